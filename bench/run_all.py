@@ -1,0 +1,34 @@
+"""Run every benchmark in bench/ one after another (what `make bench` does).
+
+Each benchmark prints its figures and writes bench/results/<name>.json itself; this runner
+only sequences them so their numbers come from one run on one machine.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+BENCH_DIR = Path(__file__).resolve().parent
+SKIP = {"__init__.py", "run_all.py"}
+
+
+def main() -> int:
+    scripts = sorted(p for p in BENCH_DIR.glob("*.py") if p.name not in SKIP and not p.name.startswith("_"))
+    failed: list[str] = []
+    for script in scripts:
+        print(f"\n=== {script.stem} ===", flush=True)
+        started = time.monotonic()
+        proc = subprocess.run([sys.executable, "-m", f"bench.{script.stem}"], cwd=BENCH_DIR.parent)
+        print(f"--- {script.stem}: exit {proc.returncode} after {time.monotonic() - started:.0f} s")
+        if proc.returncode != 0:
+            failed.append(script.stem)
+    if failed:
+        print("failed:", ", ".join(failed))
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
