@@ -16,7 +16,9 @@ SKIP = {"__init__.py", "run_all.py"}
 
 
 def main() -> int:
-    scripts = sorted(p for p in BENCH_DIR.glob("*.py") if p.name not in SKIP and not p.name.startswith("_"))
+    scripts = sorted(
+        p for p in BENCH_DIR.glob("*.py") if p.name not in SKIP and not p.name.startswith("_")
+    )
     failed: list[str] = []
     for script in scripts:
         print(f"\n=== {script.stem} ===", flush=True)
