@@ -1,0 +1,153 @@
+"""Server settings: CLI flags > SKYHELM_* environment > TOML file (--config) > defaults."""
+
+from __future__ import annotations
+
+import secrets
+from contextvars import ContextVar
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+from pydantic import Field, SecretStr, ValidationError, field_validator, model_validator
+from pydantic_settings import (
+    BaseSettings,
+    NoDecode,
+    PydanticBaseSettingsSource,
+    SettingsConfigDict,
+    TomlConfigSettingsSource,
+)
+
+OperatorLossAction = Literal["hold", "land", "rtl", "hold-mode", "continue"]
+Airframe = Literal["quad", "hexa", "octo", "plane", "vtol", "rover"]
+
+# The TOML path is only known at load time; pydantic-settings builds sources per class.
+_CONFIG_FILE: ContextVar[Path | None] = ContextVar("skyhelm_config_file", default=None)
+
+
+def _default_web_dir() -> Path | None:
+    candidate = Path(__file__).resolve().parent.parent / "web"
+    return candidate if candidate.is_dir() else None
+
+
+class Settings(BaseSettings):
+    model_config = SettingsConfigDict(env_prefix="SKYHELM_", extra="forbid", frozen=True)
+
+    host: str = "127.0.0.1"
+    port: int = Field(8000, ge=0, le=65535)
+    token: SecretStr | None = Field(None, description="pilot token; generated when unset")
+    observer_token: SecretStr | None = None
+    connect: Annotated[list[str], NoDecode] = Field(
+        default_factory=list, description="MAVLink URLs of real vehicles; none = start the sim"
+    )
+    sim_airframe: Airframe = "quad"
+    sim_count: int = Field(1, ge=1, le=32)
+    sim_speed: float = Field(1.0, gt=0.0, le=50.0)
+    rate_hz: float = Field(20.0, ge=2.0, le=200.0, description="offboard setpoint rate")
+    lease_ttl_s: float = Field(2.0, ge=0.2, le=60.0)
+    on_operator_loss: OperatorLossAction = "hold"
+    max_alt_rel_m: float | None = Field(120.0, gt=0.0)
+    max_distance_m: float | None = Field(500.0, gt=0.0)
+    max_speed_xy_m_s: float | None = Field(12.0, gt=0.0)
+    max_speed_z_m_s: float | None = Field(5.0, gt=0.0)
+    log_dir: Path | None = Path("logs")
+    cors_origins: Annotated[list[str], NoDecode] = Field(default_factory=list)
+    telemetry_max_rate_hz: float = Field(50.0, gt=0.0, le=200.0)
+    heartbeat_timeout_s: float = Field(3.0, gt=0.0, le=60.0)
+    vehicle_wait_s: float = Field(
+        20.0, ge=0.0, description="how long startup waits for each simulated vehicle"
+    )
+    scene: bool = True
+    web_dir: Path | None = Field(default_factory=_default_web_dir)
+
+    @field_validator("connect", "cors_origins", mode="before")
+    @classmethod
+    def _split_commas(cls, value: Any) -> Any:
+        if isinstance(value, str):
+            return [item.strip() for item in value.split(",") if item.strip()]
+        return value
+
+    @field_validator("connect")
+    @classmethod
+    def _check_urls(cls, urls: list[str]) -> list[str]:
+        for url in urls:
+            scheme, sep, rest = url.partition(":")
+            if not sep or not rest or scheme not in _URL_SCHEMES:
+                raise ValueError(
+                    f"{url!r} is not a MAVLink URL (expected one of "
+                    f"{', '.join(sorted(_URL_SCHEMES))}, e.g. udpin:127.0.0.1:14540)"
+                )
+        return urls
+
+    @field_validator("token", "observer_token")
+    @classmethod
+    def _check_token(cls, token: SecretStr | None) -> SecretStr | None:
+        if token is not None and len(token.get_secret_value()) < 8:
+            raise ValueError("tokens must be at least 8 characters")
+        return token
+
+    @model_validator(mode="after")
+    def _tokens_differ(self) -> Settings:
+        if (
+            self.token is not None
+            and self.observer_token is not None
+            and self.token.get_secret_value() == self.observer_token.get_secret_value()
+        ):
+            raise ValueError("observer_token must differ from token")
+        return self
+
+    @classmethod
+    def settings_customise_sources(
+        cls,
+        settings_cls: type[BaseSettings],
+        init_settings: PydanticBaseSettingsSource,
+        env_settings: PydanticBaseSettingsSource,
+        dotenv_settings: PydanticBaseSettingsSource,
+        file_secret_settings: PydanticBaseSettingsSource,
+    ) -> tuple[PydanticBaseSettingsSource, ...]:
+        sources: list[PydanticBaseSettingsSource] = [init_settings, env_settings]
+        config_file = _CONFIG_FILE.get()
+        if config_file is not None:
+            sources.append(TomlConfigSettingsSource(settings_cls, toml_file=config_file))
+        return tuple(sources)
+
+    def pilot_token(self) -> str:
+        assert self.token is not None, "load_settings() always fills the token"
+        return self.token.get_secret_value()
+
+
+_SECRET_FIELDS = frozenset({"token", "observer_token"})
+_URL_SCHEMES = frozenset({"udpin", "udpout", "udp", "tcp", "tcpin", "serial", "tlog"})
+
+
+class SettingsError(ValueError):
+    """A setting has a bad value; the message names the setting and the reason."""
+
+
+def load_settings(config_file: Path | None = None, **overrides: Any) -> Settings:
+    """Build settings from overrides (CLI flags), SKYHELM_* env, then the TOML file."""
+    if config_file is not None and not config_file.is_file():
+        raise SettingsError(f"config file {config_file} does not exist")
+    reset = _CONFIG_FILE.set(config_file)
+    try:
+        settings = Settings(**overrides)
+    except ValidationError as exc:
+        raise SettingsError(_describe(exc)) from None
+    except ValueError as exc:  # malformed TOML
+        raise SettingsError(f"cannot read {config_file}: {exc}") from None
+    finally:
+        _CONFIG_FILE.reset(reset)
+    if settings.token is None:
+        settings = settings.model_copy(update={"token": SecretStr(secrets.token_urlsafe(24))})
+    return settings
+
+
+def _describe(exc: ValidationError) -> str:
+    lines = []
+    for error in exc.errors():
+        field = ".".join(str(part) for part in error["loc"]) or "settings"
+        if error["type"] == "extra_forbidden":
+            lines.append(f"{field}: unknown setting")
+        elif field in _SECRET_FIELDS:
+            lines.append(f"{field}: {error['msg']}")
+        else:
+            lines.append(f"{field}: {error['msg']} (got {error.get('input')!r})")
+    return "invalid settings: " + "; ".join(lines)
