@@ -1,0 +1,339 @@
+"""A MAVLink connection: transport, codec, statistics, GCS heartbeat, vehicle discovery, tlog.
+
+The link decodes every frame, counts it, records it, and hands it to the vehicle whose
+system sent it. Vehicles are discovered from the HEARTBEAT of an autopilot component
+(compid 1); they do everything else (commands, state, setpoints) through ``link.send``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import time
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from types import MappingProxyType, TracebackType
+from typing import TYPE_CHECKING, Any
+
+from pymavlink.dialects.v20 import development as mavlink
+
+from .link_stats import LinkStats, SequenceGapCounter
+from .tlog import TlogWriter
+from .transports import Peer, Transport, create_transport
+from .urls import LinkUrl, parse_link_url
+
+if TYPE_CHECKING:
+    from .vehicle import Vehicle
+
+log = logging.getLogger(__name__)
+
+MAV_COMP_ID_AUTOPILOT1 = mavlink.MAV_COMP_ID_AUTOPILOT1
+MAV_AUTOPILOT_INVALID = mavlink.MAV_AUTOPILOT_INVALID
+# Heartbeats of these types are other ground stations or companions, never vehicles.
+_NOT_VEHICLE_TYPES = frozenset({mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_ONBOARD_CONTROLLER})
+GCS_HEARTBEAT_PERIOD_S = 1.0
+HEARTBEAT_CHECK_PERIOD_S = 0.5
+# subscribe_vehicles() queues hold this many announcements and drop the oldest beyond it.
+VEHICLE_QUEUE_SIZE = 32
+
+VehicleFactory = Callable[..., "Vehicle"]
+
+
+def _vehicle_class() -> VehicleFactory:
+    # Imported on first discovery: the vehicle side imports this module's types.
+    from .vehicle import Vehicle
+
+    factory: VehicleFactory = Vehicle
+    return factory
+
+
+class Link:
+    """One MAVLink connection and the vehicles seen on it. Create with ``await Link.open(url)``."""
+
+    def __init__(
+        self,
+        address: LinkUrl,
+        transport: Transport,
+        *,
+        name: str,
+        gcs_sysid: int,
+        gcs_compid: int,
+        tlog: TlogWriter | None,
+        heartbeat_timeout_s: float,
+        vehicle_factory: VehicleFactory | None,
+    ) -> None:
+        self.name = name
+        self.url = address.url
+        self.address = address
+        self.heartbeat_timeout_s = heartbeat_timeout_s
+        self.mav = mavlink.MAVLink(None, srcSystem=gcs_sysid, srcComponent=gcs_compid)
+        self.frames_dropped_out = 0  # frames send() could not write (no peer, not connected)
+        self._transport = transport
+        self._tlog = tlog
+        self._vehicle_factory = vehicle_factory
+        self._vehicles: dict[int, Vehicle] = {}
+        self._last_heartbeat_s: dict[int, float] = {}
+        self._connected_sysids: set[int] = set()
+        self._last_vehicle_heartbeat_s: float | None = None
+        self._vehicle_queues: list[asyncio.Queue[Vehicle]] = []
+        self._gaps = SequenceGapCounter()
+        self._frames_in = 0
+        self._frames_out = 0
+        self._bytes_in = 0
+        self._bytes_out = 0
+        self._bad_frames = 0
+        self._tasks: list[asyncio.Task[None]] = []
+        self._closed = False
+
+    @classmethod
+    async def open(
+        cls,
+        url: str,
+        *,
+        name: str | None = None,
+        gcs_sysid: int = 255,
+        gcs_compid: int = 190,
+        log_dir: Path | None = None,
+        heartbeat_timeout_s: float = 3.0,
+        vehicle_factory: VehicleFactory | None = None,
+    ) -> Link:
+        """Bind or connect ``url`` (pymavlink style), start the GCS heartbeat and the tlog.
+
+        A ``tcp:`` or serial peer that is not there yet is retried in the background.
+        ``vehicle_factory`` replaces the Vehicle class (tests feed links to stand-ins).
+        """
+        address = parse_link_url(url)
+        link_name = name or address.label
+        transport = create_transport(address)
+        tlog = TlogWriter.in_dir(log_dir, link_name) if log_dir is not None else None
+        link = cls(
+            address, transport, name=link_name, gcs_sysid=gcs_sysid, gcs_compid=gcs_compid,
+            tlog=tlog, heartbeat_timeout_s=heartbeat_timeout_s, vehicle_factory=vehicle_factory,
+        )
+        try:
+            await transport.start(_LinkReceiver(link))
+        except BaseException:
+            if tlog is not None:
+                await tlog.close()
+            raise
+        link._start_background_tasks()
+        log.info("link %s open on %s%s", link_name, url,
+                 f", recording {tlog.path}" if tlog is not None else "")
+        return link
+
+    async def __aenter__(self) -> Link:
+        return self
+
+    async def __aexit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        await self.close()
+
+    async def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        for task in self._tasks:
+            task.cancel()
+        for task in self._tasks:
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
+        for vehicle in list(self._vehicles.values()):
+            await _close_vehicle(vehicle)
+        await self._transport.close()
+        if self._tlog is not None:
+            await self._tlog.close()
+        log.info("link %s closed", self.name)
+
+    @property
+    def vehicles(self) -> Mapping[int, Vehicle]:
+        return MappingProxyType(self._vehicles)
+
+    @property
+    def tlog_path(self) -> Path | None:
+        return self._tlog.path if self._tlog is not None else None
+
+    @property
+    def local_address(self) -> tuple[str, int] | None:
+        """Where this link is bound (host, port): how to learn an ephemeral port."""
+        return self._transport.local_address
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    def now(self) -> float:
+        """Monotonic seconds, the clock the link's heartbeat ages use."""
+        return time.monotonic()
+
+    def subscribe_vehicles(self) -> asyncio.Queue[Vehicle]:
+        """A bounded queue of vehicles as they are discovered (already known ones first);
+        a reader that falls behind loses the oldest announcements."""
+        queue: asyncio.Queue[Vehicle] = asyncio.Queue(maxsize=VEHICLE_QUEUE_SIZE)
+        for vehicle in self._vehicles.values():
+            _put_drop_oldest(queue, vehicle)
+        self._vehicle_queues.append(queue)
+        return queue
+
+    def stats(self) -> LinkStats:
+        last = self._last_vehicle_heartbeat_s
+        age = None if last is None else max(0.0, self.now() - last)
+        return LinkStats(
+            url=self.url,
+            connected=age is not None and age <= self.heartbeat_timeout_s,
+            frames_in=self._frames_in,
+            frames_out=self._frames_out,
+            bytes_in=self._bytes_in,
+            bytes_out=self._bytes_out,
+            lost_frames=self._gaps.lost_frames,
+            bad_frames=self._bad_frames,
+            last_heartbeat_age_s=age,
+            reconnects=self._transport.reconnects,
+        )
+
+    def send(self, msg: mavlink.MAVLink_message) -> None:
+        """Pack with this link's sequence and ids (MAVLink 2), write, record. Never blocks:
+        a frame the transport cannot take now is dropped and counted."""
+        frame = bytes(msg.pack(self.mav))
+        self.mav.seq = (self.mav.seq + 1) % 256
+        target_system = getattr(msg, "target_system", None)
+        if self._closed or not self._transport.write(frame, target_system):
+            self.frames_dropped_out += 1
+            return
+        self._frames_out += 1
+        self._bytes_out += len(frame)
+        if self._tlog is not None:
+            self._tlog.record(frame)
+
+    def send_gcs_heartbeat(self) -> None:
+        self.send(self.mav.heartbeat_encode(
+            mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, mavlink.MAV_STATE_ACTIVE,
+        ))
+
+    # -- receiving (called by the transport through _LinkReceiver, on the loop) --
+
+    def _frame_received(self, msg: mavlink.MAVLink_message) -> None:
+        self._frames_in += 1
+        src_system = msg.get_srcSystem()
+        self._gaps.observe(src_system, msg.get_srcComponent(), msg.get_seq())
+        if self._tlog is not None:
+            self._tlog.record(msg.get_msgbuf())
+        if isinstance(msg, mavlink.MAVLink_unknown):
+            return
+        if (msg.get_msgId() == mavlink.MAVLINK_MSG_ID_HEARTBEAT
+                and msg.get_srcComponent() == MAV_COMP_ID_AUTOPILOT1):
+            self._vehicle_heartbeat(msg)
+        vehicle = self._vehicles.get(src_system)
+        if vehicle is not None:
+            try:
+                vehicle.handle_message(msg)
+            except Exception:
+                # One bad message must not stop the link for every other vehicle.
+                log.exception("vehicle %d failed to handle %s", src_system, msg.get_type())
+
+    def _vehicle_heartbeat(self, msg: mavlink.MAVLink_message) -> None:
+        if msg.autopilot == MAV_AUTOPILOT_INVALID or msg.type in _NOT_VEHICLE_TYPES:
+            return
+        sysid = msg.get_srcSystem()
+        now = self.now()
+        self._last_heartbeat_s[sysid] = now
+        self._last_vehicle_heartbeat_s = now
+        vehicle = self._vehicles.get(sysid)
+        if vehicle is None:
+            self._discover(sysid, msg)
+        elif sysid not in self._connected_sysids:
+            self._connected_sysids.add(sysid)
+            log.info("link %s: vehicle %d back", self.name, sysid)
+            vehicle.set_connected(True)
+
+    def _discover(self, sysid: int, heartbeat: mavlink.MAVLink_message) -> None:
+        factory = self._vehicle_factory or _vehicle_class()
+        vehicle = factory(link=self, sysid=sysid, compid=MAV_COMP_ID_AUTOPILOT1,
+                          heartbeat=heartbeat)
+        self._vehicles[sysid] = vehicle
+        self._connected_sysids.add(sysid)
+        log.info("link %s: vehicle %d discovered (type %d, autopilot %d)", self.name, sysid,
+                 heartbeat.type, heartbeat.autopilot)
+        for queue in self._vehicle_queues:
+            _put_drop_oldest(queue, vehicle)
+
+    def _bytes_received(self, count: int) -> None:
+        self._bytes_in += count
+
+    def _bad_frames_received(self, count: int) -> None:
+        self._bad_frames += count
+
+    def _connection_changed(self, connected: bool) -> None:
+        if connected and not self._closed:
+            # Introduce ourselves at once so a router or vehicle learns our address.
+            self.send_gcs_heartbeat()
+
+    # -- background tasks --
+
+    def _start_background_tasks(self) -> None:
+        loop = asyncio.get_running_loop()
+        self._tasks = [
+            loop.create_task(self._send_gcs_heartbeats(), name=f"gcs-heartbeat:{self.name}"),
+            loop.create_task(self._watch_heartbeats(), name=f"heartbeat-watch:{self.name}"),
+        ]
+        if self._tlog is not None:
+            self._tlog.start()
+
+    async def _send_gcs_heartbeats(self) -> None:
+        loop = asyncio.get_running_loop()
+        next_s = loop.time()
+        while True:
+            self.send_gcs_heartbeat()
+            next_s += GCS_HEARTBEAT_PERIOD_S
+            await asyncio.sleep(max(0.0, next_s - loop.time()))
+
+    async def _watch_heartbeats(self) -> None:
+        while True:
+            await asyncio.sleep(HEARTBEAT_CHECK_PERIOD_S)
+            self._mark_silent_vehicles()
+
+    def _mark_silent_vehicles(self) -> None:
+        now = self.now()
+        for sysid in list(self._connected_sysids):
+            if now - self._last_heartbeat_s[sysid] > self.heartbeat_timeout_s:
+                self._connected_sysids.discard(sysid)
+                log.warning("link %s: vehicle %d lost (no HEARTBEAT for %.1f s)", self.name,
+                            sysid, self.heartbeat_timeout_s)
+                self._vehicles[sysid].set_connected(False)
+
+
+class _LinkReceiver:
+    """The link's side of the transport's FrameSink protocol, kept off Link's public surface."""
+
+    def __init__(self, link: Link) -> None:
+        self._link = link
+
+    def frame_received(self, msg: mavlink.MAVLink_message, peer: Peer) -> None:
+        self._link._frame_received(msg)
+
+    def bad_frames_received(self, count: int) -> None:
+        self._link._bad_frames_received(count)
+
+    def bytes_received(self, count: int) -> None:
+        self._link._bytes_received(count)
+
+    def connection_changed(self, connected: bool) -> None:
+        self._link._connection_changed(connected)
+
+
+def _put_drop_oldest(queue: asyncio.Queue[Any], item: Any) -> None:
+    if queue.full():
+        queue.get_nowait()
+    queue.put_nowait(item)
+
+
+async def _close_vehicle(vehicle: Vehicle) -> None:
+    """Stop a vehicle's own tasks (its streamer) if it has a close()."""
+    close = getattr(vehicle, "close", None)
+    if close is None:
+        return
+    result = close()
+    if asyncio.iscoroutine(result):
+        await result
