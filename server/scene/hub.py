@@ -1,0 +1,264 @@
+"""SceneHub: the viser server, fed from vehicle snapshots, and its place in the app."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import dataclasses
+import logging
+import threading
+import time
+from collections.abc import Callable, Iterable
+from typing import TYPE_CHECKING
+
+import numpy as np
+import viser
+from fastapi import FastAPI
+
+from .frames import Vec3, enu_to_geodetic, geodetic_offset_enu, ray_hits_plane_z
+from .proxy import SceneProxy
+from .throttle import Throttle
+from .vehicle_view import VehicleView
+
+if TYPE_CHECKING:
+    from server.link import Vehicle, VehicleState
+
+_log = logging.getLogger(__name__)
+
+# With nobody watching, the scene still follows (a client that connects gets the current
+# picture at once) but at a trickle, to leave the CPU to the streamer.
+_IDLE_RATE_HZ = 2.0
+_FOLLOW_OFF = "off"
+_CAMERA_OFFSET_ENU = np.array([-10.0, -10.0, 7.0])
+
+
+@dataclasses.dataclass(frozen=True)
+class ClickPoint:
+    """Where the last click in the scene met the ground (home's level), in the scene frame.
+
+    The scene frame is ENU around the first vehicle's local origin; lat/lon are filled in
+    once that origin is known.
+    """
+
+    seq: int
+    time_s: float
+    east_m: float
+    north_m: float
+    up_m: float
+    lat_deg: float | None
+    lon_deg: float | None
+    alt_amsl_m: float | None
+
+
+class SceneHub:
+    def __init__(self, *, host: str = "127.0.0.1", port: int = 0,
+                 max_rate_hz: float = 30.0) -> None:
+        self._host = host
+        self._port = port
+        self.max_rate_hz = max_rate_hz
+        self._throttle = Throttle(max_rate_hz)
+        self._server: viser.ViserServer | None = None
+        self._task: asyncio.Task[None] | None = None
+        self._views: dict[int, VehicleView] = {}
+        self._last_update_s: dict[int, float] = {}
+        self._reference: tuple[float, float, float] | None = None
+        self._ground_z = 0.0
+        self._click: ClickPoint | None = None
+        self._click_lock = threading.Lock()
+        self._follow: viser.GuiDropdownHandle[str] | None = None
+        self._followed_at: np.ndarray | None = None
+        self._placed_clients: set[int] = set()
+        self._grid_at: Vec3 | None = None
+        self._grid: viser.GridHandle | None = None
+        self._proxy: SceneProxy | None = None
+        self.updates_applied = 0
+
+    @property
+    def port(self) -> int:
+        if self._server is None:
+            raise RuntimeError("SceneHub is not started")
+        return int(self._server.get_port())
+
+    @property
+    def last_click(self) -> ClickPoint | None:
+        return self._click
+
+    async def start(self, vehicles: Callable[[], Iterable[Vehicle]]) -> None:
+        if self._server is not None:
+            return
+        self._server = await asyncio.to_thread(
+            viser.ViserServer, host=self._host, port=self._port, verbose=False
+        )
+        self._set_up_scene(self._server)
+        self._task = asyncio.create_task(self._run(vehicles), name="scene-hub")
+
+    async def stop(self) -> None:
+        if self._task is not None:
+            self._task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._task
+            self._task = None
+        if self._server is not None:
+            server, self._server = self._server, None
+            await asyncio.to_thread(server.stop)
+        self._views.clear()
+
+    def mount(self, app: FastAPI, *, path: str = "/scene",
+              check_token: Callable[[str | None], bool]) -> None:
+        self._proxy = SceneProxy(lambda: self.port, check_token)
+        self._proxy.mount(app, path, {"click": self._click_json, "status": self.status})
+
+    def status(self) -> dict[str, object]:
+        return {
+            "running": self._server is not None,
+            "viser_clients": len(self._server.get_clients()) if self._server else 0,
+            "proxied_sockets": self._proxy.open_sockets if self._proxy else 0,
+            "vehicles": sorted(self._views),
+            "max_rate_hz": self.max_rate_hz,
+            "updates_applied": self.updates_applied,
+        }
+
+    def _click_json(self) -> dict[str, object]:
+        click = self._click
+        return {"seq": 0} if click is None else dataclasses.asdict(click)
+
+    def _set_up_scene(self, server: viser.ViserServer) -> None:
+        server.scene.set_up_direction("+z")
+        server.scene.world_axes.visible = False
+        server.initial_camera.position = tuple(_CAMERA_OFFSET_ENU)
+        server.initial_camera.look_at = (0.0, 0.0, 0.0)
+        self._follow = server.gui.add_dropdown("Follow", options=(_FOLLOW_OFF,),
+                                               initial_value=_FOLLOW_OFF)
+        self._grid = server.scene.add_grid(
+            "/ground", width=200.0, height=200.0, cell_size=1.0, section_size=10.0,
+            cell_color=(70, 74, 82), section_color=(110, 116, 128), plane="xy",
+        )
+        self._click_marker = server.scene.add_icosphere(
+            "/click", radius=0.3, color=(255, 255, 255), opacity=0.6, visible=False
+        )
+        server.scene.on_click()(self._on_click)
+
+    def _on_click(self, event: viser.SceneClickEvent) -> None:
+        """Runs in viser's thread: only computes and stores the point, then marks it."""
+        hit = ray_hits_plane_z(event.ray_origin, event.ray_direction, self._ground_z)
+        if hit is None:
+            return
+        lat = lon = alt = None
+        if self._reference is not None:
+            lat, lon, alt = enu_to_geodetic(hit[0], hit[1], hit[2], *self._reference)
+        with self._click_lock:
+            seq = 1 if self._click is None else self._click.seq + 1
+            self._click = ClickPoint(seq, time.time(), hit[0], hit[1], hit[2], lat, lon, alt)
+        self._click_marker.position = hit
+        self._click_marker.visible = True
+
+    async def _run(self, vehicles: Callable[[], Iterable[Vehicle]]) -> None:
+        period_s = 1.0 / self.max_rate_hz
+        next_s = time.monotonic()
+        while True:
+            try:
+                self._tick(list(vehicles()), time.monotonic())
+            except Exception:
+                # A bad snapshot must not kill the scene for the whole session.
+                _log.exception("scene update failed")
+            next_s += period_s if self._watched() else 1.0 / _IDLE_RATE_HZ
+            now = time.monotonic()
+            if next_s < now:
+                next_s = now
+            await asyncio.sleep(next_s - now)
+
+    def _watched(self) -> bool:
+        return self._server is not None and bool(self._server.get_clients())
+
+    def _tick(self, vehicles: list[Vehicle], now_s: float) -> None:
+        server = self._server
+        if server is None:
+            return
+        seen: set[int] = set()
+        with server.atomic():
+            for vehicle in vehicles:
+                state = vehicle.snapshot()
+                seen.add(state.sysid)
+                if self._last_update_s.get(state.sysid) == state.updated_s:
+                    continue
+                if not self._throttle.ready(state.sysid, now_s):
+                    continue
+                self._last_update_s[state.sysid] = state.updated_s
+                self._apply(server, state, now_s)
+            for sysid in set(self._views) - seen:
+                self._views.pop(sysid).remove()
+                self._throttle.forget(sysid)
+                self._last_update_s.pop(sysid, None)
+            self._follow_camera(server)
+
+    def _apply(self, server: viser.ViserServer, state: VehicleState, now_s: float) -> None:
+        view = self._views.get(state.sysid)
+        if view is None or view.mav_type != state.mav_type:
+            if view is not None:
+                view.remove()
+            view = VehicleView(server.scene, state.sysid, state.mav_type)
+            self._views[state.sysid] = view
+            self._refresh_follow_options()
+        view.update(state, self._offset_enu(state), now_s)
+        self.updates_applied += 1
+        if state.home is not None and state.sysid == min(self._views):
+            self._place_grid(view, state)
+
+    def _offset_enu(self, state: VehicleState) -> Vec3:
+        """Each vehicle reports NED around its own origin; the scene uses the first one's."""
+        origin = state.origin
+        if origin is None:
+            return (0.0, 0.0, 0.0)
+        here = (origin.lat_deg, origin.lon_deg, origin.alt_amsl_m)
+        if self._reference is None:
+            self._reference = here
+        return geodetic_offset_enu(*here, *self._reference)
+
+    def _place_grid(self, view: VehicleView, state: VehicleState) -> None:
+        home = view.home_marker.position
+        point: Vec3 = (float(home[0]), float(home[1]), float(home[2]))
+        if self._grid is None or (
+            self._grid_at is not None and max(abs(a - b) for a, b in zip(point, self._grid_at,
+                                                                          strict=True)) < 0.5
+        ):
+            return
+        self._grid_at = point
+        self._grid.position = point
+        self._ground_z = point[2]
+
+    def _refresh_follow_options(self) -> None:
+        if self._follow is None:
+            return
+        first_vehicle = self._follow.value == _FOLLOW_OFF and len(self._views) == 1
+        self._follow.options = (_FOLLOW_OFF, *(f"vehicle {s}" for s in sorted(self._views)))
+        if first_vehicle:
+            # viser's setter is typed on a generic base that mypy sees as read-only.
+            self._follow.value = f"vehicle {min(self._views)}"  # type: ignore[misc]
+
+    def _follow_camera(self, server: viser.ViserServer) -> None:
+        """Moves every client's camera with the followed vehicle, keeping the user's view angle."""
+        if self._follow is None or self._follow.value == _FOLLOW_OFF:
+            self._followed_at = None
+            return
+        sysid = int(self._follow.value.split()[-1])
+        view = self._views.get(sysid)
+        if view is None or view.position_enu is None:
+            return
+        target = np.array(view.position_enu)
+        previous = self._followed_at
+        self._followed_at = target
+        moved = previous is None or float(np.abs(target - previous).max()) >= 0.01
+        clients = server.get_clients()
+        self._placed_clients &= set(clients)
+        for client_id, client in clients.items():
+            camera = client.camera
+            if client_id not in self._placed_clients:
+                self._placed_clients.add(client_id)
+                offset = _CAMERA_OFFSET_ENU
+            elif moved:
+                offset = np.asarray(camera.position) - np.asarray(camera.look_at)
+            else:
+                continue
+            with client.atomic():
+                camera.look_at = target
+                camera.position = target + offset

@@ -1,0 +1,209 @@
+"""The scene nodes of one vehicle, updated from its VehicleState snapshots."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import TYPE_CHECKING
+
+import numpy as np
+import viser
+
+from .frames import Vec3, attitude_wxyz_enu, ned_to_enu
+from .models import VehicleModel, build_model, model_kind
+from .styling import Rgb, state_colour
+from .trail import Trail
+
+if TYPE_CHECKING:
+    from server.link import VehicleState
+
+SCENE_BACKGROUND: Rgb = (30, 33, 40)
+_TRAIL_REDRAW_S = 0.5
+_VELOCITY_LOOKAHEAD_S = 2.0
+_SETPOINT_COLOUR: Rgb = (241, 196, 15)
+_TARGET_COLOUR: Rgb = (230, 126, 34)
+_HOME_COLOUR: Rgb = (236, 240, 241)
+_RTL_COLOUR: Rgb = (231, 76, 60)
+
+
+def _finite(*values: float | None) -> bool:
+    return all(v is not None and math.isfinite(v) for v in values)
+
+
+def _shift(point: Vec3, offset: Vec3) -> Vec3:
+    return (point[0] + offset[0], point[1] + offset[1], point[2] + offset[2])
+
+
+def setpoint_point_ned(
+    setpoint: Mapping[str, object] | None, position_ned: Vec3 | None
+) -> Vec3 | None:
+    """Where the streamed setpoint points: its position, or 2 s ahead along its velocity."""
+    if not setpoint:
+        return None
+
+    def num(key: str) -> float | None:
+        value = setpoint.get(key)
+        return float(value) if isinstance(value, int | float) else None
+
+    n, e, d = num("north_m"), num("east_m"), num("down_m")
+    if _finite(n, e, d):
+        return (n or 0.0, e or 0.0, d or 0.0)
+    vn, ve, vd = num("north_m_s"), num("east_m_s"), num("down_m_s")
+    if position_ned is not None and _finite(vn, ve):
+        k = _VELOCITY_LOOKAHEAD_S
+        return (position_ned[0] + k * (vn or 0.0), position_ned[1] + k * (ve or 0.0),
+                position_ned[2] + k * (vd if vd is not None and math.isfinite(vd) else 0.0))
+    return None
+
+
+def rtl_path_enu(vehicle: Vec3, home: Vec3) -> list[Vec3]:
+    """Climb-if-lower, fly over home at that altitude, descend: the shape of PX4's return."""
+    cruise_z = max(vehicle[2], home[2] + 1.0)
+    return [vehicle, (vehicle[0], vehicle[1], cruise_z), (home[0], home[1], cruise_z), home]
+
+
+def _polyline_segments(points: list[Vec3]) -> np.ndarray:
+    return np.array([[points[i], points[i + 1]] for i in range(len(points) - 1)], dtype=np.float32)
+
+
+class _Polyline:
+    """A line-segment node that can be emptied (viser needs at least one segment)."""
+
+    def __init__(self, scene: viser.SceneApi, name: str, colour: Rgb, thickness: float) -> None:
+        self._colour = np.array(colour, dtype=np.uint8)
+        self._handle = scene.add_line_segments(
+            name, points=np.zeros((1, 2, 3), dtype=np.float32), colors=colour,
+            thickness=thickness, thickness_units="screen", visible=False,
+        )
+
+    def show(self, points: list[Vec3]) -> None:
+        segments = _polyline_segments(points)
+        self._handle.points = segments
+        self._handle.colors = np.broadcast_to(self._colour, segments.shape).astype(np.uint8)
+        self._handle.visible = True
+
+    def hide(self) -> None:
+        if self._handle.visible:
+            self._handle.visible = False
+
+    @property
+    def visible(self) -> bool:
+        return bool(self._handle.visible)
+
+
+class VehicleView:
+    def __init__(self, scene: viser.SceneApi, sysid: int, mav_type: str) -> None:
+        base = f"/vehicles/{sysid}"
+        self.sysid = sysid
+        self.mav_type = mav_type
+        self.position_enu: Vec3 | None = None
+        self._root = scene.add_frame(base, show_axes=False)
+        self._kind = model_kind(mav_type)
+        self.model: VehicleModel = build_model(scene, f"{base}/body", mav_type)
+        self.label = scene.add_label(f"{base}/label", text=f"{sysid}", anchor="bottom-center")
+        self.trail = Trail()
+        self._trail_handle = scene.add_line_segments(
+            f"{base}/trail", points=np.zeros((1, 2, 3), dtype=np.float32), colors=(0, 0, 0),
+            thickness=2.0, thickness_units="screen", visible=False,
+        )
+        self._trail_drawn_s = -math.inf
+        self.setpoint_marker = scene.add_icosphere(
+            f"{base}/setpoint", radius=0.15, color=_SETPOINT_COLOUR, visible=False
+        )
+        self.setpoint_line = _Polyline(scene, f"{base}/setpoint_line", _SETPOINT_COLOUR, 1.5)
+        self.target_marker = scene.add_icosphere(
+            f"{base}/target", radius=0.25, color=_TARGET_COLOUR, visible=False, opacity=0.8
+        )
+        self.home_marker = scene.add_cylinder(
+            f"{base}/home", radius=0.5, height=0.05, color=_HOME_COLOUR, visible=False
+        )
+        self.home_label = scene.add_label(f"{base}/home/label", text="H", position=(0, 0, 0.3))
+        self.rtl_path = _Polyline(scene, f"{base}/rtl", _RTL_COLOUR, 2.5)
+
+    def remove(self) -> None:
+        """Removing the parent node removes every child node of this vehicle."""
+        self._root.remove()
+
+    def update(self, state: VehicleState, offset_enu: Vec3, now_s: float) -> None:
+        colour = state_colour(
+            armed=state.armed, mode=state.mode, user_mode=state.user_mode,
+            system_status=state.system_status,
+        )
+        self.model.set_hull_colour(colour)
+        self.model.set_rotor_outputs(tuple(state.actuator_outputs))
+        if self._kind == "vtol":
+            self.model.show_fixed_wing(state.vtol_state in ("FW", "TRANSITION_TO_FW"))
+        mode_text = state.mode if state.user_mode in (None, state.mode) else (
+            f"{state.mode} (wants {state.user_mode})"
+        )
+        self.label.text = f"{state.sysid} {mode_text}"
+
+        position_ned: Vec3 | None = None
+        if state.position_ned is not None:
+            p = state.position_ned
+            position_ned = (p.north_m, p.east_m, p.down_m)
+            self.position_enu = _shift(ned_to_enu(*position_ned), offset_enu)
+            self.model.root.position = self.position_enu
+            self.label.position = _shift(self.position_enu, (0.0, 0.0, 0.8))
+            if self.trail.add(now_s, self.position_enu) or now_s - self._trail_drawn_s > 5.0:
+                self._redraw_trail(now_s, colour)
+        if state.attitude is not None:
+            a = state.attitude
+            self.model.root.wxyz = attitude_wxyz_enu(a.roll_deg, a.pitch_deg, a.yaw_deg)
+
+        self._update_setpoint(state, position_ned, offset_enu)
+        home_enu = self._update_home(state, offset_enu)
+        self._update_target(state, offset_enu)
+        if state.mode == "RTL" and home_enu is not None and self.position_enu is not None:
+            self.rtl_path.show(rtl_path_enu(self.position_enu, home_enu))
+        else:
+            self.rtl_path.hide()
+
+    def _redraw_trail(self, now_s: float, colour: Rgb) -> None:
+        if now_s - self._trail_drawn_s < _TRAIL_REDRAW_S or len(self.trail) < 2:
+            return
+        self._trail_drawn_s = now_s
+        points, colours = self.trail.segments(now_s, colour, SCENE_BACKGROUND)
+        self._trail_handle.points = points
+        self._trail_handle.colors = colours
+        self._trail_handle.visible = True
+
+    def _update_setpoint(self, state: VehicleState, position_ned: Vec3 | None,
+                         offset_enu: Vec3) -> None:
+        point_ned = setpoint_point_ned(state.setpoint, position_ned)
+        if point_ned is None and state.mode == "OFFBOARD" and state.target_ned is not None:
+            t = state.target_ned
+            if _finite(t.north_m, t.east_m, t.down_m):
+                point_ned = (t.north_m, t.east_m, t.down_m)
+        if point_ned is None or self.position_enu is None:
+            self.setpoint_marker.visible = False
+            self.setpoint_line.hide()
+            return
+        point_enu = _shift(ned_to_enu(*point_ned), offset_enu)
+        self.setpoint_marker.position = point_enu
+        self.setpoint_marker.visible = True
+        self.setpoint_line.show([self.position_enu, point_enu])
+
+    def _update_home(self, state: VehicleState, offset_enu: Vec3) -> Vec3 | None:
+        home = state.home
+        if home is None or not _finite(home.north_m, home.east_m, home.down_m):
+            self.home_marker.visible = False
+            return None
+        home_enu = _shift(ned_to_enu(home.north_m, home.east_m, home.down_m), offset_enu)
+        self.home_marker.position = home_enu
+        self.home_marker.wxyz = (1.0, 0.0, 0.0, 0.0)
+        self.home_marker.visible = True
+        return home_enu
+
+    def _update_target(self, state: VehicleState, offset_enu: Vec3) -> None:
+        """In Hold (where DO_REPOSITION flies) PX4's own position target is the goal."""
+        target: Vec3 | None = None
+        if state.mode == "HOLD" and state.target_ned is not None:
+            t = state.target_ned
+            if _finite(t.north_m, t.east_m, t.down_m):
+                target = _shift(ned_to_enu(t.north_m, t.east_m, t.down_m), offset_enu)
+        if target is None:
+            self.target_marker.visible = False
+            return
+        self.target_marker.position = target
+        self.target_marker.visible = True
