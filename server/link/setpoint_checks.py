@@ -1,0 +1,221 @@
+"""What PX4 accepts, per vehicle type, and the operator's safety envelope.
+
+A setpoint PX4 would silently drop (mavlink_receiver only reports it as STATUSTEXT, if at
+all) is refused here with the reason, before it reaches the link.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from typing import Literal
+
+from server.link.setpoints import (
+    IGNORE_ACCELERATION,
+    IGNORE_POSITION,
+    IGNORE_VELOCITY,
+    MAV_FRAME_BODY_NED,
+    MAV_FRAME_LOCAL_NED,
+    POSITION_TARGET_TYPEMASK_FORCE_SET,
+    AccelerationNed,
+    Attitude,
+    BodyRates,
+    LocalFields,
+    PositionGlobal,
+    PositionNed,
+    PositionVelocityNed,
+    RawLocal,
+    Setpoint,
+    VelocityBody,
+    VelocityNed,
+    local_fields,
+)
+
+EARTH_RADIUS_M = 6_371_000.0
+
+VehicleClass = Literal["multicopter", "fixed_wing", "vtol_transition", "rover"]
+Kind = Literal["position", "velocity", "acceleration", "position_velocity", "attitude", "rates"]
+
+_ALLOWED: dict[VehicleClass, frozenset[Kind]] = {
+    "multicopter": frozenset(
+        {"position", "velocity", "acceleration", "position_velocity", "attitude", "rates"}
+    ),
+    "fixed_wing": frozenset({"position", "attitude", "rates"}),
+    "vtol_transition": frozenset({"position"}),
+    "rover": frozenset({"position", "velocity"}),
+}
+_CLASS_LABEL: dict[VehicleClass, str] = {
+    "multicopter": "a multicopter",
+    "fixed_wing": "a fixed wing (or VTOL in fixed-wing flight)",
+    "vtol_transition": "a VTOL in transition",
+    "rover": "a rover",
+}
+
+# MAV_TYPE values
+_FIXED_WING = {1}
+_VTOL = {19, 20, 21, 22, 23, 24, 25}
+_ROVER = {10, 11}
+
+
+class SetpointRejected(ValueError):
+    """A setpoint that PX4 would drop or that leaves the envelope."""
+
+    def __init__(self, reason: str, field: str | None = None, limit: float | None = None):
+        super().__init__(reason)
+        self.reason = reason
+        self.field = field
+        self.limit = limit
+
+
+@dataclass
+class Envelope:
+    """Operator limits; None switches a limit off. Altitude and distance are from home."""
+
+    max_alt_rel_m: float | None = 120.0
+    max_distance_m: float | None = 500.0
+    max_speed_xy_m_s: float | None = 12.0
+    max_speed_z_m_s: float | None = 5.0
+
+
+@dataclass(frozen=True)
+class Reference:
+    """Where home is, for the envelope: local NED and, when known, global."""
+
+    home_ned: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    home_lat_lon_alt: tuple[float, float, float] | None = None
+
+
+def vehicle_class(mav_type: int, vtol_state: str) -> VehicleClass:
+    if mav_type in _VTOL:
+        if vtol_state == "FW":
+            return "fixed_wing"
+        if vtol_state.startswith("TRANSITION"):
+            return "vtol_transition"
+        return "multicopter"
+    if mav_type in _FIXED_WING:
+        return "fixed_wing"
+    if mav_type in _ROVER:
+        return "rover"
+    return "multicopter"
+
+
+def check(sp: Setpoint, vclass: VehicleClass, envelope: Envelope, ref: Reference) -> None:
+    """Raise SetpointRejected if PX4 would drop ``sp`` or it leaves the envelope.
+
+    ``sp`` must be resolved (offsets already turned into positions).
+    """
+    _check_finite(sp)
+    local = local_fields(sp)
+    if isinstance(sp, RawLocal) and local is not None:
+        _check_raw(local)
+    kind = _kind(sp, local)
+    if kind not in _ALLOWED[vclass]:
+        raise SetpointRejected(
+            f"PX4 ignores {kind.replace('_', '+')} setpoints on {_CLASS_LABEL[vclass]}",
+            field="type",
+        )
+    if isinstance(sp, Attitude | BodyRates) and not 0.0 <= sp.thrust <= 1.0:
+        raise SetpointRejected("thrust must be within 0..1", field="thrust", limit=1.0)
+    _check_envelope(sp, local, envelope, ref)
+
+
+def _check_finite(sp: Setpoint) -> None:
+    for f in fields(sp):
+        value = getattr(sp, f.name)
+        if isinstance(value, float) and not math.isfinite(value):
+            raise SetpointRejected(f"{f.name} is not a finite number", field=f.name)
+
+
+def _check_raw(local: LocalFields) -> None:
+    if local.frame not in (MAV_FRAME_LOCAL_NED, MAV_FRAME_BODY_NED):
+        # PX4's own words (mavlink_receiver), although MAVROS documents frames 7 and 9
+        raise SetpointRejected(f"coordinate frame {local.frame} unsupported", field="frame")
+    if local.type_mask & POSITION_TARGET_TYPEMASK_FORCE_SET:
+        raise SetpointRejected("force not supported", field="type_mask")
+    if _present(local.type_mask) == (False, False, False):
+        raise SetpointRejected(
+            "invalid: no position, velocity or acceleration in type_mask", field="type_mask"
+        )
+
+
+def _present(type_mask: int) -> tuple[bool, bool, bool]:
+    """Whether any axis of position, velocity, acceleration is used."""
+    return (
+        type_mask & IGNORE_POSITION != IGNORE_POSITION,
+        type_mask & IGNORE_VELOCITY != IGNORE_VELOCITY,
+        type_mask & IGNORE_ACCELERATION != IGNORE_ACCELERATION,
+    )
+
+
+def _kind(sp: Setpoint, local: LocalFields | None) -> Kind:
+    if isinstance(sp, BodyRates):
+        return "rates"
+    if isinstance(sp, Attitude):
+        return "attitude"
+    if isinstance(sp, PositionGlobal | PositionNed):
+        return "position"
+    if isinstance(sp, VelocityNed | VelocityBody):
+        return "velocity"
+    if isinstance(sp, AccelerationNed):
+        return "acceleration"
+    if isinstance(sp, PositionVelocityNed):
+        return "position_velocity"
+    assert local is not None
+    pos, vel, acc = _present(local.type_mask)
+    if acc:
+        return "acceleration"
+    if local.frame == MAV_FRAME_BODY_NED:
+        return "velocity"  # PX4 ignores position in BODY_NED
+    if pos and vel:
+        return "position_velocity"
+    return "velocity" if vel else "position"
+
+
+def _target_from_home(
+    sp: Setpoint, local: LocalFields | None, ref: Reference
+) -> tuple[float | None, float | None]:
+    """(horizontal distance from home, altitude above home) of a position target, if any."""
+    if isinstance(sp, PositionGlobal):
+        if ref.home_lat_lon_alt is None:
+            return None, sp.alt_m if sp.alt_frame == "relative" else None
+        lat0, lon0, alt0 = ref.home_lat_lon_alt
+        d_north = math.radians(sp.lat_deg - lat0) * EARTH_RADIUS_M
+        d_east = math.radians(sp.lon_deg - lon0) * EARTH_RADIUS_M * math.cos(math.radians(lat0))
+        alt = {"amsl": sp.alt_m - alt0, "relative": sp.alt_m, "terrain": None}[sp.alt_frame]
+        return math.hypot(d_north, d_east), alt
+    if local is None or local.frame != MAV_FRAME_LOCAL_NED:
+        return None, None
+    if local.type_mask & IGNORE_POSITION == IGNORE_POSITION:
+        return None, None
+    hn, he, hd = ref.home_ned
+    return math.hypot(local.x - hn, local.y - he), -(local.z - hd)
+
+
+def _velocity(sp: Setpoint, local: LocalFields | None) -> tuple[float, float] | None:
+    """(horizontal, vertical) speed asked for, if the setpoint carries a velocity."""
+    if local is None or local.type_mask & IGNORE_VELOCITY == IGNORE_VELOCITY:
+        return None
+    return math.hypot(local.vx, local.vy), abs(local.vz)
+
+
+def _check_envelope(
+    sp: Setpoint, local: LocalFields | None, envelope: Envelope, ref: Reference
+) -> None:
+    distance_m, alt_rel_m = _target_from_home(sp, local, ref)
+    limits: list[tuple[str, float | None, float | None]] = [
+        ("max_alt_rel_m", alt_rel_m, envelope.max_alt_rel_m),
+        ("max_distance_m", distance_m, envelope.max_distance_m),
+    ]
+    speeds = _velocity(sp, local)
+    if speeds is not None:
+        limits += [
+            ("max_speed_xy_m_s", speeds[0], envelope.max_speed_xy_m_s),
+            ("max_speed_z_m_s", speeds[1], envelope.max_speed_z_m_s),
+        ]
+    for name, value, limit in limits:
+        if value is not None and limit is not None and value > limit:
+            raise SetpointRejected(
+                f"outside the envelope: {name.removeprefix('max_')} {value:.1f} > {limit:g}",
+                field=name,
+                limit=limit,
+            )

@@ -1,0 +1,420 @@
+"""Offboard setpoint types (units in every field) and their exact MAVLink encoding.
+
+Type masks follow MAVSDK's offboard plugin, so a PX4 that flies MAVSDK flies these:
+position+yaw 2552, velocity NED+yaw 2503, velocity body+yaw rate 1479, ...
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, replace
+from typing import Literal
+
+from pymavlink.dialects.v20 import development as mavlink
+
+MAV_FRAME_GLOBAL_INT = 5
+MAV_FRAME_LOCAL_NED = 1
+MAV_FRAME_LOCAL_OFFSET_NED = 7
+MAV_FRAME_BODY_NED = 8
+MAV_FRAME_BODY_OFFSET_NED = 9
+MAV_FRAME_GLOBAL_RELATIVE_ALT_INT = 6
+MAV_FRAME_GLOBAL_TERRAIN_ALT_INT = 11
+
+POSITION_TARGET_TYPEMASK_X_IGNORE = 1
+POSITION_TARGET_TYPEMASK_Y_IGNORE = 2
+POSITION_TARGET_TYPEMASK_Z_IGNORE = 4
+POSITION_TARGET_TYPEMASK_VX_IGNORE = 8
+POSITION_TARGET_TYPEMASK_VY_IGNORE = 16
+POSITION_TARGET_TYPEMASK_VZ_IGNORE = 32
+POSITION_TARGET_TYPEMASK_AX_IGNORE = 64
+POSITION_TARGET_TYPEMASK_AY_IGNORE = 128
+POSITION_TARGET_TYPEMASK_AZ_IGNORE = 256
+POSITION_TARGET_TYPEMASK_FORCE_SET = 512
+POSITION_TARGET_TYPEMASK_YAW_IGNORE = 1024
+POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE = 2048
+
+IGNORE_POSITION = (
+    POSITION_TARGET_TYPEMASK_X_IGNORE
+    | POSITION_TARGET_TYPEMASK_Y_IGNORE
+    | POSITION_TARGET_TYPEMASK_Z_IGNORE
+)
+IGNORE_VELOCITY = (
+    POSITION_TARGET_TYPEMASK_VX_IGNORE
+    | POSITION_TARGET_TYPEMASK_VY_IGNORE
+    | POSITION_TARGET_TYPEMASK_VZ_IGNORE
+)
+IGNORE_ACCELERATION = (
+    POSITION_TARGET_TYPEMASK_AX_IGNORE
+    | POSITION_TARGET_TYPEMASK_AY_IGNORE
+    | POSITION_TARGET_TYPEMASK_AZ_IGNORE
+)
+
+ATTITUDE_TARGET_TYPEMASK_BODY_ROLL_RATE_IGNORE = 1
+ATTITUDE_TARGET_TYPEMASK_BODY_PITCH_RATE_IGNORE = 2
+ATTITUDE_TARGET_TYPEMASK_BODY_YAW_RATE_IGNORE = 4
+ATTITUDE_TARGET_TYPEMASK_THROTTLE_IGNORE = 64
+ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE = 128
+IGNORE_BODY_RATES = (
+    ATTITUDE_TARGET_TYPEMASK_BODY_ROLL_RATE_IGNORE
+    | ATTITUDE_TARGET_TYPEMASK_BODY_PITCH_RATE_IGNORE
+    | ATTITUDE_TARGET_TYPEMASK_BODY_YAW_RATE_IGNORE
+)
+
+AltFrame = Literal["amsl", "relative", "terrain"]
+GLOBAL_FRAMES: dict[str, int] = {
+    "amsl": MAV_FRAME_GLOBAL_INT,
+    "relative": MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+    "terrain": MAV_FRAME_GLOBAL_TERRAIN_ALT_INT,
+}
+
+
+@dataclass(frozen=True)
+class PositionNed:
+    north_m: float
+    east_m: float
+    down_m: float
+    yaw_deg: float | None = None
+
+
+@dataclass(frozen=True)
+class VelocityNed:
+    north_m_s: float
+    east_m_s: float
+    down_m_s: float
+    yaw_deg: float | None = None
+    yaw_rate_deg_s: float | None = None
+
+
+@dataclass(frozen=True)
+class VelocityBody:
+    forward_m_s: float
+    right_m_s: float
+    down_m_s: float
+    yaw_rate_deg_s: float | None = None
+
+
+@dataclass(frozen=True)
+class AccelerationNed:
+    north_m_s2: float
+    east_m_s2: float
+    down_m_s2: float
+    yaw_deg: float | None = None
+
+
+@dataclass(frozen=True)
+class PositionVelocityNed:
+    north_m: float
+    east_m: float
+    down_m: float
+    north_m_s: float
+    east_m_s: float
+    down_m_s: float
+    north_m_s2: float | None = None
+    east_m_s2: float | None = None
+    down_m_s2: float | None = None
+    yaw_deg: float | None = None
+
+
+@dataclass(frozen=True)
+class PositionGlobal:
+    lat_deg: float
+    lon_deg: float
+    alt_m: float
+    alt_frame: AltFrame = "amsl"
+    yaw_deg: float | None = None
+
+
+@dataclass(frozen=True)
+class Attitude:
+    roll_deg: float
+    pitch_deg: float
+    yaw_deg: float
+    thrust: float
+
+
+@dataclass(frozen=True)
+class BodyRates:
+    roll_rate_deg_s: float
+    pitch_rate_deg_s: float
+    yaw_rate_deg_s: float
+    thrust: float
+
+
+@dataclass(frozen=True)
+class OffsetNed:
+    north_m: float
+    east_m: float
+    down_m: float
+    yaw_deg: float | None = None
+
+
+@dataclass(frozen=True)
+class OffsetBody:
+    forward_m: float
+    right_m: float
+    down_m: float
+    yaw_deg: float | None = None
+
+
+@dataclass(frozen=True)
+class RawLocal:
+    """SET_POSITION_TARGET_LOCAL_NED as-is, for experts; yaw in radians as on the wire."""
+
+    frame: int
+    type_mask: int
+    x: float = 0.0
+    y: float = 0.0
+    z: float = 0.0
+    vx: float = 0.0
+    vy: float = 0.0
+    vz: float = 0.0
+    afx: float = 0.0
+    afy: float = 0.0
+    afz: float = 0.0
+    yaw: float = 0.0
+    yaw_rate: float = 0.0
+
+
+Setpoint = (
+    PositionNed
+    | VelocityNed
+    | VelocityBody
+    | AccelerationNed
+    | PositionVelocityNed
+    | PositionGlobal
+    | Attitude
+    | BodyRates
+    | OffsetNed
+    | OffsetBody
+    | RawLocal
+)
+
+
+@dataclass(frozen=True)
+class SentSetpoint:
+    """What went on the wire for a setpoint."""
+
+    setpoint: Setpoint
+    message: str
+    frame: int
+    type_mask: int
+
+
+def describe(sp: Setpoint) -> dict[str, object]:
+    """JSON-able form: the type name plus its fields."""
+    return {"type": type(sp).__name__, **asdict(sp)}
+
+
+def resolve(
+    sp: Setpoint, position_ned: tuple[float, float, float] | None, yaw_deg: float | None
+) -> Setpoint:
+    """Turn offsets into LOCAL_NED positions (PX4 rejects frames 7 and 9) and pin a missing
+    yaw to the current heading, so the streamed setpoint does not drift with the vehicle.
+
+    Raises LookupError when an offset needs a position or heading that is not known yet.
+    """
+    if isinstance(sp, OffsetNed | OffsetBody):
+        if position_ned is None:
+            raise LookupError("no local position yet")
+        north, east, down = position_ned
+        if isinstance(sp, OffsetBody):
+            if yaw_deg is None:
+                raise LookupError("no heading yet")
+            yaw = math.radians(yaw_deg)
+            d_north = sp.forward_m * math.cos(yaw) - sp.right_m * math.sin(yaw)
+            d_east = sp.forward_m * math.sin(yaw) + sp.right_m * math.cos(yaw)
+        else:
+            d_north, d_east = sp.north_m, sp.east_m
+        return PositionNed(
+            north + d_north,
+            east + d_east,
+            down + sp.down_m,
+            sp.yaw_deg if sp.yaw_deg is not None else yaw_deg,
+        )
+    if yaw_deg is None:
+        return sp
+    if isinstance(sp, PositionNed | PositionVelocityNed | PositionGlobal) and sp.yaw_deg is None:
+        return replace(sp, yaw_deg=yaw_deg)
+    if isinstance(sp, VelocityNed) and sp.yaw_deg is None and sp.yaw_rate_deg_s is None:
+        return replace(sp, yaw_deg=yaw_deg)
+    return sp
+
+
+def _rad(value_deg: float | None) -> float:
+    return 0.0 if value_deg is None else math.radians(value_deg)
+
+
+def _yaw_bits(yaw_deg: float | None, yaw_rate_deg_s: float | None) -> int:
+    bits = 0
+    if yaw_deg is None:
+        bits |= POSITION_TARGET_TYPEMASK_YAW_IGNORE
+    if yaw_rate_deg_s is None:
+        bits |= POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE
+    return bits
+
+
+@dataclass(frozen=True)
+class LocalFields:
+    """SET_POSITION_TARGET_LOCAL_NED fields of a setpoint (yaw in radians)."""
+
+    frame: int
+    type_mask: int
+    x: float = 0.0
+    y: float = 0.0
+    z: float = 0.0
+    vx: float = 0.0
+    vy: float = 0.0
+    vz: float = 0.0
+    afx: float = 0.0
+    afy: float = 0.0
+    afz: float = 0.0
+    yaw: float = 0.0
+    yaw_rate: float = 0.0
+
+
+def local_fields(sp: Setpoint) -> LocalFields | None:
+    """The LOCAL_NED/BODY_NED form of a setpoint, or None if it is not a local one."""
+    if isinstance(sp, PositionNed):
+        return LocalFields(
+            MAV_FRAME_LOCAL_NED,
+            IGNORE_VELOCITY | IGNORE_ACCELERATION | _yaw_bits(sp.yaw_deg, None),
+            x=sp.north_m,
+            y=sp.east_m,
+            z=sp.down_m,
+            yaw=_rad(sp.yaw_deg),
+        )
+    if isinstance(sp, VelocityNed):
+        return LocalFields(
+            MAV_FRAME_LOCAL_NED,
+            IGNORE_POSITION | IGNORE_ACCELERATION | _yaw_bits(sp.yaw_deg, sp.yaw_rate_deg_s),
+            vx=sp.north_m_s,
+            vy=sp.east_m_s,
+            vz=sp.down_m_s,
+            yaw=_rad(sp.yaw_deg),
+            yaw_rate=_rad(sp.yaw_rate_deg_s),
+        )
+    if isinstance(sp, VelocityBody):
+        # yaw rate None still means "do not turn", which PX4 only honours as rate 0
+        return LocalFields(
+            MAV_FRAME_BODY_NED,
+            IGNORE_POSITION | IGNORE_ACCELERATION | POSITION_TARGET_TYPEMASK_YAW_IGNORE,
+            vx=sp.forward_m_s,
+            vy=sp.right_m_s,
+            vz=sp.down_m_s,
+            yaw_rate=_rad(sp.yaw_rate_deg_s),
+        )
+    if isinstance(sp, AccelerationNed):
+        return LocalFields(
+            MAV_FRAME_LOCAL_NED,
+            IGNORE_POSITION | IGNORE_VELOCITY | _yaw_bits(sp.yaw_deg, None),
+            afx=sp.north_m_s2,
+            afy=sp.east_m_s2,
+            afz=sp.down_m_s2,
+            yaw=_rad(sp.yaw_deg),
+        )
+    if isinstance(sp, PositionVelocityNed):
+        accel = (sp.north_m_s2, sp.east_m_s2, sp.down_m_s2)
+        has_accel = all(a is not None for a in accel)
+        return LocalFields(
+            MAV_FRAME_LOCAL_NED,
+            (0 if has_accel else IGNORE_ACCELERATION) | _yaw_bits(sp.yaw_deg, None),
+            x=sp.north_m,
+            y=sp.east_m,
+            z=sp.down_m,
+            vx=sp.north_m_s,
+            vy=sp.east_m_s,
+            vz=sp.down_m_s,
+            afx=sp.north_m_s2 or 0.0,
+            afy=sp.east_m_s2 or 0.0,
+            afz=sp.down_m_s2 or 0.0,
+            yaw=_rad(sp.yaw_deg),
+        )
+    if isinstance(sp, RawLocal):
+        return LocalFields(**asdict(sp))
+    return None
+
+
+def _quaternion(roll_deg: float, pitch_deg: float, yaw_deg: float) -> list[float]:
+    """Hamilton quaternion (w, x, y, z) of ZYX Euler angles, as SET_ATTITUDE_TARGET wants."""
+    cr, sr = math.cos(math.radians(roll_deg) / 2), math.sin(math.radians(roll_deg) / 2)
+    cp, sp_ = math.cos(math.radians(pitch_deg) / 2), math.sin(math.radians(pitch_deg) / 2)
+    cy, sy = math.cos(math.radians(yaw_deg) / 2), math.sin(math.radians(yaw_deg) / 2)
+    return [
+        cr * cp * cy + sr * sp_ * sy,
+        sr * cp * cy - cr * sp_ * sy,
+        cr * sp_ * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp_ * cy,
+    ]
+
+
+def encode(
+    sp: Setpoint,
+    mav: mavlink.MAVLink,
+    target_system: int,
+    target_component: int,
+    time_boot_ms: int = 0,
+) -> tuple[mavlink.MAVLink_message, SentSetpoint]:
+    """The MAVLink message for an already resolved setpoint (no offsets)."""
+    fields = local_fields(sp)
+    if fields is not None:
+        msg = mav.set_position_target_local_ned_encode(
+            time_boot_ms,
+            target_system,
+            target_component,
+            fields.frame,
+            fields.type_mask,
+            fields.x,
+            fields.y,
+            fields.z,
+            fields.vx,
+            fields.vy,
+            fields.vz,
+            fields.afx,
+            fields.afy,
+            fields.afz,
+            fields.yaw,
+            fields.yaw_rate,
+        )
+        return msg, SentSetpoint(
+            sp, "SET_POSITION_TARGET_LOCAL_NED", fields.frame, fields.type_mask
+        )
+    if isinstance(sp, PositionGlobal):
+        frame = GLOBAL_FRAMES[sp.alt_frame]
+        mask = IGNORE_VELOCITY | IGNORE_ACCELERATION | _yaw_bits(sp.yaw_deg, None)
+        msg = mav.set_position_target_global_int_encode(
+            time_boot_ms,
+            target_system,
+            target_component,
+            frame,
+            mask,
+            round(sp.lat_deg * 1e7),
+            round(sp.lon_deg * 1e7),
+            sp.alt_m,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            _rad(sp.yaw_deg),
+            0.0,
+        )
+        return msg, SentSetpoint(sp, "SET_POSITION_TARGET_GLOBAL_INT", frame, mask)
+    if isinstance(sp, Attitude):
+        mask = IGNORE_BODY_RATES
+        q = _quaternion(sp.roll_deg, sp.pitch_deg, sp.yaw_deg)
+        rates = (0.0, 0.0, 0.0)
+    elif isinstance(sp, BodyRates):
+        mask = ATTITUDE_TARGET_TYPEMASK_ATTITUDE_IGNORE
+        q = [1.0, 0.0, 0.0, 0.0]
+        rates = (
+            math.radians(sp.roll_rate_deg_s),
+            math.radians(sp.pitch_rate_deg_s),
+            math.radians(sp.yaw_rate_deg_s),
+        )
+    else:
+        raise TypeError(f"offsets must be resolved before encoding: {sp!r}")
+    msg = mav.set_attitude_target_encode(
+        time_boot_ms, target_system, target_component, mask, q, *rates, sp.thrust
+    )
+    return msg, SentSetpoint(sp, "SET_ATTITUDE_TARGET", 0, mask)

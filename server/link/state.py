@@ -1,0 +1,198 @@
+"""Vehicle state snapshots (frozen, JSON-able via dataclasses.asdict) and latest-wins
+subscriptions to them."""
+
+from __future__ import annotations
+
+import asyncio
+import weakref
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Literal
+
+from server.link.link_stats import LinkStats
+
+LandedState = Literal["UNDEFINED", "ON_GROUND", "IN_AIR", "TAKEOFF", "LANDING"]
+VtolState = Literal["UNDEFINED", "MC", "FW", "TRANSITION_TO_FW", "TRANSITION_TO_MC"]
+
+LANDED_STATE_NAMES: tuple[LandedState, ...] = (
+    "UNDEFINED", "ON_GROUND", "IN_AIR", "TAKEOFF", "LANDING",
+)  # fmt: skip
+# EXTENDED_SYS_STATE.vtol_state: 0 undefined, 1 to FW, 2 to MC, 3 MC, 4 FW
+VTOL_STATE_NAMES: tuple[VtolState, ...] = (
+    "UNDEFINED", "TRANSITION_TO_FW", "TRANSITION_TO_MC", "MC", "FW",
+)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class PositionNedState:
+    north_m: float
+    east_m: float
+    down_m: float
+
+
+@dataclass(frozen=True)
+class VelocityNedState:
+    north_m_s: float
+    east_m_s: float
+    down_m_s: float
+
+
+@dataclass(frozen=True)
+class GlobalState:
+    lat_deg: float
+    lon_deg: float
+    alt_amsl_m: float
+    alt_rel_m: float
+
+
+@dataclass(frozen=True)
+class AttitudeState:
+    roll_deg: float
+    pitch_deg: float
+    yaw_deg: float
+    rollspeed_deg_s: float
+    pitchspeed_deg_s: float
+    yawspeed_deg_s: float
+
+
+@dataclass(frozen=True)
+class BatteryState:
+    voltage_v: float | None
+    current_a: float | None
+    remaining_pct: float | None
+
+
+@dataclass(frozen=True)
+class GpsState:
+    fix_type: str
+    satellites: int
+    hdop: float | None
+
+
+@dataclass(frozen=True)
+class HomeState:
+    lat_deg: float
+    lon_deg: float
+    alt_amsl_m: float
+    north_m: float
+    east_m: float
+    down_m: float
+
+
+@dataclass(frozen=True)
+class OriginState:
+    lat_deg: float
+    lon_deg: float
+    alt_amsl_m: float
+
+
+@dataclass(frozen=True)
+class StatusText:
+    time_s: float
+    severity: str
+    text: str
+
+
+@dataclass(frozen=True)
+class StreamStats:
+    """Setpoint streamer figures since it started; intervals from a bounded recent window."""
+
+    active: bool = False
+    rate_hz: float = 0.0
+    interval_p50_ms: float | None = None
+    interval_p99_ms: float | None = None
+    max_gap_ms: float | None = None
+    gaps: int = 0
+    sent: int = 0
+    since_last_ms: float | None = None
+
+
+@dataclass(frozen=True)
+class VehicleState:
+    sysid: int
+    compid: int
+    mav_type: str
+    autopilot: str
+    connected: bool
+    last_heartbeat_age_s: float
+    mode: str
+    user_mode: str | None
+    armed: bool
+    system_status: str
+    landed_state: LandedState
+    vtol_state: VtolState
+    position_ned: PositionNedState | None
+    velocity_ned: VelocityNedState | None
+    global_position: GlobalState | None
+    attitude: AttitudeState | None
+    ground_speed_m_s: float | None
+    air_speed_m_s: float | None
+    climb_rate_m_s: float | None
+    heading_deg: float | None
+    battery: BatteryState | None
+    gps: GpsState | None
+    home: HomeState | None
+    origin: OriginState | None
+    setpoint: dict[str, object] | None
+    target_ned: PositionNedState | None
+    stream: StreamStats
+    actuator_outputs: tuple[float, ...]
+    statustext: tuple[StatusText, ...]
+    rtl_phase: str | None
+    link: LinkStats
+    updated_s: float
+    telemetry_refused: tuple[str, ...] = field(default=())
+
+
+class StateSubscription:
+    """Async iterator of snapshots. Latest wins: however many changes happen between two
+    reads, the reader gets one snapshot, built when it reads, so the backlog is one."""
+
+    def __init__(self, snapshot: Callable[[], VehicleState], on_close: Callable[[], None]) -> None:
+        self._snapshot = snapshot
+        self._on_close = on_close
+        self._changed = asyncio.Event()
+        self._changed.set()  # a new subscriber gets the current state at once
+        self._closed = False
+
+    def notify(self) -> None:
+        self._changed.set()
+
+    def close(self) -> None:
+        if not self._closed:
+            self._closed = True
+            self._on_close()
+            self._changed.set()
+
+    def __aiter__(self) -> StateSubscription:
+        return self
+
+    async def __anext__(self) -> VehicleState:
+        await self._changed.wait()
+        if self._closed:
+            raise StopAsyncIteration
+        self._changed.clear()
+        return self._snapshot()
+
+
+class SubscriptionHub:
+    """Holds subscriptions weakly so a consumer that forgets close() does not leak."""
+
+    def __init__(self, snapshot: Callable[[], VehicleState]) -> None:
+        self._snapshot = snapshot
+        self._subs: weakref.WeakSet[StateSubscription] = weakref.WeakSet()
+
+    def subscribe(self) -> StateSubscription:
+        holder: list[StateSubscription] = []
+        sub = StateSubscription(self._snapshot, lambda: self._subs.discard(holder[0]))
+        holder.append(sub)
+        self._subs.add(sub)
+        return sub
+
+    def notify(self) -> None:
+        for sub in list(self._subs):
+            sub.notify()
+
+    def close_all(self) -> None:
+        for sub in list(self._subs):
+            sub.close()
