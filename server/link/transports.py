@@ -95,10 +95,12 @@ class _PeerRouter:
         self._peer_by_system: dict[int, Peer] = {}
         self._last_heard: dict[Peer, float] = {}
 
-    def heard(self, peer: Peer, src_system: int) -> None:
+    def heard(self, peer: Peer, src_system: int) -> bool:
+        """Note a frame from ``peer``; True when the peer was not known before."""
         self._peer_by_system[src_system] = peer
-        self._last_heard.pop(peer, None)  # re-insert: dict order is recency order
+        is_new = self._last_heard.pop(peer, None) is None  # re-insert: order is recency
         self._last_heard[peer] = time.monotonic()
+        return is_new
 
     def forget(self, peer: Peer) -> None:
         self._last_heard.pop(peer, None)
@@ -210,7 +212,7 @@ class UdpInTransport(_UdpTransport):
         self._router = _PeerRouter(expiry_s=UDP_PEER_EXPIRY_S)
 
     async def start(self, sink: FrameSink) -> None:
-        self._sink = _RoutingSink(sink, self._router)
+        self._sink = _RoutingSink(sink, self._router, announce_new_peers=True)
         await self._open_endpoint(local_addr=(self.address.host, self.address.port))
 
     def write(self, frame: bytes, target_system: int | None) -> bool:
@@ -237,14 +239,21 @@ class UdpOutTransport(_UdpTransport):
 
 
 class _RoutingSink:
-    """Passes frames on while noting which peer each system speaks from."""
+    """Passes frames on while noting which peer each system speaks from.
 
-    def __init__(self, sink: FrameSink, router: _PeerRouter) -> None:
+    With ``announce_new_peers`` a UDP peer's first frame reports a connection, so the link
+    can introduce itself (a GCS HEARTBEAT) at once instead of at its next 1 Hz tick.
+    """
+
+    def __init__(self, sink: FrameSink, router: _PeerRouter, *, announce_new_peers: bool) -> None:
         self._sink = sink
         self._router = router
+        self._announce_new_peers = announce_new_peers
 
     def frame_received(self, msg: mavlink.MAVLink_message, peer: Peer) -> None:
-        self._router.heard(peer, msg.get_srcSystem())
+        is_new = self._router.heard(peer, msg.get_srcSystem())
+        if is_new and self._announce_new_peers:
+            self._sink.connection_changed(True)
         self._sink.frame_received(msg, peer)
 
     def bad_frames_received(self, count: int) -> None:
@@ -355,7 +364,7 @@ class TcpServerTransport(Transport):
         return str(host), int(port)
 
     async def start(self, sink: FrameSink) -> None:
-        self._sink = _RoutingSink(sink, self._router)
+        self._sink = _RoutingSink(sink, self._router, announce_new_peers=False)
         self._server = await asyncio.start_server(
             self._serve_client, self.address.host, self.address.port
         )

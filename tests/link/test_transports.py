@@ -241,7 +241,8 @@ async def test_tcpin_serves_several_clients_and_routes_by_system() -> None:
         for sysid, (_, writer) in enumerate(clients, start=1):
             writer.write(_frame(sysid))
         await _until(lambda: sorted(sink.systems()) == [1, 2])
-        assert transport.write(b"to-2", 2) and transport.write(b"to-all", None)
+        assert transport.write(b"to-2", 2)
+        assert transport.write(b"to-all", None)
         first = await asyncio.wait_for(clients[0][0].readexactly(6), 5.0)
         second = await asyncio.wait_for(clients[1][0].readexactly(10), 5.0)
         assert (first, second) == (b"to-all", b"to-2to-all")

@@ -28,7 +28,7 @@ def test_network_urls_parse_to_kind_host_and_port(url: str, expected: LinkUrl) -
         ("/dev/ttyUSB1,921600", "/dev/ttyUSB1", 921600),
         ("serial:/dev/ttyS0:115200", "/dev/ttyS0", 115200),
         ("COM3:57600", "COM3", 57600),
-        ("/dev/serial/by-id/usb-Holybro_Pixhawk6C-if00", "/dev/serial/by-id/usb-Holybro_Pixhawk6C-if00",
+        ("/dev/serial/by-id/usb-Pixhawk6C-if00", "/dev/serial/by-id/usb-Pixhawk6C-if00",
          DEFAULT_SERIAL_BAUD),
     ],
 )
