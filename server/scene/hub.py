@@ -6,6 +6,7 @@ import asyncio
 import contextlib
 import dataclasses
 import logging
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterable
@@ -86,9 +87,10 @@ class SceneHub:
     async def start(self, vehicles: Callable[[], Iterable[Vehicle]]) -> None:
         if self._server is not None:
             return
-        self._server = await asyncio.to_thread(
-            viser.ViserServer, host=self._host, port=self._port, verbose=False
-        )
+        # viser prints its own banner with its private port: keep the app's stdout for the
+        # one URL users should open. Construction takes a few ms, so it runs on the loop.
+        with contextlib.redirect_stdout(sys.stderr):
+            self._server = viser.ViserServer(host=self._host, port=self._port, verbose=False)
         self._set_up_scene(self._server)
         self._task = asyncio.create_task(self._run(vehicles), name="scene-hub")
 
@@ -100,7 +102,8 @@ class SceneHub:
             self._task = None
         if self._server is not None:
             server, self._server = self._server, None
-            await asyncio.to_thread(server.stop)
+            with contextlib.redirect_stdout(sys.stderr):
+                await asyncio.to_thread(server.stop)
         self._views.clear()
 
     def mount(self, app: FastAPI, *, path: str = "/scene",
@@ -139,8 +142,11 @@ class SceneHub:
         server.scene.on_click()(self._on_click)
 
     def _on_click(self, event: viser.SceneClickEvent) -> None:
-        """Runs in viser's thread: only computes and stores the point, then marks it."""
-        hit = ray_hits_plane_z(event.ray_origin, event.ray_direction, self._ground_z)
+        self.record_click(event.ray_origin, event.ray_direction)
+
+    def record_click(self, ray_origin: Vec3, ray_direction: Vec3) -> None:
+        """A click ray (runs in viser's thread): stores where it meets the ground and marks it."""
+        hit = ray_hits_plane_z(ray_origin, ray_direction, self._ground_z)
         if hit is None:
             return
         lat = lon = alt = None
@@ -168,6 +174,8 @@ class SceneHub:
             await asyncio.sleep(next_s - now)
 
     def _watched(self) -> bool:
+        if self._proxy is not None and self._proxy.open_sockets > 0:
+            return True
         return self._server is not None and bool(self._server.get_clients())
 
     def _tick(self, vehicles: list[Vehicle], now_s: float) -> None:

@@ -174,5 +174,5 @@ async def _pump(websocket: WebSocket, upstream: ClientConnection) -> None:
                 websockets.exceptions.ConnectionClosed,
             ):
                 await task
-        with contextlib.suppress(RuntimeError):
+        with contextlib.suppress(RuntimeError, WebSocketDisconnect):
             await websocket.close()

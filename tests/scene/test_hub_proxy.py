@@ -1,0 +1,160 @@
+"""The scene hub behind the app's port: page, socket and scene API through the proxy."""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections.abc import AsyncIterator
+from dataclasses import dataclass
+
+import httpx
+import pytest
+import uvicorn
+import viser
+import websockets
+from fastapi import FastAPI
+from websockets.asyncio.client import connect
+from websockets.typing import Subprotocol
+
+from server.scene import SceneHub
+
+from .conftest import FakeVehicle
+
+TOKEN = "scene-test-token"
+SUBPROTOCOL = Subprotocol(f"viser-v{viser.__version__}")
+
+
+@dataclass
+class Served:
+    hub: SceneHub
+    base: str
+    vehicles: list[FakeVehicle]
+
+
+@pytest.fixture
+async def served() -> AsyncIterator[Served]:
+    vehicles = [FakeVehicle(1), FakeVehicle(2, "VTOL_FIXEDROTOR")]
+    hub = SceneHub(max_rate_hz=20.0)
+    app = FastAPI()
+    hub.mount(app, check_token=lambda token: token == TOKEN)
+    await hub.start(lambda: vehicles)
+    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=0, log_level="warning",
+                                           lifespan="off"))
+    task = asyncio.create_task(server.serve())
+    deadline = time.monotonic() + 10.0
+    while not server.started:
+        assert time.monotonic() < deadline, "uvicorn did not start"
+        await asyncio.sleep(0.02)
+    port = server.servers[0].sockets[0].getsockname()[1]
+    try:
+        yield Served(hub, f"127.0.0.1:{port}", vehicles)
+    finally:
+        server.should_exit = True
+        await task
+        await hub.stop()
+
+
+async def test_viser_listens_on_loopback_only(served: Served) -> None:
+    assert served.hub.port > 0
+    reader, writer = await asyncio.open_connection("127.0.0.1", served.hub.port)
+    writer.close()
+    assert served.base.startswith("127.0.0.1:")
+
+
+async def test_scene_page_is_served_with_token_and_sets_scene_cookie(served: Served) -> None:
+    async with httpx.AsyncClient(base_url=f"http://{served.base}") as client:
+        page = await client.get("/scene/", params={"token": TOKEN})
+        assert page.status_code == 200
+        assert page.headers["content-type"].startswith("text/html")
+        assert "<html" in page.text.lower()
+        cookie = page.headers["set-cookie"]
+        assert "skyhelm_token=" in cookie
+        assert "Path=/scene" in cookie
+        assert "HttpOnly" in cookie
+        redirect = await client.get("/scene", params={"token": TOKEN})
+        assert redirect.status_code == 307
+        assert redirect.headers["location"] == f"/scene/?token={TOKEN}"
+
+
+@pytest.mark.parametrize("token", [None, "wrong"])
+async def test_scene_page_and_api_refuse_missing_or_wrong_token(served: Served,
+                                                                token: str | None) -> None:
+    params = {"token": token} if token else {}
+    async with httpx.AsyncClient(base_url=f"http://{served.base}") as client:
+        assert (await client.get("/scene/", params=params)).status_code == 401
+        assert (await client.get("/scene/api/click", params=params)).status_code == 401
+        bearer = await client.get("/scene/api/status", headers={"Authorization": f"Bearer {TOKEN}"})
+        assert bearer.status_code == 200
+
+
+async def test_viser_socket_works_through_the_app_port_with_the_cookie(served: Served) -> None:
+    async with connect(f"ws://{served.base}/scene", subprotocols=[SUBPROTOCOL],
+                       additional_headers={"Cookie": f"skyhelm_token={TOKEN}"},
+                       max_size=None) as ws:
+        assert ws.subprotocol == SUBPROTOCOL
+        first = await asyncio.wait_for(ws.recv(), 10.0)
+        assert isinstance(first, bytes)
+        assert len(first) > 0
+        async with httpx.AsyncClient(base_url=f"http://{served.base}") as client:
+            status = (await client.get("/scene/api/status", params={"token": TOKEN})).json()
+        assert status["proxied_sockets"] == 1
+        assert status["vehicles"] == [1, 2]
+
+
+@pytest.mark.parametrize("cookie", [None, "skyhelm_token=wrong"])
+async def test_viser_socket_refused_with_4401_without_the_token(served: Served,
+                                                                cookie: str | None) -> None:
+    headers = {"Cookie": cookie} if cookie else {}
+    async with connect(f"ws://{served.base}/scene", subprotocols=[SUBPROTOCOL],
+                       additional_headers=headers) as ws:
+        with pytest.raises(websockets.exceptions.ConnectionClosed) as closed:
+            await asyncio.wait_for(ws.recv(), 10.0)
+    assert closed.value.rcvd is not None
+    assert closed.value.rcvd.code == 4401
+
+
+async def test_viser_socket_refused_from_another_origin(served: Served) -> None:
+    async with connect(f"ws://{served.base}/scene", subprotocols=[SUBPROTOCOL],
+                       additional_headers={"Cookie": f"skyhelm_token={TOKEN}"},
+                       origin=websockets.typing.Origin("http://evil.example")) as ws:
+        with pytest.raises(websockets.exceptions.ConnectionClosed) as closed:
+            await asyncio.wait_for(ws.recv(), 10.0)
+    assert closed.value.rcvd is not None
+    assert closed.value.rcvd.code == 4403
+
+
+async def test_scene_updates_stay_under_the_rate_limit_per_vehicle(served: Served) -> None:
+    async with connect(f"ws://{served.base}/scene", subprotocols=[SUBPROTOCOL],
+                       additional_headers={"Cookie": f"skyhelm_token={TOKEN}"},
+                       max_size=None) as ws:
+        await asyncio.wait_for(ws.recv(), 10.0)
+        start = served.hub.updates_applied
+        t0 = time.monotonic()
+        received = 0
+        while time.monotonic() - t0 < 1.5:
+            try:
+                await asyncio.wait_for(ws.recv(), 0.1)
+                received += 1
+            except TimeoutError:
+                pass
+        elapsed = time.monotonic() - t0
+    per_vehicle_hz = (served.hub.updates_applied - start) / 2 / elapsed
+    assert per_vehicle_hz <= 20.0 * 1.1
+    assert per_vehicle_hz >= 4.0
+    assert received > 0
+
+
+async def test_click_endpoint_reports_the_ground_point_with_lat_lon(served: Served) -> None:
+    async with httpx.AsyncClient(base_url=f"http://{served.base}") as client:
+        assert (await client.get("/scene/api/click", params={"token": TOKEN})).json() == {"seq": 0}
+        deadline = time.monotonic() + 5.0
+        while served.hub.status()["vehicles"] != [1, 2]:
+            assert time.monotonic() < deadline
+            await asyncio.sleep(0.05)
+        served.hub.record_click((0.0, -20.0, 10.0), (0.0, 1.0, -0.5))
+        click = (await client.get("/scene/api/click", params={"token": TOKEN})).json()
+    assert click["seq"] == 1
+    assert click["north_m"] == pytest.approx(0.0, abs=1e-6)
+    assert click["east_m"] == pytest.approx(0.0, abs=1e-6)
+    assert click["lat_deg"] == pytest.approx(47.397742, abs=1e-7)
+    assert click["lon_deg"] == pytest.approx(8.545594, abs=1e-7)
