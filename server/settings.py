@@ -16,6 +16,8 @@ from pydantic_settings import (
     TomlConfigSettingsSource,
 )
 
+from server.link.urls import LinkUrlError, parse_link_url
+
 OperatorLossAction = Literal["hold", "land", "rtl", "hold-mode", "continue"]
 Airframe = Literal["quad", "hexa", "octo", "plane", "vtol", "rover"]
 
@@ -69,12 +71,10 @@ class Settings(BaseSettings):
     @classmethod
     def _check_urls(cls, urls: list[str]) -> list[str]:
         for url in urls:
-            scheme, sep, rest = url.partition(":")
-            if not sep or not rest or scheme not in _URL_SCHEMES:
-                raise ValueError(
-                    f"{url!r} is not a MAVLink URL (expected one of "
-                    f"{', '.join(sorted(_URL_SCHEMES))}, e.g. udpin:127.0.0.1:14540)"
-                )
+            try:
+                parse_link_url(url)
+            except LinkUrlError as exc:
+                raise ValueError(str(exc)) from None
         return urls
 
     @field_validator("token", "observer_token")
@@ -115,7 +115,6 @@ class Settings(BaseSettings):
 
 
 _SECRET_FIELDS = frozenset({"token", "observer_token"})
-_URL_SCHEMES = frozenset({"udpin", "udpout", "udp", "tcp", "tcpin", "serial", "tlog"})
 
 
 class SettingsError(ValueError):

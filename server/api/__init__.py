@@ -1,0 +1,1 @@
+"""The v1 HTTP and WebSocket API over the link layer's vehicles."""

@@ -1,0 +1,110 @@
+"""Request dependencies as Annotated aliases: context, token role, vehicle lookup, lease."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import Annotated
+
+from fastapi import Depends, Header, Path, Request, Security
+from fastapi.security import APIKeyQuery, HTTPAuthorizationCredentials, HTTPBearer
+from starlette.requests import HTTPConnection
+
+from server.api.auth import Role, TokenChecker, token_from
+from server.api.deadman import Deadman
+from server.api.errors import ApiError
+from server.api.lease import Lease, LeaseManager
+from server.api.registry import VehicleRegistry
+from server.link import Vehicle
+from server.settings import Settings
+
+
+@dataclass
+class ApiContext:
+    settings: Settings
+    tokens: TokenChecker
+    registry: VehicleRegistry
+    leases: LeaseManager
+    deadman: Deadman
+
+
+def get_context(connection: HTTPConnection) -> ApiContext:
+    context: ApiContext = connection.app.state.api
+    return context
+
+
+Context = Annotated[ApiContext, Depends(get_context)]
+
+# Declared so /docs offers both ways in; the lookup itself is token_from().
+_bearer = HTTPBearer(auto_error=False, description="pilot or observer token")
+_query_token = APIKeyQuery(name="token", auto_error=False, description="same token, in the URL")
+
+
+def get_role(
+    request: Request,
+    context: Context,
+    _bearer_token: Annotated[HTTPAuthorizationCredentials | None, Security(_bearer)] = None,
+    _query: Annotated[str | None, Security(_query_token)] = None,
+) -> Role:
+    token = token_from(request.headers, request.query_params, request.cookies)
+    role = context.tokens.role_of(token)
+    if role is None:
+        raise ApiError(401, "missing or wrong token", headers={"WWW-Authenticate": "Bearer"})
+    return role
+
+
+Reader = Annotated[Role, Depends(get_role)]
+
+
+def require_pilot(role: Reader) -> Role:
+    if role is not Role.PILOT:
+        raise ApiError(403, "observer tokens may only read; this call needs the pilot token")
+    return role
+
+
+Pilot = Annotated[Role, Depends(require_pilot)]
+VehicleId = Annotated[int, Path(ge=0, le=255, description="the vehicle's MAVLink sysid")]
+
+
+def get_vehicle(vehicle_id: VehicleId, context: Context, _: Reader) -> Vehicle:
+    vehicle = context.registry.get(vehicle_id)
+    if vehicle is None:
+        raise ApiError(404, f"no vehicle {vehicle_id}")
+    return vehicle
+
+
+KnownVehicle = Annotated[Vehicle, Depends(get_vehicle)]
+
+
+def require_connected(vehicle: Vehicle) -> Vehicle:
+    if not vehicle.connected:
+        raise ApiError(503, f"vehicle {vehicle.sysid} is not connected (no HEARTBEAT)")
+    return vehicle
+
+
+def get_connected_vehicle(vehicle: KnownVehicle) -> Vehicle:
+    return require_connected(vehicle)
+
+
+ConnectedVehicle = Annotated[Vehicle, Depends(get_connected_vehicle)]
+
+LeaseIdHeader = Annotated[
+    str | None, Header(alias="X-Lease-Id", description="from POST /vehicles/{id}/control")
+]
+
+
+def hold_lease(
+    vehicle: KnownVehicle, _: Pilot, context: Context, x_lease_id: LeaseIdHeader = None
+) -> Iterator[Lease]:
+    """Control calls renew the lease, and it cannot lapse while the call runs."""
+    with context.leases.hold(vehicle.sysid, x_lease_id) as lease:
+        yield lease
+
+
+def get_controlled_vehicle(
+    vehicle: KnownVehicle, _lease: Annotated[Lease, Depends(hold_lease)]
+) -> Vehicle:
+    return require_connected(vehicle)
+
+
+ControlledVehicle = Annotated[Vehicle, Depends(get_controlled_vehicle)]

@@ -1,0 +1,131 @@
+"""How failures become HTTP answers. Bad input is a 422 naming the field, a vehicle's refusal
+a 409 carrying its MAV_RESULT and reason, no answer a 504, a lost vehicle a 503: never a 500."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fastapi import FastAPI, Request
+from fastapi.responses import JSONResponse
+from pydantic import BaseModel, ValidationError
+
+from server.api.lease import LeaseInvalid
+from server.api.schemas import CommandResultOut, ErrorOut, UnprocessableOut
+from server.link import CommandOutcome, CommandResult, ParamError, SetpointRejected
+
+
+class ApiError(Exception):
+    def __init__(
+        self, status_code: int, reason: str, *, field: str | None = None,
+        limit: float | None = None, holder: str | None = None,
+        headers: dict[str, str] | None = None,
+    ) -> None:  # fmt: skip
+        super().__init__(reason)
+        self.status_code = status_code
+        self.detail: dict[str, Any] = {"reason": reason}
+        for key, value in (("field", field), ("limit", limit), ("holder", holder)):
+            if value is not None:
+                self.detail[key] = value
+        self.headers = headers
+
+
+# A command's outcome decides the status; the body is always the full CommandResultOut.
+COMMAND_STATUS: dict[CommandOutcome, int] = {
+    CommandOutcome.ACCEPTED: 200,
+    CommandOutcome.IN_PROGRESS: 202,
+    CommandOutcome.TEMPORARILY_REJECTED: 409,
+    CommandOutcome.DENIED: 409,
+    CommandOutcome.UNSUPPORTED: 409,
+    CommandOutcome.FAILED: 409,
+    CommandOutcome.CANCELLED: 409,
+    CommandOutcome.NOT_CONFIRMED: 409,
+    CommandOutcome.TIMEOUT: 504,
+    CommandOutcome.LINK_LOST: 503,
+}
+
+
+def command_out(result: CommandResult) -> CommandResultOut:
+    return CommandResultOut(
+        command=result.command,
+        result=result.outcome.name,  # type: ignore[arg-type]
+        result_code=result.result_code,
+        elapsed_ms=round(result.elapsed_ms, 1),
+        reason=result.reason,
+    )
+
+
+def command_response(result: CommandResult) -> JSONResponse:
+    return JSONResponse(
+        command_out(result).model_dump(mode="json"), status_code=COMMAND_STATUS[result.outcome]
+    )
+
+
+def _described(model: type[BaseModel], description: str) -> dict[str, Any]:
+    return {"model": model, "description": description}
+
+
+Responses = dict[int | str, dict[str, Any]]
+AUTH_RESPONSES: Responses = {
+    401: _described(ErrorOut, "missing or wrong token"),
+    422: _described(UnprocessableOut, "invalid request: the field and the reason"),
+}
+READ_RESPONSES: dict[int | str, dict[str, Any]] = {
+    **AUTH_RESPONSES,
+    404: _described(ErrorOut, "no such vehicle"),
+}
+CONTROL_RESPONSES: dict[int | str, dict[str, Any]] = {
+    **READ_RESPONSES,
+    403: _described(ErrorOut, "observer tokens may only read"),
+    423: _described(ErrorOut, "the call needs the vehicle's control lease (X-Lease-Id)"),
+    503: _described(ErrorOut, "the vehicle is not connected"),
+}
+COMMAND_RESPONSES: dict[int | str, dict[str, Any]] = {
+    **CONTROL_RESPONSES,
+    202: _described(CommandResultOut, "the vehicle reported the command still in progress"),
+    409: _described(CommandResultOut, "the vehicle refused: MAV_RESULT and its reason"),
+    504: _described(CommandResultOut, "no answer from the vehicle"),
+}
+
+
+def error_status(exc: Exception) -> tuple[int, dict[str, Any]] | None:
+    """The HTTP status and `detail` for a failure the API expects; None for a real bug.
+    REST handlers and the WebSocket control session both answer through this."""
+    if isinstance(exc, ApiError):
+        return exc.status_code, exc.detail
+    if isinstance(exc, SetpointRejected):
+        return 422, {"reason": exc.reason, "field": exc.field, "limit": exc.limit}
+    if isinstance(exc, ValidationError):
+        return 422, {"reason": _validation_reason(exc), "field": _validation_field(exc)}
+    if isinstance(exc, LeaseInvalid):
+        return 423, {"reason": str(exc)}
+    if isinstance(exc, ParamError):
+        return 409, {"reason": str(exc)}
+    if isinstance(exc, TimeoutError):
+        return 504, {"reason": str(exc) or "no answer from the vehicle"}
+    return None
+
+
+def _validation_field(exc: ValidationError) -> str | None:
+    errors = exc.errors()
+    return ".".join(str(part) for part in errors[0]["loc"]) or None if errors else None
+
+
+def _validation_reason(exc: ValidationError) -> str:
+    return "; ".join(
+        f"{'.'.join(str(p) for p in error['loc']) or 'body'}: {error['msg']}"
+        for error in exc.errors()
+    )
+
+
+async def _handle(_: Request, exc: Exception) -> JSONResponse:
+    answer = error_status(exc)
+    if answer is None:  # pragma: no cover - registered only for the types above
+        raise exc
+    status_code, detail = answer
+    headers = exc.headers if isinstance(exc, ApiError) else None
+    return JSONResponse({"detail": detail}, status_code=status_code, headers=headers)
+
+
+def install_error_handlers(app: FastAPI) -> None:
+    for exc_type in (ApiError, SetpointRejected, LeaseInvalid, ParamError, TimeoutError):
+        app.add_exception_handler(exc_type, _handle)

@@ -1,0 +1,151 @@
+"""Vehicle commands by name, with their request bodies: the REST routes and the WebSocket
+control session run the same table, so both refuse and answer alike."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
+from typing import Any
+
+from pydantic import BaseModel
+
+from server.api.errors import ApiError
+from server.api.schemas import (
+    ArmBody,
+    HomeBody,
+    ModeBody,
+    OffboardStartBody,
+    OffboardStopBody,
+    OriginBody,
+    RepositionBody,
+    TakeoffBody,
+    VtolTransitionBody,
+)
+from server.link import CommandResult, Vehicle
+
+_EARTH_RADIUS_M = 6_371_000.0
+
+
+class NoBody(BaseModel):
+    pass
+
+
+@dataclass(frozen=True)
+class Operation:
+    body: type[BaseModel]
+    run: Callable[[Vehicle, Any], Awaitable[CommandResult]]
+
+
+async def arm(vehicle: Vehicle, body: ArmBody) -> CommandResult:
+    return await vehicle.arm(force=body.force)
+
+
+async def disarm(vehicle: Vehicle, body: ArmBody) -> CommandResult:
+    return await vehicle.disarm(force=body.force)
+
+
+async def takeoff(vehicle: Vehicle, body: TakeoffBody) -> CommandResult:
+    limit = vehicle.envelope.max_alt_rel_m
+    if body.altitude_m is not None and limit is not None and body.altitude_m > limit:
+        raise ApiError(422, "takeoff altitude above the envelope", field="altitude_m", limit=limit)
+    return await vehicle.takeoff(body.altitude_m)
+
+
+async def land(vehicle: Vehicle, _: NoBody) -> CommandResult:
+    return await vehicle.land()
+
+
+async def rtl(vehicle: Vehicle, _: NoBody) -> CommandResult:
+    return await vehicle.return_to_launch()
+
+
+async def hold(vehicle: Vehicle, _: NoBody) -> CommandResult:
+    return await vehicle.hold()
+
+
+async def set_mode(vehicle: Vehicle, body: ModeBody) -> CommandResult:
+    return await vehicle.set_mode(body.mode)
+
+
+async def reposition(vehicle: Vehicle, body: RepositionBody) -> CommandResult:
+    _check_reposition_envelope(vehicle, body)
+    return await vehicle.reposition(
+        body.lat_deg, body.lon_deg, alt_amsl_m=body.alt_amsl_m, alt_rel_m=body.alt_rel_m,
+        ground_speed_m_s=body.ground_speed_m_s, yaw_deg=body.yaw_deg,
+        loiter_radius_m=body.loiter_radius_m,
+    )  # fmt: skip
+
+
+async def vtol_transition(vehicle: Vehicle, body: VtolTransitionBody) -> CommandResult:
+    return await vehicle.vtol_transition(
+        body.to == "fixed_wing", immediate=body.immediate, wait=body.wait
+    )
+
+
+async def set_origin(vehicle: Vehicle, body: OriginBody) -> CommandResult:
+    return await vehicle.set_gps_origin(body.lat_deg, body.lon_deg, body.alt_amsl_m)
+
+
+async def set_home(vehicle: Vehicle, body: HomeBody) -> CommandResult:
+    return await vehicle.set_home(body.lat_deg, body.lon_deg, body.alt_amsl_m)
+
+
+async def offboard_start(vehicle: Vehicle, body: OffboardStartBody) -> CommandResult:
+    setpoint = body.setpoint.to_link() if body.setpoint is not None else None
+    return await vehicle.start_offboard(setpoint)
+
+
+async def offboard_stop(vehicle: Vehicle, body: OffboardStopBody) -> CommandResult:
+    return await vehicle.stop_offboard(body.then_mode)
+
+
+OPERATIONS: dict[str, Operation] = {
+    "arm": Operation(ArmBody, arm),
+    "disarm": Operation(ArmBody, disarm),
+    "takeoff": Operation(TakeoffBody, takeoff),
+    "land": Operation(NoBody, land),
+    "rtl": Operation(NoBody, rtl),
+    "hold": Operation(NoBody, hold),
+    "mode": Operation(ModeBody, set_mode),
+    "reposition": Operation(RepositionBody, reposition),
+    "vtol_transition": Operation(VtolTransitionBody, vtol_transition),
+    "origin": Operation(OriginBody, set_origin),
+    "home": Operation(HomeBody, set_home),
+    "offboard_start": Operation(OffboardStartBody, offboard_start),
+    "offboard_stop": Operation(OffboardStopBody, offboard_stop),
+}
+
+
+def _check_reposition_envelope(vehicle: Vehicle, body: RepositionBody) -> None:
+    """The envelope guards repositions as it guards setpoints: they fly the vehicle too."""
+    envelope = vehicle.envelope
+    home = vehicle.snapshot().home
+    if home is None:
+        return
+    if envelope.max_alt_rel_m is not None:
+        alt_rel_m = body.alt_rel_m
+        if alt_rel_m is None and body.alt_amsl_m is not None:
+            alt_rel_m = body.alt_amsl_m - home.alt_amsl_m
+        if alt_rel_m is not None and alt_rel_m > envelope.max_alt_rel_m:
+            raise ApiError(
+                422, "reposition altitude above the envelope",
+                field="alt_rel_m" if body.alt_rel_m is not None else "alt_amsl_m",
+                limit=envelope.max_alt_rel_m,
+            )  # fmt: skip
+    if envelope.max_distance_m is not None:
+        distance_m = _ground_distance_m(home.lat_deg, home.lon_deg, body.lat_deg, body.lon_deg)
+        if distance_m > envelope.max_distance_m:
+            raise ApiError(
+                422, f"reposition target {distance_m:.0f} m from home, beyond the envelope",
+                field="lat_deg", limit=envelope.max_distance_m,
+            )  # fmt: skip
+
+
+def _ground_distance_m(lat1_deg: float, lon1_deg: float, lat2_deg: float, lon2_deg: float
+                       ) -> float:  # fmt: skip
+    lat1, lat2 = math.radians(lat1_deg), math.radians(lat2_deg)
+    dlat = lat2 - lat1
+    dlon = math.radians(lon2_deg - lon1_deg)
+    a = math.sin(dlat / 2) ** 2 + math.cos(lat1) * math.cos(lat2) * math.sin(dlon / 2) ** 2
+    return 2 * _EARTH_RADIUS_M * math.asin(min(1.0, math.sqrt(a)))

@@ -1,0 +1,24 @@
+"""Liveness without a token: what the Docker HEALTHCHECK and `skyhelm serve` probe."""
+
+from __future__ import annotations
+
+from importlib.metadata import PackageNotFoundError, version
+
+from fastapi import APIRouter
+
+from server.api.deps import Context
+from server.api.schemas import HealthOut
+
+router = APIRouter(tags=["health"])
+
+
+def _version() -> str:
+    try:
+        return version("skyhelm")
+    except PackageNotFoundError:
+        return "0+unknown"
+
+
+@router.get("/health", response_model=HealthOut)
+async def health(context: Context) -> HealthOut:
+    return HealthOut(status="ok", version=_version(), vehicles=len(context.registry.all()))

@@ -1,0 +1,30 @@
+"""Reading vehicles: the list, one vehicle's full state, its streamer statistics."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fastapi import APIRouter
+
+from server.api.deps import Context, KnownVehicle, Reader
+from server.api.errors import AUTH_RESPONSES, READ_RESPONSES
+from server.api.schemas import StreamOut, VehicleStateOut, VehicleSummaryOut
+from server.api.views import state_dict, stream_dict, summary_dict
+
+router = APIRouter(tags=["vehicles"])
+
+
+@router.get("/vehicles", response_model=list[VehicleSummaryOut], responses=AUTH_RESPONSES)
+async def list_vehicles(context: Context, _: Reader) -> list[dict[str, Any]]:
+    return [summary_dict(vehicle.snapshot()) for vehicle in context.registry.all()]
+
+
+@router.get("/vehicles/{vehicle_id}", response_model=VehicleStateOut, responses=READ_RESPONSES)
+async def get_vehicle_state(vehicle: KnownVehicle, context: Context) -> dict[str, Any]:
+    return state_dict(vehicle.snapshot(), context.leases)
+
+
+@router.get("/vehicles/{vehicle_id}/stream", response_model=StreamOut, responses=READ_RESPONSES)
+async def get_stream_stats(vehicle: KnownVehicle) -> dict[str, Any]:
+    """Setpoint streamer figures, measured since the stream last started."""
+    return stream_dict(vehicle.stream_stats())

@@ -1,0 +1,127 @@
+"""The FastAPI application: API v1, the 3D scene, the static page, and a lifespan that opens
+the links (starting the simulated vehicle first when no --connect is given)."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+
+from fastapi import APIRouter, FastAPI
+from fastapi.middleware.cors import CORSMiddleware
+from fastapi.staticfiles import StaticFiles
+
+from server.api import ws
+from server.api.auth import TokenChecker
+from server.api.deadman import Deadman
+from server.api.deps import ApiContext
+from server.api.errors import install_error_handlers
+from server.api.lease import LeaseManager
+from server.api.registry import VehicleRegistry
+from server.api.routes import commands, control, health, params, setpoint, vehicles
+from server.link import Envelope, Link
+from server.scene import SceneHub
+from server.settings import Settings
+from server.simproc import SimProcess
+
+log = logging.getLogger(__name__)
+
+API_PREFIX = "/api/v1"
+
+
+class StartupError(RuntimeError):
+    """The server cannot start: a link would not open or a vehicle never appeared."""
+
+
+def create_app(settings: Settings) -> FastAPI:
+    observer = settings.observer_token.get_secret_value() if settings.observer_token else None
+    tokens = TokenChecker(settings.pilot_token(), observer)
+    envelope = Envelope(
+        max_alt_rel_m=settings.max_alt_rel_m, max_distance_m=settings.max_distance_m,
+        max_speed_xy_m_s=settings.max_speed_xy_m_s, max_speed_z_m_s=settings.max_speed_z_m_s,
+    )  # fmt: skip
+    registry = VehicleRegistry(envelope, settings.rate_hz)
+    leases = LeaseManager(settings.lease_ttl_s)
+    deadman = Deadman(leases, registry, settings.on_operator_loss)
+    context = ApiContext(settings, tokens, registry, leases, deadman)
+    hub = SceneHub() if settings.scene else None
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        sim: SimProcess | None = None
+        try:
+            if settings.connect:
+                await _open_links(registry, settings, settings.connect)
+            else:
+                sim = SimProcess(
+                    airframe=settings.sim_airframe, count=settings.sim_count,
+                    speed=settings.sim_speed,
+                )  # fmt: skip
+                app.state.sim = sim
+                instances = await sim.start()
+                await _open_links(registry, settings, [i.url for i in instances])
+                await _wait_for_vehicles(registry, [i.sysid for i in instances], settings)
+            await deadman.start()
+            if hub is not None:
+                await hub.start(registry.all)
+            yield
+        finally:
+            if hub is not None:
+                await hub.stop()
+            await deadman.stop()
+            for link in registry.remove_links():
+                await link.close()
+            if sim is not None:
+                await sim.stop()
+
+    app = FastAPI(
+        title="SkyHelm",
+        summary="Ground control for PX4 vehicles: REST + WebSocket over one MAVLink link",
+        version="1",
+        lifespan=lifespan,
+    )
+    app.state.api = context
+    app.state.sim = None
+    app.state.state_text = ws.StateText(context)
+    install_error_handlers(app)
+    if settings.cors_origins:
+        app.add_middleware(
+            CORSMiddleware, allow_origins=settings.cors_origins, allow_methods=["*"],
+            allow_headers=["Authorization", "Content-Type", "X-Lease-Id"],
+        )  # fmt: skip
+    api = APIRouter(prefix=API_PREFIX)
+    for module in (health, vehicles, control, commands, setpoint, params):
+        api.include_router(module.router)
+    api.include_router(ws.router)
+    app.include_router(api)
+    if hub is not None:
+        hub.mount(app, check_token=tokens.is_valid)
+    if settings.web_dir is not None:
+        app.mount("/", StaticFiles(directory=settings.web_dir, html=True), name="web")
+    return app
+
+
+async def _open_links(registry: VehicleRegistry, settings: Settings, urls: list[str]) -> None:
+    for url in urls:
+        try:
+            link = await Link.open(
+                url, log_dir=settings.log_dir, heartbeat_timeout_s=settings.heartbeat_timeout_s
+            )
+        except OSError as exc:
+            raise StartupError(f"cannot open {url}: {exc}") from exc
+        registry.add_link(link)
+
+
+async def _wait_for_vehicles(registry: VehicleRegistry, sysids: list[int], settings: Settings
+                             ) -> None:  # fmt: skip
+    """The URL is printed only once every simulated vehicle is talking."""
+    deadline = time.monotonic() + settings.vehicle_wait_s
+    while True:
+        missing = [sysid for sysid in sysids if registry.get(sysid) is None]
+        if not missing:
+            return
+        if time.monotonic() > deadline:
+            raise StartupError(f"simulated vehicle(s) {missing} sent no HEARTBEAT")
+        await asyncio.sleep(0.05)

@@ -1,0 +1,143 @@
+"""The `skyhelm` command: `serve` (the dashboard), `sim` (the simulated vehicle alone)."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import logging
+import os
+import re
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import uvicorn
+
+from server.settings import Settings, SettingsError, load_settings
+
+log = logging.getLogger("server")
+
+_TOKEN_IN_TEXT = re.compile(r"(token=)[^&\s\"']+")
+
+
+class RedactTokens(logging.Filter):
+    """Tokens travel in URLs (?token=); no log line may carry one."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        message = record.getMessage()
+        if "token=" in message:
+            record.msg = _TOKEN_IN_TEXT.sub(r"\1***", message)
+            record.args = None
+        return True
+
+
+def configure_logging(level: str) -> None:
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
+    handler.addFilter(RedactTokens())
+    root = logging.getLogger()
+    root.handlers[:] = [handler]
+    root.setLevel(level.upper())
+
+
+def _serve_parser(sub: Any) -> None:
+    serve = sub.add_parser(
+        "serve", help="run the dashboard (with a simulated vehicle unless --connect is given)",
+        argument_default=argparse.SUPPRESS,
+    )  # fmt: skip
+    serve.add_argument("--config", type=Path, help="TOML file with the same settings")
+    serve.add_argument("--host", help="bind address (default 127.0.0.1)")
+    serve.add_argument("--port", type=int, help="HTTP port; 0 picks a free one (default 8000)")
+    serve.add_argument("--token", help="pilot token (default: generated)")
+    serve.add_argument("--observer-token", help="read-only token")
+    serve.add_argument(
+        "--connect", action="append", metavar="URL",
+        help="vehicle link, e.g. udpin:127.0.0.1:14540 (repeatable; none = simulated vehicle)",
+    )  # fmt: skip
+    serve.add_argument("--sim-airframe", help="quad|hexa|octo|plane|vtol|rover")
+    serve.add_argument("--sim-count", type=int, help="number of simulated vehicles")
+    serve.add_argument("--sim-speed", type=float, help="simulated time per wall second")
+    serve.add_argument("--rate-hz", type=float, help="offboard setpoint stream rate")
+    serve.add_argument("--lease-ttl-s", type=float, help="control lease TTL (default 2)")
+    serve.add_argument("--on-operator-loss", help="hold|land|rtl|hold-mode|continue")
+    serve.add_argument("--max-alt-rel-m", type=float, help="envelope: altitude above home")
+    serve.add_argument("--max-distance-m", type=float, help="envelope: distance from home")
+    serve.add_argument("--max-speed-xy-m-s", type=float, help="envelope: horizontal speed")
+    serve.add_argument("--max-speed-z-m-s", type=float, help="envelope: vertical speed")
+    serve.add_argument("--log-dir", type=Path, help="where .tlog recordings go (default logs)")
+    serve.add_argument("--no-tlog", action="store_true", help="record no .tlog")
+    serve.add_argument("--cors-origin", action="append", dest="cors_origins", metavar="ORIGIN")
+    serve.add_argument("--no-scene", action="store_true", help="do not start the 3D scene")
+    serve.add_argument("--log-level", default="info", help="debug|info|warning|error")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="skyhelm", description=__doc__)
+    sub = parser.add_subparsers(dest="command", required=True)
+    _serve_parser(sub)
+    # `skyhelm sim` hands every argument to `python -m sim`, see main().
+    sub.add_parser("sim", help="run the simulated PX4 vehicle alone, like PX4 SITL (sim --help)")
+    return parser
+
+
+def settings_from_args(args: argparse.Namespace) -> Settings:
+    flags = dict(vars(args))
+    for name in ("command", "config", "log_level", "no_tlog", "no_scene"):
+        flags.pop(name, None)
+    if getattr(args, "no_tlog", False):
+        flags["log_dir"] = None
+    if getattr(args, "no_scene", False):
+        flags["scene"] = False
+    return load_settings(getattr(args, "config", None), **flags)
+
+
+def ready_url(settings: Settings, port: int) -> str:
+    host = settings.host
+    if host in ("0.0.0.0", "::", ""):
+        host = "127.0.0.1"
+    if ":" in host:
+        host = f"[{host}]"
+    return f"http://{host}:{port}/?token={settings.pilot_token()}"
+
+
+async def serve(settings: Settings) -> int:
+    from server.app import create_app
+
+    config = uvicorn.Config(
+        create_app(settings), host=settings.host, port=settings.port, log_config=None,
+        access_log=False, lifespan="on", ws="websockets-sansio",
+    )  # fmt: skip
+    server = uvicorn.Server(config)
+    running = asyncio.create_task(server.serve())
+    while not server.started:
+        if running.done():
+            await running
+            print("skyhelm: the server did not start (see the log above)", file=sys.stderr)
+            return 1
+        await asyncio.sleep(0.05)
+    port = server.servers[0].sockets[0].getsockname()[1]
+    print(f"SkyHelm ready: {ready_url(settings, port)}", flush=True)
+    await running
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["sim"]:
+        os.execv(sys.executable, [sys.executable, "-m", "sim", *argv[1:]])
+    args = build_parser().parse_args(argv)
+    configure_logging(getattr(args, "log_level", "info"))
+    try:
+        settings = settings_from_args(args)
+    except SettingsError as exc:
+        print(f"skyhelm: {exc}", file=sys.stderr)
+        return 2
+    try:
+        return asyncio.run(serve(settings))
+    except KeyboardInterrupt:
+        return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,135 @@
+"""The embedded simulated vehicle as a child process (`python -m sim`), so its 250 Hz physics
+never competes with the streamer's event loop. The server never imports `sim`: it starts the
+process, reads its one ready line, and talks MAVLink to the ports it reports."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+import signal
+import sys
+from dataclasses import dataclass
+
+log = logging.getLogger(__name__)
+
+READY_TIMEOUT_S = 30.0
+STOP_TIMEOUT_S = 5.0
+
+
+class SimProcessError(RuntimeError):
+    """The simulated vehicle did not start; the message carries what it printed."""
+
+
+@dataclass(frozen=True)
+class SimInstance:
+    instance: int
+    sysid: int
+    api_local_port: int
+    gcs_local_port: int
+
+    @property
+    def url(self) -> str:
+        return f"udpout:127.0.0.1:{self.api_local_port}"
+
+
+class SimProcess:
+    def __init__(self, *, airframe: str = "quad", count: int = 1, speed: float = 1.0) -> None:
+        self.airframe = airframe
+        self.count = count
+        self.speed = speed
+        self.instances: list[SimInstance] = []
+        self._process: asyncio.subprocess.Process | None = None
+        self._reader: asyncio.Task[None] | None = None
+
+    @property
+    def pid(self) -> int | None:
+        return self._process.pid if self._process is not None else None
+
+    def command(self) -> list[str]:
+        return [
+            sys.executable, "-m", "sim", "--airframe", self.airframe, "--count", str(self.count),
+            "--speed", repr(self.speed), "--ready-json", "--exit-on-stdin-eof",
+            "--api-port", "0", "--gcs-port", "0", "--api-local-port", "0",
+            "--gcs-local-port", "0",
+        ]  # fmt: skip
+
+    async def start(self) -> list[SimInstance]:
+        # stdin stays open as a lifeline: if this process dies, the child sees EOF and exits.
+        self._process = await asyncio.create_subprocess_exec(
+            *self.command(), stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE,
+            stderr=asyncio.subprocess.PIPE,
+        )  # fmt: skip
+        try:
+            ready = await asyncio.wait_for(self._read_ready_line(), READY_TIMEOUT_S)
+        except (TimeoutError, SimProcessError) as exc:
+            errors = await self._stderr_tail()
+            await self.stop()
+            raise SimProcessError(f"simulated vehicle did not start: {exc}{errors}") from None
+        self.instances = [
+            SimInstance(
+                instance=int(item["instance"]),
+                sysid=int(item["sysid"]),
+                api_local_port=int(item["api_local_port"]),
+                gcs_local_port=int(item["gcs_local_port"]),
+            )
+            for item in ready["instances"]
+        ]
+        self._reader = asyncio.create_task(self._forward_output())
+        log.info("simulated %s x%d running as pid %s", self.airframe, self.count, self.pid)
+        return self.instances
+
+    async def _read_ready_line(self) -> dict[str, list[dict[str, int]]]:
+        assert self._process is not None
+        assert self._process.stdout is not None
+        while True:
+            line = await self._process.stdout.readline()
+            if not line:
+                raise SimProcessError(f"exited with code {await self._process.wait()}")
+            with contextlib.suppress(ValueError):
+                message = json.loads(line)
+                if isinstance(message, dict) and message.get("event") == "ready":
+                    return message
+            log.debug("sim: %s", line.decode(errors="replace").rstrip())
+
+    async def _stderr_tail(self) -> str:
+        if self._process is None or self._process.stderr is None:
+            return ""
+        with contextlib.suppress(TimeoutError):
+            data = await asyncio.wait_for(self._process.stderr.read(4000), 1.0)
+            text = data.decode(errors="replace").strip()
+            return f"\n{text}" if text else ""
+        return ""
+
+    async def _forward_output(self) -> None:
+        """Keep the pipes drained (a full pipe would stall the child) and log what it says."""
+        assert self._process is not None
+
+        async def forward(stream: asyncio.StreamReader | None) -> None:
+            while stream is not None and (line := await stream.readline()):
+                log.info("sim: %s", line.decode(errors="replace").rstrip())
+
+        await asyncio.gather(forward(self._process.stdout), forward(self._process.stderr))
+
+    async def stop(self) -> None:
+        process, self._process = self._process, None
+        if process is None:
+            return
+        if process.returncode is None:
+            with contextlib.suppress(ProcessLookupError):
+                process.send_signal(signal.SIGTERM)
+            try:
+                await asyncio.wait_for(process.wait(), STOP_TIMEOUT_S)
+            except TimeoutError:
+                with contextlib.suppress(ProcessLookupError):
+                    process.kill()
+                await process.wait()
+        if process.stdin is not None:
+            process.stdin.close()
+        if self._reader is not None:
+            self._reader.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._reader
+            self._reader = None
+        log.info("simulated vehicle stopped (exit code %s)", process.returncode)
