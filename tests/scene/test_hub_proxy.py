@@ -6,6 +6,7 @@ import asyncio
 import time
 from collections.abc import AsyncIterator
 from dataclasses import dataclass
+from typing import cast
 
 import httpx
 import pytest
@@ -16,6 +17,7 @@ from fastapi import FastAPI
 from websockets.asyncio.client import connect
 from websockets.typing import Subprotocol
 
+from server.link import Vehicle
 from server.scene import SceneHub
 
 from .conftest import FakeVehicle
@@ -37,7 +39,8 @@ async def served() -> AsyncIterator[Served]:
     hub = SceneHub(max_rate_hz=20.0)
     app = FastAPI()
     hub.mount(app, check_token=lambda token: token == TOKEN)
-    await hub.start(lambda: vehicles)
+    # The hub reads only snapshot(), which the fakes provide.
+    await hub.start(lambda: cast("list[Vehicle]", vehicles))
     server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=0, log_level="warning",
                                            lifespan="off"))
     task = asyncio.create_task(server.serve())
@@ -52,13 +55,6 @@ async def served() -> AsyncIterator[Served]:
         server.should_exit = True
         await task
         await hub.stop()
-
-
-async def test_viser_listens_on_loopback_only(served: Served) -> None:
-    assert served.hub.port > 0
-    reader, writer = await asyncio.open_connection("127.0.0.1", served.hub.port)
-    writer.close()
-    assert served.base.startswith("127.0.0.1:")
 
 
 async def test_scene_page_is_served_with_token_and_sets_scene_cookie(served: Served) -> None:
