@@ -1,0 +1,126 @@
+"""`python -m sim` / `skyhelm sim`: run simulated PX4 vehicles like PX4 SITL does."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import os
+import signal
+import sys
+import threading
+from collections.abc import Sequence
+
+from sim.runner import SimCluster
+
+AIRFRAME_CHOICES = ("quad", "hexa", "octo", "plane", "vtol", "rover")
+# PX4 SITL's ports for instance 0 (instance i adds i, except the shared GCS port).
+SITL_API_REMOTE_PORT = 14540
+SITL_GCS_REMOTE_PORT = 14550
+SITL_API_LOCAL_PORT = 14580
+SITL_GCS_LOCAL_PORT = 18570
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="skyhelm sim",
+        description="Simulated PX4 v1.16 vehicles on UDP, like PX4 SITL.",
+    )
+    parser.add_argument("--instance", type=int, default=0,
+                        help="first instance index (sysid = index + 1)")
+    parser.add_argument("--count", type=int, default=1, help="number of vehicles")
+    parser.add_argument("--airframe", choices=AIRFRAME_CHOICES, default="quad")
+    parser.add_argument("--api-port", type=int, default=SITL_API_REMOTE_PORT,
+                        help="remote API port of instance 0 (instance i: +i); 0 = none")
+    parser.add_argument("--gcs-port", type=int, default=SITL_GCS_REMOTE_PORT,
+                        help="remote GCS port shared by all instances; 0 = none")
+    parser.add_argument("--api-local-port", type=int, default=SITL_API_LOCAL_PORT,
+                        help="local API port of instance 0 (instance i: +i); 0 = ephemeral")
+    parser.add_argument("--gcs-local-port", type=int, default=SITL_GCS_LOCAL_PORT,
+                        help="local GCS port of instance 0 (instance i: +i); 0 = ephemeral")
+    parser.add_argument("--host", default="127.0.0.1", help="address to bind and send to")
+    parser.add_argument("--speed", type=float, default=1.0, help="sim time / wall time")
+    parser.add_argument("--ready-json", action="store_true",
+                        help="print one JSON line with the bound ports once ready")
+    parser.add_argument("--exit-on-stdin-eof", action="store_true",
+                        help="stop when stdin reaches end of file")
+    return parser
+
+
+def _ports_for_instance(base: int, first: int) -> int:
+    """The local port of the first instance: SITL adds the instance index to the base."""
+    return base + first if base else 0
+
+
+async def serve(args: argparse.Namespace) -> int:
+    loop = asyncio.get_running_loop()
+    stop = asyncio.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    if args.exit_on_stdin_eof:
+        _watch_stdin(loop, stop)
+    cluster = SimCluster(
+        airframe=args.airframe,
+        count=args.count,
+        instance=args.instance,
+        host=args.host,
+        api_port=_ports_for_instance(args.api_port, args.instance) or None,
+        gcs_port=args.gcs_port or None,
+        api_local_port=_ports_for_instance(args.api_local_port, args.instance),
+        gcs_local_port=_ports_for_instance(args.gcs_local_port, args.instance),
+        speed=args.speed,
+    )
+    async with cluster:
+        _report_ports(cluster, args)
+        await stop.wait()
+    return 0
+
+
+def _report_ports(cluster: SimCluster, args: argparse.Namespace) -> None:
+    human = sys.stderr if args.ready_json else sys.stdout
+    for inst in cluster.instances:
+        api_remote = inst.api_link.remote
+        gcs_remote = inst.gcs_link.remote
+        print(
+            f"sim instance {inst.instance} ({args.airframe}, sysid {inst.sysid}): "
+            f"API udp {args.host}:{inst.api_local_port} -> "
+            f"{api_remote[1] if api_remote else 'first sender'}, "
+            f"GCS udp {args.host}:{inst.gcs_local_port} -> "
+            f"{gcs_remote[1] if gcs_remote else 'first sender'}",
+            file=human, flush=True,
+        )
+    if args.ready_json:
+        ready = {
+            "event": "ready",
+            "instances": [
+                {"instance": inst.instance, "sysid": inst.sysid,
+                 "api_local_port": inst.api_local_port, "gcs_local_port": inst.gcs_local_port}
+                for inst in cluster.instances
+            ],
+        }
+        print(json.dumps(ready), flush=True)
+
+
+def _watch_stdin(loop: asyncio.AbstractEventLoop, stop: asyncio.Event) -> None:
+    def read_until_eof() -> None:
+        fd = sys.stdin.fileno()
+        while os.read(fd, 4096):
+            pass
+        loop.call_soon_threadsafe(stop.set)
+
+    threading.Thread(target=read_until_eof, name="stdin-eof", daemon=True).start()
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    if args.count < 1:
+        print("--count must be at least 1", file=sys.stderr)
+        return 2
+    if args.speed <= 0:
+        print("--speed must be positive", file=sys.stderr)
+        return 2
+    try:
+        return asyncio.run(serve(args))
+    except OSError as exc:
+        print(f"sim: {exc}", file=sys.stderr)
+        return 1

@@ -1,0 +1,281 @@
+"""Arming, modes and failsafes of the simulated vehicle, after PX4's commander.
+
+The commander owns three pieces of state PX4 keeps apart: whether the vehicle is armed,
+the mode it flies now (`nav_mode`), and the mode the user asked for last (`user_mode`).
+They differ while a failsafe holds, e.g. OFFBOARD asked, Position flown after the
+offboard stream stopped; when the cause clears the vehicle returns to the user's mode.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from enum import IntEnum
+
+from sim import modes
+from sim.modes import Px4Mode
+from sim.params import ParamReader
+from sim.topics import ControlSetpoint
+
+MAV_RESULT_ACCEPTED = 0
+MAV_RESULT_TEMPORARILY_REJECTED = 1
+MAV_RESULT_DENIED = 2
+MAV_RESULT_UNSUPPORTED = 3
+MAV_RESULT_FAILED = 4
+
+MAV_SEVERITY_CRITICAL = 2
+MAV_SEVERITY_WARNING = 4
+MAV_SEVERITY_INFO = 6
+
+# param2 of MAV_CMD_COMPONENT_ARM_DISARM that skips the landed check on disarm.
+ARM_DISARM_FORCE_MAGIC = 21196
+
+# PX4 applies a failsafe action a moment after its trigger and switches back to the
+# user's OFFBOARD a moment after the stream resumes (observed 1.1-1.3 s and ~0.1 s).
+FAILSAFE_ACTION_DELAY_S = 0.15
+OFFBOARD_RESUME_DELAY_S = 0.1
+
+Announce = Callable[[int, str], None]
+
+
+class ObLossAction(IntEnum):
+    """COM_OBL_RC_ACT values."""
+
+    POSITION = 0
+    ALTITUDE = 1
+    STABILIZED = 2
+    RETURN = 3
+    LAND = 4
+    HOLD = 5
+    TERMINATE = 6
+    DISARM = 7
+
+
+_OBL_ACTION_MODES: dict[int, Px4Mode] = {
+    ObLossAction.POSITION: modes.POSCTL,
+    ObLossAction.ALTITUDE: modes.ALTCTL,
+    ObLossAction.STABILIZED: modes.STABILIZED,
+    ObLossAction.RETURN: modes.AUTO_RTL,
+    ObLossAction.LAND: modes.AUTO_LAND,
+    ObLossAction.HOLD: modes.AUTO_LOITER,
+    ObLossAction.TERMINATE: modes.TERMINATION,
+}
+
+# Known modes the simulated vehicle cannot run at all (nothing to follow, no beacon).
+_UNSUPPORTED_MODES = frozenset(
+    {modes.AUTO_READY, modes.AUTO_FOLLOW_TARGET, modes.AUTO_PRECLAND, modes.ORBIT}
+)
+
+
+@dataclass
+class Home:
+    """PX4 `home_position`: where RTL returns to, in local NED and geodetic terms."""
+
+    valid: bool = False
+    position_ned_m: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+    yaw_rad: float = 0.0
+    lat_deg: float = math.nan
+    lon_deg: float = math.nan
+    alt_m: float = math.nan
+
+
+@dataclass
+class OffboardInput:
+    """The newest offboard setpoint and when it arrived (sim time)."""
+
+    setpoint: ControlSetpoint | None = None
+    received_s: float = -math.inf
+
+
+class Commander:
+    def __init__(
+        self,
+        params: ParamReader,
+        announce: Announce,
+        *,
+        is_vtol: bool = False,
+        has_mission: bool = False,
+    ) -> None:
+        self._params = params
+        self._announce = announce
+        self._is_vtol = is_vtol
+        self._has_mission = has_mission
+        self.armed = False
+        self.nav_mode: Px4Mode = modes.AUTO_LOITER
+        self.user_mode: Px4Mode = modes.AUTO_LOITER
+        self.ready = False
+        self.landed = True
+        self.home = Home()
+        self.offboard = OffboardInput()
+        self.failsafe = False
+        self.armed_at_s = 0.0
+        self.took_off_since_arming = False
+        self._landed_since_s: float | None = None
+        self._offboard_lost_since_s: float | None = None
+        self._offboard_resumed_at_s: float | None = None
+        self._now_s = 0.0
+        self.mode_changes = 0
+        self._arm_listeners: list[Callable[[bool], None]] = []
+
+    # -- queries -----------------------------------------------------------------------
+
+    def offboard_signal_fresh(self, now_s: float | None = None) -> bool:
+        now = self._now_s if now_s is None else now_s
+        age = now - self.offboard.received_s
+        return self.offboard.setpoint is not None and age <= self._params.get("COM_OF_LOSS_T")
+
+    def mode_can_run(self, mode: Px4Mode) -> bool:
+        if mode == modes.OFFBOARD:
+            return self.offboard_signal_fresh()
+        if mode == modes.AUTO_MISSION:
+            return self._has_mission
+        if mode == modes.AUTO_VTOL_TAKEOFF:
+            return self._is_vtol
+        if mode in (modes.AUTO_RTL, modes.AUTO_TAKEOFF):
+            return self.ready
+        return mode not in _UNSUPPORTED_MODES
+
+    # -- requests from MAVLink ---------------------------------------------------------
+
+    def request_mode(self, mode: Px4Mode) -> int:
+        """DO_SET_MODE / SET_MODE: the MAV_RESULT of the second (real) ack."""
+        if mode not in modes.MODE_NAMES or mode in _UNSUPPORTED_MODES:
+            return MAV_RESULT_TEMPORARILY_REJECTED
+        if self.armed and not self.mode_can_run(mode):
+            return MAV_RESULT_TEMPORARILY_REJECTED
+        self.user_mode = mode
+        self._set_nav_mode(mode)
+        self._clear_failsafe()
+        return MAV_RESULT_ACCEPTED
+
+    def switch_mode(self, mode: Px4Mode) -> None:
+        """A mode change the vehicle makes itself and adopts as the user's (takeoff → Hold)."""
+        self.user_mode = mode
+        self._set_nav_mode(mode)
+        self._clear_failsafe()
+
+    def arm(self, now_s: float) -> int:
+        if self.armed:
+            return MAV_RESULT_ACCEPTED
+        reason = self._arming_denial()
+        if reason is not None:
+            self._announce(MAV_SEVERITY_CRITICAL, f"Arming denied: {reason}")
+            return MAV_RESULT_TEMPORARILY_REJECTED
+        self.armed = True
+        self.armed_at_s = now_s
+        self.took_off_since_arming = not self.landed
+        self._landed_since_s = now_s if self.landed else None
+        self._arm_listeners_notify()
+        return MAV_RESULT_ACCEPTED
+
+    def disarm(self, force: bool) -> int:
+        if not self.armed:
+            return MAV_RESULT_ACCEPTED
+        if not force and not self.landed:
+            self._announce(MAV_SEVERITY_CRITICAL, "Disarming denied: not landed")
+            return MAV_RESULT_TEMPORARILY_REJECTED
+        self._disarm("Disarmed by external command")
+        return MAV_RESULT_ACCEPTED
+
+    def on_offboard_setpoint(self, setpoint: ControlSetpoint, now_s: float) -> None:
+        """An accepted setpoint message: proof of life in any mode."""
+        was_fresh = self.offboard_signal_fresh(now_s)
+        self.offboard.setpoint = setpoint
+        self.offboard.received_s = now_s
+        if not was_fresh and self.user_mode == modes.OFFBOARD and self.nav_mode != modes.OFFBOARD:
+            self._offboard_resumed_at_s = now_s
+
+    # -- periodic ----------------------------------------------------------------------
+
+    def update(self, now_s: float, landed: bool) -> None:
+        self._now_s = now_s
+        self._track_landing(now_s, landed)
+        self._check_offboard(now_s)
+        self._check_auto_disarm(now_s)
+
+    def _track_landing(self, now_s: float, landed: bool) -> None:
+        if not landed and self.armed:
+            self.took_off_since_arming = True
+        if landed and not self.landed:
+            self._landed_since_s = now_s
+        elif not landed:
+            self._landed_since_s = None
+        self.landed = landed
+
+    def _check_offboard(self, now_s: float) -> None:
+        if self.user_mode != modes.OFFBOARD:
+            return
+        if self.offboard_signal_fresh(now_s):
+            self._offboard_lost_since_s = None
+            resumed = self._offboard_resumed_at_s
+            if resumed is not None and now_s - resumed >= OFFBOARD_RESUME_DELAY_S:
+                self._offboard_resumed_at_s = None
+                if self.nav_mode != modes.OFFBOARD:
+                    self._set_nav_mode(modes.OFFBOARD)
+                    self._clear_failsafe()
+            return
+        if not self.armed or self.nav_mode != modes.OFFBOARD:
+            return
+        if self._offboard_lost_since_s is None:
+            self._offboard_lost_since_s = now_s
+        if now_s - self._offboard_lost_since_s >= FAILSAFE_ACTION_DELAY_S:
+            self._offboard_lost_since_s = None
+            self._apply_offboard_loss_action()
+
+    def _apply_offboard_loss_action(self) -> None:
+        action = int(self._params.get("COM_OBL_RC_ACT"))
+        self._announce(MAV_SEVERITY_WARNING, "Failsafe: offboard control lost")
+        self.failsafe = True
+        if action == ObLossAction.DISARM:
+            self._disarm("Failsafe: disarming")
+            return
+        self._set_nav_mode(_OBL_ACTION_MODES.get(action, modes.POSCTL))
+
+    def _check_auto_disarm(self, now_s: float) -> None:
+        if not self.armed or not self.landed or self._landed_since_s is None:
+            return
+        if self.took_off_since_arming:
+            timeout = self._params.get("COM_DISARM_LAND")
+            reason = "Disarmed after landing"
+        else:
+            timeout = self._params.get("COM_DISARM_PRFLT")
+            reason = "Disarmed: no takeoff"
+        if timeout > 0 and now_s - self._landed_since_s >= timeout:
+            self._disarm(reason)
+
+    # -- internals ---------------------------------------------------------------------
+
+    def _arming_denial(self) -> str | None:
+        if not self.ready:
+            return "system not ready (no valid position)"
+        if self.nav_mode == modes.OFFBOARD and not self.offboard_signal_fresh():
+            return "no offboard signal"
+        if self.nav_mode == modes.AUTO_MISSION and not self._has_mission:
+            return "no valid mission"
+        if self.nav_mode == modes.TERMINATION:
+            return "flight termination active"
+        return None
+
+    def _disarm(self, reason: str) -> None:
+        self.armed = False
+        self.took_off_since_arming = False
+        self._landed_since_s = None
+        self._announce(MAV_SEVERITY_INFO, reason)
+        self._arm_listeners_notify()
+
+    def _set_nav_mode(self, mode: Px4Mode) -> None:
+        if mode != self.nav_mode:
+            self.mode_changes += 1
+        self.nav_mode = mode
+
+    def _clear_failsafe(self) -> None:
+        self.failsafe = False
+        self._offboard_lost_since_s = None
+
+    def on_arming_change(self, listener: Callable[[bool], None]) -> None:
+        self._arm_listeners.append(listener)
+
+    def _arm_listeners_notify(self) -> None:
+        for listener in self._arm_listeners:
+            listener(self.armed)

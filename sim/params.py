@@ -1,0 +1,167 @@
+"""The simulated vehicle's parameter store, with PX4 names, defaults and types.
+
+PX4 sends every parameter in PARAM_VALUE's float field; an INT32 parameter's bits are
+copied into that float unchanged ("bytewise" encoding), so clients must decode by
+param_type. A Python int default marks an INT32 parameter, a float a REAL32 one.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Callable, Iterator, Mapping
+from typing import Protocol
+
+MAV_PARAM_TYPE_INT32 = 6
+MAV_PARAM_TYPE_REAL32 = 9
+
+# PX4 defaults of the parameters the commander, navigator and streams read.
+PX4_DEFAULTS: dict[str, float | int] = {
+    # commander
+    "COM_OF_LOSS_T": 1.0,
+    "COM_OBL_RC_ACT": 0,
+    "COM_DISARM_PRFLT": 10.0,
+    "COM_DISARM_LAND": 2.0,
+    "COM_DL_LOSS_T": 10,
+    "NAV_DLL_ACT": 0,
+    "NAV_RCL_ACT": 2,
+    "COM_RC_IN_MODE": 3,
+    "COM_RCL_EXCEPT": 0,
+    "COM_RC_OVERRIDE": 1,
+    "COM_ARM_WO_GPS": 1,
+    "COM_LOW_BAT_ACT": 0,
+    "GF_ACTION": 2,
+    "GF_MAX_HOR_DIST": 0.0,
+    "GF_MAX_VER_DIST": 0.0,
+    # navigator
+    "MIS_TAKEOFF_ALT": 2.5,
+    "NAV_ACC_RAD": 10.0,
+    "NAV_LOITER_RAD": 80.0,
+    "RTL_RETURN_ALT": 60.0,
+    "RTL_DESCEND_ALT": 30.0,
+    "RTL_LAND_DELAY": 0.0,
+    "RTL_MIN_DIST": 10.0,
+    "RTL_TYPE": 0,
+    # multicopter position control used by the navigator
+    "MPC_TKO_SPEED": 1.5,
+    "MPC_LAND_SPEED": 0.7,
+    "MPC_LAND_ALT1": 10.0,
+    "MPC_LAND_ALT2": 5.0,
+    "MPC_Z_VEL_MAX_DN": 1.5,
+    "MPC_Z_VEL_MAX_UP": 3.0,
+    "MPC_XY_CRUISE": 5.0,
+    "MPC_XY_VEL_MAX": 12.0,
+    "MPC_THR_HOVER": 0.5,
+    # battery (SITL battery simulator)
+    "BAT1_N_CELLS": 4,
+    "BAT1_V_CHARGED": 4.05,
+    "BAT1_V_EMPTY": 3.6,
+    "BAT1_CAPACITY": 5000.0,
+    "SIM_BAT_MIN_PCT": 50.0,
+    "SIM_BAT_ENABLE": 1,
+    # identity
+    "MAV_SYS_ID": 1,
+    "MAV_COMP_ID": 1,
+    "MAV_TYPE": 2,
+    "SYS_AUTOSTART": 1100,
+    "SYS_HITL": 0,
+}
+
+# SIH airframe files override a few PX4 defaults (the sih_* airframes in ROMFS).
+AIRFRAME_OVERRIDES: dict[str, dict[str, float | int]] = {
+    "quad": {"MIS_TAKEOFF_ALT": 2.5, "RTL_RETURN_ALT": 30.0, "SYS_AUTOSTART": 1100},
+    "hexa": {"MIS_TAKEOFF_ALT": 2.5, "RTL_RETURN_ALT": 30.0, "SYS_AUTOSTART": 1100},
+    "octo": {"MIS_TAKEOFF_ALT": 2.5, "RTL_RETURN_ALT": 30.0, "SYS_AUTOSTART": 1100},
+    "plane": {"MIS_TAKEOFF_ALT": 20.0, "RTL_RETURN_ALT": 60.0, "SYS_AUTOSTART": 1101},
+    "vtol": {"MIS_TAKEOFF_ALT": 20.0, "RTL_RETURN_ALT": 60.0, "SYS_AUTOSTART": 1103},
+    "rover": {"SYS_AUTOSTART": 1100},
+}
+
+
+class ParamReader(Protocol):
+    """Read access to current parameter values (the same protocol sim.airframes uses)."""
+
+    def get(self, name: str) -> float: ...
+
+
+def encode_param_value(value: float | int, param_type: int) -> float:
+    """The float PX4 puts in PARAM_VALUE.param_value: INT32 bits copied, REAL32 as is."""
+    if param_type == MAV_PARAM_TYPE_INT32:
+        packed: float = struct.unpack("<f", struct.pack("<i", int(value)))[0]
+        return packed
+    return float(value)
+
+
+def decode_param_value(wire_value: float, param_type: int) -> float | int:
+    """Inverse of encode_param_value."""
+    if param_type == MAV_PARAM_TYPE_INT32:
+        decoded: int = struct.unpack("<i", struct.pack("<f", wire_value))[0]
+        return decoded
+    return float(struct.unpack("<f", struct.pack("<f", wire_value))[0])
+
+
+class ParamStore:
+    """Named parameters with a fixed order (PARAM_VALUE.param_index) and a type each.
+
+    Implements the airframes' ParamReader protocol (`get` returns a float). Changes take
+    effect at once: every reader calls `get` when it needs the value.
+    """
+
+    def __init__(self, defaults: Mapping[str, float | int]) -> None:
+        self._values: dict[str, float | int] = dict(sorted(defaults.items()))
+        self._names = list(self._values)
+        self._index = {name: i for i, name in enumerate(self._names)}
+        self._listeners: list[Callable[[str, float | int], None]] = []
+
+    @classmethod
+    def for_airframe(
+        cls, airframe: str, airframe_defaults: Mapping[str, float | int]
+    ) -> ParamStore:
+        merged: dict[str, float | int] = dict(PX4_DEFAULTS)
+        merged.update(airframe_defaults)
+        merged.update(AIRFRAME_OVERRIDES.get(airframe, {}))
+        return cls(merged)
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._values
+
+    def __len__(self) -> int:
+        return len(self._names)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._names)
+
+    def get(self, name: str) -> float:
+        return float(self._values[name])
+
+    def value(self, name: str) -> float | int:
+        """The value with its own type (int for INT32)."""
+        return self._values[name]
+
+    def param_type(self, name: str) -> int:
+        is_int = isinstance(self._values[name], int)
+        return MAV_PARAM_TYPE_INT32 if is_int else MAV_PARAM_TYPE_REAL32
+
+    def index(self, name: str) -> int:
+        return self._index[name]
+
+    def name_at(self, index: int) -> str | None:
+        return self._names[index] if 0 <= index < len(self._names) else None
+
+    def set(self, name: str, value: float) -> float | int:
+        """Store a value in the parameter's own type; returns what was stored."""
+        is_int = self.param_type(name) == MAV_PARAM_TYPE_INT32
+        stored: float | int = int(value) if is_int else float(value)
+        self._values[name] = stored
+        for listener in self._listeners:
+            listener(name, stored)
+        return stored
+
+    def set_from_wire(self, name: str, wire_value: float) -> float | int:
+        """PARAM_SET: decode by the parameter's own type, as PX4 does."""
+        return self.set(name, decode_param_value(wire_value, self.param_type(name)))
+
+    def wire_value(self, name: str) -> float:
+        return encode_param_value(self._values[name], self.param_type(name))
+
+    def on_change(self, listener: Callable[[str, float | int], None]) -> None:
+        self._listeners.append(listener)

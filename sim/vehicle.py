@@ -1,0 +1,354 @@
+"""One simulated PX4 vehicle: airframe model, commander, navigator, MAVLink in and out.
+
+`SimVehicle.step()` is the 250 Hz heartbeat of everything; `run_vehicles()` calls it
+for a group of vehicles on absolute sim-time deadlines (t0 + k·dt), optionally faster
+than real time.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import time
+from collections import deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any, Protocol, TypeAlias
+
+from pymavlink.dialects.v20 import development as mavlink
+
+from sim import modes
+from sim.battery import Battery
+from sim.commander import Commander
+from sim.geo import GeoPoint, LocalOrigin
+from sim.land_detector import LandDetector, MavLandedState
+from sim.navigator import Navigator, RtlPhase, yaw_of
+from sim.params import ParamReader, ParamStore
+from sim.receiver import Receiver
+from sim.streams import NORMAL_RATES_HZ, ONBOARD_RATES_HZ, MessageFactory, StreamSet
+from sim.topics import ControlSetpoint, TrajectorySetpoint, VehicleStateTruth, VtolState
+
+# pymavlink messages carry their fields as dynamic attributes.
+Message: TypeAlias = Any
+
+PHYSICS_DT_S = 0.004
+# PX4 SITL: first HEARTBEAT about 1.5 s after start, GPS fix and ready to arm about 3 s.
+BOOT_TIME_S = 1.5
+READY_TIME_S = 3.0
+# While disarmed on the ground home follows the vehicle; refresh it this often.
+HOME_FOLLOW_PERIOD_S = 1.0
+STATUSTEXT_MAX_LEN = 50
+STATUSTEXT_HISTORY = 200
+
+
+class AirframeModel(Protocol):
+    """The part of sim.airframes.AirframeModel the vehicle uses."""
+
+    name: str
+    mav_type: int
+    is_vtol: bool
+    truth: VehicleStateTruth
+    vtol_state: VtolState
+    in_fixed_wing_flight: bool
+    actuator_outputs: list[float]
+    power_fraction: float
+
+    def step(self, dt_s: float, armed: bool, setpoint: ControlSetpoint | None) -> None: ...
+
+    def request_transition(self, to_fixed_wing: bool, immediate: bool) -> None: ...
+
+    def reset(self, position_ned_m: list[float], yaw_rad: float) -> None: ...
+
+
+AirframeFactory = Callable[[str, ParamReader], AirframeModel]
+DefaultsFactory = Callable[[str], dict[str, float | int]]
+
+
+class Link(Protocol):
+    """A MAVLink link as the vehicle sees it (sim.endpoint.UdpLink or a test double)."""
+
+    name: str
+
+    @property
+    def has_remote(self) -> bool: ...
+
+    def send(self, msg: Message) -> None: ...
+
+
+@dataclass
+class StatusText:
+    time_s: float
+    severity: int
+    text: str
+
+
+def _physics() -> tuple[AirframeFactory, DefaultsFactory]:
+    from sim import airframes  # the physics side; imported late so tests can stand in
+
+    return airframes.make_airframe, airframes.param_defaults
+
+
+class SimVehicle:
+    def __init__(
+        self,
+        airframe: str = "quad",
+        sysid: int = 1,
+        compid: int = 1,
+        *,
+        spawn_ned_m: Sequence[float] = (0.0, 0.0, 0.0),
+        airframe_factory: AirframeFactory | None = None,
+        defaults_factory: DefaultsFactory | None = None,
+    ) -> None:
+        if airframe_factory is None or defaults_factory is None:
+            make, defaults = _physics()
+            airframe_factory = airframe_factory or make
+            defaults_factory = defaults_factory or defaults
+        self.airframe_name = airframe
+        self.sysid = sysid
+        self.compid = compid
+        self.params = ParamStore.for_airframe(airframe, defaults_factory(airframe))
+        self.params.set("MAV_SYS_ID", sysid)
+        self.model = airframe_factory(airframe, self.params)
+        self.model.reset(list(spawn_ned_m), 0.0)
+        self.params.set("MAV_TYPE", self.model.mav_type)
+        self.origin = LocalOrigin()
+        self.commander = Commander(self.params, self.announce, is_vtol=self.model.is_vtol)
+        self.commander.on_arming_change(self._on_arming_change)
+        self.navigator = Navigator(
+            self.params, self.commander, self.model, self.announce,
+            fixed_wing_only=airframe == "plane",
+        )
+        self.land_detector = LandDetector()
+        self.battery = Battery(self.params)
+        self.messages = MessageFactory(self)
+        self.receiver = Receiver(self)
+        self.now_s = 0.0
+        self.booted = False
+        self.statustexts: deque[StatusText] = deque(maxlen=STATUSTEXT_HISTORY)
+        self.last_trajectory_setpoint: TrajectorySetpoint | None = None
+        self.ready_event: asyncio.Event | None = None
+        self._links: list[tuple[Link, StreamSet]] = []
+        self._geo_cache: tuple[float, GeoPoint] | None = None
+        self._home_refreshed_s = -math.inf
+
+    # -- composition -------------------------------------------------------------------
+
+    def attach_link(self, link: Link, onboard: bool) -> None:
+        """Add a link with PX4's ONBOARD (API) or NORMAL (GCS) stream set."""
+        rates = ONBOARD_RATES_HZ if onboard else NORMAL_RATES_HZ
+        self._links.append((link, StreamSet(rates, self.messages)))
+
+    def streams_of(self, link: Link) -> StreamSet:
+        for candidate, streams in self._links:
+            if candidate is link:
+                return streams
+        raise KeyError(link.name)
+
+    def handle_message(self, link: Link, msg: Message) -> None:
+        if self.booted:
+            self.receiver.handle(link, msg)  # type: ignore[arg-type]
+
+    def broadcast(self, msg: Message) -> None:
+        for link, _ in self._links:
+            link.send(msg)
+
+    def announce(self, severity: int, text: str) -> None:
+        self.statustexts.append(StatusText(self.now_s, severity, text))
+        if self.booted:
+            self.broadcast(mavlink.MAVLink_statustext_message(
+                severity, text[:STATUSTEXT_MAX_LEN].encode()))
+
+    # -- state views -------------------------------------------------------------------
+
+    @property
+    def truth(self) -> VehicleStateTruth:
+        return self.model.truth
+
+    @property
+    def ready(self) -> bool:
+        return self.commander.ready
+
+    @property
+    def armed(self) -> bool:
+        return self.commander.armed
+
+    @property
+    def mode_name(self) -> str:
+        return self.commander.nav_mode.name
+
+    @property
+    def mav_type(self) -> int:
+        return self.model.mav_type
+
+    @property
+    def vtol_state(self) -> VtolState:
+        return self.model.vtol_state if self.model.is_vtol else VtolState.UNDEFINED
+
+    @property
+    def rtl_phases(self) -> list[RtlPhase]:
+        return list(self.navigator.rtl_phases_seen)
+
+    @property
+    def landed_state(self) -> int:
+        commander = self.commander
+        if commander.landed:
+            return MavLandedState.ON_GROUND
+        mode = commander.nav_mode
+        if mode in (modes.AUTO_TAKEOFF, modes.AUTO_VTOL_TAKEOFF):
+            return MavLandedState.TAKEOFF
+        if mode == modes.AUTO_LAND or (
+            mode == modes.AUTO_RTL and self.navigator.rtl_phase == RtlPhase.LAND
+        ):
+            return MavLandedState.LANDING
+        return MavLandedState.IN_AIR
+
+    def geodetic(self) -> GeoPoint:
+        cached = self._geo_cache
+        if cached is not None and cached[0] == self.now_s:
+            return cached[1]
+        point = self.origin.to_geodetic(*self.truth.position_ned_m)
+        self._geo_cache = (self.now_s, point)
+        return point
+
+    # -- home and origin ---------------------------------------------------------------
+
+    def set_home_here(self) -> None:
+        home = self.commander.home
+        geo = self.geodetic()
+        home.position_ned_m = list(self.truth.position_ned_m)
+        home.yaw_rad = yaw_of(self.truth)
+        home.lat_deg, home.lon_deg, home.alt_m = geo.lat_deg, geo.lon_deg, geo.alt_m
+        home.valid = True
+        self._home_refreshed_s = self.now_s
+
+    def set_home_at(self, lat_deg: float, lon_deg: float, alt_m: float, yaw_rad: float) -> None:
+        home = self.commander.home
+        home.position_ned_m = self.origin.to_ned(lat_deg, lon_deg, alt_m)
+        home.yaw_rad = yaw_rad if math.isfinite(yaw_rad) else home.yaw_rad
+        home.lat_deg, home.lon_deg, home.alt_m = lat_deg, lon_deg, alt_m
+        home.valid = True
+        self._send_home()
+
+    def set_origin(self, lat_deg: float, lon_deg: float, alt_m: float) -> None:
+        """SET_GPS_GLOBAL_ORIGIN: the vehicle stays where it is, its local frame moves."""
+        here = self.geodetic()
+        self.origin = LocalOrigin(lat_deg, lon_deg, alt_m)
+        self.truth.position_ned_m[:] = self.origin.to_ned(here.lat_deg, here.lon_deg, here.alt_m)
+        self._geo_cache = None
+        home = self.commander.home
+        if home.valid:
+            home.position_ned_m = self.origin.to_ned(home.lat_deg, home.lon_deg, home.alt_m)
+
+    def within_geofence(self, target_ned_m: Sequence[float]) -> bool:
+        home = self.commander.home.position_ned_m
+        max_hor = self.params.get("GF_MAX_HOR_DIST")
+        max_ver = self.params.get("GF_MAX_VER_DIST")
+        horizontal = math.hypot(target_ned_m[0] - home[0], target_ned_m[1] - home[1])
+        if max_hor > 0 and horizontal > max_hor:
+            return False
+        return not (max_ver > 0 and home[2] - target_ned_m[2] > max_ver)
+
+    def _send_home(self) -> None:
+        msg = self.messages.home_position()
+        if msg is not None:
+            self.broadcast(msg)
+
+    def _on_arming_change(self, armed: bool) -> None:
+        if armed:
+            self.set_home_here()
+            self._send_home()
+
+    # -- the 250 Hz step ---------------------------------------------------------------
+
+    def step(self, dt_s: float = PHYSICS_DT_S) -> None:
+        self.now_s += dt_s
+        now = self.now_s
+        if not self.booted and now >= BOOT_TIME_S:
+            self.booted = True
+        if not self.commander.ready and now >= READY_TIME_S:
+            self._become_ready()
+        commander = self.commander
+        commander.update(now, self.land_detector.landed)
+        setpoint = self._current_setpoint()
+        motors_on = commander.armed and commander.nav_mode != modes.TERMINATION
+        self.model.step(dt_s, motors_on, setpoint)
+        self.land_detector.update(dt_s, self.model.truth, commander.armed)
+        self.battery.update(dt_s, self.model.power_fraction if motors_on else 0.0)
+        if (
+            commander.ready
+            and not commander.armed
+            and commander.landed
+            and now - self._home_refreshed_s >= HOME_FOLLOW_PERIOD_S
+        ):
+            self.set_home_here()
+        if self.booted:
+            for link, streams in self._links:
+                streams.tick(now, link)
+
+    def _become_ready(self) -> None:
+        self.commander.ready = True
+        self.set_home_here()
+        if self.ready_event is not None:
+            self.ready_event.set()
+
+    def _current_setpoint(self) -> ControlSetpoint | None:
+        commander = self.commander
+        if commander.nav_mode == modes.OFFBOARD:
+            setpoint = commander.offboard.setpoint if commander.armed else None
+        else:
+            setpoint = self.navigator.setpoint(self.now_s, self.model.truth, self.origin.alt_m)
+        if isinstance(setpoint, TrajectorySetpoint):
+            self.last_trajectory_setpoint = setpoint
+        return setpoint
+
+
+@dataclass
+class LoopStats:
+    """How well the stepping loop keeps up with its deadlines (wall clock)."""
+
+    steps: int = 0
+    max_lag_s: float = 0.0
+    lag_sum_s: float = 0.0
+    wakeups: int = 0
+
+    @property
+    def mean_lag_s(self) -> float:
+        return self.lag_sum_s / self.wakeups if self.wakeups else 0.0
+
+
+async def run_vehicles(
+    vehicles: Sequence[SimVehicle],
+    speed: float = 1.0,
+    stats: LoopStats | None = None,
+    dt_s: float = PHYSICS_DT_S,
+    max_catch_up_steps: int = 50,
+) -> None:
+    """Step every vehicle at 1/dt_s sim-Hz, sim time running `speed` times wall time.
+
+    Deadlines are absolute (t0 + k·dt/speed) so timer jitter does not accumulate; after a
+    stall the loop catches up at most `max_catch_up_steps` steps at once and then drops
+    the remainder, so sim time slows down rather than jumping.
+    """
+    stats = stats if stats is not None else LoopStats()
+    wall_dt = dt_s / speed
+    t0 = time.perf_counter()
+    k = 0
+    while True:
+        now = time.perf_counter()
+        due = int((now - t0) / wall_dt)
+        lag = now - (t0 + (k + 1) * wall_dt)
+        stats.wakeups += 1
+        if lag > 0:
+            stats.lag_sum_s += lag
+            stats.max_lag_s = max(stats.max_lag_s, lag)
+        todo = due - k
+        if todo > max_catch_up_steps:
+            t0 += (todo - max_catch_up_steps) * wall_dt
+            todo = max_catch_up_steps
+        for _ in range(todo):
+            for vehicle in vehicles:
+                vehicle.step(dt_s)
+        k += max(todo, 0)
+        stats.steps += max(todo, 0)
+        next_deadline = t0 + (k + 1) * wall_dt
+        await asyncio.sleep(max(next_deadline - time.perf_counter(), 0.0))
