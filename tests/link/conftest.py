@@ -1,0 +1,140 @@
+"""Shared fixtures for the vehicle side of the link: a scripted PX4 peer on UDP and,
+for integration tests, the simulated vehicle with a Link and its Vehicle."""
+
+from __future__ import annotations
+
+import asyncio
+import functools
+import time
+from collections.abc import AsyncIterator, Callable
+from typing import Any
+
+import pytest
+from pymavlink.dialects.v20 import development as mavlink
+
+from server.link.link import Link
+from server.link.vehicle import Vehicle
+
+HEARTBEAT_PERIOD_S = 0.5
+
+
+async def wait_for(condition: Callable[[], bool], timeout_s: float = 5.0,
+                   what: str = "condition") -> None:
+    """Poll ``condition`` until it holds; fail the test after ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"{what} not met within {timeout_s} s")
+        await asyncio.sleep(0.005)
+
+
+class ScriptedPeer(asyncio.DatagramProtocol):
+    """A scripted PX4 autopilot on UDP: sends what the test says, records what arrives.
+
+    ``on_command`` (if set) is called for every COMMAND_LONG / COMMAND_INT received.
+    """
+
+    def __init__(self) -> None:
+        self.endpoint: asyncio.DatagramTransport | None = None
+        self.decoder = mavlink.MAVLink(None)
+        self.received: list[tuple[float, mavlink.MAVLink_message]] = []
+        self.on_command: Callable[[mavlink.MAVLink_message], None] | None = None
+        self.on_message: Callable[[mavlink.MAVLink_message], None] | None = None
+        self.link_address: tuple[str, int] | None = None
+        self.mav_type = mavlink.MAV_TYPE_QUADROTOR
+        self.base_mode = 1
+        self.custom_mode = 0x3040000  # HOLD
+        self._seq: dict[tuple[int, int], int] = {}
+
+    def datagram_received(self, data: bytes, addr: Any) -> None:
+        for msg in self.decoder.parse_buffer(data) or []:
+            self.received.append((time.monotonic(), msg))
+            if msg.get_type() in ("COMMAND_LONG", "COMMAND_INT") and self.on_command:
+                self.on_command(msg)
+            elif self.on_message is not None:
+                self.on_message(msg)
+
+    def send(self, msg: mavlink.MAVLink_message, *, sysid: int = 1, compid: int = 1) -> None:
+        mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
+        mav.seq = self._seq.get((sysid, compid), 0)
+        self._seq[(sysid, compid)] = (mav.seq + 1) % 256
+        assert self.endpoint is not None and self.link_address is not None
+        self.endpoint.sendto(bytes(msg.pack(mav)), self.link_address)
+
+    def send_later(self, delay_s: float, msg: mavlink.MAVLink_message, **ids: int) -> None:
+        asyncio.get_running_loop().call_later(delay_s, functools.partial(self.send, msg, **ids))
+
+    def heartbeat(self, *, sysid: int = 1) -> None:
+        self.send(mavlink.MAVLink_heartbeat_message(
+            self.mav_type, mavlink.MAV_AUTOPILOT_PX4, self.base_mode, self.custom_mode,
+            mavlink.MAV_STATE_STANDBY, 3), sysid=sysid)  # fmt: skip
+
+    def ack(self, command: int, result: int, *, delay_s: float = 0.0, progress: int = 0,
+            sysid: int = 1, compid: int = 1, target_system: int = 255) -> None:
+        msg = mavlink.MAVLink_command_ack_message(command, result, progress, 0, target_system,
+                                                  190)
+        self.send_later(delay_s, msg, sysid=sysid, compid=compid)
+
+    def messages(self, msg_type: str) -> list[mavlink.MAVLink_message]:
+        return [m for _, m in self.received if m.get_type() == msg_type]
+
+    def commands(self, command: int) -> list[mavlink.MAVLink_message]:
+        return [m for _, m in self.received
+                if m.get_type() in ("COMMAND_LONG", "COMMAND_INT") and m.command == command]
+
+
+class ScriptedSession:
+    def __init__(self, peer: ScriptedPeer, link: Link, vehicle: Vehicle) -> None:
+        self.peer = peer
+        self.link = link
+        self.vehicle = vehicle
+
+
+def fast_vehicle(**kwargs: Any) -> Callable[..., Vehicle]:
+    """A Vehicle factory with short protocol timeouts, so timeout cases run quickly."""
+
+    def factory(**link_kwargs: Any) -> Vehicle:
+        vehicle = Vehicle(**link_kwargs, **kwargs)
+        vehicle.commands.timeout_s = 0.1
+        vehicle.commands.reason_wait_s = 0.05
+        vehicle.params.timeout_s = 0.1
+        vehicle.params.list_quiet_s = 0.1
+        vehicle.mode_confirm_timeout_s = 0.5
+        vehicle.origin_timeout_s = 0.1
+        return vehicle
+
+    return factory
+
+
+async def _keep_beating(peer: ScriptedPeer) -> None:
+    while True:
+        peer.heartbeat()
+        await asyncio.sleep(HEARTBEAT_PERIOD_S)
+
+
+@pytest.fixture
+async def scripted() -> AsyncIterator[ScriptedSession]:
+    """A Link with a Vehicle discovered from a scripted peer (no telemetry requests)."""
+    async for session in open_scripted(telemetry_rates_hz={}):
+        yield session
+
+
+async def open_scripted(**vehicle_kwargs: Any) -> AsyncIterator[ScriptedSession]:
+    loop = asyncio.get_running_loop()
+    peer = ScriptedPeer()
+    peer.endpoint, _ = await loop.create_datagram_endpoint(
+        lambda: peer, local_addr=("127.0.0.1", 0))
+    link = await Link.open("udpin:127.0.0.1:0", vehicle_factory=fast_vehicle(**vehicle_kwargs),
+                           log_dir=None)
+    assert link.local_address is not None
+    peer.link_address = ("127.0.0.1", link.local_address[1])
+    beat = loop.create_task(_keep_beating(peer))
+    try:
+        await wait_for(lambda: 1 in link.vehicles, 3.0, "discovery")
+        vehicle = link.vehicles[1]
+        assert isinstance(vehicle, Vehicle)
+        yield ScriptedSession(peer, link, vehicle)
+    finally:
+        beat.cancel()
+        await link.close()
+        peer.endpoint.close()

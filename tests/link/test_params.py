@@ -1,0 +1,148 @@
+"""Parameters: PX4's bytewise codec and the read / list / set protocol."""
+
+from __future__ import annotations
+
+import struct
+
+import pytest
+from pymavlink.dialects.v20 import development as mavlink
+
+from server.link.params import (
+    MAV_PARAM_TYPE_INT8,
+    MAV_PARAM_TYPE_INT32,
+    MAV_PARAM_TYPE_REAL32,
+    MAV_PARAM_TYPE_UINT8,
+    MAV_PARAM_TYPE_UINT16,
+    ParamError,
+    decode_param_value,
+    encode_param_value,
+)
+from tests.link.conftest import ScriptedPeer, ScriptedSession
+
+
+def test_int32_parameter_of_one_travels_as_the_float_with_the_same_bits() -> None:
+    wire = encode_param_value(1, MAV_PARAM_TYPE_INT32)
+
+    assert wire == pytest.approx(1.4e-45, rel=0.01)
+    assert struct.pack("<f", wire) == struct.pack("<i", 1)
+    assert decode_param_value(wire, MAV_PARAM_TYPE_INT32) == 1
+
+
+@pytest.mark.parametrize(
+    ("value", "param_type"),
+    [(-7, MAV_PARAM_TYPE_INT32), (2_000_000_000, MAV_PARAM_TYPE_INT32),
+     (255, MAV_PARAM_TYPE_UINT8), (-128, MAV_PARAM_TYPE_INT8), (40000, MAV_PARAM_TYPE_UINT16)],
+)  # fmt: skip
+def test_integer_types_round_trip_bytewise(value: int, param_type: int) -> None:
+    decoded = decode_param_value(encode_param_value(value, param_type), param_type)
+
+    assert decoded == value
+    assert isinstance(decoded, int)
+
+
+def test_real32_is_carried_as_is() -> None:
+    assert encode_param_value(2.5, MAV_PARAM_TYPE_REAL32) == 2.5
+    assert decode_param_value(2.5, MAV_PARAM_TYPE_REAL32) == 2.5
+
+
+def test_fractional_value_for_an_integer_parameter_is_refused() -> None:
+    with pytest.raises(ParamError):
+        encode_param_value(1.5, MAV_PARAM_TYPE_INT32)
+
+
+class _ParamServer:
+    """PX4's parameter behaviour: silent on unknown names, bytewise ints, an echo on set."""
+
+    def __init__(self, peer: ScriptedPeer, params: dict[str, tuple[float | int, int]]) -> None:
+        self.peer = peer
+        self.params = params
+        self.names = list(params)
+        self.drop_in_list: set[int] = set()
+        self.clamp: dict[str, float | int] = {}
+        peer.on_message = self.handle
+
+    def send_value(self, name: str) -> None:
+        value, ptype = self.params[name]
+        self.peer.send(mavlink.MAVLink_param_value_message(
+            name.encode(), encode_param_value(value, ptype), ptype, len(self.names),
+            self.names.index(name)))  # fmt: skip
+
+    def handle(self, msg: mavlink.MAVLink_message) -> None:
+        kind = msg.get_type()
+        if kind == "PARAM_REQUEST_READ":
+            name = msg.param_id if msg.param_index < 0 else self.names[msg.param_index]
+            if name in self.params:
+                self.send_value(name)
+        elif kind == "PARAM_REQUEST_LIST":
+            for i, name in enumerate(self.names):
+                if i not in self.drop_in_list:
+                    self.send_value(name)
+        elif kind == "PARAM_SET" and msg.param_id in self.params:
+            _, ptype = self.params[msg.param_id]
+            value = decode_param_value(msg.param_value, msg.param_type)
+            self.params[msg.param_id] = (self.clamp.get(msg.param_id, value), ptype)
+            self.send_value(msg.param_id)
+
+
+def _px4_params(peer: ScriptedPeer) -> _ParamServer:
+    return _ParamServer(peer, {
+        "COM_RC_IN_MODE": (1, MAV_PARAM_TYPE_INT32),
+        "MIS_TAKEOFF_ALT": (2.5, MAV_PARAM_TYPE_REAL32),
+        "NAV_DLL_ACT": (0, MAV_PARAM_TYPE_INT32),
+        "MPC_XY_CRUISE": (5.0, MAV_PARAM_TYPE_REAL32),
+    })  # fmt: skip
+
+
+async def test_get_decodes_an_int_parameter_by_its_type(scripted: ScriptedSession) -> None:
+    _px4_params(scripted.peer)
+
+    assert await scripted.vehicle.get_param("COM_RC_IN_MODE") == 1
+    assert await scripted.vehicle.get_param("MIS_TAKEOFF_ALT") == pytest.approx(2.5)
+
+
+async def test_unknown_parameter_times_out_after_retries(scripted: ScriptedSession) -> None:
+    _px4_params(scripted.peer)
+
+    with pytest.raises(TimeoutError):
+        await scripted.vehicle.get_param("NO_SUCH_PARAM")
+    assert len(scripted.peer.messages("PARAM_REQUEST_READ")) == 4
+
+
+async def test_get_many_returns_each_value(scripted: ScriptedSession) -> None:
+    _px4_params(scripted.peer)
+
+    values = await scripted.vehicle.get_params(["NAV_DLL_ACT", "MPC_XY_CRUISE"])
+
+    assert values == {"NAV_DLL_ACT": 0, "MPC_XY_CRUISE": 5.0}
+
+
+async def test_list_rerequests_missing_indices_by_index(scripted: ScriptedSession) -> None:
+    server = _px4_params(scripted.peer)
+    server.drop_in_list = {2}
+
+    values = await scripted.vehicle.get_params()
+
+    assert values == {"COM_RC_IN_MODE": 1, "MIS_TAKEOFF_ALT": 2.5, "NAV_DLL_ACT": 0,
+                      "MPC_XY_CRUISE": 5.0}
+    by_index = [m.param_index for m in scripted.peer.messages("PARAM_REQUEST_READ")]
+    assert by_index == [2]
+
+
+async def test_set_sends_bytewise_and_checks_the_echo(scripted: ScriptedSession) -> None:
+    server = _px4_params(scripted.peer)
+
+    assert await scripted.vehicle.set_param("COM_RC_IN_MODE", 4) == 4
+
+    (sent,) = scripted.peer.messages("PARAM_SET")
+    assert struct.pack("<f", sent.param_value) == struct.pack("<i", 4)
+    assert sent.param_type == MAV_PARAM_TYPE_INT32
+    assert server.params["COM_RC_IN_MODE"] == (4, MAV_PARAM_TYPE_INT32)
+    assert scripted.vehicle.params.cache["COM_RC_IN_MODE"].value == 4
+
+
+async def test_set_whose_echo_differs_is_an_error(scripted: ScriptedSession) -> None:
+    server = _px4_params(scripted.peer)
+    server.clamp["MPC_XY_CRUISE"] = 20.0
+
+    with pytest.raises(ParamError, match="kept 20"):
+        await scripted.vehicle.set_param("MPC_XY_CRUISE", 50.0)
