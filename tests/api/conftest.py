@@ -1,0 +1,177 @@
+"""Fixtures: an in-process simulated vehicle (faster than real time), the app connected to it,
+an httpx client through ASGI, and a real uvicorn on an ephemeral port for WebSocket tests."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import time
+from collections.abc import AsyncIterator, Awaitable, Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import httpx
+import pytest
+import uvicorn
+from fastapi import FastAPI
+
+from server.app import create_app
+from server.settings import Settings, load_settings
+from sim.runner import SimCluster, SimInstance
+
+PILOT = "pilot-token-for-tests"
+OBSERVER = "observer-token-for-tests"
+# Sim seconds per wall second; PX4 timeouts inside the sim scale with it.
+SIM_SPEED = 5.0
+
+
+def make_settings(url: str | None, **overrides: Any) -> Settings:
+    values: dict[str, Any] = {
+        "connect": [url] if url else [],
+        "token": PILOT,
+        "observer_token": OBSERVER,
+        "scene": False,
+        "log_dir": None,
+        "web_dir": None,
+        "heartbeat_timeout_s": 1.5,
+    }
+    values.update(overrides)
+    return load_settings(**values)
+
+
+def auth(token: str = PILOT) -> dict[str, str]:
+    return {"Authorization": f"Bearer {token}"}
+
+
+async def eventually(
+    probe: Callable[[], Awaitable[Any]], timeout_s: float, what: str, poll_s: float = 0.05
+) -> Any:
+    """Poll until probe() returns something truthy; fail with `what` at the deadline."""
+    deadline = time.monotonic() + timeout_s
+    last: Any = None
+    while time.monotonic() < deadline:
+        last = await probe()
+        if last:
+            return last
+        await asyncio.sleep(poll_s)
+    raise AssertionError(f"timed out after {timeout_s} s waiting for {what} (last: {last!r})")
+
+
+@dataclass
+class Api:
+    """The app, a pilot client, and the simulated vehicle behind it."""
+
+    app: FastAPI
+    client: httpx.AsyncClient
+    sim: SimCluster | None
+    lease_headers: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def inst(self) -> SimInstance:
+        assert self.sim is not None
+        return self.sim.instances[0]
+
+    async def state(self, vehicle_id: int = 1) -> dict[str, Any]:
+        response = await self.client.get(f"/api/v1/vehicles/{vehicle_id}")
+        assert response.status_code == 200, response.text
+        result: dict[str, Any] = response.json()
+        return result
+
+    async def take_control(self, vehicle_id: int = 1) -> dict[str, str]:
+        response = await self.client.post(f"/api/v1/vehicles/{vehicle_id}/control", json={})
+        assert response.status_code == 200, response.text
+        self.lease_headers = {"X-Lease-Id": response.json()["lease_id"]}
+        return self.lease_headers
+
+    async def control(self, path: str, body: Any = None, vehicle_id: int = 1) -> httpx.Response:
+        """A control call with the lease (POST, or PUT for the setpoint)."""
+        url = f"/api/v1/vehicles/{vehicle_id}/{path}"
+        if path == "setpoint":
+            return await self.client.put(url, json=body, headers=self.lease_headers)
+        return await self.client.post(url, json=body, headers=self.lease_headers)
+
+    async def wait_state(
+        self, predicate: Callable[[dict[str, Any]], bool], timeout_s: float, what: str
+    ) -> dict[str, Any]:
+        async def probe() -> dict[str, Any] | None:
+            state = await self.state()
+            return state if predicate(state) else None
+
+        result: dict[str, Any] = await eventually(probe, timeout_s, what)
+        return result
+
+    async def wait_ready(self) -> None:
+        """Vehicle seen, with a global position and a home: able to arm."""
+        await self.wait_state(
+            lambda s: s["global"] is not None and s["home"] is not None, 10.0, "position and home"
+        )
+
+
+@contextlib.asynccontextmanager
+async def app_running(settings: Settings) -> AsyncIterator[FastAPI]:
+    app = create_app(settings)
+    async with app.router.lifespan_context(app):
+        yield app
+
+
+@contextlib.asynccontextmanager
+async def api_for(sim: SimCluster | None, **overrides: Any) -> AsyncIterator[Api]:
+    url = f"udpout:127.0.0.1:{sim.instances[0].api_local_port}" if sim else None
+    async with app_running(make_settings(url, **overrides)) as app:
+        transport = httpx.ASGITransport(app=app)
+        async with httpx.AsyncClient(
+            transport=transport, base_url="http://testserver", headers=auth(), timeout=30.0
+        ) as client:
+            api = Api(app, client, sim)
+            if sim is not None:
+                await eventually(
+                    lambda: _has_vehicle(client), 10.0, "the vehicle to appear in /vehicles"
+                )
+            yield api
+
+
+async def _has_vehicle(client: httpx.AsyncClient) -> bool:
+    response = await client.get("/api/v1/vehicles")
+    return bool(response.json())
+
+
+@contextlib.asynccontextmanager
+async def sim_cluster(airframe: str = "quad", speed: float = SIM_SPEED) -> AsyncIterator[SimCluster]:
+    async with SimCluster(airframe=airframe, count=1, speed=speed) as sim:
+        await sim.wait_ready(timeout_s=30.0)
+        yield sim
+
+
+@pytest.fixture
+async def quad_api() -> AsyncIterator[Api]:
+    async with sim_cluster("quad") as sim, api_for(sim) as api:
+        await api.wait_ready()
+        yield api
+
+
+@contextlib.asynccontextmanager
+async def uvicorn_serving(app: FastAPI) -> AsyncIterator[str]:
+    """Serve an app (whose lifespan already runs) on 127.0.0.1:<ephemeral>; yield base URL."""
+    config = uvicorn.Config(
+        app, host="127.0.0.1", port=0, log_config=None, access_log=False, lifespan="off",
+        ws="websockets-sansio",
+    )  # fmt: skip
+    server = uvicorn.Server(config)
+    task = asyncio.create_task(server.serve())
+    try:
+        await eventually(_started(server, task), 10.0, "uvicorn to listen")
+        port = server.servers[0].sockets[0].getsockname()[1]
+        yield f"127.0.0.1:{port}"
+    finally:
+        server.should_exit = True
+        await asyncio.wait_for(task, 10.0)
+
+
+def _started(server: uvicorn.Server, task: asyncio.Task[None]) -> Callable[[], Awaitable[bool]]:
+    async def probe() -> bool:
+        if task.done():
+            task.result()
+            raise AssertionError("uvicorn stopped before it listened")
+        return server.started
+
+    return probe
