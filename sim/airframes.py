@@ -1,0 +1,160 @@
+"""Airframes of the simulated vehicle: their parameters and a factory for their models.
+
+The MAVLink/commander side owns the parameter store (seeded from `param_defaults`) and calls
+`model.step()` at 250 Hz with the setpoint of the current mode; the model reads its
+parameters through `ParamReader`, so a PARAM_SET takes effect without a restart.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+from sim.mc_control import ParamReader
+from sim.multicopter import MulticopterModel
+from sim.topics import ControlSetpoint, VehicleStateTruth, VtolState
+
+AIRFRAME_NAMES = ("quad", "hexa", "octo", "plane", "vtol", "rover")
+
+# MAV_TYPE per airframe (MAVLink enum values)
+MAV_TYPE_FIXED_WING = 1
+MAV_TYPE_QUADROTOR = 2
+MAV_TYPE_GROUND_ROVER = 10
+MAV_TYPE_HEXAROTOR = 13
+MAV_TYPE_OCTOROTOR = 14
+MAV_TYPE_VTOL_FIXEDROTOR = 22
+
+__all__ = [
+    "AIRFRAME_NAMES",
+    "AirframeModel",
+    "ParamReader",
+    "StaticParams",
+    "default_params",
+    "make_airframe",
+    "param_defaults",
+]
+
+
+class AirframeModel(Protocol):
+    name: str
+    mav_type: int
+    is_vtol: bool
+    truth: VehicleStateTruth
+    vtol_state: VtolState
+    in_fixed_wing_flight: bool
+    actuator_outputs: list[float]
+    power_fraction: float
+
+    def step(self, dt_s: float, armed: bool, setpoint: ControlSetpoint | None) -> None: ...
+
+    def request_transition(self, to_fixed_wing: bool, immediate: bool) -> None: ...
+
+    def reset(self, position_ned_m: list[float], yaw_rad: float) -> None: ...
+
+
+# PX4 defaults of the multicopter position, attitude and rate controllers
+_MC_PARAMS: dict[str, float | int] = {
+    "MPC_XY_P": 0.95,
+    "MPC_Z_P": 1.0,
+    "MPC_XY_VEL_P_ACC": 1.8,
+    "MPC_XY_VEL_I_ACC": 0.4,
+    "MPC_XY_VEL_D_ACC": 0.2,
+    "MPC_Z_VEL_P_ACC": 4.0,
+    "MPC_Z_VEL_I_ACC": 2.0,
+    "MPC_Z_VEL_D_ACC": 0.0,
+    "MPC_XY_VEL_MAX": 12.0,
+    "MPC_XY_CRUISE": 5.0,
+    "MPC_Z_VEL_MAX_UP": 3.0,
+    "MPC_Z_VEL_MAX_DN": 1.5,
+    "MPC_TKO_SPEED": 1.5,
+    "MPC_LAND_SPEED": 0.7,
+    "MPC_ACC_HOR": 3.0,
+    "MPC_ACC_HOR_MAX": 5.0,
+    "MPC_THR_HOVER": 0.5,
+    "MPC_THR_MIN": 0.08,
+    "MPC_THR_MAX": 1.0,
+    "MPC_THR_XY_MARG": 0.3,
+    "MPC_TILTMAX_AIR": 45.0,
+    "MC_ROLL_P": 6.5,
+    "MC_PITCH_P": 6.5,
+    "MC_YAW_P": 2.8,
+    "MC_YAW_WEIGHT": 0.4,
+    "MC_ROLLRATE_MAX": 220.0,
+    "MC_PITCHRATE_MAX": 220.0,
+    "MC_YAWRATE_MAX": 200.0,
+    "MC_ROLLRATE_P": 0.15,
+    "MC_ROLLRATE_I": 0.2,
+    "MC_ROLLRATE_D": 0.003,
+    "MC_ROLLRATE_K": 1.0,
+    "MC_PITCHRATE_P": 0.15,
+    "MC_PITCHRATE_I": 0.2,
+    "MC_PITCHRATE_D": 0.003,
+    "MC_PITCHRATE_K": 1.0,
+    "MC_YAWRATE_P": 0.2,
+    "MC_YAWRATE_I": 0.1,
+    "MC_YAWRATE_D": 0.0,
+    "MC_YAWRATE_K": 1.0,
+    "MC_RR_INT_LIM": 0.3,
+    "MC_PR_INT_LIM": 0.3,
+    "MC_YR_INT_LIM": 0.3,
+}
+
+# PX4 simulator_sih defaults (SIH quadrotor)
+_SIH_PARAMS: dict[str, float | int] = {
+    "SIH_MASS": 1.0,
+    "SIH_IXX": 0.025,
+    "SIH_IYY": 0.025,
+    "SIH_IZZ": 0.030,
+    "SIH_T_MAX": 5.0,
+    "SIH_Q_MAX": 0.1,
+    "SIH_L_ROLL": 0.2,
+    "SIH_L_PITCH": 0.2,
+    "SIH_KDV": 1.0,
+    "SIH_KDW": 0.025,
+    "SIH_T_TAU": 0.05,
+}
+
+_MULTICOPTERS: dict[str, tuple[int, str, float]] = {
+    # name: (MAV_TYPE, mixer geometry, mass in kg so that hover thrust stays ≈ 0.5)
+    "quad": (MAV_TYPE_QUADROTOR, "4x", 1.0),
+    "hexa": (MAV_TYPE_HEXAROTOR, "6x", 1.5),
+    "octo": (MAV_TYPE_OCTOROTOR, "8x", 2.0),
+}
+
+
+def param_defaults(airframe: str) -> dict[str, float | int]:
+    """Every parameter the physics and controllers of `airframe` read, with PX4 defaults.
+
+    A Python int means an INT32 parameter, a float REAL32.
+    """
+    if airframe not in AIRFRAME_NAMES:
+        raise ValueError(f"unknown airframe {airframe!r}; known: {', '.join(AIRFRAME_NAMES)}")
+    params: dict[str, float | int] = dict(_SIH_PARAMS)
+    if airframe in _MULTICOPTERS:
+        params.update(_MC_PARAMS)
+        _, _, mass_kg = _MULTICOPTERS[airframe]
+        scale = mass_kg / float(_SIH_PARAMS["SIH_MASS"])
+        params["SIH_MASS"] = mass_kg
+        for name in ("SIH_IXX", "SIH_IYY", "SIH_IZZ"):
+            params[name] = float(_SIH_PARAMS[name]) * scale
+    return params
+
+
+def make_airframe(name: str, params: ParamReader) -> AirframeModel:
+    if name in _MULTICOPTERS:
+        mav_type, geometry, _ = _MULTICOPTERS[name]
+        return MulticopterModel(name, mav_type, geometry, params)
+    raise ValueError(f"unknown airframe {name!r}; known: {', '.join(AIRFRAME_NAMES)}")
+
+
+class StaticParams:
+    """A ParamReader over a plain dict, for running a model without the parameter store."""
+
+    def __init__(self, values: dict[str, float | int]) -> None:
+        self.values = dict(values)
+
+    def get(self, name: str) -> float:
+        return float(self.values[name])
+
+
+def default_params(airframe: str) -> StaticParams:
+    return StaticParams(param_defaults(airframe))
