@@ -94,7 +94,7 @@ LeaseIdHeader = Annotated[
 
 
 def hold_lease(
-    vehicle: KnownVehicle, _: Pilot, context: Context, x_lease_id: LeaseIdHeader = None
+    _: Pilot, vehicle: KnownVehicle, context: Context, x_lease_id: LeaseIdHeader = None
 ) -> Iterator[Lease]:
     """Control calls renew the lease, and it cannot lapse while the call runs."""
     with context.leases.hold(vehicle.sysid, x_lease_id) as lease:
@@ -102,7 +102,7 @@ def hold_lease(
 
 
 def get_controlled_vehicle(
-    vehicle: KnownVehicle, _lease: Annotated[Lease, Depends(hold_lease)]
+    _lease: Annotated[Lease, Depends(hold_lease)], vehicle: KnownVehicle
 ) -> Vehicle:
     return require_connected(vehicle)
 

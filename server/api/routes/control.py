@@ -35,7 +35,7 @@ def holder_name(request: Request, client_name: str | None) -> str:
     responses={**CONTROL_RESPONSES, 409: {"model": ErrorOut, "description": "held by another"}},
 )
 async def acquire_control(
-    request: Request, vehicle: KnownVehicle, context: Context, _: Pilot,
+    request: Request, _: Pilot, vehicle: KnownVehicle, context: Context,
     body: Annotated[ControlBody | None, Body()] = None, x_lease_id: LeaseIdHeader = None,
 ) -> LeaseOut:  # fmt: skip
     """Take the control lease (409 while another pilot holds it, unless `takeover`).
@@ -53,7 +53,7 @@ async def acquire_control(
 
 @router.put("", response_model=LeaseOut, responses=CONTROL_RESPONSES)
 async def renew_control(
-    vehicle: KnownVehicle, context: Context, _: Pilot, x_lease_id: LeaseIdHeader = None
+    _: Pilot, vehicle: KnownVehicle, context: Context, x_lease_id: LeaseIdHeader = None
 ) -> LeaseOut:
     return lease_out(context.leases.renew(vehicle.sysid, x_lease_id), context)
 
@@ -66,7 +66,7 @@ async def control_status(vehicle: KnownVehicle, context: Context, _: Reader) -> 
 
 @router.delete("", status_code=204, response_class=Response, responses=CONTROL_RESPONSES)
 async def release_control(
-    vehicle: KnownVehicle, context: Context, _: Pilot, x_lease_id: LeaseIdHeader = None
+    _: Pilot, vehicle: KnownVehicle, context: Context, x_lease_id: LeaseIdHeader = None
 ) -> Response:
     """Give control back. While the streamer runs, this applies on_operator_loss."""
     context.leases.release(vehicle.sysid, x_lease_id)
