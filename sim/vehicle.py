@@ -130,6 +130,7 @@ class SimVehicle:
         self._links: list[tuple[Link, StreamSet]] = []
         self._geo_cache: tuple[float, GeoPoint] | None = None
         self._home_refreshed_s = -math.inf
+        self._statustext_id = 0
 
     # -- composition -------------------------------------------------------------------
 
@@ -154,9 +155,18 @@ class SimVehicle:
 
     def announce(self, severity: int, text: str) -> None:
         self.statustexts.append(StatusText(self.now_s, severity, text))
-        if self.booted:
+        if not self.booted:
+            return
+        data = text.encode()
+        if len(data) <= STATUSTEXT_MAX_LEN:
+            self.broadcast(mavlink.MAVLink_statustext_message(severity, data))
+            return
+        # Longer texts go out in 50-byte chunks sharing an id, as MAVLink 2 allows.
+        self._statustext_id = self._statustext_id % 65535 + 1
+        for seq, start in enumerate(range(0, len(data), STATUSTEXT_MAX_LEN)):
+            chunk = data[start:start + STATUSTEXT_MAX_LEN]
             self.broadcast(mavlink.MAVLink_statustext_message(
-                severity, text[:STATUSTEXT_MAX_LEN].encode()))
+                severity, chunk, self._statustext_id, seq))
 
     # -- state views -------------------------------------------------------------------
 
