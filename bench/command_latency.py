@@ -1,0 +1,176 @@
+"""Arm → COMMAND_ACK round trip: SkyHelm's Link/Vehicle vs MAVSDK on one simulated vehicle.
+
+The simulated vehicle runs as its own process (``python -m sim``), as in ``skyhelm serve``.
+SkyHelm talks to its API socket, MAVSDK (mavsdk_server) to its GCS socket, so each client
+gets its own acknowledgements. Rounds alternate between the clients (arm, then disarm
+before the next) so both see the same machine conditions. Figures are the wall time of
+``await vehicle.arm()`` and ``await drone.action.arm()``, and SkyHelm's own
+``CommandResult.elapsed_ms`` (send to ACK).
+
+Goal: median SkyHelm / median MAVSDK ≤ 1.
+
+    .venv/bin/python -m bench.command_latency [--count 30]
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import json
+import os
+import platform
+import socket
+import statistics
+import sys
+import time
+from collections.abc import AsyncIterator, Sequence
+from pathlib import Path
+from typing import Any
+
+from server.link import Link, Vehicle
+
+PROJECT_ROOT = Path(__file__).resolve().parent.parent
+RESULTS = PROJECT_ROOT / "bench" / "results" / "command_latency.json"
+READY_TIMEOUT_S = 30.0
+
+
+@contextlib.asynccontextmanager
+async def simulated_vehicle() -> AsyncIterator[dict[str, int]]:
+    """``python -m sim`` with ephemeral ports; yields its ready line's first instance."""
+    proc = await asyncio.create_subprocess_exec(
+        sys.executable, "-m", "sim", "--api-port", "0", "--gcs-port", "0",
+        "--api-local-port", "0", "--gcs-local-port", "0", "--ready-json",
+        "--exit-on-stdin-eof",
+        stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE, cwd=PROJECT_ROOT,
+    )
+    try:
+        assert proc.stdout is not None
+        while True:
+            line = await asyncio.wait_for(proc.stdout.readline(), READY_TIMEOUT_S)
+            if not line:
+                raise RuntimeError("the simulated vehicle exited before it was ready")
+            with contextlib.suppress(ValueError):
+                ready = json.loads(line)
+                if isinstance(ready, dict) and ready.get("event") == "ready":
+                    break
+        instance: dict[str, int] = ready["instances"][0]
+        yield instance
+    finally:
+        if proc.stdin is not None:
+            proc.stdin.close()
+        try:
+            await asyncio.wait_for(proc.wait(), 5.0)
+        except TimeoutError:
+            proc.kill()
+            await proc.wait()
+
+
+async def _until_ready(vehicle: Vehicle) -> None:
+    deadline = time.monotonic() + READY_TIMEOUT_S
+    while vehicle.snapshot().home is None:
+        if time.monotonic() > deadline:
+            raise RuntimeError("the vehicle never reported a home position")
+        await asyncio.sleep(0.1)
+
+
+async def _skyhelm_arm_ms(vehicle: Vehicle) -> tuple[float, float]:
+    begin = time.perf_counter()
+    result = await vehicle.arm()
+    wall_ms = (time.perf_counter() - begin) * 1e3
+    if not result.ok:
+        raise RuntimeError(f"SkyHelm arm refused: {result}")
+    disarmed = await vehicle.disarm()
+    if not disarmed.ok:
+        raise RuntimeError(f"SkyHelm disarm refused: {disarmed}")
+    return wall_ms, result.elapsed_ms
+
+
+async def _mavsdk_arm_ms(drone: Any) -> float:
+    begin = time.perf_counter()
+    await drone.action.arm()
+    wall_ms = (time.perf_counter() - begin) * 1e3
+    await drone.action.disarm()
+    return wall_ms
+
+
+def _free_tcp_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+def _summary(values_ms: Sequence[float]) -> dict[str, float]:
+    ordered = sorted(values_ms)
+    return {
+        "median_ms": statistics.median(ordered),
+        "p90_ms": ordered[min(len(ordered) - 1, int(0.9 * len(ordered)))],
+        "min_ms": ordered[0],
+        "max_ms": ordered[-1],
+    }
+
+
+async def run(count: int) -> dict[str, Any]:
+    import mavsdk_grpc as mavsdk
+
+    async with simulated_vehicle() as instance:
+        link = await Link.open(f"udpout:127.0.0.1:{instance['api_local_port']}",
+                               name="bench-latency")
+        drone = mavsdk.System(port=_free_tcp_port())
+        try:
+            vehicle = await asyncio.wait_for(link.subscribe_vehicles().get(), READY_TIMEOUT_S)
+            await _until_ready(vehicle)
+            await drone.connect(system_address=f"udpout://127.0.0.1:{instance['gcs_local_port']}")
+            async for state in drone.core.connection_state():
+                if state.is_connected:
+                    break
+            ours_wall: list[float] = []
+            ours_ack: list[float] = []
+            theirs: list[float] = []
+            for _ in range(count):
+                wall_ms, ack_ms = await _skyhelm_arm_ms(vehicle)
+                ours_wall.append(wall_ms)
+                ours_ack.append(ack_ms)
+                theirs.append(await _mavsdk_arm_ms(drone))
+        finally:
+            with contextlib.suppress(Exception):
+                drone._stop_mavsdk_server()
+            await link.close()
+    ours = _summary(ours_wall)
+    mavsdk_summary = _summary(theirs)
+    ratio = ours["median_ms"] / mavsdk_summary["median_ms"]
+    return {
+        "count": count,
+        "skyhelm_arm_wall": ours,
+        "skyhelm_arm_elapsed_ms": _summary(ours_ack),
+        "mavsdk_arm_wall": mavsdk_summary,
+        "median_ratio_skyhelm_over_mavsdk": ratio,
+        "goal_met": ratio <= 1.0,
+        "samples_ms": {"skyhelm": ours_wall, "mavsdk": theirs},
+        "machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
+                    "platform": platform.platform()},
+    }
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--count", type=int, default=30, help="arms per client (≥ 30)")
+    args = parser.parse_args(argv)
+    result = asyncio.run(run(args.count))
+    print(f"{'client':10} {'median ms':>10} {'p90 ms':>8} {'min ms':>8} {'max ms':>8}")
+    for name, key in (("skyhelm", "skyhelm_arm_wall"), ("mavsdk", "mavsdk_arm_wall")):
+        row = result[key]
+        print(f"{name:10} {row['median_ms']:10.2f} {row['p90_ms']:8.2f} {row['min_ms']:8.2f} "
+              f"{row['max_ms']:8.2f}")
+    print(f"SkyHelm send→ACK (CommandResult.elapsed_ms) median "
+          f"{result['skyhelm_arm_elapsed_ms']['median_ms']:.2f} ms")
+    print(f"median ratio SkyHelm/MAVSDK = {result['median_ratio_skyhelm_over_mavsdk']:.2f} "
+          f"(goal ≤ 1: {'met' if result['goal_met'] else 'NOT met'})")
+    RESULTS.parent.mkdir(parents=True, exist_ok=True)
+    RESULTS.write_text(json.dumps(result, indent=2) + "\n")
+    print(f"wrote {RESULTS}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
