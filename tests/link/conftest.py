@@ -4,6 +4,7 @@ for integration tests, the simulated vehicle with a Link and its Vehicle."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import functools
 import time
 from collections.abc import AsyncIterator, Callable
@@ -18,8 +19,9 @@ from server.link.vehicle import Vehicle
 HEARTBEAT_PERIOD_S = 0.5
 
 
-async def wait_for(condition: Callable[[], bool], timeout_s: float = 5.0,
-                   what: str = "condition") -> None:
+async def wait_for(
+    condition: Callable[[], bool], timeout_s: float = 5.0, what: str = "condition"
+) -> None:
     """Poll ``condition`` until it holds; fail the test after ``timeout_s``."""
     deadline = time.monotonic() + timeout_s
     while not condition():
@@ -58,7 +60,8 @@ class ScriptedPeer(asyncio.DatagramProtocol):
         mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
         mav.seq = self._seq.get((sysid, compid), 0)
         self._seq[(sysid, compid)] = (mav.seq + 1) % 256
-        assert self.endpoint is not None and self.link_address is not None
+        assert self.endpoint is not None
+        assert self.link_address is not None
         self.endpoint.sendto(bytes(msg.pack(mav)), self.link_address)
 
     def send_later(self, delay_s: float, msg: mavlink.MAVLink_message, **ids: int) -> None:
@@ -69,18 +72,48 @@ class ScriptedPeer(asyncio.DatagramProtocol):
             self.mav_type, mavlink.MAV_AUTOPILOT_PX4, self.base_mode, self.custom_mode,
             mavlink.MAV_STATE_STANDBY, 3), sysid=sysid)  # fmt: skip
 
-    def ack(self, command: int, result: int, *, delay_s: float = 0.0, progress: int = 0,
-            sysid: int = 1, compid: int = 1, target_system: int = 255) -> None:
-        msg = mavlink.MAVLink_command_ack_message(command, result, progress, 0, target_system,
-                                                  190)
+    def ack(
+        self,
+        command: int,
+        result: int,
+        *,
+        delay_s: float = 0.0,
+        progress: int = 0,
+        sysid: int = 1,
+        compid: int = 1,
+        target_system: int = 255,
+    ) -> None:
+        msg = mavlink.MAVLink_command_ack_message(command, result, progress, 0, target_system, 190)
         self.send_later(delay_s, msg, sysid=sysid, compid=compid)
+
+    def accept_commands(self, *, mode_report_delay_s: float = 0.0) -> None:
+        """Answer every command ACCEPTED; DO_SET_MODE also changes the reported mode (in
+        HEARTBEAT and CURRENT_MODE) after ``mode_report_delay_s``."""
+
+        def answer(msg: mavlink.MAVLink_message) -> None:
+            self.ack(msg.command, mavlink.MAV_RESULT_ACCEPTED)
+            if msg.command == mavlink.MAV_CMD_DO_SET_MODE:
+                custom_mode = int(msg.param2) << 16 | int(msg.param3) << 24
+                asyncio.get_running_loop().call_later(
+                    mode_report_delay_s, self.report_mode, custom_mode, custom_mode
+                )
+
+        self.on_command = answer
+
+    def report_mode(self, custom_mode: int, intended_custom_mode: int) -> None:
+        self.custom_mode = custom_mode
+        self.send(mavlink.MAVLink_current_mode_message(0, custom_mode, intended_custom_mode))
+        self.heartbeat()
 
     def messages(self, msg_type: str) -> list[mavlink.MAVLink_message]:
         return [m for _, m in self.received if m.get_type() == msg_type]
 
     def commands(self, command: int) -> list[mavlink.MAVLink_message]:
-        return [m for _, m in self.received
-                if m.get_type() in ("COMMAND_LONG", "COMMAND_INT") and m.command == command]
+        return [
+            m
+            for _, m in self.received
+            if m.get_type() in ("COMMAND_LONG", "COMMAND_INT") and m.command == command
+        ]
 
 
 class ScriptedSession:
@@ -115,17 +148,20 @@ async def _keep_beating(peer: ScriptedPeer) -> None:
 @pytest.fixture
 async def scripted() -> AsyncIterator[ScriptedSession]:
     """A Link with a Vehicle discovered from a scripted peer (no telemetry requests)."""
-    async for session in open_scripted(telemetry_rates_hz={}):
+    async with open_scripted(telemetry_rates_hz={}) as session:
         yield session
 
 
+@contextlib.asynccontextmanager
 async def open_scripted(**vehicle_kwargs: Any) -> AsyncIterator[ScriptedSession]:
     loop = asyncio.get_running_loop()
     peer = ScriptedPeer()
     peer.endpoint, _ = await loop.create_datagram_endpoint(
-        lambda: peer, local_addr=("127.0.0.1", 0))
-    link = await Link.open("udpin:127.0.0.1:0", vehicle_factory=fast_vehicle(**vehicle_kwargs),
-                           log_dir=None)
+        lambda: peer, local_addr=("127.0.0.1", 0)
+    )
+    link = await Link.open(
+        "udpin:127.0.0.1:0", vehicle_factory=fast_vehicle(**vehicle_kwargs), log_dir=None
+    )
     assert link.local_address is not None
     peer.link_address = ("127.0.0.1", link.local_address[1])
     beat = loop.create_task(_keep_beating(peer))

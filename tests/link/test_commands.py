@@ -9,6 +9,7 @@ import math
 from pymavlink.dialects.v20 import development as mavlink
 
 from server.link.commands import CommandOutcome
+from server.link.events import VehicleEvent
 from tests.link.conftest import ScriptedSession, wait_for
 
 ARM = mavlink.MAV_CMD_COMPONENT_ARM_DISARM
@@ -19,7 +20,8 @@ IN_PROGRESS = mavlink.MAV_RESULT_IN_PROGRESS
 
 
 async def test_unanswered_command_times_out_after_exactly_four_sends(
-        scripted: ScriptedSession) -> None:
+    scripted: ScriptedSession,
+) -> None:
     result = await scripted.vehicle.arm()
     await asyncio.sleep(0.15)  # nothing more may follow the timeout
 
@@ -31,13 +33,15 @@ async def test_unanswered_command_times_out_after_exactly_four_sends(
 
 
 async def test_command_long_targets_the_vehicle_and_leaves_unused_params_nan(
-        scripted: ScriptedSession) -> None:
+    scripted: ScriptedSession,
+) -> None:
     scripted.peer.on_command = lambda m: scripted.peer.ack(m.command, ACCEPTED)
 
     result = await scripted.vehicle.land()
 
     (sent,) = scripted.peer.commands(mavlink.MAV_CMD_NAV_LAND)
-    assert result.ok and result.command == "MAV_CMD_NAV_LAND"
+    assert result.ok
+    assert result.command == "MAV_CMD_NAV_LAND"
     assert (sent.target_system, sent.target_component) == (1, 1)
     assert all(math.isnan(getattr(sent, f"param{i}")) for i in range(1, 8))
 
@@ -56,7 +60,8 @@ async def test_in_progress_is_not_final_and_stops_retries(scripted: ScriptedSess
     assert result.outcome is CommandOutcome.ACCEPTED
     assert len(peer.commands(ARM)) == 1  # no retry while the vehicle says it is working
     progress = [e.data for e in _drain(events) if e.data.get("outcome") == "IN_PROGRESS"]
-    assert progress and progress[0]["progress"] == 40
+    assert progress
+    assert progress[0]["progress"] == 40
 
 
 async def test_second_ack_of_set_mode_replaces_the_first(scripted: ScriptedSession) -> None:
@@ -87,7 +92,8 @@ async def test_late_ack_after_timeout_is_ignored(scripted: ScriptedSession) -> N
 
 
 async def test_acks_from_another_system_component_or_for_another_gcs_are_ignored(
-        scripted: ScriptedSession) -> None:
+    scripted: ScriptedSession,
+) -> None:
     peer = scripted.peer
     peer.heartbeat(sysid=2)  # make system 2 a known vehicle on the same link
     await wait_for(lambda: 2 in scripted.link.vehicles, what="second vehicle")
@@ -103,15 +109,18 @@ async def test_acks_from_another_system_component_or_for_another_gcs_are_ignored
     assert result.outcome is CommandOutcome.TIMEOUT
 
 
-async def test_refusal_carries_the_statustext_that_explains_it(
-        scripted: ScriptedSession) -> None:
+async def test_refusal_carries_the_statustext_that_explains_it(scripted: ScriptedSession) -> None:
     peer = scripted.peer
 
     def refuse(msg: mavlink.MAVLink_message) -> None:
         peer.ack(msg.command, TEMPORARILY_REJECTED)
         # PX4 may publish its report just after the ACK
-        peer.send_later(0.01, mavlink.MAVLink_statustext_message(
-            mavlink.MAV_SEVERITY_CRITICAL, b"Arming denied: no offboard signal"))
+        peer.send_later(
+            0.01,
+            mavlink.MAVLink_statustext_message(
+                mavlink.MAV_SEVERITY_CRITICAL, b"Arming denied: no offboard signal"
+            ),
+        )
 
     peer.on_command = refuse
     result = await scripted.vehicle.arm()
@@ -121,22 +130,24 @@ async def test_refusal_carries_the_statustext_that_explains_it(
     assert not result.ok
 
 
-async def test_second_command_with_same_id_waits_for_the_first(
-        scripted: ScriptedSession) -> None:
+async def test_second_command_with_same_id_waits_for_the_first(scripted: ScriptedSession) -> None:
     peer = scripted.peer
     peer.on_command = lambda m: peer.ack(m.command, ACCEPTED, delay_s=0.05)
 
     first, second = await asyncio.gather(scripted.vehicle.arm(), scripted.vehicle.disarm())
 
-    received = [(t, m) for t, m in peer.received
-                if m.get_type() == "COMMAND_LONG" and m.command == ARM]
-    assert first.ok and second.ok
+    received = [
+        (t, m) for t, m in peer.received if m.get_type() == "COMMAND_LONG" and m.command == ARM
+    ]
+    assert first.ok
+    assert second.ok
     assert [m.param1 for _, m in received] == [1.0, 0.0]
     assert received[1][0] - received[0][0] >= 0.04  # sent only after the first ACK
 
 
 async def test_pending_command_ends_as_link_lost_when_vehicle_goes_silent(
-        scripted: ScriptedSession) -> None:
+    scripted: ScriptedSession,
+) -> None:
     scripted.vehicle.commands.timeout_s = 5.0
     task = asyncio.ensure_future(scripted.vehicle.arm())
     await wait_for(lambda: bool(scripted.peer.commands(ARM)))
@@ -147,7 +158,7 @@ async def test_pending_command_ends_as_link_lost_when_vehicle_goes_silent(
     assert result.outcome is CommandOutcome.LINK_LOST
 
 
-def _drain(queue: asyncio.Queue[object]) -> list[object]:
+def _drain(queue: asyncio.Queue[VehicleEvent]) -> list[VehicleEvent]:
     items = []
     while not queue.empty():
         items.append(queue.get_nowait())

@@ -122,8 +122,12 @@ async def test_list_rerequests_missing_indices_by_index(scripted: ScriptedSessio
 
     values = await scripted.vehicle.get_params()
 
-    assert values == {"COM_RC_IN_MODE": 1, "MIS_TAKEOFF_ALT": 2.5, "NAV_DLL_ACT": 0,
-                      "MPC_XY_CRUISE": 5.0}
+    assert values == {
+        "COM_RC_IN_MODE": 1,
+        "MIS_TAKEOFF_ALT": 2.5,
+        "NAV_DLL_ACT": 0,
+        "MPC_XY_CRUISE": 5.0,
+    }
     by_index = [m.param_index for m in scripted.peer.messages("PARAM_REQUEST_READ")]
     assert by_index == [2]
 

@@ -19,8 +19,9 @@ from server.link.setpoint_checks import (
 HOME = Reference((0.0, 0.0, 0.0), (47.397742, 8.545594, 489.4))
 
 
-def _refusal(setpoint: sp.Setpoint, vclass: VehicleClass = "multicopter",
-             envelope: Envelope | None = None) -> SetpointRejected:
+def _refusal(
+    setpoint: sp.Setpoint, vclass: VehicleClass = "multicopter", envelope: Envelope | None = None
+) -> SetpointRejected:
     with pytest.raises(SetpointRejected) as info:
         check(setpoint, vclass, envelope or Envelope(), HOME)
     return info.value
@@ -50,7 +51,8 @@ def test_multicopter_accepts_every_setpoint_kind(setpoint: sp.Setpoint) -> None:
     ],
 )  # fmt: skip
 def test_setpoint_kinds_px4_ignores_for_the_vehicle_type_are_refused(
-        setpoint: sp.Setpoint, vclass: VehicleClass, words: str) -> None:
+    setpoint: sp.Setpoint, vclass: VehicleClass, words: str
+) -> None:
     refusal = _refusal(setpoint, vclass)
 
     assert words in refusal.reason
@@ -95,8 +97,7 @@ def test_raw_setpoint_with_nothing_usable_is_refused() -> None:
 
 def test_raw_body_frame_velocity_passes_as_velocity() -> None:
     check(sp.RawLocal(frame=8, type_mask=1479, vx=1.0), "rover", Envelope(), HOME)
-    assert "velocity" in _refusal(sp.RawLocal(frame=8, type_mask=1479, vx=1.0),
-                                  "fixed_wing").reason
+    assert "velocity" in _refusal(sp.RawLocal(frame=8, type_mask=1479, vx=1.0), "fixed_wing").reason
 
 
 @pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
@@ -123,8 +124,9 @@ def test_thrust_outside_zero_to_one_is_refused() -> None:
         (sp.RawLocal(frame=1, type_mask=2552, x=0, y=0, z=-121), "max_alt_rel_m", 120.0),
     ],
 )  # fmt: skip
-def test_envelope_refuses_with_the_limit_hit(setpoint: sp.Setpoint, field: str,
-                                             limit: float) -> None:
+def test_envelope_refuses_with_the_limit_hit(
+    setpoint: sp.Setpoint, field: str, limit: float
+) -> None:
     refusal = _refusal(setpoint)
 
     assert (refusal.field, refusal.limit) == (field, limit)

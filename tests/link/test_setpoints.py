@@ -41,7 +41,8 @@ def _encoded(setpoint: sp.Setpoint) -> tuple[mavlink.MAVLink_message, sp.SentSet
     ],
 )  # fmt: skip
 def test_setpoint_encodes_to_the_message_frame_and_type_mask_px4_expects(
-        setpoint: sp.Setpoint, message: str, frame: int, type_mask: int) -> None:
+    setpoint: sp.Setpoint, message: str, frame: int, type_mask: int
+) -> None:
     decoded, sent = _encoded(setpoint)
 
     assert (sent.message, sent.frame, sent.type_mask) == (message, frame, type_mask)

@@ -15,8 +15,9 @@ MAV = mavlink.MAVLink(None)
 
 
 def _msg(x: float) -> mavlink.MAVLink_message:
-    return MAV.set_position_target_local_ned_encode(0, 1, 1, 1, 2552, x, 0, -5, 0, 0, 0, 0, 0,
-                                                    0, 0, 0)
+    return MAV.set_position_target_local_ned_encode(
+        0, 1, 1, 1, 2552, x, 0, -5, 0, 0, 0, 0, 0, 0, 0, 0
+    )
 
 
 class _Recorder:
@@ -55,7 +56,7 @@ async def test_changed_setpoint_goes_out_at_once_and_rephases() -> None:
     await wait_for(lambda: len(rec.sent) >= 3, 2.0)
     streamer.stop()
 
-    (t1, x1), (t2, x2), (t3, x3) = rec.sent[:3]
+    (_t1, x1), (t2, x2), (t3, x3) = rec.sent[:3]
     assert (x1, x2, x3) == (1, 2, 2)
     assert t2 - changed_at < 0.005
     assert t3 - t2 == pytest.approx(0.5, abs=0.05)  # next tick counts from the change
@@ -66,7 +67,7 @@ async def test_a_stalled_loop_skips_missed_ticks_and_counts_a_gap() -> None:
     streamer = SetpointStreamer(rec, rate_hz=50)
     streamer.stream(_msg(1))
     await asyncio.sleep(0.1)
-    time.sleep(0.2)  # block the event loop for ten periods
+    time.sleep(0.2)  # noqa: ASYNC251 - blocks the event loop for ten periods on purpose
     before = len(rec.sent)
     await asyncio.sleep(0.005)
     burst = len(rec.sent) - before
@@ -76,7 +77,8 @@ async def test_a_stalled_loop_skips_missed_ticks_and_counts_a_gap() -> None:
     stats = streamer.stats()
     assert burst <= 1  # no catch-up burst of missed ticks
     assert stats.gaps >= 1
-    assert stats.max_gap_ms is not None and stats.max_gap_ms >= 190
+    assert stats.max_gap_ms is not None
+    assert stats.max_gap_ms >= 190
 
 
 async def test_stop_ends_the_stream() -> None:
@@ -94,7 +96,7 @@ async def test_stop_ends_the_stream() -> None:
 
 @pytest.mark.parametrize("rate_hz", [1.0, 101.0])
 def test_rate_outside_2_to_100_hz_is_refused(rate_hz: float) -> None:
-    with pytest.raises(ValueError, match="2..100"):
+    with pytest.raises(ValueError, match=r"2\.\.100"):
         SetpointStreamer(lambda _m: None, rate_hz=rate_hz)
 
 
