@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from typing import Protocol
 
+from sim.fixed_wing import FixedWingModel
 from sim.mc_control import ParamReader
 from sim.multicopter import MulticopterModel
 from sim.topics import ControlSetpoint, VehicleStateTruth, VtolState
@@ -113,6 +114,47 @@ _SIH_PARAMS: dict[str, float | int] = {
     "SIH_T_TAU": 0.05,
 }
 
+# Fixed-wing guidance, TECS-like height/speed and attitude/rate control (PX4 names)
+_FW_PARAMS: dict[str, float | int] = {
+    "FW_AIRSPD_MIN": 10.0,
+    "FW_AIRSPD_TRIM": 15.0,
+    "FW_AIRSPD_MAX": 20.0,
+    "NAV_LOITER_RAD": 80.0,
+    "FW_R_LIM": 50.0,
+    "FW_P_LIM_MAX": 30.0,
+    "FW_P_LIM_MIN": -30.0,
+    "FW_R_TC": 0.4,
+    "FW_P_TC": 0.4,
+    "FW_R_RMAX": 70.0,
+    "FW_P_RMAX_POS": 60.0,
+    "FW_Y_RMAX": 50.0,
+    "FW_RR_P": 0.05,
+    "FW_RR_I": 0.1,
+    "FW_RR_FF": 0.5,
+    "FW_PR_P": 0.08,
+    "FW_PR_I": 0.1,
+    "FW_PR_FF": 0.5,
+    "FW_YR_P": 0.05,
+    "FW_YR_I": 0.1,
+    "FW_YR_FF": 0.3,
+    "FW_T_CLMB_MAX": 5.0,
+    "FW_T_SINK_MAX": 5.0,
+    "FW_THR_TRIM": 0.35,
+    "FW_THR_MAX": 1.0,
+    "FW_THR_MIN": 0.0,
+}
+
+# The plane: 1.5 kg, 1.5 m span, a 6 N pusher (SIH_F_T_MAX); wheels, no rotor drag
+_PLANE_PARAMS: dict[str, float | int] = {
+    "SIH_MASS": 1.5,
+    "SIH_IXX": 0.05,
+    "SIH_IYY": 0.06,
+    "SIH_IZZ": 0.1,
+    "SIH_KDV": 0.0,
+    "SIH_KDW": 0.01,
+    "SIH_F_T_MAX": 6.0,
+}
+
 _MULTICOPTERS: dict[str, tuple[int, str, float]] = {
     # name: (MAV_TYPE, mixer geometry, mass in kg so that hover thrust stays ≈ 0.5)
     "quad": (MAV_TYPE_QUADROTOR, "4x", 1.0),
@@ -136,6 +178,9 @@ def param_defaults(airframe: str) -> dict[str, float | int]:
         params["SIH_MASS"] = mass_kg
         for name in ("SIH_IXX", "SIH_IYY", "SIH_IZZ"):
             params[name] = float(_SIH_PARAMS[name]) * scale
+    elif airframe == "plane":
+        params.update(_FW_PARAMS)
+        params.update(_PLANE_PARAMS)
     return params
 
 
@@ -143,6 +188,8 @@ def make_airframe(name: str, params: ParamReader) -> AirframeModel:
     if name in _MULTICOPTERS:
         mav_type, geometry, _ = _MULTICOPTERS[name]
         return MulticopterModel(name, mav_type, geometry, params)
+    if name == "plane":
+        return FixedWingModel(params)
     raise ValueError(f"unknown airframe {name!r}; known: {', '.join(AIRFRAME_NAMES)}")
 
 
