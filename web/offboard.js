@@ -167,7 +167,9 @@ export class KeyboardPilot {
   down(event) {
     if (!this.enabled() || KeyboardPilot.typing(event)) return;
     if (event.code === "Space") {
+      // Space must never also press whichever button has the focus.
       event.preventDefault();
+      document.activeElement?.blur();
       this.held.clear();
       this.stopTimer();
       this.onKeys("HOLD");
@@ -183,6 +185,7 @@ export class KeyboardPilot {
   }
 
   up(event) {
+    if (event.code === "Space" && this.enabled() && !KeyboardPilot.typing(event)) event.preventDefault();
     if (!this.held.delete(event.code)) return;
     event.preventDefault();
     this.send();

@@ -1,0 +1,193 @@
+"""Running `skyhelm serve` (with its simulated vehicle) and a headless Chromium for the
+browser tests and the screenshot script."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import os
+import re
+import secrets
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+from urllib.parse import urlsplit
+
+import httpx
+
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_ARGS = [
+    "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
+    "--disable-background-networking", "--disable-component-update", "--disable-sync",
+    "--disable-quic",
+]
+READY = re.compile(r"SkyHelm ready: (http://\S+)")
+REPO = Path(__file__).resolve().parents[2]
+
+
+def skyhelm_command() -> list[str]:
+    return [sys.executable, "-m", "server.cli"] if not (REPO / ".venv/bin/skyhelm").exists() else [
+        str(REPO / ".venv/bin/skyhelm")
+    ]
+
+
+@dataclass
+class Serve:
+    """One `skyhelm serve --port 0` process; restartable on the same port and token."""
+
+    extra_args: list[str] = field(default_factory=list)
+    token: str = field(default_factory=lambda: secrets.token_urlsafe(16))
+    url: str = ""
+    port: int = 0
+    _process: subprocess.Popen[str] | None = None
+    _log: Any = None
+
+    @property
+    def base(self) -> str:
+        return f"http://127.0.0.1:{self.port}"
+
+    def start(self, timeout_s: float = 60.0) -> str:
+        # The file outlives this call: it is the server's stderr until stop().
+        self._log = tempfile.NamedTemporaryFile(  # noqa: SIM115
+            "w+", prefix="skyhelm-serve-", suffix=".log", delete=False
+        )
+        args = [*skyhelm_command(), "serve", "--port", str(self.port), "--token", self.token,
+                "--no-tlog", *self.extra_args]
+        self._process = subprocess.Popen(
+            args, cwd=REPO, stdout=subprocess.PIPE, stderr=self._log, text=True,
+            stdin=subprocess.DEVNULL, start_new_session=True,
+        )
+        found: list[str] = []
+
+        def read_stdout() -> None:
+            assert self._process is not None
+            assert self._process.stdout is not None
+            for line in self._process.stdout:
+                match = READY.search(line)
+                if match and not found:
+                    found.append(match.group(1))
+
+        threading.Thread(target=read_stdout, daemon=True).start()
+        deadline = time.monotonic() + timeout_s
+        while not found:
+            if self._process.poll() is not None or time.monotonic() > deadline:
+                self.stop()
+                raise RuntimeError(f"skyhelm serve did not start:\n{self.log_tail()}")
+            time.sleep(0.05)
+        self.url = found[0]
+        self.port = urlsplit(self.url).port or 0
+        return self.url
+
+    def stop(self) -> None:
+        process, self._process = self._process, None
+        if process is None or process.poll() is not None:
+            return
+        process.send_signal(signal.SIGINT)
+        try:
+            process.wait(15.0)
+        except subprocess.TimeoutExpired:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait(5.0)
+
+    def restart(self) -> str:
+        """Same port and token, so an open page can find the server again."""
+        self.stop()
+        deadline = time.monotonic() + 30.0
+        while True:
+            try:
+                return self.start()
+            except RuntimeError:
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.5)
+
+    def log_tail(self, lines: int = 40) -> str:
+        if self._log is None:
+            return ""
+        self._log.flush()
+        text = Path(self._log.name).read_text(errors="replace")
+        return "\n".join(text.splitlines()[-lines:])
+
+    def client(self) -> httpx.Client:
+        return httpx.Client(base_url=f"{self.base}/api/v1", timeout=10.0,
+                            headers={"Authorization": f"Bearer {self.token}"})
+
+
+def wait_for(what: str, check: Callable[[], Any], timeout_s: float, every_s: float = 0.1) -> Any:
+    """Polls until check() returns something truthy; fails with the last value seen."""
+    deadline = time.monotonic() + timeout_s
+    last: Any = None
+    while time.monotonic() < deadline:
+        last = check()
+        if last:
+            return last
+        time.sleep(every_s)
+    raise AssertionError(f"timed out after {timeout_s} s waiting for {what}; last: {last!r}")
+
+
+def vehicle_state(api: httpx.Client, vehicle_id: int = 1) -> dict[str, Any]:
+    response = api.get(f"/vehicles/{vehicle_id}")
+    response.raise_for_status()
+    state: dict[str, Any] = response.json()
+    return state
+
+
+def altitude_m(state: dict[str, Any]) -> float:
+    glob = state.get("global") or {}
+    if glob.get("alt_rel_m") is not None:
+        return float(glob["alt_rel_m"])
+    home_down = (state.get("home") or {}).get("down_m") or 0.0
+    return float(home_down - state["position_ned"]["down_m"])
+
+
+def speed_m_s(state: dict[str, Any]) -> float:
+    v = state["velocity_ned"]
+    return float((v["north_m_s"] ** 2 + v["east_m_s"] ** 2 + v["down_m_s"] ** 2) ** 0.5)
+
+
+@contextlib.contextmanager
+def empty_scene() -> Iterator[tuple[str, str]]:
+    """A scene hub with no vehicle behind its own tiny app: the reference 'empty' picture."""
+    import uvicorn
+    from fastapi import FastAPI
+
+    from server.scene import SceneHub
+
+    token = secrets.token_urlsafe(12)
+    ready = threading.Event()
+    holder: dict[str, Any] = {}
+
+    async def run() -> None:
+        hub = SceneHub()
+        app = FastAPI()
+        hub.mount(app, check_token=lambda t: t == token)
+        await hub.start(lambda: [])
+        server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=0,
+                                               log_level="warning", lifespan="off"))
+        holder["server"] = server
+        task = asyncio.create_task(server.serve())
+        for _ in range(1000):
+            if server.started:
+                break
+            await asyncio.sleep(0.02)
+        holder["port"] = server.servers[0].sockets[0].getsockname()[1]
+        ready.set()
+        await task
+        await hub.stop()
+
+    thread = threading.Thread(target=lambda: asyncio.run(run()), daemon=True)
+    thread.start()
+    if not ready.wait(20.0):
+        raise RuntimeError("empty scene server did not start")
+    try:
+        yield f"http://127.0.0.1:{holder['port']}", token
+    finally:
+        holder["server"].should_exit = True
+        thread.join(10.0)
