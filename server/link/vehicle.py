@@ -91,6 +91,8 @@ ONE_SHOT_MESSAGES = (mavlink.MAVLINK_MSG_ID_HOME_POSITION, mavlink.MAVLINK_MSG_I
 
 # PX4's RTL announces its phases in STATUSTEXT ("RTL: climb to ...", "RTL: land at ...")
 _RTL_PHASES = (
+    ("landed", "LANDED"),
+    ("move to land", "MOVE_TO_LAND"),
     ("climb", "CLIMBING"),
     ("start return", "RETURNING"),
     ("return at", "RETURNING"),
@@ -605,8 +607,9 @@ class Vehicle:
                 msg_id, await self.command_long(MAV_CMD_REQUEST_MESSAGE, msg_id)
             )
 
-    def _note_telemetry_answer(self, msg_id: int, result: CommandResult) -> None:
-        name = mavlink.mavlink_map[msg_id].msgname if msg_id in mavlink.mavlink_map else str(msg_id)
+    def _note_telemetry_answer(self, msg_id: int, result: CommandResult, prefix: str = "") -> None:
+        msg_class = mavlink.mavlink_map.get(msg_id)
+        name = prefix + (msg_class.msgname if msg_class is not None else str(msg_id))
         if result.ok:
             self._telemetry_refused.pop(name, None)
             return

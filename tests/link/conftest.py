@@ -174,3 +174,42 @@ async def open_scripted(**vehicle_kwargs: Any) -> AsyncIterator[ScriptedSession]
         beat.cancel()
         await link.close()
         peer.endpoint.close()
+
+
+class SimSession:
+    def __init__(self, sim: Any, link: Link, vehicle: Vehicle) -> None:
+        self.sim = sim
+        self.link = link
+        self.vehicle = vehicle
+
+    @property
+    def truth_ned_m(self) -> tuple[float, float, float]:
+        """Where the simulated vehicle really is (test introspection only)."""
+        x, y, z = self.sim.instances[0].vehicle.truth.position_ned_m
+        return float(x), float(y), float(z)
+
+
+@contextlib.asynccontextmanager
+async def open_sim(
+    airframe: str = "quad", speed: float = 5.0, ready_timeout_s: float = 10.0
+) -> AsyncIterator[SimSession]:
+    """The simulated vehicle on ephemeral ports, a Link to its API port, the Vehicle on it,
+    once it has a position and a home (PX4 is ready to take off then)."""
+    from sim.runner import SimCluster
+
+    async with SimCluster(airframe=airframe, count=1, speed=speed) as sim:
+        url = f"udpout:127.0.0.1:{sim.instances[0].api_local_port}"
+        link = await Link.open(url, log_dir=None)
+        try:
+            await wait_for(lambda: 1 in link.vehicles, ready_timeout_s, "discovery")
+            vehicle = link.vehicles[1]
+            assert isinstance(vehicle, Vehicle)
+            await wait_for(lambda: _ready(vehicle), ready_timeout_s, "home and position")
+            yield SimSession(sim, link, vehicle)
+        finally:
+            await link.close()
+
+
+def _ready(vehicle: Vehicle) -> bool:
+    state = vehicle.snapshot()
+    return state.home is not None and state.position_ned is not None
