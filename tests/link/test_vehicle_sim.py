@@ -39,7 +39,8 @@ async def test_vehicle_is_discovered_with_type_home_and_both_modes() -> None:
         state = session.vehicle.snapshot()
 
     assert (state.mav_type, state.autopilot) == ("QUADROTOR", "PX4")
-    assert state.connected and not state.armed
+    assert state.connected
+    assert not state.armed
     assert state.mode == state.user_mode
     assert state.home is not None
     assert state.home.lat_deg == pytest.approx(47.397742, abs=1e-4)
@@ -160,4 +161,5 @@ async def test_arming_refusal_in_offboard_without_signal_carries_the_reason() ->
         result = await vehicle.arm()
 
         assert result.outcome is CommandOutcome.TEMPORARILY_REJECTED
-        assert result.reason is not None and "denied" in result.reason.lower()
+        assert result.reason is not None
+        assert "denied" in result.reason.lower()
