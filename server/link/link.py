@@ -216,12 +216,16 @@ class Link:
 
     def _frame_received(self, msg: mavlink.MAVLink_message) -> None:
         self._frames_in += 1
+        if isinstance(msg, mavlink.MAVLink_unknown):
+            # Not in our dialect: counted and recorded, but nobody can read it.
+            self._gaps.observe(*_header_ids(msg.get_msgbuf()))
+            if self._tlog is not None:
+                self._tlog.record(msg.get_msgbuf())
+            return
         src_system = msg.get_srcSystem()
         self._gaps.observe(src_system, msg.get_srcComponent(), msg.get_seq())
         if self._tlog is not None:
             self._tlog.record(msg.get_msgbuf())
-        if isinstance(msg, mavlink.MAVLink_unknown):
-            return
         if (msg.get_msgId() == mavlink.MAVLINK_MSG_ID_HEARTBEAT
                 and msg.get_srcComponent() == MAV_COMP_ID_AUTOPILOT1):
             self._vehicle_heartbeat(msg)
@@ -321,6 +325,16 @@ class _LinkReceiver:
 
     def connection_changed(self, connected: bool) -> None:
         self._link._connection_changed(connected)
+
+
+def _header_ids(frame: bytes | bytearray) -> tuple[int, int, int]:
+    """(system, component, sequence) from a raw frame's header, MAVLink 1 or 2.
+
+    pymavlink leaves these unset on messages of ids it does not know.
+    """
+    if frame[0] == mavlink.PROTOCOL_MARKER_V2:
+        return frame[5], frame[6], frame[4]
+    return frame[3], frame[4], frame[2]
 
 
 def _put_drop_oldest(queue: asyncio.Queue[Any], item: Any) -> None:

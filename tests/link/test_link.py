@@ -11,6 +11,7 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import development as mavlink
 
 from server.link import Link
+from server.link.tlog import iter_tlog
 
 
 async def _until(condition: Callable[[], bool], timeout_s: float = 5.0) -> None:
@@ -258,3 +259,25 @@ async def test_several_links_run_side_by_side() -> None:
         peer.send(_heartbeat(), one, sysid=1)
         peer.send(_heartbeat(), two, sysid=2)
         await _until(lambda: list(one.vehicles) == [1] and list(two.vehicles) == [2])
+
+
+async def test_frames_of_unknown_message_ids_are_counted_and_recorded_not_dispatched(
+    tmp_path: Path,
+) -> None:
+    async with _udpin_link(log_dir=tmp_path) as link, _peer() as peer:
+        peer.send(_heartbeat(), link, seq=0)
+        await _until(lambda: 1 in link.vehicles)
+        mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+        mav.seq = 3  # 1 and 2 lost
+        unknown = bytearray(_statustext("x").pack(mav))
+        unknown[7:10] = (0xFFFF00).to_bytes(3, "little")  # a message id no dialect has
+        assert peer.endpoint is not None
+        assert link.local_address is not None
+        peer.endpoint.sendto(bytes(unknown), ("127.0.0.1", link.local_address[1]))
+        await _until(lambda: link.stats().frames_in == 2)
+        assert link.stats().lost_frames == 2
+        assert link.stats().bad_frames == 0
+        assert _stand_in(link, 1).types() == ["HEARTBEAT"]
+        path = link.tlog_path
+    assert path is not None
+    assert any(frame == bytes(unknown) for _, frame in iter_tlog(path))
