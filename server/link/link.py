@@ -177,6 +177,10 @@ class Link:
         self._vehicle_queues.append(queue)
         return queue
 
+    def unsubscribe_vehicles(self, queue: asyncio.Queue[Vehicle]) -> None:
+        with contextlib.suppress(ValueError):
+            self._vehicle_queues.remove(queue)
+
     def stats(self) -> LinkStats:
         last = self._last_vehicle_heartbeat_s
         age = None if last is None else max(0.0, self.now() - last)

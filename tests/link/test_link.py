@@ -128,6 +128,10 @@ async def test_vehicles_are_discovered_only_from_autopilot_heartbeats() -> None:
         assert (first.compid, first.link) == (1, link)
         late = link.subscribe_vehicles()
         assert sorted([late.get_nowait().sysid, late.get_nowait().sysid]) == [2, 3]
+        link.unsubscribe_vehicles(late)
+        peer.send(_heartbeat(), link, sysid=4)
+        assert (await asyncio.wait_for(announcements.get(), 5.0)).sysid == 4
+        assert late.empty()
 
 
 async def test_messages_go_to_the_vehicle_of_their_source_system_only() -> None:
