@@ -89,7 +89,8 @@ def main() -> int:
         finally:
             context.close()
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    RESULTS.write_text(json.dumps({"viewport": [WIDTH, HEIGHT], "screenshots": shots}, indent=2) + "\n")
+    summary = {"viewport": [WIDTH, HEIGHT], "screenshots": shots}
+    RESULTS.write_text(json.dumps(summary, indent=2) + "\n")
     return 0
 
 
