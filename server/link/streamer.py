@@ -38,6 +38,7 @@ class SetpointStreamer:
         self._loop: asyncio.AbstractEventLoop | None = None
         self._t0 = 0.0
         self._k = 0
+        self._started_s: float | None = None
         # statistics; the interval window is preallocated and overwritten in a ring
         self._intervals = array("d", bytes(8 * window))
         self._ring_next = 0
@@ -71,6 +72,8 @@ class SetpointStreamer:
         """Send ``msg`` now and then every period until stop() or the next stream()."""
         self._msg = msg
         self._loop = asyncio.get_running_loop()
+        if self._started_s is None:
+            self._started_s = self._loop.time()
         self._emit(self._loop.time())
         self._rephase()
 
@@ -79,6 +82,13 @@ class SetpointStreamer:
             self._handle.cancel()
             self._handle = None
         self._msg = None
+        self._started_s = None
+
+    def streaming_for_s(self) -> float:
+        """How long the current stream has run without a stop (0 when stopped)."""
+        if self._started_s is None or self._loop is None:
+            return 0.0
+        return self._loop.time() - self._started_s
 
     def _rephase(self) -> None:
         assert self._loop is not None

@@ -108,6 +108,14 @@ class ScriptedPeer(asyncio.DatagramProtocol):
     def messages(self, msg_type: str) -> list[mavlink.MAVLink_message]:
         return [m for _, m in self.received if m.get_type() == msg_type]
 
+    def commands_at(self, command: int) -> list[tuple[float, mavlink.MAVLink_message]]:
+        """Commands with this id as (arrival time, message)."""
+        return [
+            (t, m)
+            for t, m in self.received
+            if m.get_type() in ("COMMAND_LONG", "COMMAND_INT") and m.command == command
+        ]
+
     def commands(self, command: int) -> list[mavlink.MAVLink_message]:
         return [
             m

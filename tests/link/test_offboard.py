@@ -4,6 +4,7 @@ after a failsafe blip, stopping when the user picks another mode, setpoint refus
 from __future__ import annotations
 
 import asyncio
+import time
 
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
@@ -142,3 +143,23 @@ async def test_hold_position_setpoint_works_even_outside_the_envelope(
 
     assert sent.setpoint == PositionNed(0.0, 0.0, -80.0, 0.0)
     assert scripted.vehicle.streamer_active
+
+
+async def test_every_offboard_start_after_a_stop_streams_first_again(
+    scripted: ScriptedSession,
+) -> None:
+    await _at(scripted, 0.0, 0.0, -5.0, 0.0)
+    scripted.peer.accept_commands()
+    scripted.vehicle.offboard_prestream_s = 0.3
+    await scripted.vehicle.start_offboard()
+    await scripted.vehicle.stop_offboard()
+    await asyncio.sleep(0.05)  # let the last frames of the first stream land
+    stopped_at = time.monotonic()
+
+    assert (await scripted.vehicle.start_offboard()).ok
+
+    restart = next(t for t, _ in _setpoints(scripted) if t > stopped_at)
+    (second_switch,) = [
+        t for t, m in scripted.peer.commands_at(176) if m.param2 == 6 and t > stopped_at
+    ]
+    assert second_switch - restart >= 0.28
