@@ -14,6 +14,7 @@ from sim.quat import Vec3
 
 AIR_DENSITY_KG_M3 = 1.225
 _STALL_BLEND_RATE = 50.0
+SIDESLIP_STALL_RAD = math.radians(15.0)
 
 
 @dataclass(frozen=True)
@@ -79,7 +80,9 @@ def forces_and_moments(
     if airspeed < 0.1:
         return (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)
     alpha = math.atan2(w, u)
+    # fin and dihedral effects stall too: beyond a moderate sideslip they stop growing
     beta = math.asin(max(-1.0, min(1.0, v / airspeed)))
+    beta = max(-SIDESLIP_STALL_RAD, min(SIDESLIP_STALL_RAD, beta))
     qbar_s = 0.5 * AIR_DENSITY_KG_M3 * airspeed * airspeed * wing.area_m2
     cl = lift_coefficient(wing, alpha)
     sa = math.sin(alpha)

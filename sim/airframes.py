@@ -13,6 +13,7 @@ from sim.fixed_wing import FixedWingModel
 from sim.mc_control import ParamReader
 from sim.multicopter import MulticopterModel
 from sim.topics import ControlSetpoint, VehicleStateTruth, VtolState
+from sim.vtol import VtolModel
 
 AIRFRAME_NAMES = ("quad", "hexa", "octo", "plane", "vtol", "rover")
 
@@ -155,6 +156,30 @@ _PLANE_PARAMS: dict[str, float | int] = {
     "SIH_F_T_MAX": 6.0,
 }
 
+# The standard VTOL: 1.2 kg on four SIH rotors, a 1.8 m wing and an 8 N pusher
+_VTOL_PARAMS: dict[str, float | int] = {
+    "SIH_MASS": 1.2,
+    "SIH_IXX": 0.06,
+    "SIH_IYY": 0.05,
+    "SIH_IZZ": 0.1,
+    "SIH_KDV": 0.1,
+    "SIH_KDW": 0.02,
+    "SIH_F_T_MAX": 8.0,
+    # a winged airframe hovering is no racer: PX4's VTOL airframes lower the MC speed
+    "MPC_XY_VEL_MAX": 8.0,
+    "FW_AIRSPD_MIN": 7.0,
+    "FW_AIRSPD_TRIM": 10.0,
+    "FW_AIRSPD_MAX": 15.0,
+    "FW_THR_TRIM": 0.3,
+    "VT_ARSP_TRANS": 10.0,
+    "VT_TRANS_MIN_TM": 2.0,
+    "VT_F_TR_OL_TM": 6.0,
+    "VT_TRANS_TIMEOUT": 15.0,
+    "VT_PSHER_SLEW": 0.33,
+    "VT_F_TRANS_THR": 1.0,
+    "VT_B_TRANS_DUR": 10.0,
+}
+
 _MULTICOPTERS: dict[str, tuple[int, str, float]] = {
     # name: (MAV_TYPE, mixer geometry, mass in kg so that hover thrust stays ≈ 0.5)
     "quad": (MAV_TYPE_QUADROTOR, "4x", 1.0),
@@ -181,6 +206,10 @@ def param_defaults(airframe: str) -> dict[str, float | int]:
     elif airframe == "plane":
         params.update(_FW_PARAMS)
         params.update(_PLANE_PARAMS)
+    elif airframe == "vtol":
+        params.update(_MC_PARAMS)
+        params.update(_FW_PARAMS)
+        params.update(_VTOL_PARAMS)
     return params
 
 
@@ -190,6 +219,8 @@ def make_airframe(name: str, params: ParamReader) -> AirframeModel:
         return MulticopterModel(name, mav_type, geometry, params)
     if name == "plane":
         return FixedWingModel(params)
+    if name == "vtol":
+        return VtolModel(params)
     raise ValueError(f"unknown airframe {name!r}; known: {', '.join(AIRFRAME_NAMES)}")
 
 

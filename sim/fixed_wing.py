@@ -18,14 +18,16 @@ ROLLING_FRICTION = 0.03
 
 class Airframe:
     """What the plane and the VTOL share: wing, pusher (SIH_F_T_MAX, lagged by SIH_T_TAU),
-    a rigid body, airspeed, and wheels that roll along the heading on the ground."""
+    a rigid body and airspeed. With wheels it rolls along its heading on the ground (plane);
+    without, it sits still on skids (VTOL)."""
 
-    def __init__(self, params: ParamReader, wing: WingGeometry) -> None:
+    def __init__(self, params: ParamReader, wing: WingGeometry, wheels: bool) -> None:
         self.params = params
         self.wing = wing
+        self.wheels = wheels
         self.truth = VehicleStateTruth()
         self.body: RigidBody = make_rigid_body(self.truth, params)
-        self.body.ground_friction = False
+        self.body.ground_friction = not wheels
         self.pusher = 0.0
         self._since_refresh_s = 0.0
         self.refresh_params()
@@ -62,10 +64,10 @@ class Airframe:
     def integrate(self, dt_s: float, force_body_n: Vec3, moment_body_n_m: Vec3) -> None:
         t = self.truth
         force = rotate_body_to_ned(t.q_wxyz, force_body_n)
-        if t.on_ground:
+        if self.wheels and t.on_ground:
             force = self._with_wheel_friction(force)
         self.body.step(dt_s, force, moment_body_n_m)
-        if t.on_ground:
+        if self.wheels and t.on_ground:
             self._roll_along_heading()
 
     def _with_wheel_friction(self, force_ned: Vec3) -> Vec3:
@@ -107,7 +109,7 @@ class FixedWingModel:
 
     def __init__(self, params: ParamReader) -> None:
         self.params = params
-        self.frame = Airframe(params, PLANE_WING)
+        self.frame = Airframe(params, PLANE_WING, wheels=True)
         self.truth = self.frame.truth
         self.control = FixedWingControl(
             params, self.frame.body.mass_kg, self.frame.pusher_max_n

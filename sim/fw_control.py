@@ -105,7 +105,7 @@ class FixedWingControl:
     ) -> SurfacesThrottle:
         roll, pitch, yaw = euler_from_quat(truth.q_wxyz)
         if isinstance(setpoint, RatesSetpoint):
-            surfaces = self._rate_control(dt_s, truth, setpoint.rates_rad_s)
+            surfaces = self.rate_control(dt_s, truth, setpoint.rates_rad_s)
             surfaces.throttle = _clamp(setpoint.thrust_body[0], 0.0, 1.0)
             return surfaces
         if isinstance(setpoint, AttitudeSetpoint):
@@ -114,7 +114,7 @@ class FixedWingControl:
         else:
             roll_sp, pitch_sp, throttle = self._guidance(dt_s, truth, setpoint, yaw)
         rates_sp = self.attitude_rates(truth, roll, pitch, roll_sp, pitch_sp)
-        surfaces = self._rate_control(dt_s, truth, rates_sp)
+        surfaces = self.rate_control(dt_s, truth, rates_sp)
         surfaces.throttle = _clamp(throttle, 0.0, 1.0)
         return surfaces
 
@@ -225,7 +225,7 @@ class FixedWingControl:
         lim = self.rate_max_rad_s
         return (_clamp(p, -lim[0], lim[0]), _clamp(q, -lim[1], lim[1]), _clamp(r, -lim[2], lim[2]))
 
-    def _rate_control(
+    def rate_control(
         self, dt_s: float, truth: VehicleStateTruth, rates_sp: tuple[float, float, float]
     ) -> SurfacesThrottle:
         # control surfaces bite with dynamic pressure: scale outputs by trim/actual airspeed
