@@ -38,7 +38,7 @@ async def test_ticks_fall_on_absolute_deadlines_at_the_configured_rate() -> None
     t0 = rec.sent[0][0]
     # each send is near t0 + k/50: lateness does not accumulate over the run
     lateness = [t - (t0 + k * 0.02) for k, (t, _) in enumerate(rec.sent[:26])]
-    assert max(abs(x) for x in lateness) < 0.015
+    assert max(abs(x) for x in lateness) < 0.04
     stats = streamer.stats()
     assert stats.sent == len(rec.sent)
     assert stats.interval_p50_ms == pytest.approx(20, abs=5)
@@ -68,14 +68,14 @@ async def test_a_stalled_loop_skips_missed_ticks_and_counts_a_gap() -> None:
     streamer.stream(_msg(1))
     await asyncio.sleep(0.1)
     time.sleep(0.2)  # noqa: ASYNC251 - blocks the event loop for ten periods on purpose
-    before = len(rec.sent)
-    await asyncio.sleep(0.005)
-    burst = len(rec.sent) - before
+    stall_end = asyncio.get_running_loop().time()
     await asyncio.sleep(0.1)
     streamer.stop()
-
+    end = asyncio.get_running_loop().time()
+    after = [t for t, _ in rec.sent if t >= stall_end]
     stats = streamer.stats()
-    assert burst <= 1  # no catch-up burst of missed ticks
+    # the ten missed ticks are skipped, not sent in a catch-up burst
+    assert len(after) <= (end - stall_end) * 50 + 2
     assert stats.gaps >= 1
     assert stats.max_gap_ms is not None
     assert stats.max_gap_ms >= 190
