@@ -12,6 +12,7 @@ from typing import Protocol
 from sim.fixed_wing import FixedWingModel
 from sim.mc_control import ParamReader
 from sim.multicopter import MulticopterModel
+from sim.rover import RoverModel
 from sim.topics import ControlSetpoint, VehicleStateTruth, VtolState
 from sim.vtol import VtolModel
 
@@ -180,6 +181,16 @@ _VTOL_PARAMS: dict[str, float | int] = {
     "VT_B_TRANS_DUR": 10.0,
 }
 
+# Differential rover (PX4 rover_pos_control / rover_differential names)
+_ROVER_PARAMS: dict[str, float | int] = {
+    "GND_SPEED_MAX": 10.0,
+    "GND_SPEED_TRIM": 3.0,
+    "RO_ACCEL_LIM": 2.0,
+    "RO_DECEL_LIM": 3.0,
+    "RO_YAW_RATE_LIM": 90.0,
+    "RD_WHEEL_TRACK": 0.3,
+}
+
 _MULTICOPTERS: dict[str, tuple[int, str, float]] = {
     # name: (MAV_TYPE, mixer geometry, mass in kg so that hover thrust stays ≈ 0.5)
     "quad": (MAV_TYPE_QUADROTOR, "4x", 1.0),
@@ -188,28 +199,38 @@ _MULTICOPTERS: dict[str, tuple[int, str, float]] = {
 }
 
 
+def _multicopter_params(mass_kg: float) -> dict[str, float | int]:
+    """The SIH quad scaled to a heavier frame: same rotors, inertia growing with mass."""
+    scale = mass_kg / float(_SIH_PARAMS["SIH_MASS"])
+    return {
+        "SIH_MASS": mass_kg,
+        **{name: float(_SIH_PARAMS[name]) * scale for name in ("SIH_IXX", "SIH_IYY", "SIH_IZZ")},
+    }
+
+
+# Later tables override earlier ones
+_PARAM_TABLES: dict[str, tuple[dict[str, float | int], ...]] = {
+    **{
+        name: (_SIH_PARAMS, _MC_PARAMS, _multicopter_params(mass_kg))
+        for name, (_, _, mass_kg) in _MULTICOPTERS.items()
+    },
+    "plane": (_SIH_PARAMS, _FW_PARAMS, _PLANE_PARAMS),
+    "vtol": (_SIH_PARAMS, _MC_PARAMS, _FW_PARAMS, _VTOL_PARAMS),
+    "rover": (_ROVER_PARAMS,),
+}
+
+
 def param_defaults(airframe: str) -> dict[str, float | int]:
-    """Every parameter the physics and controllers of `airframe` read, with PX4 defaults.
+    """Every parameter the physics and controllers of `airframe` read, with PX4 defaults
+    (airframe-specific values where PX4's SIH airframes have no equivalent).
 
     A Python int means an INT32 parameter, a float REAL32.
     """
-    if airframe not in AIRFRAME_NAMES:
+    if airframe not in _PARAM_TABLES:
         raise ValueError(f"unknown airframe {airframe!r}; known: {', '.join(AIRFRAME_NAMES)}")
-    params: dict[str, float | int] = dict(_SIH_PARAMS)
-    if airframe in _MULTICOPTERS:
-        params.update(_MC_PARAMS)
-        _, _, mass_kg = _MULTICOPTERS[airframe]
-        scale = mass_kg / float(_SIH_PARAMS["SIH_MASS"])
-        params["SIH_MASS"] = mass_kg
-        for name in ("SIH_IXX", "SIH_IYY", "SIH_IZZ"):
-            params[name] = float(_SIH_PARAMS[name]) * scale
-    elif airframe == "plane":
-        params.update(_FW_PARAMS)
-        params.update(_PLANE_PARAMS)
-    elif airframe == "vtol":
-        params.update(_MC_PARAMS)
-        params.update(_FW_PARAMS)
-        params.update(_VTOL_PARAMS)
+    params: dict[str, float | int] = {}
+    for table in _PARAM_TABLES[airframe]:
+        params.update(table)
     return params
 
 
@@ -221,6 +242,8 @@ def make_airframe(name: str, params: ParamReader) -> AirframeModel:
         return FixedWingModel(params)
     if name == "vtol":
         return VtolModel(params)
+    if name == "rover":
+        return RoverModel(params)
     raise ValueError(f"unknown airframe {name!r}; known: {', '.join(AIRFRAME_NAMES)}")
 
 
