@@ -84,9 +84,10 @@ class StateText:
         cached = self._cache.get(state.sysid)
         if cached is not None and cached[0] == state.updated_s:
             return cached[1]
-        text = json.dumps(
-            {"type": "state", "vehicle": state.sysid, **state_dict(state, self._context.leases)}
-        )
+        fields = state_dict(state, self._context.leases)
+        # `type` names the message here, so the vehicle's type travels as vehicle_type.
+        fields["vehicle_type"] = fields.pop("type")
+        text = json.dumps({"type": "state", "vehicle": state.sysid, **fields})
         self._cache[state.sysid] = (state.updated_s, text)
         return text
 

@@ -136,7 +136,9 @@ async def _has_vehicle(client: httpx.AsyncClient) -> bool:
 
 
 @contextlib.asynccontextmanager
-async def sim_cluster(airframe: str = "quad", speed: float = SIM_SPEED) -> AsyncIterator[SimCluster]:
+async def sim_cluster(
+    airframe: str = "quad", speed: float = SIM_SPEED
+) -> AsyncIterator[SimCluster]:
     async with SimCluster(airframe=airframe, count=1, speed=speed) as sim:
         await sim.wait_ready(timeout_s=30.0)
         yield sim

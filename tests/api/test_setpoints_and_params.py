@@ -18,7 +18,11 @@ def velocity(north_m_s: float = 0.0, down_m_s: float = 0.0) -> dict[str, Any]:
     ("setpoint", "field", "limit"),
     [
         ({"type": "position_ned", "north_m": 0, "east_m": 0, "down_m": -150}, "max_alt_rel_m", 120),
-        ({"type": "position_ned", "north_m": 600, "east_m": 0, "down_m": -5}, "max_distance_m", 500),
+        (
+            {"type": "position_ned", "north_m": 600, "east_m": 0, "down_m": -5},
+            "max_distance_m",
+            500,
+        ),
         (velocity(north_m_s=13.0), "max_speed_xy_m_s", 12),
         (velocity(down_m_s=6.0), "max_speed_z_m_s", 5),
         ({"type": "offset_ned", "north_m": 0, "east_m": 0, "down_m": -130}, "max_alt_rel_m", 120),
@@ -140,10 +144,10 @@ async def test_lease_is_renewed_by_control_calls_and_released_by_delete(quad_api
 async def test_unrenewed_lease_lapses_after_ttl() -> None:
     async with sim_cluster("quad") as sim, api_for(sim, lease_ttl_s=0.4) as api:
         headers = await api.take_control()
-        await eventually(
-            lambda: _lease_gone(api), 2.0, "the lease to lapse", poll_s=0.05
-        )
-        assert (await api.client.post("/api/v1/vehicles/1/hold", headers=headers)).status_code == 423
+        await eventually(lambda: _lease_gone(api), 2.0, "the lease to lapse", poll_s=0.05)
+        assert (
+            await api.client.post("/api/v1/vehicles/1/hold", headers=headers)
+        ).status_code == 423
 
 
 async def _lease_gone(api: Api) -> bool:

@@ -1,0 +1,273 @@
+"""WebSockets over a real uvicorn on an ephemeral port: telemetry, the pilot session, and the
+deadman when the pilot goes away."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import math
+import time
+from collections.abc import AsyncIterator
+from dataclasses import dataclass
+from typing import Any
+
+import pytest
+from websockets.asyncio.client import ClientConnection, connect
+from websockets.exceptions import ConnectionClosed
+
+from tests.api.conftest import (
+    OBSERVER,
+    PILOT,
+    Api,
+    api_for,
+    sim_cluster,
+    uvicorn_serving,
+)
+
+TTL_S = 1.0
+
+
+@dataclass
+class Served:
+    api: Api
+    host: str
+
+    def url(self, path: str, token: str = PILOT, **query: object) -> str:
+        params = "&".join(f"{key}={value}" for key, value in {"token": token, **query}.items())
+        return f"ws://{self.host}/api/v1/ws/{path}?{params}"
+
+
+@contextlib.asynccontextmanager
+async def served(airframe: str = "quad", **overrides: Any) -> AsyncIterator[Served]:
+    async with sim_cluster(airframe) as sim, api_for(sim, lease_ttl_s=TTL_S, **overrides) as api:
+        await api.wait_ready()
+        async with uvicorn_serving(api.app) as host:
+            yield Served(api, host)
+
+
+@pytest.fixture
+async def quad() -> AsyncIterator[Served]:
+    async with served() as s:
+        yield s
+
+
+async def receive(ws: ClientConnection, timeout_s: float = 5.0) -> dict[str, Any]:
+    message: dict[str, Any] = json.loads(await asyncio.wait_for(ws.recv(), timeout_s))
+    return message
+
+
+async def receive_until(ws: ClientConnection, want: dict[str, Any], timeout_s: float = 10.0
+                        ) -> dict[str, Any]:  # fmt: skip
+    """The first message whose keys include all of `want`'s items."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        message = await receive(ws, max(0.01, deadline - time.monotonic()))
+        if all(message.get(key) == value for key, value in want.items()):
+            return message
+
+
+async def close_code(ws: ClientConnection) -> int | None:
+    with contextlib.suppress(ConnectionClosed, TimeoutError):
+        while True:
+            await asyncio.wait_for(ws.recv(), 5.0)
+    return ws.close_code
+
+
+async def test_telemetry_streams_states_at_the_asked_rate(quad: Served) -> None:
+    async with connect(quad.url("telemetry", token=OBSERVER, vehicle=1, rate_hz=5)) as ws:
+        first = await receive_until(ws, {"type": "state"})
+        assert first["vehicle"] == 1
+        assert first["id"] == 1
+        assert {
+            "mode",
+            "armed",
+            "landed_state",
+            "position_ned",
+            "global",
+            "stream",
+            "lease",
+        } <= set(first)
+        start = time.monotonic()
+        count = 0
+        while time.monotonic() - start < 2.0:
+            if (await receive(ws))["type"] == "state":
+                count += 1
+    # 5 Hz for 2 s: about 10, never the sim's own telemetry rate
+    assert 6 <= count <= 12
+
+
+async def test_telemetry_carries_events_for_commands_and_lease(quad: Served) -> None:
+    async with connect(quad.url("telemetry", vehicle=1, rate_hz=1)) as ws:
+        await receive_until(ws, {"type": "state"})
+        await quad.api.take_control()
+        lease = await receive_until(ws, {"type": "event", "kind": "lease"})
+        assert lease["data"]["action"] == "acquired"
+        assert (await quad.api.control("mode", {"mode": "POSCTL"})).status_code == 200
+        mode = await receive_until(ws, {"type": "event", "kind": "mode"})
+        assert mode["vehicle"] == 1
+
+
+async def test_telemetry_refuses_bad_token_foreign_origin_and_unknown_vehicle(
+    quad: Served,
+) -> None:
+    async with connect(quad.url("telemetry", token="wrong-token-123")) as ws:
+        assert await close_code(ws) == 4401
+    async with connect(quad.url("telemetry"), origin="http://evil.example") as ws:  # type: ignore[arg-type]
+        assert await close_code(ws) == 4403
+    async with connect(quad.url("telemetry", vehicle=9)) as ws:
+        assert await close_code(ws) == 4404
+    async with connect(quad.url("telemetry"), origin=f"http://{quad.host}") as ws:  # type: ignore[arg-type]
+        assert (await receive_until(ws, {"type": "state"}))["vehicle"] == 1
+
+
+async def test_control_session_gets_lease_and_answers_every_message(quad: Served) -> None:
+    async with connect(quad.url("control", vehicle=1, client_name="ws-pilot")) as ws:
+        lease = await receive(ws)
+        assert lease["type"] == "lease"
+        assert lease["ttl_s"] == TTL_S
+        await ws.send(json.dumps({"type": "heartbeat", "id": 1}))
+        assert (await receive(ws))["id"] == 1
+        await ws.send(json.dumps({"type": "command", "id": 2, "name": "arm", "args": {}}))
+        armed = await receive_until(ws, {"id": 2})
+        assert armed["status"] == 200
+        assert armed["body"]["result"] == "ACCEPTED"
+        await ws.send(json.dumps({"type": "setpoint", "id": 3, "setpoint": {"type": "warp"}}))
+        refused = await receive_until(ws, {"id": 3})
+        assert refused["status"] == 422
+        assert refused["ok"] is False
+        await ws.send(json.dumps({"type": "command", "id": 4, "name": "fly_away"}))
+        assert (await receive_until(ws, {"id": 4}))["status"] == 422
+        await ws.send("not json")
+        assert (await receive(ws))["status"] == 422
+        state = await quad.api.state()
+        assert state["lease"]["holder"] == "ws-pilot"
+        # the WS lease id works for REST control calls too
+        rest = await quad.api.client.post(
+            "/api/v1/vehicles/1/hold", headers={"X-Lease-Id": lease["lease_id"]}
+        )
+        assert rest.status_code != 423
+
+
+async def test_control_socket_refuses_observer_and_second_pilot(quad: Served) -> None:
+    async with connect(quad.url("control", token=OBSERVER, vehicle=1)) as ws:
+        assert await close_code(ws) == 4403
+    async with connect(quad.url("control", vehicle=1, client_name="first")) as first:
+        await receive(first)
+        async with connect(quad.url("control", vehicle=1)) as second:
+            refusal = await receive(second)
+            assert refusal["holder"] == "first"
+            assert await close_code(second) == 4409
+        async with connect(quad.url("control", vehicle=1, takeover="true")) as third:
+            assert (await receive(third))["type"] == "lease"
+            lost = await receive_until(first, {"type": "lease"})
+            assert lost["state"] == "taken_over"
+            assert await close_code(first) == 4408
+
+
+async def test_silent_pilot_loses_the_lease_after_ttl(quad: Served) -> None:
+    async with connect(quad.url("control", vehicle=1)) as ws:
+        await receive(ws)
+        started = time.monotonic()
+        lost = await receive_until(ws, {"type": "lease"}, timeout_s=TTL_S + 2.0)
+        assert lost["state"] == "expired"
+        assert time.monotonic() - started >= TTL_S * 0.9
+        assert await close_code(ws) == 4408
+
+
+async def fly_offboard_at_2_m_s(served: Served) -> ClientConnection:
+    """A WS pilot takes off, starts offboard flying north at 2 m/s, and keeps heartbeating."""
+    ws = await connect(served.url("control", vehicle=1))
+    await receive(ws)
+    for request_id, name, args in (
+        (1, "arm", {}),
+        (2, "takeoff", {"altitude_m": 4.0}),
+    ):
+        await ws.send(json.dumps({"type": "command", "id": request_id, "name": name, "args": args}))
+        assert (await receive_until(ws, {"id": request_id}))["status"] == 200
+    deadline = time.monotonic() + 20.0
+    while (await served.api.state())["position_ned"]["down_m"] > -3.0:
+        assert time.monotonic() < deadline, "takeoff"
+        await ws.send(json.dumps({"type": "heartbeat"}))
+        await asyncio.sleep(0.1)
+    start = {
+        "setpoint": {"type": "velocity_ned", "north_m_s": 2.0, "east_m_s": 0.0, "down_m_s": 0.0}
+    }
+    await ws.send(json.dumps({"type": "command", "id": 3, "name": "offboard_start", "args": start}))
+    assert (await receive_until(ws, {"id": 3}))["status"] == 200
+    while _speed(await served.api.state()) < 1.8:
+        assert time.monotonic() < deadline + 10.0, "reach 2 m/s"
+        await ws.send(json.dumps({"type": "heartbeat"}))
+        await asyncio.sleep(0.1)
+    return ws
+
+
+def _speed(state: dict[str, Any]) -> float:
+    velocity = state["velocity_ned"]
+    return math.hypot(velocity["north_m_s"], velocity["east_m_s"])
+
+
+async def test_deadman_holds_position_when_the_pilot_socket_closes(quad: Served) -> None:
+    api = quad.api
+    async with connect(quad.url("telemetry", vehicle=1, rate_hz=2)) as telemetry:
+        ws = await fly_offboard_at_2_m_s(quad)
+        await ws.close()
+        closed_at = time.monotonic()
+        # the sim runs SIM_SPEED times faster, so 0.5 s wall is a generous allowance
+        stopped = await api.wait_state(
+            lambda s: _speed(s) < 0.3, TTL_S + 0.5, "speed below 0.3 m/s"
+        )
+        assert time.monotonic() - closed_at <= TTL_S + 0.5
+        assert stopped["mode"] == "OFFBOARD"
+        assert stopped["stream"]["active"] is True
+        event = await receive_until(telemetry, {"type": "event", "kind": "deadman"})
+        assert event["data"]["action"] == "hold"
+        assert event["data"]["cause"] == "closed"
+        assert event["data"]["ok"] is True
+
+
+async def test_deadman_holds_when_rest_renewals_stop(quad: Served) -> None:
+    api = quad.api
+    headers = await api.take_control()
+
+    async def renew_forever() -> None:
+        while True:
+            await api.client.put("/api/v1/vehicles/1/control", headers=headers)
+            await asyncio.sleep(TTL_S / 4)
+
+    renewing = asyncio.create_task(renew_forever())
+    try:
+        assert (await api.control("arm")).status_code == 200
+        assert (await api.control("takeoff", {"altitude_m": 4.0})).status_code == 200
+        await api.wait_state(lambda s: s["position_ned"]["down_m"] < -3.0, 20.0, "climb")
+        north = {"type": "velocity_ned", "north_m_s": 2.0, "east_m_s": 0.0, "down_m_s": 0.0}
+        assert (await api.control("offboard/start", {"setpoint": north})).status_code == 200
+        await api.wait_state(lambda s: _speed(s) > 1.8, 10.0, "2 m/s")
+    finally:
+        renewing.cancel()
+    last_renewal = time.monotonic()
+    stopped = await api.wait_state(lambda s: _speed(s) < 0.3, TTL_S + 0.5, "hold")
+    assert time.monotonic() - last_renewal <= TTL_S + 0.5
+    assert stopped["mode"] == "OFFBOARD"
+    assert stopped["lease"]["holder"] is None
+
+
+@pytest.mark.parametrize(("policy", "mode"), [("land", "LAND"), ("rtl", "RTL")])
+async def test_deadman_applies_land_and_rtl_policies(policy: str, mode: str) -> None:
+    async with served(on_operator_loss=policy) as s:
+        ws = await fly_offboard_at_2_m_s(s)
+        await ws.close()
+        state = await s.api.wait_state(lambda st: st["mode"] == mode, TTL_S + 2.0, mode)
+        assert state["armed"] is True
+
+
+async def test_deadman_does_nothing_without_a_stream(quad: Served) -> None:
+    async with connect(quad.url("telemetry", vehicle=1, rate_hz=1)) as telemetry:
+        async with connect(quad.url("control", vehicle=1)) as ws:
+            await receive(ws)
+        lease_end = await receive_until(telemetry, {"type": "event", "kind": "lease"})
+        while lease_end["data"]["action"] == "acquired":
+            lease_end = await receive_until(telemetry, {"type": "event", "kind": "lease"})
+        assert lease_end["data"]["action"] == "closed"
+        with pytest.raises(TimeoutError):
+            await receive_until(telemetry, {"type": "event", "kind": "deadman"}, timeout_s=0.5)
