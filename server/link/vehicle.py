@@ -64,6 +64,8 @@ MAV_CMD_REQUEST_MESSAGE = 512
 MAV_CMD_DO_VTOL_TRANSITION = 3000
 MAV_DO_REPOSITION_FLAGS_CHANGE_MODE = 1
 MAV_FRAME_GLOBAL = 0
+MAV_VTOL_STATE_TRANSITION_TO_FW = 1
+MAV_VTOL_STATE_TRANSITION_TO_MC = 2
 MAV_VTOL_STATE_MC = 3
 MAV_VTOL_STATE_FW = 4
 MAVLINK_MSG_ID_SET_GPS_GLOBAL_ORIGIN = 48
@@ -399,13 +401,26 @@ class Vehicle:
         result = await self.command_long(MAV_CMD_DO_VTOL_TRANSITION, target, 1 if immediate else 0)
         if not result.ok or not wait:
             return result
-        reached = await self.wait_until(lambda: self._vtol_state == target, timeout_s)
+        opposite = MAV_VTOL_STATE_MC if to_fixed_wing else MAV_VTOL_STATE_FW
+        in_transition = False
+
+        def settled() -> bool:
+            nonlocal in_transition
+            in_transition = in_transition or self._vtol_state in (
+                MAV_VTOL_STATE_TRANSITION_TO_FW,
+                MAV_VTOL_STATE_TRANSITION_TO_MC,
+            )
+            # back where it started after a transition: PX4 aborted it (quadchute, timeout)
+            return self._vtol_state == target or (in_transition and self._vtol_state == opposite)
+
+        await self.wait_until(settled, timeout_s)
         elapsed_ms = (asyncio.get_running_loop().time() - started) * 1000.0
-        if reached:
+        if self._vtol_state == target:
             return replace(result, elapsed_ms=elapsed_ms)
-        return replace(result, outcome=CommandOutcome.NOT_CONFIRMED, elapsed_ms=elapsed_ms,
+        outcome = CommandOutcome.FAILED if in_transition else CommandOutcome.NOT_CONFIRMED
+        return replace(result, outcome=outcome, elapsed_ms=elapsed_ms,
                        reason=f"vtol_state is {VTOL_STATE_NAMES[self._vtol_state]}"
-                              f" after {timeout_s:g} s")  # fmt: skip
+                              f" after {elapsed_ms / 1000:.1f} s")  # fmt: skip
 
     async def set_gps_origin(
         self, lat_deg: float, lon_deg: float, alt_amsl_m: float

@@ -183,3 +183,22 @@ async def test_telemetry_is_requested_on_connection_and_refusals_are_noted() -> 
         assert set(intervals) == set(DEFAULT_TELEMETRY_RATES_HZ)
         assert intervals[mavlink.MAVLINK_MSG_ID_CURRENT_MODE] <= 200_000  # >= 5 Hz
         assert session.vehicle.snapshot().telemetry_refused == ("SERVO_OUTPUT_RAW",)
+
+
+async def test_vtol_transition_that_falls_back_to_multicopter_fails(
+    scripted: ScriptedSession,
+) -> None:
+    peer = scripted.peer
+    peer.send(mavlink.MAVLink_extended_sys_state_message(3, 2))  # MC
+    await wait_for(lambda: scripted.vehicle.snapshot().vtol_state == "MC")
+
+    def quadchute(msg: mavlink.MAVLink_message) -> None:
+        peer.ack(msg.command, 0)
+        peer.send(mavlink.MAVLink_extended_sys_state_message(1, 2))  # TRANSITION_TO_FW
+        peer.send_later(0.1, mavlink.MAVLink_extended_sys_state_message(3, 2))  # MC again
+
+    peer.on_command = quadchute
+    result = await scripted.vehicle.vtol_transition(to_fixed_wing=True, timeout_s=5.0)
+
+    assert result.outcome is CommandOutcome.FAILED
+    assert result.elapsed_ms < 1000
