@@ -1,9 +1,11 @@
 """A stand-in PX4 vehicle for the link benchmarks, in its own process.
 
 It answers on one UDP socket on 127.0.0.1 like a vehicle that talks back to whoever spoke:
-HEARTBEAT at 1 Hz (quadrotor, PX4, Hold mode), COMMAND_ACK ACCEPTED to every command for
-it. It timestamps each SET_POSITION_TARGET_LOCAL_NED on arrival (time.perf_counter), per
-sending system/component, so clients can be compared with the same clock and socket.
+HEARTBEAT at 1 Hz (quadrotor, PX4, starting in Hold), COMMAND_ACK ACCEPTED to every command
+for it, and DO_SET_MODE switches the mode it reports (so clients that stop streaming when
+the vehicle is not in OFFBOARD, as MAVSDK does, keep going). It timestamps each
+SET_POSITION_TARGET_LOCAL_NED on arrival (time.perf_counter), per sending
+system/component, so clients can be compared with the same clock and socket.
 
 Protocol on stdio, one line each: it prints ``{"event": "ready", "port": N}`` once bound;
 ``reset`` forgets the arrivals so far; ``report`` prints
@@ -35,6 +37,7 @@ class Receiver:
         self.decoder = mavlink.MAVLink(None)
         self.decoder.robust_parsing = True
         self.peers: dict[tuple[str, int], None] = {}
+        self.custom_mode = HOLD_CUSTOM_MODE
         self.arrivals: dict[str, list[float]] = {}
 
     @property
@@ -51,7 +54,7 @@ class Receiver:
         for addr in self.peers:
             self.send(self.mav.heartbeat_encode(
                 mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4, base_mode,
-                HOLD_CUSTOM_MODE, mavlink.MAV_STATE_STANDBY,
+                self.custom_mode, mavlink.MAV_STATE_STANDBY,
             ), addr)
 
     def read_socket(self) -> None:
@@ -77,6 +80,10 @@ class Receiver:
                 msg.command, mavlink.MAV_RESULT_ACCEPTED, 0, 0,
                 msg.get_srcSystem(), msg.get_srcComponent(),
             ), addr)
+            if msg.command == mavlink.MAV_CMD_DO_SET_MODE:
+                # PX4: custom_mode = main << 16 | sub << 24, from param2 and param3.
+                self.custom_mode = int(msg.param2) << 16 | int(msg.param3) << 24
+                self.send_heartbeat()
 
     def command(self, line: str) -> bool:
         word = line.strip()

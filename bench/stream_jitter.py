@@ -140,9 +140,13 @@ async def measure_skyhelm(
     vehicle.envelope = Envelope(None, None, None, None)
     key = f"{vehicle.link.mav.srcSystem}/{vehicle.link.mav.srcComponent}"
     results = []
+    setpoint = PositionNed(0.0, 0.0, -5.0, yaw_deg=0.0)
+    started = await vehicle.start_offboard(setpoint)
+    if not started.ok:
+        raise RuntimeError(f"offboard refused by the stand-in vehicle: {started}")
     for rate_hz in SKYHELM_RATES_HZ:
         vehicle.stream_rate_hz = rate_hz
-        await vehicle.set_setpoint(PositionNed(0.0, 0.0, -5.0, yaw_deg=0.0))
+        await vehicle.set_setpoint(setpoint)
         await asyncio.sleep(0.5)  # settle on the new rate before measuring
         await receiver.reset()
         await asyncio.sleep(seconds)
@@ -164,6 +168,7 @@ async def measure_mavsdk(receiver: ReceiverProcess, seconds: float) -> dict[str,
             if state.is_connected:
                 break
         await drone.offboard.set_position_ned(PositionNedYaw(0.0, 0.0, -5.0, 0.0))
+        await drone.offboard.start()  # MAVSDK stops streaming to a vehicle not in OFFBOARD
         await asyncio.sleep(0.5)
         await receiver.reset()
         await asyncio.sleep(seconds)
@@ -196,6 +201,7 @@ def print_table(rows: Sequence[dict[str, Any]]) -> None:
 
 
 async def run(seconds: float) -> dict[str, Any]:
+    load_average_before = os.getloadavg()
     async with ReceiverProcess.running() as receiver:
         link = await Link.open(f"udpout:127.0.0.1:{receiver.port}", name="bench-jitter")
         try:
@@ -225,7 +231,9 @@ async def run(seconds: float) -> dict[str, Any]:
             "no_gap_over_100ms": goal_gaps,
         },
         "machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
-                    "platform": platform.platform()},
+                    "platform": platform.platform(),
+                    "load_average_before": load_average_before,
+                    "load_average_after": os.getloadavg()},
     }
 
 
@@ -236,7 +244,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     result = asyncio.run(run(args.seconds))
     print_table(result["rows"])
     goal = result["goal"]
-    print(f"\nloop load: {result['loop_load']['busy_fraction'] * 100:.0f}% busy encoding snapshots")
+    print(f"\nloop load: {result['loop_load']['busy_fraction'] * 100:.0f}% busy encoding snapshots;"
+          f" machine load average {result['machine']['load_average_before'][0]:.1f} before, "
+          f"{result['machine']['load_average_after'][0]:.1f} after")
     print(f"goal p99 |interval-period|: SkyHelm 50 Hz "
           f"{goal['skyhelm_50hz_p99_abs_error_ms']:.2f} ms vs MAVSDK 20 Hz "
           f"{goal['mavsdk_20hz_p99_abs_error_ms']:.2f} ms -> "
