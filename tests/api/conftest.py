@@ -91,9 +91,18 @@ class Api:
         return await self.client.post(url, json=body, headers=self.lease_headers)
 
     async def wait_state(
-        self, predicate: Callable[[dict[str, Any]], bool], timeout_s: float, what: str
+        self,
+        predicate: Callable[[dict[str, Any]], bool],
+        timeout_s: float,
+        what: str,
+        *,
+        renew: bool = True,
     ) -> dict[str, Any]:
+        """Poll the state; a pilot holding the lease keeps renewing it while waiting."""
+
         async def probe() -> dict[str, Any] | None:
+            if renew and self.lease_headers:
+                await self.client.put("/api/v1/vehicles/1/control", headers=self.lease_headers)
             state = await self.state()
             return state if predicate(state) else None
 

@@ -246,7 +246,7 @@ async def test_deadman_holds_when_rest_renewals_stop(quad: Served) -> None:
     finally:
         renewing.cancel()
     last_renewal = time.monotonic()
-    stopped = await api.wait_state(lambda s: _speed(s) < 0.3, TTL_S + 0.5, "hold")
+    stopped = await api.wait_state(lambda s: _speed(s) < 0.3, TTL_S + 0.5, "hold", renew=False)
     assert time.monotonic() - last_renewal <= TTL_S + 0.5
     assert stopped["mode"] == "OFFBOARD"
     assert stopped["lease"]["holder"] is None
