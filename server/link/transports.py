@@ -35,6 +35,8 @@ RECONNECT_BACKOFF_MIN_S = 0.5
 RECONNECT_BACKOFF_MAX_S = 5.0
 # Broadcast frames (HEARTBEAT, untargeted) go to every UDP peer heard from this recently.
 UDP_PEER_EXPIRY_S = 10.0
+# Peers remembered per listening link; beyond this the longest silent one is forgotten.
+MAX_PEERS = 64
 _READ_CHUNK_BYTES = 65536
 _SERIAL_READ_TIMEOUT_S = 0.05
 
@@ -100,6 +102,8 @@ class _PeerRouter:
         self._peer_by_system[src_system] = peer
         is_new = self._last_heard.pop(peer, None) is None  # re-insert: order is recency
         self._last_heard[peer] = time.monotonic()
+        if len(self._last_heard) > MAX_PEERS:
+            self.forget(next(iter(self._last_heard)))
         return is_new
 
     def forget(self, peer: Peer) -> None:
