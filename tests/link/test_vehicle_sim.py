@@ -104,6 +104,8 @@ async def test_reposition_flies_to_the_target_and_holds() -> None:
 async def test_rtl_lands_and_disarms_at_home_and_ends_the_stream() -> None:
     async with open_sim(speed=SPEED) as session:
         vehicle = session.vehicle
+        # return at the altitude it already has: no climb to PX4's default 30 m first
+        assert await vehicle.set_param("RTL_RETURN_ALT", 8.0) == 8.0
         await _take_off(session, 5.0)
         await vehicle.start_offboard(PositionNed(12.0, -6.0, -8.0, yaw_deg=0))
         await wait_for(lambda: _distance_m(session.truth_ned_m, (12, -6, -8)) < 1.0, 40 / SPEED)
