@@ -77,6 +77,11 @@ class Command:
     source_component: int
 
 
+def _as_int(value: float) -> int:
+    """A command param as an integer; NaN (\"unset\") and infinities count as -1."""
+    return int(value) if math.isfinite(value) else -1
+
+
 def _nan_if(ignored: bool, value: float) -> float:
     return math.nan if ignored else float(value)
 
@@ -179,9 +184,8 @@ class Receiver:
     def _is_any_target(cmd: Command) -> bool:
         if cmd.command in _ANY_TARGET_COMMANDS:
             return True
-        return cmd.command == mavlink.MAV_CMD_REQUEST_MESSAGE and int(cmd.params[0]) in (
-            _VERSION_MESSAGES
-        )
+        requested = _as_int(cmd.params[0])
+        return cmd.command == mavlink.MAV_CMD_REQUEST_MESSAGE and requested in _VERSION_MESSAGES
 
     def ack(self, link: UdpLink, cmd: Command, result: int) -> None:
         link.send(mavlink.MAVLink_command_ack_message(
@@ -189,7 +193,7 @@ class Receiver:
 
     def _cmd_arm_disarm(self, cmd: Command, link: UdpLink) -> int | None:
         action = cmd.params[0]
-        force = round(cmd.params[1]) == ARM_DISARM_FORCE_MAGIC
+        force = _as_int(cmd.params[1]) == ARM_DISARM_FORCE_MAGIC
         if action == 1.0:
             return self._v.commander.arm(self._v.now_s)
         if action == 0.0:
@@ -199,7 +203,7 @@ class Receiver:
     def _cmd_do_set_mode(self, cmd: Command, link: UdpLink) -> int | None:
         # PX4 v1.16 acks every DO_SET_MODE twice: ACCEPTED at once, then the real result.
         self.ack(link, cmd, MAV_RESULT_ACCEPTED)
-        return self._set_mode(int(cmd.params[0]), int(cmd.params[1]), int(cmd.params[2]))
+        return self._set_mode(*(_as_int(p) for p in cmd.params[:3]))
 
     def _set_mode(self, base_mode: int, main_mode: int, sub_mode: int) -> int:
         if not base_mode & modes.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
@@ -235,7 +239,7 @@ class Receiver:
     def _cmd_reposition(self, cmd: Command, link: UdpLink) -> int:
         v = self._v
         speed, flags, _radius, yaw, lat, lon, alt = cmd.params
-        if int(flags) != MAV_DO_REPOSITION_FLAGS_CHANGE_MODE:
+        if _as_int(flags) != MAV_DO_REPOSITION_FLAGS_CHANGE_MODE:
             return MAV_RESULT_UNSUPPORTED
         if not v.ready:
             return MAV_RESULT_TEMPORARILY_REJECTED
@@ -266,8 +270,8 @@ class Receiver:
         v = self._v
         if not v.model.is_vtol:
             return None  # PX4 without a VTOL attitude controller leaves it unanswered
-        state = int(cmd.params[0])
-        immediate = int(cmd.params[1]) == 1
+        state = _as_int(cmd.params[0])
+        immediate = _as_int(cmd.params[1]) == 1
         if state == VTOL_TRANSITION_FW:
             if v.commander.nav_mode in _NO_FRONT_TRANSITION_MODES:
                 return MAV_RESULT_TEMPORARILY_REJECTED
@@ -279,11 +283,12 @@ class Receiver:
         return MAV_RESULT_DENIED
 
     def _cmd_set_message_interval(self, cmd: Command, link: UdpLink) -> int:
-        ok = self._v.streams_of(link).set_interval(int(cmd.params[0]), cmd.params[1], self._v.now_s)
+        streams = self._v.streams_of(link)
+        ok = streams.set_interval(_as_int(cmd.params[0]), cmd.params[1], self._v.now_s)
         return MAV_RESULT_ACCEPTED if ok else MAV_RESULT_FAILED
 
     def _cmd_request_message(self, cmd: Command, link: UdpLink) -> int | None:
-        msg = self._v.messages.build(int(cmd.params[0]))
+        msg = self._v.messages.build(_as_int(cmd.params[0]))
         if msg is None:
             return MAV_RESULT_FAILED
         self.ack(link, cmd, MAV_RESULT_ACCEPTED)
