@@ -113,6 +113,7 @@ def _summary(values_ms: Sequence[float]) -> dict[str, float]:
 async def run(count: int) -> dict[str, Any]:
     import mavsdk_grpc as mavsdk
 
+    load_average_before = os.getloadavg()
     async with simulated_vehicle() as instance:
         link = await Link.open(f"udpout:127.0.0.1:{instance['api_local_port']}",
                                name="bench-latency")
@@ -148,7 +149,9 @@ async def run(count: int) -> dict[str, Any]:
         "goal_met": ratio <= 1.0,
         "samples_ms": {"skyhelm": ours_wall, "mavsdk": theirs},
         "machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
-                    "platform": platform.platform()},
+                    "platform": platform.platform(),
+                    "load_average_before": load_average_before,
+                    "load_average_after": os.getloadavg()},
     }
 
 
