@@ -1,0 +1,111 @@
+"""The real MAVSDK (mavsdk_server) flies the simulated vehicle like PX4 SITL."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from tests.peers.conftest import MavsdkFactory, first, wait_for
+
+pytestmark = pytest.mark.peers
+
+
+def ned_distance_m(a: list[float], b: list[float]) -> float:
+    return math.dist(a, b)
+
+
+async def test_connect_health_and_telemetry(mavsdk_drone: MavsdkFactory) -> None:
+    drone, sim = await mavsdk_drone(speed=2.0)
+    telemetry = drone.telemetry
+    assert await first(telemetry.health_all_ok(), bool, 20.0)
+    position = await first(telemetry.position(), lambda p: True, 5.0)
+    assert position.latitude_deg == pytest.approx(47.397742, abs=1e-5)
+    assert position.absolute_altitude_m == pytest.approx(489.4, abs=0.5)
+    attitude = await first(telemetry.attitude_euler(), lambda a: True, 5.0)
+    assert abs(attitude.roll_deg) < 5 and abs(attitude.pitch_deg) < 5
+    assert str(await first(telemetry.flight_mode(), lambda m: True, 5.0)) == "HOLD"
+    assert await first(telemetry.armed(), lambda a: True, 5.0) is False
+    assert str(await first(telemetry.landed_state(), lambda s: True, 5.0)) == "ON_GROUND"
+    battery = await first(telemetry.battery(), lambda b: True, 10.0)
+    assert 12.0 < battery.voltage_v < 17.0 and battery.remaining_percent > 50
+    home = await first(telemetry.home(), lambda h: True, 10.0)
+    assert home.latitude_deg == pytest.approx(47.397742, abs=1e-5)
+    await drone.action.set_takeoff_altitude(4.0)
+    assert await drone.action.get_takeoff_altitude() == pytest.approx(4.0)
+    assert sim.instances[0].vehicle.params.get("MIS_TAKEOFF_ALT") == pytest.approx(4.0)
+
+
+async def test_arm_takeoff_offboard_position_velocity_and_stop(
+    mavsdk_drone: MavsdkFactory,
+) -> None:
+    from mavsdk_grpc.offboard import PositionNedYaw, VelocityNedYaw
+
+    drone, sim = await mavsdk_drone()
+    vehicle = sim.instances[0].vehicle
+    await first(drone.telemetry.health_all_ok(), bool, 20.0)
+    await drone.action.set_takeoff_altitude(5.0)
+    await drone.action.arm()
+    assert vehicle.armed
+    await drone.action.takeoff()
+    await first(drone.telemetry.flight_mode(), lambda m: str(m) == "HOLD", 30.0)
+    assert -vehicle.truth.position_ned_m[2] > 4.0
+
+    target = [5.0, -3.0, -6.0]
+    await drone.offboard.set_position_ned(PositionNedYaw(*target, 0.0))
+    await drone.offboard.start()
+    assert vehicle.mode_name == "OFFBOARD"
+    await wait_for(lambda: ned_distance_m(vehicle.truth.position_ned_m, target) < 0.5, 20.0,
+                   "offboard position")
+
+    await drone.offboard.set_velocity_ned(VelocityNedYaw(2.0, 0.0, 0.0, 0.0))
+    await wait_for(lambda: abs(vehicle.truth.velocity_ned_m_s[0] - 2.0) < 0.3, 20.0,
+                   "offboard velocity")
+
+    await drone.offboard.stop()
+    await first(drone.telemetry.flight_mode(), lambda m: str(m) == "HOLD", 10.0)
+    await wait_for(lambda: math.hypot(*vehicle.truth.velocity_ned_m_s[:2]) < 0.5, 10.0,
+                   "stop after offboard")
+
+
+async def test_goto_location_then_return_to_launch_lands_at_home(
+    mavsdk_drone: MavsdkFactory,
+) -> None:
+    drone, sim = await mavsdk_drone()
+    vehicle = sim.instances[0].vehicle
+    await first(drone.telemetry.health_all_ok(), bool, 20.0)
+    home = await first(drone.telemetry.home(), lambda h: True, 10.0)
+    await drone.action.set_takeoff_altitude(10.0)
+    await drone.action.arm()
+    await drone.action.takeoff()
+    await first(drone.telemetry.flight_mode(), lambda m: str(m) == "HOLD", 40.0)
+
+    goal = vehicle.origin.to_geodetic(15.0, 0.0, 0.0)
+    await drone.action.goto_location(goal.lat_deg, goal.lon_deg, home.absolute_altitude_m + 10,
+                                     0.0)
+    await wait_for(lambda: abs(vehicle.truth.position_ned_m[0] - 15.0) < 1.0, 30.0, "goto")
+
+    await drone.action.return_to_launch()
+    await first(drone.telemetry.armed(), lambda armed: not armed, 60.0)
+    north, east, _ = vehicle.truth.position_ned_m
+    assert math.hypot(north - home.local_north_m, east - home.local_east_m) < 1.0
+    assert str(await first(drone.telemetry.landed_state(), lambda s: True, 5.0)) == "ON_GROUND"
+
+
+async def test_vtol_transitions_to_fixed_wing_and_back(mavsdk_drone: MavsdkFactory) -> None:
+    from sim import airframes
+
+    try:
+        airframes.make_airframe("vtol", airframes.default_params("vtol"))
+    except (ValueError, KeyError):
+        pytest.skip("the vtol airframe model is not available yet")
+    drone, sim = await mavsdk_drone(airframe="vtol")
+    await first(drone.telemetry.health_all_ok(), bool, 20.0)
+    await drone.action.set_takeoff_altitude(30.0)
+    await drone.action.arm()
+    await drone.action.takeoff()
+    await first(drone.telemetry.flight_mode(), lambda m: str(m) == "HOLD", 60.0)
+    await drone.action.transition_to_fixedwing()
+    await first(drone.telemetry.vtol_state(), lambda s: str(s) == "FW", 30.0)
+    await drone.action.transition_to_multicopter()
+    await first(drone.telemetry.vtol_state(), lambda s: str(s) == "MC", 30.0)
