@@ -124,24 +124,33 @@ class SetpointStreamer:
         self._sent += 1
 
     def stats(self) -> StreamStats:
-        window = sorted(self._intervals[: self._ring_len])
+        window = self._window()
         since_last_ms = None
         if self._last_s is not None:
             now = self._loop.time() if self._loop is not None else self._last_s
             since_last_ms = (now - self._last_s) * 1000.0
         if not window:
             return StreamStats(active=self.active, sent=self._sent, since_last_ms=since_last_ms)
-        total = sum(window)
+        # the rate over the last ~1 s, so it follows a rate change; percentiles use the window
+        recent = window[-max(2, round(self.rate_hz)) :]
+        ordered = sorted(window)
         return StreamStats(
             active=self.active,
-            rate_hz=len(window) / total if total > 0 else 0.0,
-            interval_p50_ms=_percentile(window, 0.50) * 1000.0,
-            interval_p99_ms=_percentile(window, 0.99) * 1000.0,
+            rate_hz=len(recent) / sum(recent) if sum(recent) > 0 else 0.0,
+            interval_p50_ms=_percentile(ordered, 0.50) * 1000.0,
+            interval_p99_ms=_percentile(ordered, 0.99) * 1000.0,
             max_gap_ms=self._max_interval_s * 1000.0,
             gaps=self._gaps,
             sent=self._sent,
             since_last_ms=since_last_ms,
         )
+
+    def _window(self) -> list[float]:
+        """The recorded intervals, oldest first."""
+        size = len(self._intervals)
+        if self._ring_len < size:
+            return list(self._intervals[: self._ring_len])
+        return list(self._intervals[self._ring_next :]) + list(self._intervals[: self._ring_next])
 
 
 def _percentile(ordered: list[float], q: float) -> float:

@@ -111,3 +111,15 @@ async def test_rate_change_while_streaming_takes_effect() -> None:
     streamer.stop()
 
     assert len(rec.sent) - start >= 12
+
+
+async def test_reported_rate_follows_a_rate_change() -> None:
+    rec = _Recorder()
+    streamer = SetpointStreamer(rec, rate_hz=10)
+    streamer.stream(_msg(1))
+    await asyncio.sleep(0.5)
+    streamer.rate_hz = 50
+    await asyncio.sleep(1.3)
+    streamer.stop()
+
+    assert streamer.stats().rate_hz == pytest.approx(50, rel=0.2)
