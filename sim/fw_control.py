@@ -33,7 +33,7 @@ CLIMB_RATE_P_RAD_S_M = 0.06
 CLIMB_RATE_I_RAD_M = 0.03
 SPEED_P_PER_S = 0.6
 SPEED_I_THROTTLE_PER_M = 0.04
-TAKEOFF_PITCH_RAD = math.radians(10.0)
+STALL_PITCH_LIMIT_RAD = math.radians(10.0)
 
 
 @dataclass
@@ -124,11 +124,24 @@ class FixedWingControl:
         self, dt_s: float, truth: VehicleStateTruth, sp: TrajectorySetpoint, yaw: float
     ) -> tuple[float, float, float]:
         """Roll and pitch setpoints and throttle for a trajectory setpoint."""
-        pos, vel = truth.position_ned_m, truth.velocity_ned_m_s
         airspeed = max(truth.airspeed_m_s, 1.0)
-        ground_speed = math.hypot(vel[0], vel[1])
-        course = math.atan2(vel[1], vel[0]) if ground_speed > 1.0 else yaw
-        target = sp.position_ned_m
+        roll_sp, speed_sp = self._lateral(truth, sp, yaw, airspeed)
+        climb_sp = self._climb_rate_setpoint(truth, sp)
+        if truth.on_ground:
+            # runway takeoff: wings level, full throttle while the target is above us
+            self.climb_int_rad = 0.0
+            self.speed_int = 0.0
+            return 0.0, 0.0, self.thr_max if climb_sp > 0.5 else 0.0
+        pitch_sp, throttle = self._longitudinal(dt_s, truth, climb_sp, speed_sp, airspeed)
+        return roll_sp, pitch_sp, throttle
+
+    def _lateral(
+        self, truth: VehicleStateTruth, sp: TrajectorySetpoint, yaw: float, airspeed: float
+    ) -> tuple[float, float]:
+        """Roll setpoint towards the commanded course or loiter circle, and the speed to fly."""
+        pos, vel = truth.position_ned_m, truth.velocity_ned_m_s
+        course = math.atan2(vel[1], vel[0]) if math.hypot(vel[0], vel[1]) > 1.0 else yaw
+        target, sp_vel = sp.position_ned_m, sp.velocity_ned_m_s
         speed_sp = self.airspeed_trim_m_s
         if _finite(sp.max_speed_xy_m_s) and sp.max_speed_xy_m_s > 0.0:
             speed_sp = sp.max_speed_xy_m_s
@@ -139,54 +152,58 @@ class FixedWingControl:
                 pos[0] - target[0], pos[1] - target[1], max(abs(radius), 1.0), airspeed
             )
             self.hold_course_rad = math.nan
-        elif _finite(sp.velocity_ned_m_s[0]) and _finite(sp.velocity_ned_m_s[1]) and math.hypot(
-            sp.velocity_ned_m_s[0], sp.velocity_ned_m_s[1]
-        ) > 0.1:
-            course_sp = math.atan2(sp.velocity_ned_m_s[1], sp.velocity_ned_m_s[0])
-            speed_sp = math.hypot(sp.velocity_ned_m_s[0], sp.velocity_ned_m_s[1])
+        elif _finite(sp_vel[0]) and _finite(sp_vel[1]) and math.hypot(sp_vel[0], sp_vel[1]) > 0.1:
+            course_sp = math.atan2(sp_vel[1], sp_vel[0])
+            speed_sp = math.hypot(sp_vel[0], sp_vel[1])
             self.hold_course_rad = math.nan
         else:
             if not _finite(self.hold_course_rad):
                 self.hold_course_rad = course
             course_sp = self.hold_course_rad
-        speed_sp = _clamp(speed_sp, self.airspeed_min_m_s, self.airspeed_max_m_s)
-
         lateral_accel = COURSE_P_PER_S * airspeed * wrap_pi(course_sp - course) + accel_ff
         roll_sp = _clamp(
             math.atan2(lateral_accel, GRAVITY_M_S2), -self.roll_limit_rad, self.roll_limit_rad
         )
+        return roll_sp, _clamp(speed_sp, self.airspeed_min_m_s, self.airspeed_max_m_s)
 
-        climb = -vel[2]
-        if _finite(target[2]):
+    def _climb_rate_setpoint(self, truth: VehicleStateTruth, sp: TrajectorySetpoint) -> float:
+        """Climb rate (m/s, up) towards the setpoint's altitude, its vertical speed, or the
+        altitude held when it has neither."""
+        down = truth.position_ned_m[2]
+        if _finite(sp.position_ned_m[2]):
             self.hold_down_m = math.nan
-            climb_sp = -HEIGHT_P_PER_S * (target[2] - pos[2])
+            climb_sp = -HEIGHT_P_PER_S * (sp.position_ned_m[2] - down)
         elif _finite(sp.velocity_ned_m_s[2]):
             self.hold_down_m = math.nan
             climb_sp = -sp.velocity_ned_m_s[2]
         else:
             if not _finite(self.hold_down_m):
-                self.hold_down_m = pos[2]
-            climb_sp = -HEIGHT_P_PER_S * (self.hold_down_m - pos[2])
-        climb_sp = _clamp(climb_sp, -self.sink_max_m_s, self.climb_max_m_s)
+                self.hold_down_m = down
+            climb_sp = -HEIGHT_P_PER_S * (self.hold_down_m - down)
+        return _clamp(climb_sp, -self.sink_max_m_s, self.climb_max_m_s)
 
-        if truth.on_ground:
-            # runway takeoff: wings level, full throttle while the target is above us
-            wants_air = climb_sp > 0.5
-            self.climb_int_rad = 0.0
-            self.speed_int = 0.0
-            return 0.0, 0.0, self.thr_max if wants_air else 0.0
-
+    def _longitudinal(
+        self,
+        dt_s: float,
+        truth: VehicleStateTruth,
+        climb_sp: float,
+        speed_sp: float,
+        airspeed: float,
+    ) -> tuple[float, float]:
+        """Pitch for the climb angle (plus the angle of attack the wing flies at), throttle
+        for drag, climb and acceleration: the TECS split of duties."""
         gamma_sp = math.asin(_clamp(climb_sp / airspeed, -0.5, 0.5))
-        # climb-angle control: a turn needs more lift, which the integrator supplies
-        climb_error = climb_sp - climb
+        # a turn needs more lift than level flight: the integrator supplies it
+        climb_error = climb_sp + truth.velocity_ned_m_s[2]
         self.climb_int_rad = _clamp(
             self.climb_int_rad + CLIMB_RATE_I_RAD_M * climb_error * dt_s, -0.3, 0.3
         )
-        alpha = math.atan2(_body_w(truth), max(airspeed, 1.0))
+        alpha = math.atan2(_body_w(truth), airspeed)
         pitch_sp = gamma_sp + alpha + CLIMB_RATE_P_RAD_S_M * climb_error + self.climb_int_rad
-        if airspeed < self.airspeed_min_m_s:
+        slow = airspeed < self.airspeed_min_m_s
+        if slow:
             # too slow: trade height for speed rather than stall
-            pitch_sp = min(pitch_sp, TAKEOFF_PITCH_RAD * (airspeed / self.airspeed_min_m_s))
+            pitch_sp = min(pitch_sp, STALL_PITCH_LIMIT_RAD * airspeed / self.airspeed_min_m_s)
         pitch_sp = _clamp(pitch_sp, self.pitch_min_rad, self.pitch_max_rad)
 
         speed_error = speed_sp - airspeed
@@ -198,9 +215,9 @@ class FixedWingControl:
         throttle = (
             self.thr_trim + self.speed_int + accel_needed * self.mass_kg / self.thrust_max_n
         )
-        if airspeed < self.airspeed_min_m_s:
+        if slow:
             throttle = self.thr_max
-        return roll_sp, pitch_sp, _clamp(throttle, self.thr_min, self.thr_max)
+        return pitch_sp, _clamp(throttle, self.thr_min, self.thr_max)
 
     # -- attitude and rates --------------------------------------------------------------
 

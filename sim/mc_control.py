@@ -462,11 +462,8 @@ class MulticopterControl:
             else:
                 self._since_position_s += dt_s
                 if self._since_position_s >= POSITION_LOOP_PERIOD_S - 1e-9:
-                    period = (
-                        POSITION_LOOP_PERIOD_S
-                        if self._since_position_s < 1.0
-                        else dt_s
-                    )
+                    # after a pause (other setpoint types, reset) integrate one period only
+                    period = min(self._since_position_s, POSITION_LOOP_PERIOD_S)
                     self.position.hover_thrust = hover_thrust
                     self._q_sp, self._thrust = self.position.update(
                         period, truth, setpoint, landed
