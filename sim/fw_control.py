@@ -14,6 +14,7 @@ import math
 from dataclasses import dataclass
 
 from sim.mc_control import ParamReader
+from sim.numeric import clamp, is_finite
 from sim.quat import euler_from_quat, rotate_ned_to_body, wrap_pi
 from sim.rigid_body import GRAVITY_M_S2
 from sim.topics import (
@@ -44,14 +45,6 @@ class SurfacesThrottle:
     elevator: float = 0.0
     rudder: float = 0.0
     throttle: float = 0.0
-
-
-def _finite(x: float) -> bool:
-    return x == x and x not in (math.inf, -math.inf)
-
-
-def _clamp(x: float, low: float, high: float) -> float:
-    return low if x < low else high if x > high else x
 
 
 class FixedWingControl:
@@ -106,7 +99,7 @@ class FixedWingControl:
         roll, pitch, yaw = euler_from_quat(truth.q_wxyz)
         if isinstance(setpoint, RatesSetpoint):
             surfaces = self.rate_control(dt_s, truth, setpoint.rates_rad_s)
-            surfaces.throttle = _clamp(setpoint.thrust_body[0], 0.0, 1.0)
+            surfaces.throttle = clamp(setpoint.thrust_body[0], 0.0, 1.0)
             return surfaces
         if isinstance(setpoint, AttitudeSetpoint):
             roll_sp, pitch_sp, _ = euler_from_quat(setpoint.q_wxyz)
@@ -115,7 +108,7 @@ class FixedWingControl:
             roll_sp, pitch_sp, throttle = self._guidance(dt_s, truth, setpoint, yaw)
         rates_sp = self.attitude_rates(truth, roll, pitch, roll_sp, pitch_sp)
         surfaces = self.rate_control(dt_s, truth, rates_sp)
-        surfaces.throttle = _clamp(throttle, 0.0, 1.0)
+        surfaces.throttle = clamp(throttle, 0.0, 1.0)
         return surfaces
 
     # -- guidance ------------------------------------------------------------------------
@@ -143,44 +136,45 @@ class FixedWingControl:
         course = math.atan2(vel[1], vel[0]) if math.hypot(vel[0], vel[1]) > 1.0 else yaw
         target, sp_vel = sp.position_ned_m, sp.velocity_ned_m_s
         speed_sp = self.airspeed_trim_m_s
-        if _finite(sp.max_speed_xy_m_s) and sp.max_speed_xy_m_s > 0.0:
+        if is_finite(sp.max_speed_xy_m_s) and sp.max_speed_xy_m_s > 0.0:
             speed_sp = sp.max_speed_xy_m_s
         accel_ff = 0.0
-        if _finite(target[0]) and _finite(target[1]):
-            radius = sp.loiter_radius_m if _finite(sp.loiter_radius_m) else self.loiter_radius_m
+        commanded_speed = math.hypot(sp_vel[0], sp_vel[1])
+        if is_finite(target[0]) and is_finite(target[1]):
+            radius = sp.loiter_radius_m if is_finite(sp.loiter_radius_m) else self.loiter_radius_m
             course_sp, accel_ff = _orbit_course(
                 pos[0] - target[0], pos[1] - target[1], max(abs(radius), 1.0), airspeed
             )
             self.hold_course_rad = math.nan
-        elif _finite(sp_vel[0]) and _finite(sp_vel[1]) and math.hypot(sp_vel[0], sp_vel[1]) > 0.1:
+        elif is_finite(commanded_speed) and commanded_speed > 0.1:
             course_sp = math.atan2(sp_vel[1], sp_vel[0])
-            speed_sp = math.hypot(sp_vel[0], sp_vel[1])
+            speed_sp = commanded_speed
             self.hold_course_rad = math.nan
         else:
-            if not _finite(self.hold_course_rad):
+            if not is_finite(self.hold_course_rad):
                 self.hold_course_rad = course
             course_sp = self.hold_course_rad
         lateral_accel = COURSE_P_PER_S * airspeed * wrap_pi(course_sp - course) + accel_ff
-        roll_sp = _clamp(
+        roll_sp = clamp(
             math.atan2(lateral_accel, GRAVITY_M_S2), -self.roll_limit_rad, self.roll_limit_rad
         )
-        return roll_sp, _clamp(speed_sp, self.airspeed_min_m_s, self.airspeed_max_m_s)
+        return roll_sp, clamp(speed_sp, self.airspeed_min_m_s, self.airspeed_max_m_s)
 
     def _climb_rate_setpoint(self, truth: VehicleStateTruth, sp: TrajectorySetpoint) -> float:
         """Climb rate (m/s, up) towards the setpoint's altitude, its vertical speed, or the
         altitude held when it has neither."""
         down = truth.position_ned_m[2]
-        if _finite(sp.position_ned_m[2]):
+        if is_finite(sp.position_ned_m[2]):
             self.hold_down_m = math.nan
             climb_sp = -HEIGHT_P_PER_S * (sp.position_ned_m[2] - down)
-        elif _finite(sp.velocity_ned_m_s[2]):
+        elif is_finite(sp.velocity_ned_m_s[2]):
             self.hold_down_m = math.nan
             climb_sp = -sp.velocity_ned_m_s[2]
         else:
-            if not _finite(self.hold_down_m):
+            if not is_finite(self.hold_down_m):
                 self.hold_down_m = down
             climb_sp = -HEIGHT_P_PER_S * (self.hold_down_m - down)
-        return _clamp(climb_sp, -self.sink_max_m_s, self.climb_max_m_s)
+        return clamp(climb_sp, -self.sink_max_m_s, self.climb_max_m_s)
 
     def _longitudinal(
         self,
@@ -192,10 +186,10 @@ class FixedWingControl:
     ) -> tuple[float, float]:
         """Pitch for the climb angle (plus the angle of attack the wing flies at), throttle
         for drag, climb and acceleration: the TECS split of duties."""
-        gamma_sp = math.asin(_clamp(climb_sp / airspeed, -0.5, 0.5))
+        gamma_sp = math.asin(clamp(climb_sp / airspeed, -0.5, 0.5))
         # a turn needs more lift than level flight: the integrator supplies it
         climb_error = climb_sp + truth.velocity_ned_m_s[2]
-        self.climb_int_rad = _clamp(
+        self.climb_int_rad = clamp(
             self.climb_int_rad + CLIMB_RATE_I_RAD_M * climb_error * dt_s, -0.3, 0.3
         )
         alpha = math.atan2(_body_w(truth), airspeed)
@@ -204,10 +198,10 @@ class FixedWingControl:
         if slow:
             # too slow: trade height for speed rather than stall
             pitch_sp = min(pitch_sp, STALL_PITCH_LIMIT_RAD * airspeed / self.airspeed_min_m_s)
-        pitch_sp = _clamp(pitch_sp, self.pitch_min_rad, self.pitch_max_rad)
+        pitch_sp = clamp(pitch_sp, self.pitch_min_rad, self.pitch_max_rad)
 
         speed_error = speed_sp - airspeed
-        self.speed_int = _clamp(
+        self.speed_int = clamp(
             self.speed_int + SPEED_I_THROTTLE_PER_M * speed_error * dt_s, -0.5, 1.0
         )
         accel_needed = SPEED_P_PER_S * speed_error + GRAVITY_M_S2 * math.sin(gamma_sp)
@@ -217,7 +211,7 @@ class FixedWingControl:
         )
         if slow:
             throttle = self.thr_max
-        return pitch_sp, _clamp(throttle, self.thr_min, self.thr_max)
+        return pitch_sp, clamp(throttle, self.thr_min, self.thr_max)
 
     # -- attitude and rates --------------------------------------------------------------
 
@@ -233,31 +227,31 @@ class FixedWingControl:
         roll_dot = (roll_sp - roll) / self.roll_tc_s
         pitch_dot = (pitch_sp - pitch) / self.pitch_tc_s
         speed = max(truth.airspeed_m_s, self.airspeed_min_m_s)
-        yaw_dot = GRAVITY_M_S2 * math.tan(_clamp(roll, -1.2, 1.2)) / speed
+        yaw_dot = GRAVITY_M_S2 * math.tan(clamp(roll, -1.2, 1.2)) / speed
         sr, cr = math.sin(roll), math.cos(roll)
         sp, cp = math.sin(pitch), math.cos(pitch)
         p = roll_dot - yaw_dot * sp
         q = pitch_dot * cr + yaw_dot * sr * cp
         r = -pitch_dot * sr + yaw_dot * cr * cp
         lim = self.rate_max_rad_s
-        return (_clamp(p, -lim[0], lim[0]), _clamp(q, -lim[1], lim[1]), _clamp(r, -lim[2], lim[2]))
+        return (clamp(p, -lim[0], lim[0]), clamp(q, -lim[1], lim[1]), clamp(r, -lim[2], lim[2]))
 
     def rate_control(
         self, dt_s: float, truth: VehicleStateTruth, rates_sp: tuple[float, float, float]
     ) -> SurfacesThrottle:
         # control surfaces bite with dynamic pressure: scale outputs by trim/actual airspeed
         speed = max(truth.airspeed_m_s, 0.5 * self.airspeed_min_m_s)
-        scaler = _clamp(self.airspeed_trim_m_s / speed, 0.3, 2.0)
+        scaler = clamp(self.airspeed_trim_m_s / speed, 0.3, 2.0)
         out = [0.0, 0.0, 0.0]
         rates = truth.rates_body_rad_s
         for i in range(3):
             err = rates_sp[i] - rates[i]
             if not truth.on_ground:
-                self.rate_int[i] = _clamp(
+                self.rate_int[i] = clamp(
                     self.rate_int[i] + self.rate_i[i] * err * dt_s * scaler, -0.4, 0.4
                 )
             raw = (self.rate_ff[i] * rates_sp[i] + self.rate_p[i] * err) * scaler + self.rate_int[i]
-            out[i] = _clamp(raw, -1.0, 1.0)
+            out[i] = clamp(raw, -1.0, 1.0)
         return SurfacesThrottle(aileron=out[0], elevator=out[1], rudder=out[2])
 
 

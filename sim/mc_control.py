@@ -12,6 +12,7 @@ import math
 from dataclasses import dataclass
 from typing import Protocol
 
+from sim.numeric import clamp, is_finite
 from sim.quat import (
     Vec3,
     body_z_axis_ned,
@@ -47,14 +48,6 @@ class TorqueThrust:
     pitch: float = 0.0
     yaw: float = 0.0
     thrust: float = 0.0
-
-
-def _finite(x: float) -> bool:
-    return x == x and x not in (math.inf, -math.inf)
-
-
-def _clamp(x: float, low: float, high: float) -> float:
-    return low if x < low else high if x > high else x
 
 
 class PositionControl:
@@ -101,7 +94,7 @@ class PositionControl:
         pos_sp = sp.position_ned_m
         vel_ff = sp.velocity_ned_m_s
         acc_ff = sp.acceleration_ned_m_s2
-        if not any(_finite(v) for v in (*pos_sp, *vel_ff, *acc_ff)):
+        if not any(is_finite(v) for v in (*pos_sp, *vel_ff, *acc_ff)):
             # Nothing controllable: PX4's failsafe would hold, so hold where it is now
             if self.hold_position_ned_m is None:
                 self.hold_position_ned_m = list(pos)
@@ -110,55 +103,55 @@ class PositionControl:
             self.hold_position_ned_m = None
         self._update_yaw_setpoint(dt_s, truth, sp)
 
-        lim_xy = sp.max_speed_xy_m_s if _finite(sp.max_speed_xy_m_s) else self.vel_max_xy_m_s
-        lim_up = sp.max_speed_up_m_s if _finite(sp.max_speed_up_m_s) else self.vel_max_up_m_s
+        lim_xy = sp.max_speed_xy_m_s if is_finite(sp.max_speed_xy_m_s) else self.vel_max_xy_m_s
+        lim_up = sp.max_speed_up_m_s if is_finite(sp.max_speed_up_m_s) else self.vel_max_up_m_s
         lim_dn = (
-            sp.max_speed_down_m_s if _finite(sp.max_speed_down_m_s) else self.vel_max_down_m_s
+            sp.max_speed_down_m_s if is_finite(sp.max_speed_down_m_s) else self.vel_max_down_m_s
         )
 
         # position P; a NaN position or feed-forward axis contributes nothing
         vel_from_pos = [
-            (pos_sp[i] - pos[i]) * self.gain_pos_p[i] if _finite(pos_sp[i]) else math.nan
+            (pos_sp[i] - pos[i]) * self.gain_pos_p[i] if is_finite(pos_sp[i]) else math.nan
             for i in range(3)
         ]
         vel_sp = [
             _add_if_finite(vel_ff[i], vel_from_pos[i]) for i in range(3)
         ]
         vel_sp_xy = _constrain_xy(
-            [v if _finite(v) else 0.0 for v in vel_from_pos[:2]],
+            [v if is_finite(v) else 0.0 for v in vel_from_pos[:2]],
             [
-                (vel_sp[i] - vel_from_pos[i]) if _finite(vel_from_pos[i]) else vel_sp[i]
+                (vel_sp[i] - vel_from_pos[i]) if is_finite(vel_from_pos[i]) else vel_sp[i]
                 for i in range(2)
             ],
             lim_xy,
         )
-        if _finite(vel_sp[0]):
+        if is_finite(vel_sp[0]):
             vel_sp[0] = vel_sp_xy[0]
-        if _finite(vel_sp[1]):
+        if is_finite(vel_sp[1]):
             vel_sp[1] = vel_sp_xy[1]
-        if _finite(vel_sp[2]):
-            vel_sp[2] = _clamp(vel_sp[2], -lim_up, lim_dn)
+        if is_finite(vel_sp[2]):
+            vel_sp[2] = clamp(vel_sp[2], -lim_up, lim_dn)
 
         # velocity PID; acceleration feed-forward added on top
         acc = truth.acceleration_ned_m_s2
         vel_error = [vel_sp[i] - vel[i] for i in range(3)]
-        acc_sp = [0.0 if not _finite(acc_ff[i]) else acc_ff[i] for i in range(3)]
-        any_acc = any(_finite(a) for a in acc_ff)
+        acc_sp = [0.0 if not is_finite(acc_ff[i]) else acc_ff[i] for i in range(3)]
+        any_acc = any(is_finite(a) for a in acc_ff)
         for i in range(3):
-            if _finite(vel_error[i]):
+            if is_finite(vel_error[i]):
                 acc_sp[i] += (
                     vel_error[i] * self.gain_vel_p[i]
                     + self.vel_int[i]
                     - acc[i] * self.gain_vel_d[i]
                 )
-            elif not any_acc and not _finite(vel_sp[i]):
+            elif not any_acc and not is_finite(vel_sp[i]):
                 # axis uncontrolled: damp it so the vehicle does not drift away
                 acc_sp[i] += -vel[i] * self.gain_vel_p[i]
         thr_sp = self._acceleration_to_thrust(acc_sp)
 
         # anti-windup: vertical stops integrating when thrust saturates that way
-        if (thr_sp[2] >= -self.thr_min and _finite(vel_error[2]) and vel_error[2] >= 0.0) or (
-            thr_sp[2] <= -self.thr_max and _finite(vel_error[2]) and vel_error[2] <= 0.0
+        if (thr_sp[2] >= -self.thr_min and is_finite(vel_error[2]) and vel_error[2] >= 0.0) or (
+            thr_sp[2] <= -self.thr_max and is_finite(vel_error[2]) and vel_error[2] <= 0.0
         ):
             vel_error[2] = 0.0
         thr_sp = self._limit_thrust_keeping_vertical(thr_sp)
@@ -173,13 +166,13 @@ class PositionControl:
         )
         arw_gain = 2.0 / self.gain_vel_p[0] if self.gain_vel_p[0] > 0 else 0.0
         for i in range(2):
-            if _finite(vel_error[i]):
+            if is_finite(vel_error[i]):
                 vel_error[i] -= arw_gain * (wanted[i] - limited[i])
         if not landed:
             for i in range(3):
-                if _finite(vel_error[i]):
+                if is_finite(vel_error[i]):
                     self.vel_int[i] += vel_error[i] * self.gain_vel_i[i] * dt_s
-            self.vel_int[2] = _clamp(self.vel_int[2], -GRAVITY_M_S2, GRAVITY_M_S2)
+            self.vel_int[2] = clamp(self.vel_int[2], -GRAVITY_M_S2, GRAVITY_M_S2)
 
         collective = math.sqrt(thr_sp[0] ** 2 + thr_sp[1] ** 2 + thr_sp[2] ** 2)
         if collective > 1e-6:
@@ -193,15 +186,15 @@ class PositionControl:
         self, dt_s: float, truth: VehicleStateTruth, sp: TrajectorySetpoint
     ) -> None:
         yaw_now = yaw_from_quat(truth.q_wxyz)
-        if _finite(sp.yaw_rad):
+        if is_finite(sp.yaw_rad):
             self.yaw_sp_rad = wrap_pi(sp.yaw_rad)
-        elif _finite(sp.yawspeed_rad_s):
-            start = self.yaw_sp_rad if _finite(self.yaw_sp_rad) else yaw_now
+        elif is_finite(sp.yawspeed_rad_s):
+            start = self.yaw_sp_rad if is_finite(self.yaw_sp_rad) else yaw_now
             # keep the integrated setpoint near the vehicle so it cannot run away
             if abs(wrap_pi(start - yaw_now)) > 0.5:
                 start = yaw_now
             self.yaw_sp_rad = wrap_pi(start + sp.yawspeed_rad_s * dt_s)
-        elif not _finite(self.yaw_sp_rad):
+        elif not is_finite(self.yaw_sp_rad):
             self.yaw_sp_rad = yaw_now
         self.yawspeed_sp_rad_s = sp.yawspeed_rad_s
 
@@ -235,9 +228,9 @@ class PositionControl:
 
 
 def _add_if_finite(base: float, addition: float) -> float:
-    if not _finite(addition):
+    if not is_finite(addition):
         return base
-    if not _finite(base):
+    if not is_finite(base):
         return addition
     return base + addition
 
@@ -245,7 +238,7 @@ def _add_if_finite(base: float, addition: float) -> float:
 def _constrain_xy(v0: list[float], v1: list[float], max_norm: float) -> list[float]:
     """PX4 ControlMath::constrainXY: keep v0 (towards the target) first, then as much of the
     feed-forward v1 as fits inside max_norm."""
-    v1 = [x if _finite(x) else 0.0 for x in v1]
+    v1 = [x if is_finite(x) else 0.0 for x in v1]
     sx, sy = v0[0] + v1[0], v0[1] + v1[1]
     if math.hypot(sx, sy) <= max_norm:
         return [sx, sy]
@@ -264,7 +257,7 @@ def _constrain_xy(v0: list[float], v1: list[float], max_norm: float) -> list[flo
 
 def _limit_tilt(bz: list[float], tilt_max_rad: float) -> list[float]:
     """PX4 ControlMath::limitTilt against the vertical."""
-    cos_tilt = _clamp(bz[2], -1.0, 1.0)
+    cos_tilt = clamp(bz[2], -1.0, 1.0)
     angle = math.acos(cos_tilt)
     if angle <= tilt_max_rad:
         return bz
@@ -285,7 +278,7 @@ class AttitudeControl:
         def get(name: str, default: float) -> float:
             return default if params is None else float(params.get(name))
 
-        self.yaw_weight = _clamp(get("MC_YAW_WEIGHT", 0.4), 0.0, 1.0)
+        self.yaw_weight = clamp(get("MC_YAW_WEIGHT", 0.4), 0.0, 1.0)
         yaw_p = get("MC_YAW_P", 2.8)
         self.gain_p = (
             get("MC_ROLL_P", 6.5),
@@ -314,8 +307,8 @@ class AttitudeControl:
         q_mix = quat_multiply(quat_conjugate(qd_red), q_sp)
         if q_mix[0] < 0.0:
             q_mix = (-q_mix[0], -q_mix[1], -q_mix[2], -q_mix[3])
-        w = _clamp(q_mix[0], -1.0, 1.0)
-        z = _clamp(q_mix[3], -1.0, 1.0)
+        w = clamp(q_mix[0], -1.0, 1.0)
+        z = clamp(q_mix[3], -1.0, 1.0)
         yw = self.yaw_weight
         yaw_part = (math.cos(yw * math.acos(w)), 0.0, 0.0, math.sin(yw * math.asin(z)))
         qd = quat_multiply(qd_red, yaw_part)
@@ -324,14 +317,14 @@ class AttitudeControl:
             qe = (-qe[0], -qe[1], -qe[2], -qe[3])
         gain = self.gain_p
         rates = [2.0 * qe[1] * gain[0], 2.0 * qe[2] * gain[1], 2.0 * qe[3] * gain[2]]
-        if _finite(yawspeed_sp_rad_s):
+        if is_finite(yawspeed_sp_rad_s):
             ff = rotate_ned_to_body(q, (0.0, 0.0, yawspeed_sp_rad_s))
             rates = [rates[i] + ff[i] for i in range(3)]
         lim = self.rate_limit_rad_s
         return (
-            _clamp(rates[0], -lim[0], lim[0]),
-            _clamp(rates[1], -lim[1], lim[1]),
-            _clamp(rates[2], -lim[2], lim[2]),
+            clamp(rates[0], -lim[0], lim[0]),
+            clamp(rates[1], -lim[1], lim[1]),
+            clamp(rates[2], -lim[2], lim[2]),
         )
 
 
@@ -403,7 +396,7 @@ class RateControl:
                 # PX4 shrinks the integration for large errors to avoid windup on flips
                 i_factor = max(0.0, 1.0 - (err / math.radians(400.0)) ** 2)
                 lim = self.int_lim[i]
-                self.rate_int[i] = _clamp(
+                self.rate_int[i] = clamp(
                     self.rate_int[i] + i_factor * self.gain_i[i] * err * dt_s, -lim, lim
                 )
         return (out[0], out[1], out[2])
@@ -475,4 +468,4 @@ class MulticopterControl:
         torque = self.rates.update(
             dt_s, truth.rates_body_rad_s, rates_sp, landed, self.mixer_saturated
         )
-        return TorqueThrust(torque[0], torque[1], torque[2], _clamp(thrust, 0.0, 1.0))
+        return TorqueThrust(torque[0], torque[1], torque[2], clamp(thrust, 0.0, 1.0))

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 
+from sim.numeric import clamp
 from sim.quat import Vec3, quat_from_yaw, quat_integrate, yaw_from_quat
 from sim.topics import VehicleStateTruth
 
@@ -133,4 +134,4 @@ class RigidBody:
 
 
 def _clamp(value: float, limit: float) -> float:
-    return limit if value > limit else -limit if value < -limit else value
+    return clamp(value, -limit, limit)

@@ -12,6 +12,7 @@ import math
 
 from sim.mc_control import ParamReader
 from sim.multicopter import PARAM_REFRESH_PERIOD_S
+from sim.numeric import clamp, is_finite
 from sim.quat import quat_from_yaw, wrap_pi, yaw_from_quat
 from sim.topics import (
     AttitudeSetpoint,
@@ -26,14 +27,6 @@ MAV_TYPE_GROUND_ROVER = 10
 ARRIVAL_RADIUS_M = 0.3
 HEADING_P_PER_S = 2.5
 YAW_RATE_TAU_S = 0.1
-
-
-def _finite(x: float) -> bool:
-    return x == x and x not in (math.inf, -math.inf)
-
-
-def _clamp(x: float, low: float, high: float) -> float:
-    return low if x < low else high if x > high else x
 
 
 class RoverModel:
@@ -72,19 +65,19 @@ class RoverModel:
             speed_sp, yaw_rate_sp = self._control(setpoint, yaw)
         else:
             speed_sp, yaw_rate_sp = 0.0, 0.0
-        speed_sp = _clamp(speed_sp, -self.speed_max_m_s, self.speed_max_m_s)
-        yaw_rate_sp = _clamp(yaw_rate_sp, -self.yaw_rate_max_rad_s, self.yaw_rate_max_rad_s)
+        speed_sp = clamp(speed_sp, -self.speed_max_m_s, self.speed_max_m_s)
+        yaw_rate_sp = clamp(yaw_rate_sp, -self.yaw_rate_max_rad_s, self.yaw_rate_max_rad_s)
 
         previous_speed = self.speed_m_s
         limit = (self.accel_m_s2 if abs(speed_sp) > abs(previous_speed) else self.decel_m_s2) * dt_s
-        self.speed_m_s += _clamp(speed_sp - previous_speed, -limit, limit)
+        self.speed_m_s += clamp(speed_sp - previous_speed, -limit, limit)
         self.yaw_rate_rad_s += (yaw_rate_sp - self.yaw_rate_rad_s) * min(1.0, dt_s / YAW_RATE_TAU_S)
         self._integrate(dt_s, yaw, previous_speed)
 
         half_track = 0.5 * self.wheel_track_m
         left = (self.speed_m_s - self.yaw_rate_rad_s * half_track) / self.speed_max_m_s
         right = (self.speed_m_s + self.yaw_rate_rad_s * half_track) / self.speed_max_m_s
-        self.actuator_outputs = [_clamp(left, -1.0, 1.0), _clamp(right, -1.0, 1.0)]
+        self.actuator_outputs = [clamp(left, -1.0, 1.0), clamp(right, -1.0, 1.0)]
         self.power_fraction = min(1.0, 0.5 * (abs(left) + abs(right)))
 
     def _integrate(self, dt_s: float, yaw: float, previous_speed: float) -> None:
@@ -119,25 +112,25 @@ class RoverModel:
     def _trajectory_control(self, sp: TrajectorySetpoint, yaw: float) -> tuple[float, float]:
         pos = self.truth.position_ned_m
         target, vel = sp.position_ned_m, sp.velocity_ned_m_s
-        if _finite(target[0]) and _finite(target[1]):
+        if is_finite(target[0]) and is_finite(target[1]):
             dn, de = target[0] - pos[0], target[1] - pos[1]
             distance = math.hypot(dn, de)
             if distance < ARRIVAL_RADIUS_M:
-                if _finite(sp.yaw_rad):
+                if is_finite(sp.yaw_rad):
                     return 0.0, HEADING_P_PER_S * wrap_pi(sp.yaw_rad - yaw)
                 return 0.0, 0.0
-            cruise = sp.max_speed_xy_m_s if _finite(sp.max_speed_xy_m_s) else self.speed_trim_m_s
+            cruise = sp.max_speed_xy_m_s if is_finite(sp.max_speed_xy_m_s) else self.speed_trim_m_s
             # arrive: the speed from which the deceleration limit stops us well inside the
             # arrival radius (aiming at its edge would approach it forever)
             aim_m = max(distance - 0.5 * ARRIVAL_RADIUS_M, 0.0)
             arrive = math.sqrt(2.0 * self.decel_m_s2 * aim_m)
             return self._steer(math.atan2(de, dn), min(cruise, arrive), yaw)
-        if _finite(vel[0]) and _finite(vel[1]):
+        if is_finite(vel[0]) and is_finite(vel[1]):
             speed = math.hypot(vel[0], vel[1])
             if speed < 0.05:
                 return 0.0, 0.0
             return self._steer(math.atan2(vel[1], vel[0]), speed, yaw)
-        if _finite(sp.yawspeed_rad_s):
+        if is_finite(sp.yawspeed_rad_s):
             return 0.0, sp.yawspeed_rad_s
         return 0.0, 0.0
 
