@@ -179,12 +179,18 @@ function inControl() {
   return Boolean(page.control && page.control.open);
 }
 
+function renderHolder(holder) {
+  const mine = inControl();
+  setText("holder", mine ? `you (${page.control.holder || holder || "this page"})` : holder || "nobody");
+}
+
 function updateControls() {
   const pilot = inControl() && page.connected;
   document.body.classList.toggle("observing", !pilot);
   for (const el of document.querySelectorAll(".ctl")) el.disabled = !pilot;
   $("take-control").classList.toggle("hidden", inControl());
   $("release").classList.toggle("hidden", !inControl());
+  renderHolder(page.state?.lease?.holder);
 }
 
 // ---- telemetry ----------------------------------------------------------------------------
@@ -233,7 +239,7 @@ function onTelemetryStatus(status) {
 
 async function reloadAfterReconnect() {
   await loadVehicles();
-  $("scene").src = sceneUrl();
+  showScene($("scene-enable").checked);
   loadParams();
   if (page.wantControl && !inControl()) {
     log("NOTICE", "taking control again");
@@ -285,11 +291,10 @@ function render(state) {
   $("vtol-state").classList.toggle("hidden", !vtol);
   if (vtol) setText("vtol-state", state.vtol_state.replaceAll("_", " "), state.vtol_state.startsWith("TRANSITION") ? "warn" : "info");
 
-  const holder = state.lease?.holder;
-  const mine = inControl();
-  setText("holder", mine ? `you (${page.control.holder || holder || "this page"})` : holder || "nobody");
+  renderHolder(state.lease?.holder);
 
   renderTelemetry(state);
+  continueHold(state);
   renderStream(state.stream || {});
   renderVtol(state);
   const t = nowS();
@@ -437,16 +442,36 @@ const keyboard = new KeyboardPilot({
   speed: () => parseFloat($("kbd-speed").value) || 1,
   onKeys: (text) => setText("kbd-state", `keys: ${text}`),
   onVelocity: (v) => {
+    holdBrakingSince = null;
     if (panel.type !== "velocity_body") showSetpointType("velocity_body");
     panel.set(v);
     sendSetpoint(setpointBody("velocity_body", panel.values));
   },
-  onHold: () => {
-    showSetpointType("position");
-    sendSetpoint();
-    log("NOTICE", "hold: position setpoint at the current position");
-  },
+  onHold: () => startHold(),
 });
+
+// Space: brake with a zero velocity first, then hold the position where the vehicle stopped,
+// so it does not fly back to where the key was pressed.
+const HOLD_STOPPED_M_S = 0.3;
+const HOLD_BRAKE_TIMEOUT_MS = 5000;
+let holdBrakingSince = null;
+
+function startHold() {
+  holdBrakingSince = performance.now();
+  showSetpointType("velocity");
+  sendSetpoint(setpointBody("velocity", panel.values));
+  log("NOTICE", "hold: braking, then holding the position where it stops");
+}
+
+function continueHold(state) {
+  if (holdBrakingSince === null || !inControl()) return;
+  const v = state.velocity_ned;
+  const speed = v ? Math.hypot(v.north_m_s, v.east_m_s, v.down_m_s) : 0;
+  if (speed > HOLD_STOPPED_M_S && performance.now() - holdBrakingSince < HOLD_BRAKE_TIMEOUT_MS) return;
+  holdBrakingSince = null;
+  showSetpointType("position");
+  sendSetpoint();
+}
 
 // ---- reposition ---------------------------------------------------------------------------
 
@@ -551,6 +576,13 @@ function sceneUrl() {
   return `/scene/?token=${encodeURIComponent(token)}&darkMode`;
 }
 
+// The 3D scene renders continuously; switching it off frees the CPU on weak machines.
+function showScene(on) {
+  $("scene").src = on ? sceneUrl() : "about:blank";
+  $("scene").classList.toggle("hidden", !on);
+  $("scene-off").classList.toggle("hidden", on);
+}
+
 function wire() {
   $("vehicle-select").addEventListener("change", (e) => selectVehicle(e.target.value));
   $("take-control").addEventListener("click", () => takeControl(false));
@@ -596,6 +628,7 @@ function wire() {
   $("btn-to-fw").addEventListener("click", (e) => runCommand("Transition to FW", "vtol_transition", { to: "fixed_wing" }, e.target));
   $("btn-to-mc").addEventListener("click", (e) => runCommand("Transition to MC", "vtol_transition", { to: "multicopter" }, e.target));
   $("params-refresh").addEventListener("click", loadParams);
+  $("scene-enable").addEventListener("change", (e) => showScene(e.target.checked));
   window.addEventListener("pagehide", () => page.control?.close());
 }
 
@@ -610,10 +643,11 @@ async function main() {
   if (!token) {
     banner("Open the URL printed by `skyhelm serve` (it carries ?token=…)");
   }
+  if (new URLSearchParams(location.search).get("scene") === "off") $("scene-enable").checked = false;
   wire();
   showSetpointType("position");
   updateControls();
-  $("scene").src = sceneUrl();
+  showScene($("scene-enable").checked);
   await loadModes();
   await loadVehicles();
   setInterval(loadVehicles, 10000);

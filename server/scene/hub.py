@@ -30,7 +30,7 @@ _log = logging.getLogger(__name__)
 # picture at once) but at a trickle, to leave the CPU to the streamer.
 _IDLE_RATE_HZ = 2.0
 _FOLLOW_OFF = "off"
-_CAMERA_OFFSET_ENU = np.array([-10.0, -10.0, 7.0])
+_CAMERA_OFFSET_ENU = np.array([-6.0, -6.0, 4.0])
 
 
 @dataclasses.dataclass(frozen=True)

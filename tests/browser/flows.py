@@ -11,9 +11,10 @@ from .harness import altitude_m, vehicle_state, wait_for
 RESULT_TIMEOUT_S = 30.0
 
 
-def open_dashboard(context: Any, url: str) -> Any:
+def open_dashboard(context: Any, url: str, scene: bool = True) -> Any:
+    """Opens the page; without the scene, software WebGL leaves the CPU to the vehicle."""
     page = context.new_page()
-    page.goto(url)
+    page.goto(url if scene else f"{url}&scene=off")
     page.wait_for_function(
         "document.getElementById('mode').textContent !== '–'", timeout=30_000
     )
@@ -24,6 +25,8 @@ def take_control(page: Any) -> None:
     page.click("#take-control")
     page.wait_for_selector("#release:not(.hidden)", timeout=10_000)
     page.wait_for_selector("#btn-arm:not([disabled])", timeout=10_000)
+    page.wait_for_function("document.getElementById('holder').textContent.startsWith('you')",
+                           timeout=10_000)
 
 
 def click_and_wait_result(page: Any, selector: str, expect: str = "ACCEPTED",

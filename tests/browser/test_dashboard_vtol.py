@@ -22,7 +22,7 @@ def serve() -> Iterator[Serve]:
 
 
 def test_transition_buttons_reach_fixed_wing_and_back(browser: Any, serve: Serve) -> None:
-    page = open_dashboard(browser, serve.url)
+    page = open_dashboard(browser, serve.url, scene=False)
     with serve.client() as api:
         assert page.is_visible("#vtol-panel")
         take_control(page)
