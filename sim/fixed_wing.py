@@ -10,6 +10,7 @@ from sim.mc_control import ParamReader
 from sim.multicopter import PARAM_REFRESH_PERIOD_S, make_rigid_body, refresh_rigid_body
 from sim.quat import Vec3, rotate_body_to_ned, rotate_ned_to_body
 from sim.rigid_body import GRAVITY_M_S2, RigidBody
+from sim.setpoint_guard import safe_setpoint
 from sim.topics import ControlSetpoint, VehicleStateTruth, VtolState
 
 # Wheels: rolling resistance on the runway, and no sideways slip
@@ -123,7 +124,7 @@ class FixedWingModel:
             self.control.mass_kg = self.frame.body.mass_kg
             self.control.thrust_max_n = self.frame.pusher_max_n
         if armed and setpoint is not None:
-            surfaces = self.control.update(dt_s, self.truth, setpoint)
+            surfaces = self.control.update(dt_s, self.truth, safe_setpoint(setpoint, self.truth))
         else:
             surfaces = SurfacesThrottle()
             self.control.reset()

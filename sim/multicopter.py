@@ -8,6 +8,7 @@ from sim.mc_control import MulticopterControl, ParamReader
 from sim.mixer import Mixer
 from sim.quat import rotate_body_to_ned
 from sim.rigid_body import GRAVITY_M_S2, RigidBody
+from sim.setpoint_guard import safe_setpoint
 from sim.topics import ControlSetpoint, VehicleStateTruth, VtolState
 
 PARAM_REFRESH_PERIOD_S = 0.2
@@ -115,7 +116,10 @@ class MulticopterModel:
         mixer = self.rotors.mixer
         if armed and setpoint is not None:
             cmd = self.control.update(
-                dt_s, self.truth, setpoint, self.rotors.hover_thrust(self.body.mass_kg)
+                dt_s,
+                self.truth,
+                safe_setpoint(setpoint, self.truth),
+                self.rotors.hover_thrust(self.body.mass_kg),
             )
             outputs = mixer.mix(cmd.roll, cmd.pitch, cmd.yaw, cmd.thrust)
             self.control.mixer_saturated = mixer.saturated

@@ -12,3 +12,7 @@ def is_finite(x: float) -> bool:
 
 def clamp(x: float, low: float, high: float) -> float:
     return low if x < low else high if x > high else x
+
+
+def finite_or(x: float, default: float) -> float:
+    return x if is_finite(x) else default

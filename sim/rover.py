@@ -14,6 +14,7 @@ from sim.mc_control import ParamReader
 from sim.multicopter import PARAM_REFRESH_PERIOD_S
 from sim.numeric import clamp, is_finite
 from sim.quat import quat_from_yaw, wrap_pi, yaw_from_quat
+from sim.setpoint_guard import safe_setpoint
 from sim.topics import (
     AttitudeSetpoint,
     ControlSetpoint,
@@ -62,7 +63,7 @@ class RoverModel:
             self._refresh_params()
         yaw = yaw_from_quat(self.truth.q_wxyz)
         if armed and setpoint is not None:
-            speed_sp, yaw_rate_sp = self._control(setpoint, yaw)
+            speed_sp, yaw_rate_sp = self._control(safe_setpoint(setpoint, self.truth), yaw)
         else:
             speed_sp, yaw_rate_sp = 0.0, 0.0
         speed_sp = clamp(speed_sp, -self.speed_max_m_s, self.speed_max_m_s)

@@ -19,6 +19,7 @@ from sim.mc_control import MulticopterControl, ParamReader
 from sim.mixer import Mixer
 from sim.multicopter import RotorSet
 from sim.quat import euler_from_quat, rotate_ned_to_body, yaw_from_quat
+from sim.setpoint_guard import safe_setpoint
 from sim.topics import ControlSetpoint, TrajectorySetpoint, VtolState
 
 VTOL_WING = WingGeometry(area_m2=0.55, span_m=1.8, chord_m=0.3)
@@ -120,6 +121,7 @@ class VtolModel:
         lift = [0.0, 0.0, 0.0, 0.0]
         surfaces = SurfacesThrottle()
         if armed and setpoint is not None:
+            setpoint = safe_setpoint(setpoint, t)
             if state == VtolState.FW:
                 surfaces = self.fw.update(dt_s, t, setpoint)
                 self.mc.reset()

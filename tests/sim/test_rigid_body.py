@@ -7,10 +7,16 @@ import random
 
 import pytest
 
-from sim.airframes import default_params, make_airframe
+from sim.airframes import AIRFRAME_NAMES, default_params, make_airframe
 from sim.rigid_body import GRAVITY_M_S2, RigidBody
 from sim.sim_run import PHYSICS_DT_S, fly
-from sim.topics import ControlSetpoint, RatesSetpoint, TrajectorySetpoint, VehicleStateTruth
+from sim.topics import (
+    AttitudeSetpoint,
+    ControlSetpoint,
+    RatesSetpoint,
+    TrajectorySetpoint,
+    VehicleStateTruth,
+)
 
 
 def _body(truth: VehicleStateTruth, kdv: float = 0.0) -> RigidBody:
@@ -133,3 +139,24 @@ def test_multicopter_never_produces_nan_under_random_setpoints(airframe: str) ->
         assert all(math.isfinite(v) for v in state)
         assert t.position_ned_m[2] <= 0.0
         assert all(0.0 <= u <= 1.0 for u in model.actuator_outputs)
+
+
+@pytest.mark.parametrize("airframe", AIRFRAME_NAMES)
+def test_nan_attitude_and_rates_setpoints_do_not_poison_the_model(airframe: str) -> None:
+    model = make_airframe(airframe, default_params(airframe))
+    model.reset([0.0, 0.0, -30.0 if airframe != "rover" else 0.0], 0.5)
+    if airframe in ("plane",):
+        model.truth.velocity_ned_m_s[0] = 15.0
+    nan = math.nan
+    fly(model, RatesSetpoint(rates_rad_s=(nan, 0.2, nan), thrust_body=(nan, 0.0, -0.5)), 0.5)
+    fly(model, AttitudeSetpoint(q_wxyz=(nan, 0.0, 0.0, 0.0), thrust_body=(0.5, 0.0, nan)), 0.5)
+    fly(model, AttitudeSetpoint(q_wxyz=(0.0, 0.0, 0.0, 0.0), thrust_body=(0.5, 0.0, -0.5)), 0.5)
+    target = [0.0, 0.0, -30.0] if airframe != "rover" else [5.0, 0.0, 0.0]
+    fly(model, TrajectorySetpoint(position_ned_m=target), 15.0)
+    t = model.truth
+    state = [*t.position_ned_m, *t.velocity_ned_m_s, *t.acceleration_ned_m_s2, *t.q_wxyz]
+    assert all(math.isfinite(v) for v in state)
+    assert all(math.isfinite(u) for u in model.actuator_outputs)
+    if airframe in ("quad", "hexa", "octo", "rover"):
+        # still controllable afterwards
+        assert math.dist(t.position_ned_m, target) < 1.0
