@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import random
 
 import pytest
 
@@ -175,3 +176,19 @@ def test_back_transition_ends_after_vt_b_trans_dur_if_still_fast() -> None:
         elapsed += 0.01
         assert elapsed < 5.0
     assert elapsed == pytest.approx(1.5, abs=0.02)
+
+
+def test_vtol_never_produces_nan_under_random_setpoints_and_transitions() -> None:
+    rng = random.Random(3)
+    vtol = _hovering_vtol()
+    for _ in range(30):
+        if rng.random() < 0.3:
+            vtol.request_transition(to_fixed_wing=rng.random() < 0.5, immediate=rng.random() < 0.3)
+        target = [rng.uniform(-200, 200), rng.uniform(-200, 200), rng.uniform(-60, -10)]
+        fly(vtol, TrajectorySetpoint(position_ned_m=target), 1.0, armed=rng.random() > 0.05)
+        t = vtol.truth
+        state = [*t.position_ned_m, *t.velocity_ned_m_s, *t.q_wxyz, t.airspeed_m_s]
+        assert all(math.isfinite(v) for v in state)
+        assert t.position_ned_m[2] <= 0.0
+        assert all(math.isfinite(u) for u in vtol.actuator_outputs)
+        assert vtol.in_fixed_wing_flight == (vtol.vtol_state == VtolState.FW)
