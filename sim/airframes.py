@@ -172,6 +172,7 @@ _VTOL_PARAMS: dict[str, float | int] = {
     "FW_AIRSPD_TRIM": 10.0,
     "FW_AIRSPD_MAX": 15.0,
     "FW_THR_TRIM": 0.3,
+    "FW_USE_AIRSPD": 1,
     "VT_ARSP_TRANS": 10.0,
     "VT_TRANS_MIN_TM": 2.0,
     "VT_F_TR_OL_TM": 6.0,

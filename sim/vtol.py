@@ -2,8 +2,9 @@
 
 `VtolTransition` is the transition logic of PX4_NOTES "VTOL" (standard.cpp):
 - front: the pusher ramps at VT_PSHER_SLEW up to VT_F_TRANS_THR while the lift rotors hold
-  height; done when airspeed ≥ VT_ARSP_TRANS after at least VT_TRANS_MIN_TM; after
-  VT_TRANS_TIMEOUT without that, quadchute back to MC.
+  height; done when airspeed ≥ VT_ARSP_TRANS after at least VT_TRANS_MIN_TM (without an
+  airspeed sensor, FW_USE_AIRSPD 0: after VT_F_TR_OL_TM); after VT_TRANS_TIMEOUT without
+  that, quadchute back to MC.
 - back: pusher off, the rotors brake; done below MPC_XY_CRUISE forward speed or after
   VT_B_TRANS_DUR.
 """
@@ -62,7 +63,12 @@ class VtolTransition:
             self.pusher_throttle = min(
                 p("VT_F_TRANS_THR"), self.pusher_throttle + p("VT_PSHER_SLEW") * dt_s
             )
-            if self.elapsed_s >= p("VT_TRANS_MIN_TM") and airspeed_m_s >= p("VT_ARSP_TRANS"):
+            if p("FW_USE_AIRSPD"):
+                fast_enough = airspeed_m_s >= p("VT_ARSP_TRANS")
+            else:
+                # no airspeed sensor: PX4 trusts the clock (open-loop transition)
+                fast_enough = self.elapsed_s >= p("VT_F_TR_OL_TM")
+            if self.elapsed_s >= p("VT_TRANS_MIN_TM") and fast_enough:
                 self._enter(VtolState.FW)
             elif self.elapsed_s >= p("VT_TRANS_TIMEOUT"):
                 self.quadchutes += 1

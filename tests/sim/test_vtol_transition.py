@@ -152,6 +152,18 @@ def test_transition_logic_waits_vt_trans_min_tm_even_when_fast() -> None:
     assert elapsed == pytest.approx(2.0, abs=0.02)
 
 
+def test_without_airspeed_sensor_the_transition_ends_after_vt_f_tr_ol_tm() -> None:
+    params = default_params("vtol")
+    params.values["FW_USE_AIRSPD"] = 0
+    logic = VtolTransition(params)
+    logic.request(to_fixed_wing=True, immediate=False, airborne=True)
+    elapsed = 0.0
+    while logic.update(0.01, airspeed_m_s=0.0, forward_speed_m_s=0.0) != VtolState.FW:
+        elapsed += 0.01
+        assert elapsed < 10.0
+    assert elapsed == pytest.approx(6.0, abs=0.02)
+
+
 def test_pusher_ramps_at_vt_psher_slew_up_to_vt_f_trans_thr() -> None:
     params = default_params("vtol")
     params.values["VT_F_TRANS_THR"] = 0.8
