@@ -22,6 +22,8 @@ import numpy as np
 CA_ROTOR_KM = 0.05
 CCW = 1
 CW = -1
+# mixer definition files store their scales multiplied by this (seed 002)
+MIXER_SCALE = 10000
 
 
 @dataclass(frozen=True)
@@ -122,6 +124,17 @@ class Mixer:
         self._thrust = [float(v) for v in mix[:, 3]]
         self.rotor_count = len(self.rotors)
         self.saturated = False
+
+    @classmethod
+    def from_definition(cls, line: str) -> Mixer:
+        """A mixer from seed 002's text form, `R: <geometry> <roll> <pitch> <yaw> <deadband>`,
+        scales stored ×10000 (`R: 4x 10000 10000 10000 0`). The deadband is accepted and
+        ignored, as by PX4's later multirotor mixers."""
+        fields = line.split()
+        if len(fields) < 5 or fields[0] != "R:":
+            raise ValueError(f"not a multirotor mixer definition: {line!r}")
+        roll, pitch, yaw = (int(v) / MIXER_SCALE for v in fields[2:5])
+        return cls(fields[1], roll, pitch, yaw)
 
     def mix(self, roll: float, pitch: float, yaw: float, thrust: float) -> list[float]:
         """Rotor outputs in [0, 1] for normalised roll/pitch/yaw in [-1, 1], thrust in [0, 1]."""

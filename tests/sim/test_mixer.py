@@ -110,6 +110,15 @@ def test_roll_and_pitch_are_scaled_together_when_they_alone_saturate() -> None:
     assert yaw == pytest.approx(0.0, abs=1e-9)
 
 
+def test_mixer_definition_line_of_seed_002_is_read_with_its_scales() -> None:
+    mixer = Mixer.from_definition("R: 6+ 10000 5000 2500 0")
+    reference = Mixer("6+", roll_scale=1.0, pitch_scale=0.5, yaw_scale=0.25)
+    assert mixer.geometry == "6+"
+    assert mixer.mix(0.3, 0.3, 0.3, 0.5) == pytest.approx(reference.mix(0.3, 0.3, 0.3, 0.5))
+    with pytest.raises(ValueError, match="not a multirotor mixer"):
+        Mixer.from_definition("M: 2")
+
+
 def test_nan_commands_are_treated_as_zero() -> None:
     outputs = Mixer("6x").mix(math.nan, 0.0, math.nan, 0.4)
     assert outputs == pytest.approx([0.4] * 6)
