@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import math
 
-from sim.numeric import clamp
 from sim.quat import Vec3, quat_from_yaw, quat_integrate, yaw_from_quat
 from sim.topics import VehicleStateTruth
 
@@ -85,27 +84,28 @@ class RigidBody:
         else:
             t.on_ground = False
 
-        values = (n, e, d, vx, vy, vz, p, q, r, ax, ay, az)
-        if not all(math.isfinite(v) for v in values) or not all(
-            math.isfinite(v) for v in q_new
-        ):
+        # one sum carries any NaN or inf of its terms, and x - x is 0 only for finite x
+        total = n + e + d + vx + vy + vz + p + q + r + ax + ay + az + sum(q_new)
+        if total - total != 0.0:
             self._reset_to_rest()
             return
         t.position_ned_m[0] = n
         t.position_ned_m[1] = e
         t.position_ned_m[2] = d
         v = t.velocity_ned_m_s
-        v[0] = _clamp(vx, MAX_SPEED_M_S)
-        v[1] = _clamp(vy, MAX_SPEED_M_S)
-        v[2] = _clamp(vz, MAX_SPEED_M_S)
+        vmax = MAX_SPEED_M_S
+        v[0] = vmax if vx > vmax else -vmax if vx < -vmax else vx
+        v[1] = vmax if vy > vmax else -vmax if vy < -vmax else vy
+        v[2] = vmax if vz > vmax else -vmax if vz < -vmax else vz
         a = t.acceleration_ned_m_s2
         a[0] = ax
         a[1] = ay
         a[2] = az
         w = t.rates_body_rad_s
-        w[0] = _clamp(p, MAX_RATE_RAD_S)
-        w[1] = _clamp(q, MAX_RATE_RAD_S)
-        w[2] = _clamp(r, MAX_RATE_RAD_S)
+        wmax = MAX_RATE_RAD_S
+        w[0] = wmax if p > wmax else -wmax if p < -wmax else p
+        w[1] = wmax if q > wmax else -wmax if q < -wmax else q
+        w[2] = wmax if r > wmax else -wmax if r < -wmax else r
         t.q_wxyz[0], t.q_wxyz[1], t.q_wxyz[2], t.q_wxyz[3] = q_new
 
     def _reset_to_rest(self) -> None:
@@ -131,7 +131,3 @@ class RigidBody:
         t.q_wxyz[:] = list(quat_from_yaw(yaw_rad))
         t.airspeed_m_s = 0.0
         t.on_ground = t.position_ned_m[2] >= 0.0
-
-
-def _clamp(value: float, limit: float) -> float:
-    return clamp(value, -limit, limit)
