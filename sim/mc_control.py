@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass
 from typing import Protocol
 
-from sim.numeric import clamp, is_finite
+from sim.numeric import clamp, finite_or, is_finite
 from sim.quat import (
     Vec3,
     body_z_axis_ned,
@@ -89,98 +89,97 @@ class PositionControl:
         self, dt_s: float, truth: VehicleStateTruth, sp: TrajectorySetpoint, landed: bool
     ) -> tuple[tuple[float, float, float, float], float]:
         """Attitude setpoint (w, x, y, z) and collective thrust in [0, 1]."""
-        pos = truth.position_ned_m
-        vel = truth.velocity_ned_m_s
-        pos_sp = sp.position_ned_m
-        vel_ff = sp.velocity_ned_m_s
-        acc_ff = sp.acceleration_ned_m_s2
-        if not any(is_finite(v) for v in (*pos_sp, *vel_ff, *acc_ff)):
-            # Nothing controllable: PX4's failsafe would hold, so hold where it is now
+        given = (*sp.position_ned_m, *sp.velocity_ned_m_s, *sp.acceleration_ned_m_s2)
+        if not any(is_finite(v) for v in given):
+            # nothing controllable: PX4's failsafe would hold, so hold where it is now
             if self.hold_position_ned_m is None:
-                self.hold_position_ned_m = list(pos)
+                self.hold_position_ned_m = list(truth.position_ned_m)
             pos_sp = self.hold_position_ned_m
         else:
             self.hold_position_ned_m = None
+            pos_sp = sp.position_ned_m
         self._update_yaw_setpoint(dt_s, truth, sp)
-
-        lim_xy = sp.max_speed_xy_m_s if is_finite(sp.max_speed_xy_m_s) else self.vel_max_xy_m_s
-        lim_up = sp.max_speed_up_m_s if is_finite(sp.max_speed_up_m_s) else self.vel_max_up_m_s
-        lim_dn = (
-            sp.max_speed_down_m_s if is_finite(sp.max_speed_down_m_s) else self.vel_max_down_m_s
-        )
-
-        # position P; a NaN position or feed-forward axis contributes nothing
-        vel_from_pos = [
-            (pos_sp[i] - pos[i]) * self.gain_pos_p[i] if is_finite(pos_sp[i]) else math.nan
-            for i in range(3)
-        ]
-        vel_sp = [
-            _add_if_finite(vel_ff[i], vel_from_pos[i]) for i in range(3)
-        ]
-        vel_sp_xy = _constrain_xy(
-            [v if is_finite(v) else 0.0 for v in vel_from_pos[:2]],
-            [
-                (vel_sp[i] - vel_from_pos[i]) if is_finite(vel_from_pos[i]) else vel_sp[i]
-                for i in range(2)
-            ],
-            lim_xy,
-        )
-        if is_finite(vel_sp[0]):
-            vel_sp[0] = vel_sp_xy[0]
-        if is_finite(vel_sp[1]):
-            vel_sp[1] = vel_sp_xy[1]
-        if is_finite(vel_sp[2]):
-            vel_sp[2] = clamp(vel_sp[2], -lim_up, lim_dn)
-
-        # velocity PID; acceleration feed-forward added on top
-        acc = truth.acceleration_ned_m_s2
-        vel_error = [vel_sp[i] - vel[i] for i in range(3)]
-        acc_sp = [0.0 if not is_finite(acc_ff[i]) else acc_ff[i] for i in range(3)]
-        any_acc = any(is_finite(a) for a in acc_ff)
-        for i in range(3):
-            if is_finite(vel_error[i]):
-                acc_sp[i] += (
-                    vel_error[i] * self.gain_vel_p[i]
-                    + self.vel_int[i]
-                    - acc[i] * self.gain_vel_d[i]
-                )
-            elif not any_acc and not is_finite(vel_sp[i]):
-                # axis uncontrolled: damp it so the vehicle does not drift away
-                acc_sp[i] += -vel[i] * self.gain_vel_p[i]
-        thr_sp = self._acceleration_to_thrust(acc_sp)
-
-        # anti-windup: vertical stops integrating when thrust saturates that way
-        if (thr_sp[2] >= -self.thr_min and is_finite(vel_error[2]) and vel_error[2] >= 0.0) or (
-            thr_sp[2] <= -self.thr_max and is_finite(vel_error[2]) and vel_error[2] <= 0.0
-        ):
-            vel_error[2] = 0.0
-        thr_sp = self._limit_thrust_keeping_vertical(thr_sp)
-        # tracking anti-windup horizontally (Rundqwist): integrate what was produced
-        scale = GRAVITY_M_S2 / self.hover_thrust
-        produced = (thr_sp[0] * scale, thr_sp[1] * scale)
-        wanted = (acc_sp[0], acc_sp[1])
-        limited = (
-            produced
-            if wanted[0] ** 2 + wanted[1] ** 2 > produced[0] ** 2 + produced[1] ** 2
-            else wanted
-        )
-        arw_gain = 2.0 / self.gain_vel_p[0] if self.gain_vel_p[0] > 0 else 0.0
-        for i in range(2):
-            if is_finite(vel_error[i]):
-                vel_error[i] -= arw_gain * (wanted[i] - limited[i])
-        if not landed:
-            for i in range(3):
-                if is_finite(vel_error[i]):
-                    self.vel_int[i] += vel_error[i] * self.gain_vel_i[i] * dt_s
-            self.vel_int[2] = clamp(self.vel_int[2], -GRAVITY_M_S2, GRAVITY_M_S2)
-
+        vel_sp = self._velocity_setpoint(truth, sp, pos_sp)
+        thr_sp = self._velocity_control(dt_s, truth, vel_sp, sp.acceleration_ned_m_s2, landed)
         collective = math.sqrt(thr_sp[0] ** 2 + thr_sp[1] ** 2 + thr_sp[2] ** 2)
         if collective > 1e-6:
             body_z = (-thr_sp[0] / collective, -thr_sp[1] / collective, -thr_sp[2] / collective)
         else:
             body_z = (0.0, 0.0, 1.0)
-        q_sp = quat_from_body_z_and_yaw(body_z, self.yaw_sp_rad)
-        return q_sp, collective
+        return quat_from_body_z_and_yaw(body_z, self.yaw_sp_rad), collective
+
+    def _velocity_setpoint(
+        self, truth: VehicleStateTruth, sp: TrajectorySetpoint, pos_sp: list[float]
+    ) -> list[float]:
+        """Position P plus velocity feed-forward, limited; NaN where neither is given."""
+        pos = truth.position_ned_m
+        vel_ff = sp.velocity_ned_m_s
+        lim_xy = finite_or(sp.max_speed_xy_m_s, self.vel_max_xy_m_s)
+        lim_up = finite_or(sp.max_speed_up_m_s, self.vel_max_up_m_s)
+        lim_dn = finite_or(sp.max_speed_down_m_s, self.vel_max_down_m_s)
+        vel_from_pos = [
+            (pos_sp[i] - pos[i]) * self.gain_pos_p[i] if is_finite(pos_sp[i]) else math.nan
+            for i in range(3)
+        ]
+        vel_sp = [_add_if_finite(vel_ff[i], vel_from_pos[i]) for i in range(3)]
+        # horizontally the way to the target has priority over the feed-forward
+        vel_sp_xy = _constrain_xy(
+            [finite_or(v, 0.0) for v in vel_from_pos[:2]],
+            [finite_or(v, 0.0) for v in vel_ff[:2]],
+            lim_xy,
+        )
+        for i in range(2):
+            if is_finite(vel_sp[i]):
+                vel_sp[i] = vel_sp_xy[i]
+        if is_finite(vel_sp[2]):
+            vel_sp[2] = clamp(vel_sp[2], -lim_up, lim_dn)
+        return vel_sp
+
+    def _velocity_control(
+        self,
+        dt_s: float,
+        truth: VehicleStateTruth,
+        vel_sp: list[float],
+        acc_ff: list[float],
+        landed: bool,
+    ) -> list[float]:
+        """Velocity PID plus acceleration feed-forward → thrust vector (NED, normalised)."""
+        vel = truth.velocity_ned_m_s
+        acc = truth.acceleration_ned_m_s2
+        vel_error = [vel_sp[i] - vel[i] for i in range(3)]
+        acc_sp = [finite_or(a, 0.0) for a in acc_ff]
+        any_acc = any(is_finite(a) for a in acc_ff)
+        for i in range(3):
+            if is_finite(vel_error[i]):
+                p_term = vel_error[i] * self.gain_vel_p[i]
+                acc_sp[i] += p_term + self.vel_int[i] - acc[i] * self.gain_vel_d[i]
+            elif not any_acc:
+                # axis uncontrolled: damp it so the vehicle does not drift away
+                acc_sp[i] -= vel[i] * self.gain_vel_p[i]
+        thr_sp = self._acceleration_to_thrust(acc_sp)
+
+        # anti-windup: vertical stops integrating when thrust saturates that way
+        ez = vel_error[2]
+        if is_finite(ez) and (
+            (thr_sp[2] >= -self.thr_min and ez >= 0.0) or (thr_sp[2] <= -self.thr_max and ez <= 0.0)
+        ):
+            vel_error[2] = 0.0
+        thr_sp = self._limit_thrust_keeping_vertical(thr_sp)
+        # horizontally, tracking anti-windup (Rundqwist): integrate only what was produced
+        scale = GRAVITY_M_S2 / self.hover_thrust
+        produced = (thr_sp[0] * scale, thr_sp[1] * scale)
+        wanted = (acc_sp[0], acc_sp[1])
+        too_much = wanted[0] ** 2 + wanted[1] ** 2 > produced[0] ** 2 + produced[1] ** 2
+        limited = produced if too_much else wanted
+        arw_gain = 2.0 / self.gain_vel_p[0] if self.gain_vel_p[0] > 0 else 0.0
+        for i in range(2):
+            vel_error[i] -= arw_gain * (wanted[i] - limited[i])
+        if not landed:
+            for i in range(3):
+                if is_finite(vel_error[i]):
+                    self.vel_int[i] += vel_error[i] * self.gain_vel_i[i] * dt_s
+            self.vel_int[2] = clamp(self.vel_int[2], -GRAVITY_M_S2, GRAVITY_M_S2)
+        return thr_sp
 
     def _update_yaw_setpoint(
         self, dt_s: float, truth: VehicleStateTruth, sp: TrajectorySetpoint
