@@ -251,7 +251,7 @@ async def test_tcpin_serves_several_clients_and_routes_by_system() -> None:
         await _until(lambda: sink.connection_events.count(False) == 2)
 
 
-async def test_serial_port_carries_frames_both_ways() -> None:
+async def test_serial_port_carries_frames_both_ways_and_reports_the_device_lost() -> None:
     pytest.importorskip("serial")
     controller_fd, device_fd = os.openpty()
     os.set_blocking(controller_fd, False)
@@ -272,6 +272,11 @@ async def test_serial_port_carries_frames_both_ways() -> None:
                 return bytes(received) == _frame(255)
 
             await _until(read_available)
+            os.close(controller_fd)  # the cable is pulled
+            controller_fd = -1
+            await _until(lambda: sink.connection_events == [True, False])
+            assert transport.write(_frame(255), None) is False
     finally:
-        os.close(controller_fd)
+        if controller_fd >= 0:
+            os.close(controller_fd)
         os.close(device_fd)
