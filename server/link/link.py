@@ -116,6 +116,7 @@ class Link:
         except BaseException:
             if tlog is not None:
                 await tlog.close()
+                tlog.path.unlink(missing_ok=True)  # nothing was recorded
             raise
         link._start_background_tasks()
         log.info("link %s open on %s%s", link_name, url,

@@ -2,11 +2,13 @@
 
 import asyncio
 import contextlib
+import os
 import time
 from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 from typing import Any, cast
 
+import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import development as mavlink
 
@@ -285,3 +287,12 @@ async def test_frames_of_unknown_message_ids_are_counted_and_recorded_not_dispat
         path = link.tlog_path
     assert path is not None
     assert any(frame == bytes(unknown) for _, frame in iter_tlog(path))
+
+
+async def test_a_port_already_taken_fails_open_and_leaves_no_tlog(tmp_path: Path) -> None:
+    async with _udpin_link() as first:
+        assert first.local_address is not None
+        taken = f"udpin:127.0.0.1:{first.local_address[1]}"
+        with pytest.raises(OSError, match="in use"):
+            await Link.open(taken, log_dir=tmp_path)
+    assert os.listdir(tmp_path) == []
