@@ -1,0 +1,154 @@
+"""`skyhelm serve` as the Docker image runs it: a real subprocess that starts the simulated
+vehicle, prints one URL, answers with the token, and takes the sim down on Ctrl-C."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import httpx
+import pytest
+
+from server.cli import RedactTokens, build_parser, settings_from_args
+from server.settings import SettingsError
+
+SKYHELM = Path(sys.executable).with_name("skyhelm")
+READY_PREFIX = "SkyHelm ready: "
+
+
+def _children(pid: int) -> list[int]:
+    children: list[int] = []
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        text = (task / "children").read_text().split()
+        children += [int(child) for child in text]
+    return children
+
+
+def _gone(pid: int) -> bool:
+    stat = Path(f"/proc/{pid}/stat")
+    try:
+        return stat.read_text().split(") ")[1].startswith("Z")
+    except FileNotFoundError:
+        return True
+
+
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads process children from /proc")
+def test_serve_prints_url_answers_and_stops_sim_on_sigint(tmp_path: Path) -> None:
+    command = [str(SKYHELM), "serve", "--port", "0", "--sim-speed", "2", "--log-dir", str(tmp_path)]
+    stderr_path = tmp_path / "stderr.log"
+    with stderr_path.open("w") as stderr:
+        server = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=stderr, text=True)
+        try:
+            assert server.stdout is not None
+            line = server.stdout.readline()
+            assert line.startswith(READY_PREFIX), line
+            url = line.removeprefix(READY_PREFIX).strip()
+            base, _, token = url.partition("/?token=")
+            assert base.startswith("http://127.0.0.1:")
+            assert len(token) >= 16
+
+            assert httpx.get(f"{base}/api/v1/health").json()["status"] == "ok"
+            assert httpx.get(f"{base}/api/v1/vehicles").status_code == 401
+            vehicles = httpx.get(
+                f"{base}/api/v1/vehicles", headers={"Authorization": f"Bearer {token}"}
+            ).json()
+            assert [v["id"] for v in vehicles] == [1]
+            assert httpx.get(f"{base}/api/v1/vehicles", params={"token": token}).status_code == 200
+
+            sims = _children(server.pid)
+            assert sims, "the simulated vehicle runs as a child process"
+            server.send_signal(signal.SIGINT)
+            assert server.wait(timeout=20) == 0
+            deadline = time.monotonic() + 10
+            while not all(_gone(pid) for pid in sims):
+                assert time.monotonic() < deadline, "sim child still running after SIGINT"
+                time.sleep(0.1)
+            assert server.stdout.read() == "", "exactly one line on stdout"
+        finally:
+            if server.poll() is None:
+                server.kill()
+                server.wait()
+    log = stderr_path.read_text()
+    assert token not in log, "the token must never be logged"
+    assert list(tmp_path.glob("*.tlog")), "the session is recorded"
+
+
+def test_bad_setting_values_exit_2_with_a_clear_message() -> None:
+    result = subprocess.run(
+        [str(SKYHELM), "serve", "--port", "99999", "--on-operator-loss", "panic"],
+        capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    assert result.returncode == 2
+    assert "port" in result.stderr
+    assert "on_operator_loss" in result.stderr
+    assert "hold-mode" in result.stderr
+    assert result.stdout == ""
+
+
+def test_cli_flags_beat_environment_which_beats_toml(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    config = tmp_path / "skyhelm.toml"
+    config.write_text('port = 9001\nrate_hz = 30.0\nlease_ttl_s = 5.0\non_operator_loss = "land"\n')
+    monkeypatch.setenv("SKYHELM_RATE_HZ", "40")
+    monkeypatch.setenv("SKYHELM_LEASE_TTL_S", "3")
+    args = build_parser().parse_args(["serve", "--config", str(config), "--lease-ttl-s", "1.5"])
+    settings = settings_from_args(args)
+    assert settings.port == 9001  # TOML
+    assert settings.rate_hz == 40.0  # env over TOML
+    assert settings.lease_ttl_s == 1.5  # flag over env
+    assert settings.on_operator_loss == "land"
+
+
+def test_connect_flag_repeats_and_env_takes_a_comma_list(monkeypatch: pytest.MonkeyPatch) -> None:
+    args = build_parser().parse_args(
+        ["serve", "--connect", "udpin:127.0.0.1:0", "--connect", "tcp:127.0.0.1:5760"]
+    )
+    assert settings_from_args(args).connect == ["udpin:127.0.0.1:0", "tcp:127.0.0.1:5760"]
+    monkeypatch.setenv("SKYHELM_CONNECT", "udpin:127.0.0.1:0,udpout:127.0.0.1:9")
+    env_only = settings_from_args(build_parser().parse_args(["serve"]))
+    assert env_only.connect == ["udpin:127.0.0.1:0", "udpout:127.0.0.1:9"]
+
+
+def test_bad_connect_url_and_missing_config_are_refused(tmp_path: Path) -> None:
+    with pytest.raises(SettingsError, match="connect"):
+        settings_from_args(build_parser().parse_args(["serve", "--connect", "carrier-pigeon"]))
+    with pytest.raises(SettingsError, match="does not exist"):
+        settings_from_args(
+            build_parser().parse_args(["serve", "--config", str(tmp_path / "none.toml")])
+        )
+
+
+def test_generated_token_is_random_and_configured_token_is_kept() -> None:
+    first = settings_from_args(build_parser().parse_args(["serve"])).pilot_token()
+    second = settings_from_args(build_parser().parse_args(["serve"])).pilot_token()
+    assert first != second
+    assert len(first) >= 24
+    given = settings_from_args(build_parser().parse_args(["serve", "--token", "s3cret-token"]))
+    assert given.pilot_token() == "s3cret-token"
+
+
+def test_log_filter_redacts_tokens_in_urls() -> None:
+    import logging
+
+    record = logging.LogRecord(
+        "uvicorn.error", logging.INFO, __file__, 1,
+        '%s - "WebSocket %s" [accepted]', ("127.0.0.1", "/api/v1/ws/telemetry?token=abc&x=1"),
+        None,
+    )  # fmt: skip
+    assert RedactTokens().filter(record)
+    assert "abc" not in record.getMessage()
+    assert "token=***&x=1" in record.getMessage()
+
+
+def test_sim_subcommand_execs_python_m_sim() -> None:
+    result = subprocess.run(
+        [str(SKYHELM), "sim", "--help"], capture_output=True, text=True, timeout=60,
+        env={**os.environ},
+    )  # fmt: skip
+    assert result.returncode == 0
+    assert "--airframe" in result.stdout
