@@ -131,6 +131,9 @@ class MulticopterModel:
         self.power_fraction = sum(self.rotors.lagged) / mixer.rotor_count
         force = rotate_body_to_ned(self.truth.q_wxyz, (0.0, 0.0, -thrust_n))
         self.body.step(dt_s, force, (roll, pitch, yaw))
+        v = self.truth.velocity_ned_m_s
+        # still air: what a pitot tube would read is the speed over ground
+        self.truth.airspeed_m_s = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
 
     def request_transition(self, to_fixed_wing: bool, immediate: bool) -> None:
         """Not a VTOL: nothing to do (the commander does not ack the command either)."""

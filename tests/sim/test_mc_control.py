@@ -83,6 +83,7 @@ def test_velocity_setpoint_is_tracked() -> None:
     assert quad.truth.velocity_ned_m_s[1] == pytest.approx(2.0, abs=0.1)
     assert abs(quad.truth.velocity_ned_m_s[0]) < 0.1
     assert quad.truth.position_ned_m[2] == pytest.approx(HOVER_DOWN_M, abs=0.3)
+    assert quad.truth.airspeed_m_s == pytest.approx(2.0, abs=0.15)
 
 
 def test_zero_velocity_stops_the_vehicle_quickly() -> None:
