@@ -202,3 +202,30 @@ async def test_vtol_transition_that_falls_back_to_multicopter_fails(
 
     assert result.outcome is CommandOutcome.FAILED
     assert result.elapsed_ms < 1000
+
+
+async def test_set_home_at_a_place_is_a_command_int_in_deg_e7(scripted: ScriptedSession) -> None:
+    scripted.peer.accept_commands()
+
+    assert (await scripted.vehicle.set_home(47.5, 8.25, 500.0)).ok
+
+    (sent,) = scripted.peer.commands(mavlink.MAV_CMD_DO_SET_HOME)
+    assert sent.get_type() == "COMMAND_INT"
+    assert (sent.param1, sent.x, sent.y, sent.z) == (0, 475000000, 82500000, 500.0)
+
+
+async def test_telemetry_is_requested_again_when_the_vehicle_comes_back() -> None:
+    async with open_scripted() as session:
+        peer = session.peer
+        peer.accept_commands()
+        requests = len(DEFAULT_TELEMETRY_RATES_HZ)
+
+        def first_tries() -> int:  # retries of an early unanswered request do not count
+            sent = peer.commands(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL)
+            return sum(1 for m in sent if m.confirmation == 0)
+
+        await wait_for(lambda: first_tries() == requests, what="first requests")
+        session.vehicle.set_connected(False)
+        session.vehicle.set_connected(True)
+
+        await wait_for(lambda: first_tries() == 2 * requests, what="re-requests")
