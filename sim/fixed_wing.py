@@ -13,8 +13,10 @@ from sim.rigid_body import GRAVITY_M_S2, RigidBody
 from sim.setpoint_guard import safe_setpoint
 from sim.topics import ControlSetpoint, VehicleStateTruth, VtolState
 
-# Wheels: rolling resistance on the runway, and no sideways slip
+# Wheels: rolling resistance on the runway, brakes when no thrust is wanted, no side slip
 ROLLING_FRICTION = 0.03
+BRAKING_FRICTION = 0.3
+BRAKE_BELOW_THROTTLE = 0.05
 
 
 class Airframe:
@@ -66,18 +68,21 @@ class Airframe:
         t = self.truth
         force = rotate_body_to_ned(t.q_wxyz, force_body_n)
         if self.wheels and t.on_ground:
-            force = self._with_wheel_friction(force)
+            braking = self.pusher < BRAKE_BELOW_THROTTLE
+            friction = BRAKING_FRICTION if braking else ROLLING_FRICTION
+            force = self._with_wheel_friction(dt_s, force, friction)
         self.body.step(dt_s, force, moment_body_n_m)
         if self.wheels and t.on_ground:
             self._roll_along_heading()
 
-    def _with_wheel_friction(self, force_ned: Vec3) -> Vec3:
+    def _with_wheel_friction(self, dt_s: float, force_ned: Vec3, friction: float) -> Vec3:
         v = self.truth.velocity_ned_m_s
         speed = math.hypot(v[0], v[1])
         if speed < 1e-3:
             return force_ned
         normal = max(0.0, self.body.mass_kg * GRAVITY_M_S2 + force_ned[2])
-        k = ROLLING_FRICTION * normal / speed
+        # never more than what stops the vehicle within this step (no reversing)
+        k = min(friction * normal, self.body.mass_kg * speed / dt_s) / speed
         return (force_ned[0] - k * v[0], force_ned[1] - k * v[1], force_ned[2])
 
     def _roll_along_heading(self) -> None:

@@ -14,7 +14,7 @@ import math
 from dataclasses import dataclass
 
 from sim.mc_control import ParamReader
-from sim.numeric import clamp, is_finite
+from sim.numeric import clamp, finite_or, is_finite
 from sim.quat import euler_from_quat, rotate_ned_to_body, wrap_pi
 from sim.rigid_body import GRAVITY_M_S2
 from sim.topics import (
@@ -162,7 +162,8 @@ class FixedWingControl:
 
     def _climb_rate_setpoint(self, truth: VehicleStateTruth, sp: TrajectorySetpoint) -> float:
         """Climb rate (m/s, up) towards the setpoint's altitude, its vertical speed, or the
-        altitude held when it has neither."""
+        altitude held when it has neither; within FW_T_CLMB_MAX / FW_T_SINK_MAX and the
+        setpoint's own vertical speed limits (a landing circles down at the land speed)."""
         down = truth.position_ned_m[2]
         if is_finite(sp.position_ned_m[2]):
             self.hold_down_m = math.nan
@@ -174,7 +175,9 @@ class FixedWingControl:
             if not is_finite(self.hold_down_m):
                 self.hold_down_m = down
             climb_sp = -HEIGHT_P_PER_S * (self.hold_down_m - down)
-        return clamp(climb_sp, -self.sink_max_m_s, self.climb_max_m_s)
+        sink_max = min(self.sink_max_m_s, finite_or(sp.max_speed_down_m_s, math.inf))
+        climb_max = min(self.climb_max_m_s, finite_or(sp.max_speed_up_m_s, math.inf))
+        return clamp(climb_sp, -sink_max, climb_max)
 
     def _longitudinal(
         self,

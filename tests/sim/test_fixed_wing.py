@@ -101,6 +101,20 @@ def test_velocity_setpoint_flies_that_course_and_climbs() -> None:
     assert math.hypot(v[0], v[1]) == pytest.approx(14.0, abs=1.5)
 
 
+def test_plane_lands_by_circling_down_at_the_setpoint_sink_rate() -> None:
+    plane = _launched(down_m=-20.0)
+    land = TrajectorySetpoint(position_ned_m=[0.0, 0.0, 1.0], max_speed_down_m_s=1.5)
+    fly(plane, land, 5.0)
+    fastest_sink = fly_peak(plane, land, 5.0, lambda: plane.truth.velocity_ned_m_s[2])
+    assert fastest_sink == pytest.approx(1.5, abs=0.3)
+    touchdown = fly(plane, land, 40.0, until=lambda: plane.truth.on_ground)
+    assert touchdown is not None
+    fly(plane, land, 20.0)
+    assert plane.truth.on_ground
+    assert plane.truth.position_ned_m[2] == 0.0
+    assert math.hypot(*plane.truth.velocity_ned_m_s) < 0.5
+
+
 def test_unpowered_plane_glides_down_and_stops_on_the_ground() -> None:
     plane = _launched(down_m=-20.0)
     fly(plane, TrajectorySetpoint(position_ned_m=[500.0, 0.0, -20.0]), 90.0, armed=False)
