@@ -68,6 +68,8 @@ async def test_mavproxy_connects_shows_mode_arms_and_switches_to_rtl(tmp_path: P
                 await reader
         output = "".join(lines)
         assert "Detected vehicle 1:1" in output
-        assert "COMPONENT_ARM_DISARM: ACCEPTED" in output and armed_seen
+        assert "COMPONENT_ARM_DISARM: ACCEPTED" in output
+        assert armed_seen
         assert "DO_SET_MODE: ACCEPTED" in output
-        assert inst.gcs_link.counters.rx_messages > 0 and inst.api_link.counters.rx_messages == 0
+        assert inst.gcs_link.counters.rx_messages > 0
+        assert inst.api_link.counters.rx_messages == 0

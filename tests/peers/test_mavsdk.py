@@ -23,12 +23,14 @@ async def test_connect_health_and_telemetry(mavsdk_drone: MavsdkFactory) -> None
     assert position.latitude_deg == pytest.approx(47.397742, abs=1e-5)
     assert position.absolute_altitude_m == pytest.approx(489.4, abs=0.5)
     attitude = await first(telemetry.attitude_euler(), lambda a: True, 5.0)
-    assert abs(attitude.roll_deg) < 5 and abs(attitude.pitch_deg) < 5
+    assert abs(attitude.roll_deg) < 5
+    assert abs(attitude.pitch_deg) < 5
     assert str(await first(telemetry.flight_mode(), lambda m: True, 5.0)) == "HOLD"
     assert await first(telemetry.armed(), lambda a: True, 5.0) is False
     assert str(await first(telemetry.landed_state(), lambda s: True, 5.0)) == "ON_GROUND"
     battery = await first(telemetry.battery(), lambda b: True, 10.0)
-    assert 12.0 < battery.voltage_v < 17.0 and battery.remaining_percent > 50
+    assert 12.0 < battery.voltage_v < 17.0
+    assert battery.remaining_percent > 50
     home = await first(telemetry.home(), lambda h: True, 10.0)
     assert home.latitude_deg == pytest.approx(47.397742, abs=1e-5)
     await drone.action.set_takeoff_altitude(4.0)
@@ -99,7 +101,7 @@ async def test_vtol_transitions_to_fixed_wing_and_back(mavsdk_drone: MavsdkFacto
         airframes.make_airframe("vtol", airframes.default_params("vtol"))
     except (ValueError, KeyError):
         pytest.skip("the vtol airframe model is not available yet")
-    drone, sim = await mavsdk_drone(airframe="vtol")
+    drone, _sim = await mavsdk_drone(airframe="vtol")
     await first(drone.telemetry.health_all_ok(), bool, 20.0)
     await drone.action.set_takeoff_altitude(30.0)
     await drone.action.arm()

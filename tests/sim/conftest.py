@@ -148,7 +148,8 @@ class RecordingLink:
     def send(self, msg: Any) -> None:
         data = msg.pack(self._codec)
         decoded = self._parser.parse_buffer(data)
-        assert decoded is not None and len(decoded) == 1
+        assert decoded is not None
+        assert len(decoded) == 1
         self.sent.extend(decoded)
 
     def of_type(self, type_name: str) -> list[Any]:
@@ -253,7 +254,7 @@ def make_harness() -> Iterator[Callable[..., Harness]]:
             harness.wait_ready()
         return harness
 
-    yield make
+    return make
 
 
 @pytest.fixture

@@ -29,7 +29,8 @@ def test_ack_goes_to_the_sender_with_its_ids(harness: Harness) -> None:
 
 def test_commands_answer_on_the_link_they_came_from(harness: Harness) -> None:
     harness.command_long(ARM, 1, link=harness.gcs)
-    assert harness.gcs.acks(ARM) and not harness.api.acks(ARM)
+    assert harness.gcs.acks(ARM)
+    assert not harness.api.acks(ARM)
 
 
 @pytest.mark.parametrize(("target_system", "target_component"), [(2, 1), (0, 1), (1, 5)])
@@ -50,7 +51,8 @@ def test_version_request_is_answered_for_target_system_zero(harness: Harness) ->
                          mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION, target_system=0)
     assert harness.last_ack(mavlink.MAV_CMD_REQUEST_MESSAGE) == ACCEPTED
     (version,) = harness.api.of_type("AUTOPILOT_VERSION")
-    assert version.flight_sw_version >> 24 == 1 and (version.flight_sw_version >> 16) & 0xFF == 16
+    assert version.flight_sw_version >> 24 == 1
+    assert (version.flight_sw_version >> 16) & 0xFF == 16
 
 
 def test_unknown_command_is_unsupported(harness: Harness) -> None:
@@ -252,7 +254,8 @@ def test_do_set_home_current_and_given_position(harness: Harness) -> None:
     assert v.commander.home.lat_deg == pytest.approx(47.398, abs=1e-5)
     assert v.commander.home.alt_m == 495.0
     home_msgs = harness.api.of_type("HOME_POSITION")
-    assert home_msgs and home_msgs[-1].latitude == pytest.approx(473980000, abs=100)
+    assert home_msgs
+    assert home_msgs[-1].latitude == pytest.approx(473980000, abs=100)
     harness.command_long(mavlink.MAV_CMD_DO_SET_HOME, 1)
     assert v.commander.home.position_ned_m == pytest.approx(v.truth.position_ned_m)
 
@@ -262,4 +265,5 @@ def test_repeated_commands_are_safe(harness: Harness) -> None:
         harness.command_long(mavlink.MAV_CMD_NAV_TAKEOFF, *([math.nan] * 7))
         harness.arm()
     assert [a.result for a in harness.api.acks(ARM)] == [ACCEPTED] * 3
-    assert harness.vehicle.mode_name == "AUTO_TAKEOFF" and harness.vehicle.armed
+    assert harness.vehicle.mode_name == "AUTO_TAKEOFF"
+    assert harness.vehicle.armed

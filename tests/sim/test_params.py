@@ -75,7 +75,8 @@ def test_param_set_stores_decodes_bytewise_and_echoes(harness: Harness) -> None:
     harness.deliver(mavlink.MAVLink_param_set_message(1, 1, b"COM_OBL_RC_ACT", wire, 6))
     assert harness.vehicle.params.value("COM_OBL_RC_ACT") == 4
     echoes = [m for m in harness.api.of_type("PARAM_VALUE") if m.param_id == "COM_OBL_RC_ACT"]
-    assert echoes and decode_param_value(echoes[-1].param_value, 6) == 4
+    assert echoes
+    assert decode_param_value(echoes[-1].param_value, 6) == 4
     assert harness.gcs.of_type("PARAM_VALUE"), "PX4 announces the change on every link"
 
 

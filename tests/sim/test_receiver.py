@@ -39,10 +39,12 @@ def test_setpoint_counts_as_proof_of_life_in_any_mode(harness: Harness) -> None:
 def test_ignore_bits_make_axes_nan(harness: Harness) -> None:
     harness.local_ned(POSITION_ONLY | 2, position=(1.0, 2.0, -3.0))  # also ignore y
     sp = offboard_setpoint(harness)
-    assert sp.position_ned_m[0] == 1.0 and math.isnan(sp.position_ned_m[1])
+    assert sp.position_ned_m[0] == 1.0
+    assert math.isnan(sp.position_ned_m[1])
     assert sp.position_ned_m[2] == -3.0
     assert all(math.isnan(v) for v in sp.velocity_ned_m_s + sp.acceleration_ned_m_s2)
-    assert sp.yaw_rad == 0.0 and math.isnan(sp.yawspeed_rad_s)
+    assert sp.yaw_rad == 0.0
+    assert math.isnan(sp.yawspeed_rad_s)
 
 
 @pytest.mark.parametrize("frame", [7, 9, 3])
