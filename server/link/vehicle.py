@@ -13,7 +13,7 @@ import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from pymavlink.dialects.v20 import development as mavlink
 
@@ -32,22 +32,14 @@ from server.link.setpoints import PositionNed, SentSetpoint, Setpoint, describe,
 from server.link.state import (
     LANDED_STATE_NAMES,
     VTOL_STATE_NAMES,
-    AttitudeState,
-    BatteryState,
-    GlobalState,
-    GpsState,
-    HomeState,
-    OriginState,
-    PositionNedState,
     StateSubscription,
-    StatusText,
     StreamStats,
     SubscriptionHub,
     VehicleState,
-    VelocityNedState,
 )
-from server.link.statustext import RecentTexts, StatusTextAssembler, severity_name
+from server.link.statustext import RecentTexts
 from server.link.streamer import DEFAULT_RATE_HZ, SetpointStreamer
+from server.link.telemetry import Telemetry, enum_name
 
 if TYPE_CHECKING:
     from server.link.link import Link
@@ -70,7 +62,6 @@ MAV_VTOL_STATE_MC = 3
 MAV_VTOL_STATE_FW = 4
 MAVLINK_MSG_ID_SET_GPS_GLOBAL_ORIGIN = 48
 PX4_ARM_DISARM_FORCE = 21196
-STATUSTEXT_KEEP = 20
 NAN = math.nan
 
 # What the dashboard needs, in Hz. CURRENT_MODE at >= 5 Hz because HEARTBEAT (1 Hz) shows
@@ -90,24 +81,6 @@ DEFAULT_TELEMETRY_RATES_HZ: Mapping[int, float] = {
 }
 # Sent once on connection: their values do not change often enough to stream.
 ONE_SHOT_MESSAGES = (mavlink.MAVLINK_MSG_ID_HOME_POSITION, mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN)
-
-# PX4's RTL announces its phases in STATUSTEXT ("RTL: climb to ...", "RTL: land at ...")
-_RTL_PHASES = (
-    ("landed", "LANDED"),
-    ("move to land", "MOVE_TO_LAND"),
-    ("climb", "CLIMBING"),
-    ("start return", "RETURNING"),
-    ("return at", "RETURNING"),
-    ("descend", "DESCENDING"),
-    ("loiter", "LOITERING"),
-    ("land", "LANDING"),
-    ("completed", "COMPLETED"),
-)
-
-
-def _enum_name(enum: str, value: int, prefix: str) -> str:
-    entry = mavlink.enums[enum].get(value)
-    return entry.name.removeprefix(prefix) if entry is not None else str(value)
 
 
 class Vehicle:
@@ -132,15 +105,12 @@ class Vehicle:
         self.sysid = sysid
         self.compid = compid
         self.envelope = Envelope()
-        self.mav_type = heartbeat.type if heartbeat is not None else 0
-        self.autopilot = heartbeat.autopilot if heartbeat is not None else 0
         self.connected = True
         self._created_s = time.monotonic()
         self._events = EventHub()
         self._hub = SubscriptionHub(self.snapshot)
         self._changed = asyncio.Event()
         self._texts = RecentTexts(time.monotonic)
-        self._assembler = StatusTextAssembler(time.monotonic)
         self.commands = CommandProtocol(
             send=link.send, mav=link.mav, target_system=sysid, target_component=compid,
             own_system=link.mav.srcSystem, texts=self._texts, publish=self.publish_event,
@@ -155,66 +125,28 @@ class Vehicle:
         self._telemetry_task: asyncio.Task[None] | None = None
         self._telemetry_refused: dict[str, str] = {}
 
-        # state as last reported
-        self._last_heartbeat_s = time.monotonic()
-        self._base_mode = 0
-        self._mode = "UNKNOWN"
-        self._user_mode: str | None = None
-        self._current_mode_s: float | None = None
-        self._armed = False
-        self._system_status = "UNINIT"
-        self._landed_state = 0
-        self._vtol_state = 0
-        self._position: PositionNedState | None = None
-        self._velocity: VelocityNedState | None = None
-        self._global: GlobalState | None = None
-        self._attitude: AttitudeState | None = None
-        self._ground_speed_m_s: float | None = None
-        self._air_speed_m_s: float | None = None
-        self._climb_rate_m_s: float | None = None
-        self._heading_deg: float | None = None
-        self._battery: BatteryState | None = None
-        self._gps: GpsState | None = None
-        self._home: HomeState | None = None
-        self._origin: OriginState | None = None
+        self.telemetry = Telemetry(
+            heartbeat=heartbeat,
+            texts=self._texts,
+            publish=self.publish_event,
+            on_mode=self._apply_stream_policy,
+        )
         self._setpoint: Setpoint | None = None
-        self._target_ned: PositionNedState | None = None
-        self._actuators: tuple[float, ...] = ()
-        self._statustext: list[StatusText] = []
-        self._rtl_phase: str | None = None
         self._offboard_engaged = False
         self._updated_s = time.monotonic()
-
-        self._handlers: dict[str, Callable[[Any], None]] = {
-            "HEARTBEAT": self._on_heartbeat,
-            "CURRENT_MODE": self._on_current_mode,
-            "EXTENDED_SYS_STATE": self._on_extended_sys_state,
-            "LOCAL_POSITION_NED": self._on_local_position,
-            "GLOBAL_POSITION_INT": self._on_global_position,
-            "ATTITUDE": self._on_attitude,
-            "VFR_HUD": self._on_vfr_hud,
-            "SYS_STATUS": self._on_sys_status,
-            "BATTERY_STATUS": self._on_battery_status,
-            "GPS_RAW_INT": self._on_gps_raw,
-            "HOME_POSITION": self._on_home,
-            "GPS_GLOBAL_ORIGIN": self._on_origin,
-            "POSITION_TARGET_LOCAL_NED": self._on_position_target,
-            "SERVO_OUTPUT_RAW": self._on_servo_output,
-            "ACTUATOR_OUTPUT_STATUS": self._on_actuator_output,
-            "STATUSTEXT": self._on_statustext,
-            "COMMAND_ACK": self._on_command_ack,
-            "PARAM_VALUE": self.params.handle_param_value,
-        }
         self._start_telemetry_requests()
 
     # -- feeding (called by the Link) ----------------------------------------------
     def handle_message(self, msg: mavlink.MAVLink_message) -> None:
-        if msg.get_srcComponent() != self.compid and msg.get_type() != "STATUSTEXT":
+        kind = msg.get_type()
+        if msg.get_srcComponent() != self.compid and kind != "STATUSTEXT":
             return
-        handler = self._handlers.get(msg.get_type())
-        if handler is None:
+        if kind == "COMMAND_ACK":
+            self.commands.handle_ack(msg, msg.get_srcComponent())
+        elif kind == "PARAM_VALUE":
+            self.params.handle_param_value(msg)
+        elif not self.telemetry.handle(msg):
             return
-        handler(msg)
         self._updated_s = time.monotonic()
         self._changed.set()
         self._hub.notify()
@@ -240,38 +172,47 @@ class Vehicle:
         self._hub.close_all()
 
     # -- observing --------------------------------------------------------------------
+    @property
+    def mav_type(self) -> int:
+        return self.telemetry.mav_type
+
+    @property
+    def autopilot(self) -> int:
+        return self.telemetry.autopilot
+
     def snapshot(self) -> VehicleState:
+        t = self.telemetry
         return VehicleState(
             sysid=self.sysid,
             compid=self.compid,
-            mav_type=_enum_name("MAV_TYPE", self.mav_type, "MAV_TYPE_"),
-            autopilot=_enum_name("MAV_AUTOPILOT", self.autopilot, "MAV_AUTOPILOT_"),
+            mav_type=enum_name("MAV_TYPE", t.mav_type, "MAV_TYPE_"),
+            autopilot=enum_name("MAV_AUTOPILOT", t.autopilot, "MAV_AUTOPILOT_"),
             connected=self.connected,
-            last_heartbeat_age_s=time.monotonic() - self._last_heartbeat_s,
-            mode=self._mode,
-            user_mode=self._user_mode,
-            armed=self._armed,
-            system_status=self._system_status,
-            landed_state=LANDED_STATE_NAMES[self._landed_state],
-            vtol_state=VTOL_STATE_NAMES[self._vtol_state],
-            position_ned=self._position,
-            velocity_ned=self._velocity,
-            global_position=self._global,
-            attitude=self._attitude,
-            ground_speed_m_s=self._ground_speed_m_s,
-            air_speed_m_s=self._air_speed_m_s,
-            climb_rate_m_s=self._climb_rate_m_s,
-            heading_deg=self._heading_deg,
-            battery=self._battery,
-            gps=self._gps,
-            home=self._home,
-            origin=self._origin,
+            last_heartbeat_age_s=time.monotonic() - t.last_heartbeat_s,
+            mode=t.mode,
+            user_mode=t.user_mode,
+            armed=t.armed,
+            system_status=t.system_status,
+            landed_state=LANDED_STATE_NAMES[t.landed_state],
+            vtol_state=VTOL_STATE_NAMES[t.vtol_state],
+            position_ned=t.position,
+            velocity_ned=t.velocity,
+            global_position=t.global_position,
+            attitude=t.attitude,
+            ground_speed_m_s=t.ground_speed_m_s,
+            air_speed_m_s=t.air_speed_m_s,
+            climb_rate_m_s=t.climb_rate_m_s,
+            heading_deg=t.heading_deg,
+            battery=t.battery,
+            gps=t.gps,
+            home=t.home,
+            origin=t.origin,
             setpoint=describe(self._setpoint) if self._setpoint is not None else None,
-            target_ned=self._target_ned,
+            target_ned=t.target_ned,
             stream=self._streamer.stats(),
-            actuator_outputs=self._actuators,
-            statustext=tuple(self._statustext),
-            rtl_phase=self._rtl_phase,
+            actuator_outputs=t.actuators,
+            statustext=tuple(t.statustext),
+            rtl_phase=t.rtl_phase,
             link=self.link.stats(),
             updated_s=self._updated_s,
             telemetry_refused=tuple(sorted(self._telemetry_refused)),
@@ -343,12 +284,14 @@ class Vehicle:
         main, sub = modes.main_sub_from_name(target)
         started = asyncio.get_running_loop().time()
         result = await self.command_long(
-            MAV_CMD_DO_SET_MODE, modes.set_mode_base_mode(self._armed), main, sub
+            MAV_CMD_DO_SET_MODE, modes.set_mode_base_mode(self.telemetry.armed), main, sub
         )
         result = replace(result, command=f"SET_MODE:{target}")
         if not result.ok:
             return result
-        confirmed = await self.wait_until(lambda: self._mode == target, self.mode_confirm_timeout_s)
+        confirmed = await self.wait_until(
+            lambda: self.telemetry.mode == target, self.mode_confirm_timeout_s
+        )
         elapsed_ms = (asyncio.get_running_loop().time() - started) * 1000.0
         if confirmed:
             return replace(result, elapsed_ms=elapsed_ms)
@@ -356,7 +299,7 @@ class Vehicle:
             result,
             outcome=CommandOutcome.NOT_CONFIRMED,
             elapsed_ms=elapsed_ms,
-            reason=f"accepted, but the vehicle still reports {self._mode}",
+            reason=f"accepted, but the vehicle still reports {self.telemetry.mode}",
         )
 
     async def reposition(
@@ -406,20 +349,22 @@ class Vehicle:
 
         def settled() -> bool:
             nonlocal in_transition
-            in_transition = in_transition or self._vtol_state in (
+            in_transition = in_transition or self.telemetry.vtol_state in (
                 MAV_VTOL_STATE_TRANSITION_TO_FW,
                 MAV_VTOL_STATE_TRANSITION_TO_MC,
             )
             # back where it started after a transition: PX4 aborted it (quadchute, timeout)
-            return self._vtol_state == target or (in_transition and self._vtol_state == opposite)
+            return self.telemetry.vtol_state == target or (
+                in_transition and self.telemetry.vtol_state == opposite
+            )
 
         await self.wait_until(settled, timeout_s)
         elapsed_ms = (asyncio.get_running_loop().time() - started) * 1000.0
-        if self._vtol_state == target:
+        if self.telemetry.vtol_state == target:
             return replace(result, elapsed_ms=elapsed_ms)
         outcome = CommandOutcome.FAILED if in_transition else CommandOutcome.NOT_CONFIRMED
         return replace(result, outcome=outcome, elapsed_ms=elapsed_ms,
-                       reason=f"vtol_state is {VTOL_STATE_NAMES[self._vtol_state]}"
+                       reason=f"vtol_state is {VTOL_STATE_NAMES[self.telemetry.vtol_state]}"
                               f" after {elapsed_ms / 1000:.1f} s")  # fmt: skip
 
     async def set_gps_origin(
@@ -432,7 +377,7 @@ class Vehicle:
         started = loop.time()
 
         def matches() -> bool:
-            o = self._origin
+            o = self.telemetry.origin
             return (o is not None and round(o.lat_deg * 1e7) == lat_e7
                     and round(o.lon_deg * 1e7) == lon_e7
                     and abs(o.alt_amsl_m - alt_amsl_m) < 0.01)  # fmt: skip
@@ -467,12 +412,13 @@ class Vehicle:
         if lat_deg is None or lon_deg is None:
             raise ValueError("give both lat_deg and lon_deg, or neither")
         if alt_amsl_m is None:
-            alt_amsl_m = self._global.alt_amsl_m if self._global is not None else NAN
+            here = self.telemetry.global_position
+            alt_amsl_m = here.alt_amsl_m if here is not None else NAN
         where = CommandInt(MAV_FRAME_GLOBAL, round(lat_deg * 1e7), round(lon_deg * 1e7), alt_amsl_m)
         return await self.commands.command_int(MAV_CMD_DO_SET_HOME, where, 0)
 
     def _home_alt_amsl(self) -> float | None:
-        return self._home.alt_amsl_m if self._home is not None else None
+        return self.telemetry.home.alt_amsl_m if self.telemetry.home is not None else None
 
     def _not_sent(self, command: int, reason: str) -> CommandResult:
         return CommandResult(
@@ -504,8 +450,8 @@ class Vehicle:
         self._checked(sp, self.envelope)
 
     def _checked(self, sp: Setpoint, envelope: Envelope) -> Setpoint:
-        position = self._position
-        yaw = self._attitude.yaw_deg if self._attitude is not None else None
+        position = self.telemetry.position
+        yaw = self.telemetry.attitude.yaw_deg if self.telemetry.attitude is not None else None
         try:
             resolved = resolve(
                 sp,
@@ -515,12 +461,12 @@ class Vehicle:
             )  # fmt: skip
         except LookupError as exc:
             raise SetpointRejected(f"cannot convert the offset: {exc}") from None
-        vclass = vehicle_class(self.mav_type, VTOL_STATE_NAMES[self._vtol_state])
+        vclass = vehicle_class(self.mav_type, VTOL_STATE_NAMES[self.telemetry.vtol_state])
         check(resolved, vclass, envelope, self._reference())
         return resolved
 
     def _reference(self) -> Reference:
-        home = self._home
+        home = self.telemetry.home
         if home is None:
             return Reference()
         return Reference(
@@ -542,10 +488,10 @@ class Vehicle:
     async def hold_position_setpoint(self) -> SentSetpoint:
         """Stream "stay here": current position and yaw. Skips the envelope, since a
         vehicle already outside it must still be able to stop."""
-        position = self._position
+        position = self.telemetry.position
         if position is None:
             raise SetpointRejected("no local position yet")
-        yaw = self._attitude.yaw_deg if self._attitude is not None else None
+        yaw = self.telemetry.attitude.yaw_deg if self.telemetry.attitude is not None else None
         hold = PositionNed(position.north_m, position.east_m, position.down_m, yaw)
         return self._stream(self._checked(hold, Envelope(None, None, None, None)))
 
@@ -580,7 +526,8 @@ class Vehicle:
     def _apply_stream_policy(self) -> None:
         """Keep streaming while the user's intended mode is OFFBOARD (PX4 returns to it by
         itself after a blip); stop once the user chose another mode."""
-        intended = self._user_mode if self._user_mode is not None else self._mode
+        t = self.telemetry
+        intended = t.user_mode if t.user_mode is not None else t.mode
         if intended == "OFFBOARD":
             self._offboard_engaged = True
         elif self._offboard_engaged:
@@ -625,141 +572,3 @@ class Vehicle:
             return
         self._telemetry_refused[name] = result.outcome.value
         self.publish_event("stream", {"message": name, "outcome": result.outcome.value})
-
-    # -- message handlers -----------------------------------------------------------------
-    def _set_mode_name(self, mode: str) -> None:
-        if mode != self._mode:
-            old, self._mode = self._mode, mode
-            self.publish_event("mode", {"mode": mode, "previous": old})
-            if mode != "RTL":
-                self._rtl_phase = None
-
-    def _on_heartbeat(self, msg: mavlink.MAVLink_heartbeat_message) -> None:
-        self._last_heartbeat_s = time.monotonic()
-        self.mav_type = msg.type
-        self.autopilot = msg.autopilot
-        self._base_mode = msg.base_mode
-        self._system_status = _enum_name("MAV_STATE", msg.system_status, "MAV_STATE_")
-        armed = bool(msg.base_mode & modes.MAV_MODE_FLAG_SAFETY_ARMED)
-        if armed != self._armed:
-            self._armed = armed
-            self.publish_event("armed", {"armed": armed})
-        current_mode_fresh = (
-            self._current_mode_s is not None and time.monotonic() - self._current_mode_s < 2.0
-        )
-        if msg.base_mode & modes.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED and not current_mode_fresh:
-            self._set_mode_name(modes.name_from_custom_mode(msg.custom_mode))
-            self._apply_stream_policy()
-
-    def _on_current_mode(self, msg: mavlink.MAVLink_current_mode_message) -> None:
-        self._current_mode_s = time.monotonic()
-        self._set_mode_name(modes.name_from_custom_mode(msg.custom_mode))
-        if msg.intended_custom_mode:
-            self._user_mode = modes.name_from_custom_mode(msg.intended_custom_mode)
-        self._apply_stream_policy()
-
-    def _on_extended_sys_state(self, msg: mavlink.MAVLink_extended_sys_state_message) -> None:
-        if 0 <= msg.landed_state < len(LANDED_STATE_NAMES):
-            self._landed_state = msg.landed_state
-        if 0 <= msg.vtol_state < len(VTOL_STATE_NAMES) and msg.vtol_state != self._vtol_state:
-            self._vtol_state = msg.vtol_state
-            self.publish_event("vtol", {"vtol_state": VTOL_STATE_NAMES[msg.vtol_state]})
-
-    def _on_local_position(self, msg: mavlink.MAVLink_local_position_ned_message) -> None:
-        self._position = PositionNedState(msg.x, msg.y, msg.z)
-        self._velocity = VelocityNedState(msg.vx, msg.vy, msg.vz)
-
-    def _on_global_position(self, msg: mavlink.MAVLink_global_position_int_message) -> None:
-        self._global = GlobalState(
-            msg.lat / 1e7, msg.lon / 1e7, msg.alt / 1e3, msg.relative_alt / 1e3
-        )
-        if msg.hdg != 0xFFFF:
-            self._heading_deg = msg.hdg / 100.0
-
-    def _on_attitude(self, msg: mavlink.MAVLink_attitude_message) -> None:
-        d = math.degrees
-        self._attitude = AttitudeState(
-            d(msg.roll),
-            d(msg.pitch),
-            d(msg.yaw),
-            d(msg.rollspeed),
-            d(msg.pitchspeed),
-            d(msg.yawspeed),
-        )
-
-    def _on_vfr_hud(self, msg: mavlink.MAVLink_vfr_hud_message) -> None:
-        self._air_speed_m_s = msg.airspeed
-        self._ground_speed_m_s = msg.groundspeed
-        self._climb_rate_m_s = msg.climb
-        self._heading_deg = float(msg.heading)
-
-    def _on_sys_status(self, msg: mavlink.MAVLink_sys_status_message) -> None:
-        self._battery = BatteryState(
-            None if msg.voltage_battery == 0xFFFF else msg.voltage_battery / 1000.0,
-            None if msg.current_battery < 0 else msg.current_battery / 100.0,
-            None if msg.battery_remaining < 0 else float(msg.battery_remaining),
-        )
-
-    def _on_battery_status(self, msg: mavlink.MAVLink_battery_status_message) -> None:
-        cells = [v for v in msg.voltages if v != 0xFFFF]
-        self._battery = BatteryState(
-            sum(cells) / 1000.0 if cells else None,
-            None if msg.current_battery < 0 else msg.current_battery / 100.0,
-            None if msg.battery_remaining < 0 else float(msg.battery_remaining),
-        )
-
-    def _on_gps_raw(self, msg: mavlink.MAVLink_gps_raw_int_message) -> None:
-        self._gps = GpsState(
-            _enum_name("GPS_FIX_TYPE", msg.fix_type, "GPS_FIX_TYPE_"),
-            msg.satellites_visible,
-            None if msg.eph == 0xFFFF else msg.eph / 100.0,
-        )
-
-    def _on_home(self, msg: mavlink.MAVLink_home_position_message) -> None:
-        self._home = HomeState(
-            msg.latitude / 1e7, msg.longitude / 1e7, msg.altitude / 1e3, msg.x, msg.y, msg.z
-        )
-
-    def _on_origin(self, msg: mavlink.MAVLink_gps_global_origin_message) -> None:
-        self._origin = OriginState(msg.latitude / 1e7, msg.longitude / 1e7, msg.altitude / 1e3)
-
-    def _on_position_target(self, msg: mavlink.MAVLink_position_target_local_ned_message) -> None:
-        self._target_ned = PositionNedState(msg.x, msg.y, msg.z)
-
-    def _on_servo_output(self, msg: mavlink.MAVLink_servo_output_raw_message) -> None:
-        raw = [getattr(msg, f"servo{i}_raw", 0) for i in range(1, 17)]
-        self._actuators = tuple(_pwm_to_unit(v) for v in raw if v)
-
-    def _on_actuator_output(self, msg: mavlink.MAVLink_actuator_output_status_message) -> None:
-        values = msg.actuator[: msg.active]
-        self._actuators = tuple(
-            _pwm_to_unit(v) if v > 2.0 else min(max(v, 0.0), 1.0) for v in values
-        )
-
-    def _on_command_ack(self, msg: mavlink.MAVLink_command_ack_message) -> None:
-        self.commands.handle_ack(msg, msg.get_srcComponent())
-
-    def _on_statustext(self, msg: mavlink.MAVLink_statustext_message) -> None:
-        text = msg.text if isinstance(msg.text, str) else msg.text.decode("utf-8", "replace")
-        for severity, whole in self._assembler.feed(
-            msg.severity, text.rstrip("\0"), getattr(msg, "id", 0), getattr(msg, "chunk_seq", 0)
-        ):
-            self._add_statustext(severity, whole)
-
-    def _add_statustext(self, severity: int, text: str) -> None:
-        entry = StatusText(time.time(), severity_name(severity), text)
-        self._statustext.append(entry)
-        del self._statustext[:-STATUSTEXT_KEEP]
-        self._texts.add(severity, text)
-        self.publish_event("statustext", {"severity": entry.severity, "text": text})
-        lowered = text.lower()
-        if lowered.startswith("rtl"):
-            for keyword, phase in _RTL_PHASES:
-                if keyword in lowered:
-                    self._rtl_phase = phase
-                    break
-
-
-def _pwm_to_unit(pwm: float) -> float:
-    """PX4 motor PWM 1000..2000 us as 0..1."""
-    return min(max((pwm - 1000.0) / 1000.0, 0.0), 1.0)

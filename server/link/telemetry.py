@@ -1,0 +1,259 @@
+"""What a vehicle last reported: telemetry messages decoded into state parts (units in
+names), STATUSTEXTs reassembled, events published when mode, arming or VTOL state change."""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from typing import Any
+
+from pymavlink.dialects.v20 import development as mavlink
+
+from server.link import modes
+from server.link.state import (
+    LANDED_STATE_NAMES,
+    VTOL_STATE_NAMES,
+    AttitudeState,
+    BatteryState,
+    GlobalState,
+    GpsState,
+    HomeState,
+    OriginState,
+    PositionNedState,
+    StatusText,
+    VelocityNedState,
+)
+from server.link.statustext import RecentTexts, StatusTextAssembler, severity_name
+
+STATUSTEXT_KEEP = 20
+# HEARTBEAT (1 Hz) shows failsafe mode changes late, so while CURRENT_MODE keeps coming it
+# alone says the mode; HEARTBEAT takes over when it has been silent this long.
+CURRENT_MODE_FRESH_S = 2.0
+
+# PX4's RTL announces its phases in STATUSTEXT ("RTL: climb to ...", "RTL: land at ...");
+# the first keyword found names the phase, so the more specific ones come first.
+_RTL_PHASES = (
+    ("landed", "LANDED"),
+    ("move to land", "MOVE_TO_LAND"),
+    ("climb", "CLIMBING"),
+    ("start return", "RETURNING"),
+    ("return at", "RETURNING"),
+    ("descend", "DESCENDING"),
+    ("loiter", "LOITERING"),
+    ("land", "LANDING"),
+    ("completed", "COMPLETED"),
+)
+
+
+def enum_name(enum: str, value: int, prefix: str) -> str:
+    entry = mavlink.enums[enum].get(value)
+    return entry.name.removeprefix(prefix) if entry is not None else str(value)
+
+
+def _pwm_to_unit(pwm: float) -> float:
+    """PX4 motor PWM 1000..2000 us as 0..1."""
+    return min(max((pwm - 1000.0) / 1000.0, 0.0), 1.0)
+
+
+class Telemetry:
+    """The latest reported value of each state part, updated by handle()."""
+
+    def __init__(
+        self,
+        *,
+        heartbeat: mavlink.MAVLink_heartbeat_message | None,
+        texts: RecentTexts,
+        publish: Callable[[str, dict[str, object]], None],
+        on_mode: Callable[[], None],
+    ) -> None:
+        self._texts = texts
+        self._publish = publish
+        self._on_mode = on_mode
+        self._assembler = StatusTextAssembler(time.monotonic)
+        self._current_mode_s: float | None = None
+        self.mav_type = heartbeat.type if heartbeat is not None else 0
+        self.autopilot = heartbeat.autopilot if heartbeat is not None else 0
+        self.last_heartbeat_s = time.monotonic()
+        self.mode = "UNKNOWN"
+        self.user_mode: str | None = None
+        self.armed = False
+        self.system_status = "UNINIT"
+        self.landed_state = 0
+        self.vtol_state = 0
+        self.position: PositionNedState | None = None
+        self.velocity: VelocityNedState | None = None
+        self.global_position: GlobalState | None = None
+        self.attitude: AttitudeState | None = None
+        self.ground_speed_m_s: float | None = None
+        self.air_speed_m_s: float | None = None
+        self.climb_rate_m_s: float | None = None
+        self.heading_deg: float | None = None
+        self.battery: BatteryState | None = None
+        self.gps: GpsState | None = None
+        self.home: HomeState | None = None
+        self.origin: OriginState | None = None
+        self.target_ned: PositionNedState | None = None
+        self.actuators: tuple[float, ...] = ()
+        self.statustext: list[StatusText] = []
+        self.rtl_phase: str | None = None
+        self._handlers: dict[str, Callable[[Any], None]] = {
+            "HEARTBEAT": self._on_heartbeat,
+            "CURRENT_MODE": self._on_current_mode,
+            "EXTENDED_SYS_STATE": self._on_extended_sys_state,
+            "LOCAL_POSITION_NED": self._on_local_position,
+            "GLOBAL_POSITION_INT": self._on_global_position,
+            "ATTITUDE": self._on_attitude,
+            "VFR_HUD": self._on_vfr_hud,
+            "SYS_STATUS": self._on_sys_status,
+            "BATTERY_STATUS": self._on_battery_status,
+            "GPS_RAW_INT": self._on_gps_raw,
+            "HOME_POSITION": self._on_home,
+            "GPS_GLOBAL_ORIGIN": self._on_origin,
+            "POSITION_TARGET_LOCAL_NED": self._on_position_target,
+            "SERVO_OUTPUT_RAW": self._on_servo_output,
+            "ACTUATOR_OUTPUT_STATUS": self._on_actuator_output,
+            "STATUSTEXT": self._on_statustext,
+        }
+
+    def handle(self, msg: mavlink.MAVLink_message) -> bool:
+        """Take in a message; False if it carries no telemetry."""
+        handler = self._handlers.get(msg.get_type())
+        if handler is None:
+            return False
+        handler(msg)
+        return True
+
+    @property
+    def landed_state_name(self) -> str:
+        return LANDED_STATE_NAMES[self.landed_state]
+
+    @property
+    def vtol_state_name(self) -> str:
+        return VTOL_STATE_NAMES[self.vtol_state]
+
+    def _set_mode(self, mode: str) -> None:
+        if mode != self.mode:
+            previous, self.mode = self.mode, mode
+            self._publish("mode", {"mode": mode, "previous": previous})
+            if mode != "RTL":
+                self.rtl_phase = None
+
+    def _on_heartbeat(self, msg: mavlink.MAVLink_heartbeat_message) -> None:
+        self.last_heartbeat_s = time.monotonic()
+        self.mav_type = msg.type
+        self.autopilot = msg.autopilot
+        self.system_status = enum_name("MAV_STATE", msg.system_status, "MAV_STATE_")
+        armed = bool(msg.base_mode & modes.MAV_MODE_FLAG_SAFETY_ARMED)
+        if armed != self.armed:
+            self.armed = armed
+            self._publish("armed", {"armed": armed})
+        current_mode_fresh = (
+            self._current_mode_s is not None
+            and time.monotonic() - self._current_mode_s < CURRENT_MODE_FRESH_S
+        )
+        if msg.base_mode & modes.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED and not current_mode_fresh:
+            self._set_mode(modes.name_from_custom_mode(msg.custom_mode))
+            self._on_mode()
+
+    def _on_current_mode(self, msg: mavlink.MAVLink_current_mode_message) -> None:
+        self._current_mode_s = time.monotonic()
+        self._set_mode(modes.name_from_custom_mode(msg.custom_mode))
+        if msg.intended_custom_mode:
+            self.user_mode = modes.name_from_custom_mode(msg.intended_custom_mode)
+        self._on_mode()
+
+    def _on_extended_sys_state(self, msg: mavlink.MAVLink_extended_sys_state_message) -> None:
+        if 0 <= msg.landed_state < len(LANDED_STATE_NAMES):
+            self.landed_state = msg.landed_state
+        if 0 <= msg.vtol_state < len(VTOL_STATE_NAMES) and msg.vtol_state != self.vtol_state:
+            self.vtol_state = msg.vtol_state
+            self._publish("vtol", {"vtol_state": VTOL_STATE_NAMES[msg.vtol_state]})
+
+    def _on_local_position(self, msg: mavlink.MAVLink_local_position_ned_message) -> None:
+        self.position = PositionNedState(msg.x, msg.y, msg.z)
+        self.velocity = VelocityNedState(msg.vx, msg.vy, msg.vz)
+
+    def _on_global_position(self, msg: mavlink.MAVLink_global_position_int_message) -> None:
+        self.global_position = GlobalState(
+            msg.lat / 1e7, msg.lon / 1e7, msg.alt / 1e3, msg.relative_alt / 1e3
+        )
+        if msg.hdg != 0xFFFF:
+            self.heading_deg = msg.hdg / 100.0
+
+    def _on_attitude(self, msg: mavlink.MAVLink_attitude_message) -> None:
+        d = math.degrees
+        self.attitude = AttitudeState(
+            d(msg.roll), d(msg.pitch), d(msg.yaw),
+            d(msg.rollspeed), d(msg.pitchspeed), d(msg.yawspeed),
+        )  # fmt: skip
+
+    def _on_vfr_hud(self, msg: mavlink.MAVLink_vfr_hud_message) -> None:
+        self.air_speed_m_s = msg.airspeed
+        self.ground_speed_m_s = msg.groundspeed
+        self.climb_rate_m_s = msg.climb
+        self.heading_deg = float(msg.heading)
+
+    def _on_sys_status(self, msg: mavlink.MAVLink_sys_status_message) -> None:
+        voltage_v = None if msg.voltage_battery == 0xFFFF else msg.voltage_battery / 1000.0
+        self.battery = _battery(voltage_v, msg.current_battery, msg.battery_remaining)
+
+    def _on_battery_status(self, msg: mavlink.MAVLink_battery_status_message) -> None:
+        cells = [v for v in msg.voltages if v != 0xFFFF]
+        voltage_v = sum(cells) / 1000.0 if cells else None
+        self.battery = _battery(voltage_v, msg.current_battery, msg.battery_remaining)
+
+    def _on_gps_raw(self, msg: mavlink.MAVLink_gps_raw_int_message) -> None:
+        self.gps = GpsState(
+            enum_name("GPS_FIX_TYPE", msg.fix_type, "GPS_FIX_TYPE_"),
+            msg.satellites_visible,
+            None if msg.eph == 0xFFFF else msg.eph / 100.0,
+        )
+
+    def _on_home(self, msg: mavlink.MAVLink_home_position_message) -> None:
+        self.home = HomeState(
+            msg.latitude / 1e7, msg.longitude / 1e7, msg.altitude / 1e3, msg.x, msg.y, msg.z
+        )
+
+    def _on_origin(self, msg: mavlink.MAVLink_gps_global_origin_message) -> None:
+        self.origin = OriginState(msg.latitude / 1e7, msg.longitude / 1e7, msg.altitude / 1e3)
+
+    def _on_position_target(self, msg: mavlink.MAVLink_position_target_local_ned_message) -> None:
+        self.target_ned = PositionNedState(msg.x, msg.y, msg.z)
+
+    def _on_servo_output(self, msg: mavlink.MAVLink_servo_output_raw_message) -> None:
+        raw = [getattr(msg, f"servo{i}_raw", 0) for i in range(1, 17)]
+        self.actuators = tuple(_pwm_to_unit(v) for v in raw if v)
+
+    def _on_actuator_output(self, msg: mavlink.MAVLink_actuator_output_status_message) -> None:
+        # PWM in microseconds, or already normalised: either way 0..1 for the dashboard
+        values = msg.actuator[: msg.active]
+        self.actuators = tuple(
+            _pwm_to_unit(v) if v > 2.0 else min(max(v, 0.0), 1.0) for v in values
+        )
+
+    def _on_statustext(self, msg: mavlink.MAVLink_statustext_message) -> None:
+        text = msg.text if isinstance(msg.text, str) else msg.text.decode("utf-8", "replace")
+        for severity, whole in self._assembler.feed(
+            msg.severity, text.rstrip("\0"), getattr(msg, "id", 0), getattr(msg, "chunk_seq", 0)
+        ):
+            self._add_statustext(severity, whole)
+
+    def _add_statustext(self, severity: int, text: str) -> None:
+        entry = StatusText(time.time(), severity_name(severity), text)
+        self.statustext.append(entry)
+        del self.statustext[:-STATUSTEXT_KEEP]
+        self._texts.add(severity, text)
+        self._publish("statustext", {"severity": entry.severity, "text": text})
+        lowered = text.lower()
+        if lowered.startswith("rtl"):
+            self.rtl_phase = next((p for k, p in _RTL_PHASES if k in lowered), self.rtl_phase)
+
+
+def _battery(voltage_v: float | None, current_ca: int, remaining_pct: int) -> BatteryState:
+    """MAVLink marks unknown current and remaining charge with -1."""
+    return BatteryState(
+        voltage_v,
+        None if current_ca < 0 else current_ca / 100.0,
+        None if remaining_pct < 0 else float(remaining_pct),
+    )
