@@ -1,0 +1,143 @@
+"""Telemetry out: per-link stream rates, message contents, SET_MESSAGE_INTERVAL, battery."""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+
+import pytest
+from pymavlink.dialects.v20 import development as mavlink
+
+from sim import modes
+from sim.streams import NORMAL_RATES_HZ, ONBOARD_RATES_HZ
+from tests.sim.conftest import Harness
+
+WINDOW_S = 10.0
+
+
+def rates_hz(messages: list[object], seconds: float) -> dict[str, float]:
+    counts = Counter(m.get_type() for m in messages)  # type: ignore[attr-defined]
+    return {name: n / seconds for name, n in counts.items()}
+
+
+@pytest.mark.parametrize(("link_name", "table"), [("api", ONBOARD_RATES_HZ),
+                                                  ("gcs", NORMAL_RATES_HZ)])
+def test_each_link_streams_at_px4_default_rates(harness: Harness, link_name: str,
+                                                table: dict[int, float]) -> None:
+    link = getattr(harness, link_name)
+    link.clear()
+    harness.run(WINDOW_S)
+    measured = rates_hz(link.sent, WINDOW_S)
+    for msg_id, hz in table.items():
+        name = mavlink.mavlink_map[msg_id].msgname
+        assert measured.get(name, 0.0) == pytest.approx(hz, rel=0.1, abs=0.11), name
+    unexpected = set(measured) - {mavlink.mavlink_map[i].msgname for i in table}
+    assert unexpected == set()
+
+
+def test_set_message_interval_changes_only_that_link(harness: Harness) -> None:
+    harness.command_long(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
+                         mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED, 20_000)  # 50 Hz
+    harness.command_long(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
+                         mavlink.MAVLINK_MSG_ID_ATTITUDE, -1)
+    harness.command_long(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
+                         mavlink.MAVLINK_MSG_ID_BATTERY_STATUS, 500_000)  # new stream, 2 Hz
+    assert [a.result for a in harness.api.acks()] == [mavlink.MAV_RESULT_ACCEPTED] * 3
+    harness.api.clear()
+    harness.gcs.clear()
+    harness.run(4.0)
+    api = rates_hz(harness.api.sent, 4.0)
+    assert api["LOCAL_POSITION_NED"] == pytest.approx(50.0, rel=0.05)
+    assert "ATTITUDE" not in api
+    assert api["BATTERY_STATUS"] == pytest.approx(2.0, rel=0.15)
+    assert rates_hz(harness.gcs.sent, 4.0)["ATTITUDE"] == pytest.approx(15.0, rel=0.1)
+
+
+def test_interval_zero_restores_the_default_rate(harness: Harness) -> None:
+    harness.command_long(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
+                         mavlink.MAVLINK_MSG_ID_ATTITUDE, -1)
+    harness.command_long(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
+                         mavlink.MAVLINK_MSG_ID_ATTITUDE, 0)
+    harness.api.clear()
+    harness.run(2.0)
+    assert rates_hz(harness.api.sent, 2.0)["ATTITUDE"] == pytest.approx(100.0, rel=0.05)
+
+
+def test_heartbeat_identity_mode_and_system_status(harness: Harness) -> None:
+    hb = harness.api.of_type("HEARTBEAT")[-1]
+    assert (hb.type, hb.autopilot, hb.mavlink_version) == (2, 12, 3)
+    assert hb.custom_mode == modes.AUTO_LOITER.custom_mode
+    assert hb.base_mode == modes.AUTO_LOITER.base_mode(armed=False)
+    assert hb.system_status == mavlink.MAV_STATE_STANDBY
+    harness.arm()
+    harness.run(1.0)
+    hb = harness.api.of_type("HEARTBEAT")[-1]
+    assert hb.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+    assert hb.system_status == mavlink.MAV_STATE_ACTIVE
+
+
+@pytest.mark.parametrize(("airframe", "mav_type"), [("plane", 1), ("vtol", 22), ("rover", 10),
+                                                     ("hexa", 13), ("octo", 14)])
+def test_heartbeat_type_follows_airframe(make_harness, airframe: str, mav_type: int) -> None:  # type: ignore[no-untyped-def]
+    h = make_harness(airframe)
+    assert h.api.of_type("HEARTBEAT")[-1].type == mav_type
+
+
+def test_sys_status_reports_gps_and_prearm_only_once_ready(make_harness) -> None:  # type: ignore[no-untyped-def]
+    h = make_harness(ready=False)
+    h.run(2.0)
+    before = h.api.of_type("SYS_STATUS")[-1]
+    assert not before.onboard_control_sensors_health & mavlink.MAV_SYS_STATUS_PREARM_CHECK
+    assert not before.onboard_control_sensors_present & mavlink.MAV_SYS_STATUS_SENSOR_GPS
+    assert h.api.of_type("GLOBAL_POSITION_INT") == []
+    h.run(1.5)
+    after = h.api.of_type("SYS_STATUS")[-1]
+    wanted = (mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+              | mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG | mavlink.MAV_SYS_STATUS_SENSOR_GPS)
+    assert after.onboard_control_sensors_present & wanted == wanted
+    assert after.onboard_control_sensors_health & wanted == wanted
+    assert after.onboard_control_sensors_health & mavlink.MAV_SYS_STATUS_PREARM_CHECK
+    assert h.gcs.of_type("GPS_RAW_INT")[-1].fix_type == 3
+
+
+def test_position_messages_match_the_vehicle_state(harness: Harness) -> None:
+    harness.vehicle.params.set("MIS_TAKEOFF_ALT", 5.0)
+    harness.command_long(mavlink.MAV_CMD_NAV_TAKEOFF, *([math.nan] * 7))
+    harness.arm()
+    harness.run(6.0)
+    v = harness.vehicle
+    local = harness.api.of_type("LOCAL_POSITION_NED")[-1]
+    assert local.z == pytest.approx(v.truth.position_ned_m[2], abs=0.2)
+    glob = harness.api.of_type("GLOBAL_POSITION_INT")[-1]
+    assert glob.relative_alt == pytest.approx(-v.truth.position_ned_m[2] * 1000, abs=100)
+    assert glob.alt == pytest.approx((v.origin.alt_m - v.truth.position_ned_m[2]) * 1000, abs=100)
+    state = harness.api.of_type("EXTENDED_SYS_STATE")[-1]
+    assert state.landed_state == mavlink.MAV_LANDED_STATE_IN_AIR
+    target = harness.api.of_type("POSITION_TARGET_LOCAL_NED")[-1]
+    assert target.z == pytest.approx(-5.0)
+
+
+def test_battery_drains_with_power_while_flying(harness: Harness) -> None:
+    start = harness.vehicle.battery.remaining
+    harness.run(5.0)
+    idle_drain = start - harness.vehicle.battery.remaining  # disarmed: avionics only
+    assert 0 < idle_drain < 2e-4
+    harness.command_long(mavlink.MAV_CMD_NAV_TAKEOFF, *([math.nan] * 7))
+    harness.arm()
+    harness.run(60.0)
+    assert harness.vehicle.battery.remaining < start - 0.01
+    status = harness.gcs.of_type("BATTERY_STATUS")[-1]
+    assert status.battery_remaining == harness.vehicle.battery.remaining_percent
+    assert status.voltages[0] == pytest.approx(harness.vehicle.battery.cell_voltage_v * 1000,
+                                               abs=20)
+    assert status.voltages[4] == 65535  # four cells
+
+
+def test_statustext_longer_than_50_bytes_is_chunked(harness: Harness) -> None:
+    text = "SET_POSITION_TARGET_LOCAL_NED coordinate frame 7 unsupported"
+    harness.vehicle.announce(mavlink.MAV_SEVERITY_CRITICAL, text)
+    chunks = harness.api.of_type("STATUSTEXT")
+    assert len(chunks) == 2
+    assert chunks[0].id == chunks[1].id != 0
+    assert [c.chunk_seq for c in chunks] == [0, 1]
+    assert harness.api.texts() == [text]
