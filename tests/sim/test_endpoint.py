@@ -5,7 +5,7 @@ from __future__ import annotations
 import asyncio
 import socket
 import time
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from typing import Any
 
 import pytest
@@ -60,6 +60,14 @@ class UdpPeer:
 
     def close(self) -> None:
         self.sock.close()
+
+
+async def poll_until(condition: Callable[[], bool], timeout_s: float) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"condition not met within {timeout_s} s")
+        await asyncio.sleep(0.01)
 
 
 @pytest.fixture
@@ -122,9 +130,7 @@ async def test_garbage_truncated_and_bad_crc_datagrams_are_counted_and_dropped(
         peer.send_bytes(b"this is not mavlink", port)
         peer.send_bytes(frame[: len(frame) // 2], port)
         peer.send_bytes(bytes(bad_crc), port)
-        deadline = time.monotonic() + 5.0
-        while inst.api_link.counters.rx_datagrams < 3 and time.monotonic() < deadline:
-            await asyncio.sleep(0.01)
+        await poll_until(lambda: inst.api_link.counters.rx_datagrams >= 3, 5.0)
         assert inst.rx_dropped == 3
         assert inst.api_link.counters.rx_messages == 0
         assert not inst.vehicle.armed
