@@ -11,7 +11,9 @@ from typing import Protocol
 
 from sim.fixed_wing import FixedWingModel
 from sim.mc_control import ParamReader
+from sim.mixer import GEOMETRIES
 from sim.multicopter import MulticopterModel
+from sim.rigid_body import GRAVITY_M_S2
 from sim.rover import RoverModel
 from sim.topics import ControlSetpoint, VehicleStateTruth, VtolState
 from sim.vtol import VtolModel
@@ -72,6 +74,8 @@ _MC_PARAMS: dict[str, float | int] = {
     "MPC_LAND_SPEED": 0.7,
     "MPC_ACC_HOR": 3.0,
     "MPC_ACC_HOR_MAX": 5.0,
+    # the controllers use the true hover thrust (SIH_MASS, SIH_T_MAX), as PX4's hover thrust
+    # estimator would after converging; the parameter reports it (set per airframe below)
     "MPC_THR_HOVER": 0.5,
     "MPC_THR_MIN": 0.08,
     "MPC_THR_MAX": 1.0,
@@ -200,11 +204,16 @@ _MULTICOPTERS: dict[str, tuple[int, str, float]] = {
 }
 
 
-def _multicopter_params(mass_kg: float) -> dict[str, float | int]:
+def _hover_thrust(mass_kg: float, rotor_count: int) -> float:
+    return round(mass_kg * GRAVITY_M_S2 / (rotor_count * float(_SIH_PARAMS["SIH_T_MAX"])), 3)
+
+
+def _multicopter_params(mass_kg: float, rotor_count: int) -> dict[str, float | int]:
     """The SIH quad scaled to a heavier frame: same rotors, inertia growing with mass."""
     scale = mass_kg / float(_SIH_PARAMS["SIH_MASS"])
     return {
         "SIH_MASS": mass_kg,
+        "MPC_THR_HOVER": _hover_thrust(mass_kg, rotor_count),
         **{name: float(_SIH_PARAMS[name]) * scale for name in ("SIH_IXX", "SIH_IYY", "SIH_IZZ")},
     }
 
@@ -212,11 +221,17 @@ def _multicopter_params(mass_kg: float) -> dict[str, float | int]:
 # Later tables override earlier ones
 _PARAM_TABLES: dict[str, tuple[dict[str, float | int], ...]] = {
     **{
-        name: (_SIH_PARAMS, _MC_PARAMS, _multicopter_params(mass_kg))
-        for name, (_, _, mass_kg) in _MULTICOPTERS.items()
+        name: (_SIH_PARAMS, _MC_PARAMS, _multicopter_params(mass_kg, len(GEOMETRIES[geometry])))
+        for name, (_, geometry, mass_kg) in _MULTICOPTERS.items()
     },
     "plane": (_SIH_PARAMS, _FW_PARAMS, _PLANE_PARAMS),
-    "vtol": (_SIH_PARAMS, _MC_PARAMS, _FW_PARAMS, _VTOL_PARAMS),
+    "vtol": (
+        _SIH_PARAMS,
+        _MC_PARAMS,
+        _FW_PARAMS,
+        _VTOL_PARAMS,
+        {"MPC_THR_HOVER": _hover_thrust(float(_VTOL_PARAMS["SIH_MASS"]), 4)},
+    ),
     "rover": (_ROVER_PARAMS,),
 }
 
