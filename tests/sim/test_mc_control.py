@@ -146,6 +146,32 @@ def test_velocity_feed_forward_reduces_tracking_lag() -> None:
     assert with_ff < 0.6 * without_ff
 
 
+def test_acceleration_feed_forward_improves_circle_tracking() -> None:
+    radius_m, omega_rad_s = 5.0, 0.6
+
+    def worst_error(with_acceleration: bool) -> float:
+        quad = _hovering()
+        fly(quad, TrajectorySetpoint(position_ned_m=[radius_m, 0.0, HOVER_DOWN_M]), 4.0)
+        worst = 0.0
+        for k in range(1, 12 * 50 + 1):
+            t = k * 0.02
+            c, s = math.cos(omega_rad_s * t), math.sin(omega_rad_s * t)
+            target = [radius_m * c, radius_m * s, HOVER_DOWN_M]
+            velocity = [-radius_m * omega_rad_s * s, radius_m * omega_rad_s * c, 0.0]
+            accel = [-radius_m * omega_rad_s**2 * c, -radius_m * omega_rad_s**2 * s, 0.0]
+            sp = TrajectorySetpoint(
+                position_ned_m=target,
+                velocity_ned_m_s=velocity,
+                acceleration_ned_m_s2=accel if with_acceleration else [math.nan] * 3,
+            )
+            fly(quad, sp, 0.02)
+            if t > 5.0:
+                worst = max(worst, _distance_to(quad, target))
+        return worst
+
+    assert worst_error(True) < 0.9 * worst_error(False)
+
+
 def test_acceleration_feed_forward_is_applied() -> None:
     quad = _hovering()
     sp = TrajectorySetpoint(acceleration_ned_m_s2=[2.0, 0.0, 0.0])
