@@ -19,6 +19,46 @@ class GeoPoint:
     alt_m: float
 
 
+# pymap3d's exact conversion costs a few hundred microseconds, too much for 50 Hz telemetry
+# of many vehicles. Within this distance of a point pymap3d converted exactly, positions
+# are mapped with pymap3d's own local derivatives there (error below a millimetre).
+LINEAR_RANGE_M = 50.0
+_DERIVATIVE_STEP_M = 1.0
+
+
+class _Anchor:
+    """An exactly converted point and the local d(lat, lon, alt)/d(north, east, down)."""
+
+    def __init__(self, origin: LocalOrigin, ned_m: tuple[float, float, float]) -> None:
+        self.ned_m = ned_m
+        self.point = origin.to_geodetic_exact(*ned_m)
+        north, east, down = ned_m
+        step = _DERIVATIVE_STEP_M
+        to_north = origin.to_geodetic_exact(north + step, east, down)
+        to_east = origin.to_geodetic_exact(north, east + step, down)
+        self.dlat_dnorth = (to_north.lat_deg - self.point.lat_deg) / step
+        self.dlon_dnorth = (to_north.lon_deg - self.point.lon_deg) / step
+        self.dlat_deast = (to_east.lat_deg - self.point.lat_deg) / step
+        self.dlon_deast = (to_east.lon_deg - self.point.lon_deg) / step
+        # Far from the origin, level NED motion changes the altitude (earth curvature).
+        self.dalt_dnorth = (to_north.alt_m - self.point.alt_m) / step
+        self.dalt_deast = (to_east.alt_m - self.point.alt_m) / step
+
+    def covers(self, north_m: float, east_m: float, down_m: float) -> bool:
+        n0, e0, d0 = self.ned_m
+        return max(abs(north_m - n0), abs(east_m - e0), abs(down_m - d0)) <= LINEAR_RANGE_M
+
+    def to_geodetic(self, north_m: float, east_m: float, down_m: float) -> GeoPoint:
+        dn = north_m - self.ned_m[0]
+        de = east_m - self.ned_m[1]
+        return GeoPoint(
+            self.point.lat_deg + self.dlat_dnorth * dn + self.dlat_deast * de,
+            self.point.lon_deg + self.dlon_dnorth * dn + self.dlon_deast * de,
+            self.point.alt_m - (down_m - self.ned_m[2])
+            + self.dalt_dnorth * dn + self.dalt_deast * de,
+        )
+
+
 class LocalOrigin:
     """The local position's reference point (PX4's `vehicle_local_position.ref_*`)."""
 
@@ -31,8 +71,16 @@ class LocalOrigin:
         self.lat_deg = lat_deg
         self.lon_deg = lon_deg
         self.alt_m = alt_m
+        self._anchor: _Anchor | None = None
 
     def to_geodetic(self, north_m: float, east_m: float, down_m: float) -> GeoPoint:
+        """Fast conversion for telemetry (see LINEAR_RANGE_M)."""
+        anchor = self._anchor
+        if anchor is None or not anchor.covers(north_m, east_m, down_m):
+            anchor = self._anchor = _Anchor(self, (north_m, east_m, down_m))
+        return anchor.to_geodetic(north_m, east_m, down_m)
+
+    def to_geodetic_exact(self, north_m: float, east_m: float, down_m: float) -> GeoPoint:
         lat, lon, alt = pymap3d.ned2geodetic(
             north_m, east_m, down_m, self.lat_deg, self.lon_deg, self.alt_m
         )
