@@ -325,6 +325,12 @@ class LoopStats:
     def mean_lag_s(self) -> float:
         return self.lag_sum_s / self.wakeups if self.wakeups else 0.0
 
+    def reset(self) -> None:
+        self.steps = 0
+        self.max_lag_s = 0.0
+        self.lag_sum_s = 0.0
+        self.wakeups = 0
+
 
 async def run_vehicles(
     vehicles: Sequence[SimVehicle],
