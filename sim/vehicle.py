@@ -37,6 +37,10 @@ BOOT_TIME_S = 1.5
 READY_TIME_S = 3.0
 # While disarmed on the ground home follows the vehicle; refresh it this often.
 HOME_FOLLOW_PERIOD_S = 1.0
+# The stepping loop wakes at most this often and then runs every step that is due: two
+# 4 ms steps per wake-up at speed 1 halve the event-loop overhead, and nothing outside
+# (UDP at 50-100 Hz) sees a difference.
+MIN_WAKE_PERIOD_S = 0.008
 STATUSTEXT_MAX_LEN = 50
 STATUSTEXT_HISTORY = 200
 
@@ -314,7 +318,7 @@ class SimVehicle:
 
 @dataclass
 class LoopStats:
-    """How well the stepping loop keeps up with its deadlines (wall clock)."""
+    """How late the stepping loop wakes up against its intended times (wall clock)."""
 
     steps: int = 0
     max_lag_s: float = 0.0
@@ -349,10 +353,11 @@ async def run_vehicles(
     wall_dt = dt_s / speed
     t0 = time.perf_counter()
     k = 0
+    intended_wake = t0
     while True:
         now = time.perf_counter()
         due = int((now - t0) / wall_dt)
-        lag = now - (t0 + (k + 1) * wall_dt)
+        lag = now - intended_wake
         stats.wakeups += 1
         if lag > 0:
             stats.lag_sum_s += lag
@@ -366,5 +371,5 @@ async def run_vehicles(
                 vehicle.step(dt_s)
         k += max(todo, 0)
         stats.steps += max(todo, 0)
-        next_deadline = t0 + (k + 1) * wall_dt
-        await asyncio.sleep(max(next_deadline - time.perf_counter(), 0.0))
+        intended_wake = max(t0 + (k + 1) * wall_dt, now + MIN_WAKE_PERIOD_S)
+        await asyncio.sleep(max(intended_wake - time.perf_counter(), 0.0))
