@@ -27,11 +27,16 @@ class MavLandedState(IntEnum):
 
 
 class LandDetector:
-    def __init__(self) -> None:
+    def __init__(self, ground_vehicle: bool = False) -> None:
         self.landed = True
+        self._ground_vehicle = ground_vehicle
         self._ground_time_s = 0.0
 
     def update(self, dt_s: float, truth: VehicleStateTruth, armed: bool) -> None:
+        if self._ground_vehicle:
+            # PX4's rover land detector: landed exactly while disarmed.
+            self.landed = not armed
+            return
         down_m = truth.position_ned_m[2]
         vz = truth.velocity_ned_m_s[2]
         on_ground = truth.on_ground or (-down_m < 0.05 and abs(vz) < REST_SPEED_M_S)

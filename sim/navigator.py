@@ -70,12 +70,14 @@ class Navigator:
         announce: Announce,
         *,
         fixed_wing_only: bool = False,
+        ground_vehicle: bool = False,
     ) -> None:
         self._params = params
         self._commander = commander
         self._airframe = airframe
         self._announce = announce
         self._fixed_wing_only = fixed_wing_only
+        self._ground_vehicle = ground_vehicle
         self._active: Px4Mode | None = None
         self._hold_target: list[float] = [0.0, 0.0, 0.0]
         self._hold_yaw_rad = math.nan
@@ -227,6 +229,8 @@ class Navigator:
         return self._descend(self._land_xy, NO_RC_DESCENT_SPEED_M_S)
 
     def _descend(self, xy: list[float], speed_m_s: float) -> TrajectorySetpoint:
+        if self._ground_vehicle:  # a rover "lands" by stopping where it is
+            return TrajectorySetpoint(position_ned_m=[xy[0], xy[1], 0.0])
         return TrajectorySetpoint(
             position_ned_m=[xy[0], xy[1], LAND_TARGET_BELOW_GROUND_M],
             yaw_rad=self._hold_yaw_rad,
@@ -241,6 +245,7 @@ class Navigator:
         home_down = home.position_ned_m[2]
         down = truth.position_ned_m[2]
         far = self._home_distance_m(truth) > self._params.get("RTL_MIN_DIST")
+        far = far and not self._ground_vehicle
         return_down = home_down - self._params.get("RTL_RETURN_ALT")
         self._rtl_return_down_m = min(return_down, down) if far else down
         self._rtl_descend_down_m = max(
@@ -326,6 +331,8 @@ class Navigator:
             near = self._home_distance_m(truth) <= MC_POSITION_REACHED_M
             return RtlPhase.LAND if near else None
         if phase == RtlPhase.LAND:
+            if self._ground_vehicle:
+                return RtlPhase.IDLE  # arrived: a rover stops and stays armed
             return RtlPhase.IDLE if self._commander.landed else None
         return None
 

@@ -120,9 +120,9 @@ class SimVehicle:
         self.commander.on_arming_change(self._on_arming_change)
         self.navigator = Navigator(
             self.params, self.commander, self.model, self.announce,
-            fixed_wing_only=airframe == "plane",
+            fixed_wing_only=airframe == "plane", ground_vehicle=airframe == "rover",
         )
-        self.land_detector = LandDetector()
+        self.land_detector = LandDetector(ground_vehicle=airframe == "rover")
         self.battery = Battery(self.params)
         self.messages = MessageFactory(self)
         self.receiver = Receiver(self)

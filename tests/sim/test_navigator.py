@@ -156,3 +156,22 @@ def test_vtol_in_fixed_wing_transitions_back_before_landing(make_harness) -> Non
     h.command_long(mavlink.MAV_CMD_NAV_LAND)
     h.run(0.1)
     assert h.vehicle.model.transitions[-1] == (False, False)
+
+
+def test_rover_returns_home_on_the_ground_and_stays_armed(make_harness) -> None:  # type: ignore[no-untyped-def]
+    h = make_harness("rover")
+    v = h.vehicle
+    h.arm()
+    h.run(0.1)
+    assert not v.commander.landed  # PX4's rover land detector: landed only while disarmed
+    target = v.origin.to_geodetic(20.0, 0.0, 0.0)
+    h.command_long(mavlink.MAV_CMD_DO_REPOSITION, -1, 1, 0, math.nan, target.lat_deg,
+                   target.lon_deg, math.nan)
+    h.run_until(lambda: abs(v.truth.position_ned_m[0] - 20.0) < 0.5, 30.0)
+    h.command_long(mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH)
+    h.run_until(lambda: v.navigator.rtl_phase == RtlPhase.IDLE, 60.0)
+    assert RtlPhase.CLIMBING not in v.rtl_phases
+    assert math.hypot(*v.truth.position_ned_m[:2]) < 1.0
+    assert v.truth.position_ned_m[2] == 0.0
+    h.run(12.0)
+    assert v.armed  # no auto-disarm for an armed rover
