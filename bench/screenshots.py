@@ -53,14 +53,29 @@ def fly_vtol(page: Any, serve: Serve) -> None:
         time.sleep(4.0)
 
 
+def dismiss_scene_notifications(page: Any) -> None:
+    """viser warns about software WebGL in a toast; it is noise in a screenshot. (Hidden, not
+    clicked: clicks wait for frames that software WebGL delivers slowly.)"""
+    toasts = page.frame_locator("#scene").locator(".mantine-Notification-root")
+    toasts.evaluate_all("els => els.forEach(e => { e.style.display = 'none'; })")
+
+
 def shoot(context: Any, airframe: str, fly: Callable[[Any, Serve], None]) -> dict[str, Any]:
-    serve = Serve(extra_args=["--sim-airframe", airframe, "--sim-speed", "2"])
+    # A long lease: taking a screenshot of software-rendered WebGL can stall the page for
+    # longer than the default 2 s, and the picture should show the pilot still in control.
+    serve = Serve(extra_args=["--sim-airframe", airframe, "--sim-speed", "2",
+                              "--lease-ttl-s", "10"])
     started = time.monotonic()
     serve.start()
     try:
-        page = open_dashboard(context, serve.url)
+        # Software WebGL is slow enough to stall clicks: fly first, then show the scene.
+        page = open_dashboard(context, serve.url, scene=False)
         fly(page, serve)
-        page.wait_for_timeout(1500)
+        page.check("#scene-enable")
+        page.frame_locator("#scene").locator("canvas").first.wait_for(timeout=30_000)
+        page.wait_for_timeout(4000)
+        dismiss_scene_notifications(page)
+        page.wait_for_timeout(500)
         path = IMG_DIR / f"dashboard-{'quad' if airframe == 'quad' else airframe}.png"
         page.screenshot(path=str(path))
         page.close()

@@ -88,8 +88,9 @@ export class TelemetrySocket {
 }
 
 /**
- * The pilot session: holds the control lease while open, heartbeats within the TTL, and
- * carries setpoints and commands; every message gets its result back (matched by id).
+ * The pilot session: holds the control lease while open and carries setpoints and commands;
+ * every message gets its result back (matched by id). The socket and its heartbeats run in
+ * control-worker.js; this side pings the worker to show the page is alive.
  */
 export class ControlSession {
   constructor(vehicleId, { takeover = false, onLease, onClosed, clientName }) {
@@ -100,13 +101,21 @@ export class ControlSession {
     this.nextId = 1;
     this.leaseId = null;
     this.ttlS = 2;
+    this.socketOpen = false;
     this.closedByUs = false;
     const params = { vehicle: vehicleId };
     if (takeover) params.takeover = "true";
     if (clientName) params.client_name = clientName;
-    this.ws = new WebSocket(socketUrl("/ws/control", params));
-    this.ws.onmessage = (event) => this.receive(JSON.parse(event.data));
-    this.ws.onclose = (event) => this.closedWith(event);
+    this.worker = new Worker(new URL("./control-worker.js", import.meta.url), { type: "module" });
+    this.worker.onmessage = (event) => this.fromWorker(event.data);
+    this.worker.postMessage({ op: "open", url: socketUrl("/ws/control", params) });
+    this.alive = setInterval(() => this.worker.postMessage({ op: "alive" }), 1000);
+  }
+
+  fromWorker(msg) {
+    if (msg.ev === "open") this.socketOpen = true;
+    else if (msg.ev === "message") this.receive(msg.data);
+    else if (msg.ev === "close") this.closedWith(msg);
   }
 
   receive(message) {
@@ -114,9 +123,6 @@ export class ControlSession {
       this.leaseId = message.lease_id;
       this.ttlS = message.ttl_s || 2;
       this.holder = message.holder;
-      // Heartbeats at a quarter of the TTL survive one lost or late message.
-      this.heartbeat = setInterval(() => this.send({ type: "heartbeat" }).catch(() => {}),
-        Math.max(100, (this.ttlS * 1000) / 4));
       this.onLease(message);
     } else if (message.type === "error") {
       this.refusal = message;
@@ -130,7 +136,9 @@ export class ControlSession {
   }
 
   closedWith(event) {
-    clearInterval(this.heartbeat);
+    this.socketOpen = false;
+    clearInterval(this.alive);
+    this.worker.terminate();
     for (const waiter of this.pending.values()) {
       waiter({ ok: false, status: 0, body: { detail: { reason: "control socket closed" } } });
     }
@@ -140,17 +148,17 @@ export class ControlSession {
   }
 
   get open() {
-    return this.ws.readyState === WebSocket.OPEN && this.leaseId !== null;
+    return this.socketOpen && this.leaseId !== null;
   }
 
   send(message) {
-    if (this.ws.readyState !== WebSocket.OPEN) {
+    if (!this.socketOpen) {
       return Promise.resolve({ ok: false, status: 0, body: { detail: { reason: "not in control" } } });
     }
     const id = this.nextId++;
     return new Promise((resolve) => {
       this.pending.set(id, resolve);
-      this.ws.send(JSON.stringify({ ...message, id }));
+      this.worker.postMessage({ op: "send", text: JSON.stringify({ ...message, id }) });
     });
   }
 
@@ -164,6 +172,6 @@ export class ControlSession {
 
   close() {
     this.closedByUs = true;
-    this.ws.close(1000, "released");
+    this.worker.postMessage({ op: "close" });
   }
 }

@@ -267,6 +267,7 @@ class SceneHub:
                 offset = np.asarray(camera.position) - np.asarray(camera.look_at)
             else:
                 continue
+            # viser moves look_at along with position, so position goes first.
             with client.atomic():
-                camera.look_at = target
                 camera.position = target + offset
+                camera.look_at = target
