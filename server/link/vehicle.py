@@ -28,7 +28,15 @@ from server.link.setpoint_checks import (
     check,
     vehicle_class,
 )
-from server.link.setpoints import PositionNed, SentSetpoint, Setpoint, describe, encode, resolve
+from server.link.setpoints import (
+    PositionGlobal,
+    PositionNed,
+    SentSetpoint,
+    Setpoint,
+    describe,
+    encode,
+    resolve,
+)
 from server.link.state import (
     LANDED_STATE_NAMES,
     VTOL_STATE_NAMES,
@@ -450,19 +458,17 @@ class Vehicle:
         self._checked(sp, self.envelope)
 
     def _checked(self, sp: Setpoint, envelope: Envelope) -> Setpoint:
-        position = self.telemetry.position
-        yaw = self.telemetry.attitude.yaw_deg if self.telemetry.attitude is not None else None
+        t = self.telemetry
+        here = None if t.position is None else (t.position.north_m, t.position.east_m,
+                                                t.position.down_m)  # fmt: skip
         try:
-            resolved = resolve(
-                sp,
-                None if position is None else (position.north_m, position.east_m,
-                                                position.down_m),
-                yaw,
-            )  # fmt: skip
+            resolved = resolve(sp, here, t.attitude.yaw_deg if t.attitude is not None else None)
         except LookupError as exc:
             raise SetpointRejected(f"cannot convert the offset: {exc}") from None
-        vclass = vehicle_class(self.mav_type, VTOL_STATE_NAMES[self.telemetry.vtol_state])
-        check(resolved, vclass, envelope, self._reference())
+        if isinstance(resolved, PositionGlobal) and t.global_position is None:
+            # PX4 drops global setpoints silently until it has a global position
+            raise SetpointRejected("no global position yet", field="lat_deg")
+        check(resolved, vehicle_class(t.mav_type, t.vtol_state_name), envelope, self._reference())
         return resolved
 
     def _reference(self) -> Reference:

@@ -10,7 +10,7 @@ import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
 from server.link.setpoint_checks import SetpointRejected
-from server.link.setpoints import OffsetBody, PositionNed, VelocityNed
+from server.link.setpoints import OffsetBody, PositionGlobal, PositionNed, VelocityNed
 from tests.link.conftest import ScriptedSession, wait_for
 
 OFFBOARD = 0x60000
@@ -163,3 +163,19 @@ async def test_every_offboard_start_after_a_stop_streams_first_again(
         t for t, m in scripted.peer.commands_at(176) if m.param2 == 6 and t > stopped_at
     ]
     assert second_switch - restart >= 0.28
+
+
+async def test_global_setpoint_before_a_global_position_is_refused(
+    scripted: ScriptedSession,
+) -> None:
+    with pytest.raises(SetpointRejected, match="no global position"):
+        await scripted.vehicle.set_setpoint(PositionGlobal(47.4, 8.5, 10.0, "relative"))
+
+    scripted.peer.send(
+        mavlink.MAVLink_global_position_int_message(
+            0, 473977420, 85455940, 492400, 3000, 0, 0, 0, 0
+        )
+    )
+    await wait_for(lambda: scripted.vehicle.snapshot().global_position is not None)
+    sent = await scripted.vehicle.set_setpoint(PositionGlobal(47.3978, 8.5456, 10.0, "relative"))
+    assert sent.frame == 6
