@@ -120,7 +120,7 @@ class PointMassAirframe:
         if truth.position_ned_m[2] >= 0.0:
             truth.position_ned_m[2] = 0.0
             truth.velocity_ned_m_s[2] = min(truth.velocity_ned_m_s[2], 0.0)
-            if truth.velocity_ned_m_s[2] == 0.0:
+            if truth.velocity_ned_m_s[2] == 0.0 and (not armed or setpoint is None):
                 truth.velocity_ned_m_s[0] = truth.velocity_ned_m_s[1] = 0.0
         truth.on_ground = truth.position_ned_m[2] >= 0.0
         truth.airspeed_m_s = math.hypot(*truth.velocity_ned_m_s[:2])

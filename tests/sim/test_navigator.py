@@ -169,7 +169,7 @@ def test_rover_returns_home_on_the_ground_and_stays_armed(make_harness) -> None:
                    target.lon_deg, math.nan)
     h.run_until(lambda: abs(v.truth.position_ned_m[0] - 20.0) < 0.5, 30.0)
     h.command_long(mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH)
-    h.run_until(lambda: v.navigator.rtl_phase == RtlPhase.IDLE, 60.0)
+    h.run_until(lambda: RtlPhase.IDLE in v.rtl_phases, 60.0)
     assert RtlPhase.CLIMBING not in v.rtl_phases
     assert math.hypot(*v.truth.position_ned_m[:2]) < 1.0
     assert v.truth.position_ned_m[2] == 0.0
