@@ -91,6 +91,7 @@ class _Pending:
         self.result: int | None = None
         self.first_final_s: float | None = None
         self.progress: int | None = None
+        self.progress_acks = 0
         self.link_lost = False
 
 
@@ -147,6 +148,7 @@ class CommandProtocol:
         if msg.result == MAV_RESULT_IN_PROGRESS:
             if pending.result is None:
                 pending.progress = msg.progress
+                pending.progress_acks += 1
         elif pending.first_final_s is None:
             pending.result = msg.result
             pending.first_final_s = now
@@ -236,23 +238,24 @@ class CommandProtocol:
         attempt = 0
         self._send(build(attempt))
         deadline = loop.time() + per_try_s
-        seen_progress: int | None = None
+        seen_progress_acks = 0
         while pending.result is None:
             if pending.link_lost:
                 return CommandOutcome.LINK_LOST
-            if pending.progress is not None and pending.progress != seen_progress:
-                seen_progress = pending.progress
+            if pending.progress_acks != seen_progress_acks:
+                # every IN_PROGRESS says the vehicle is still working: wait longer, no retry
+                seen_progress_acks = pending.progress_acks
                 deadline = loop.time() + self.in_progress_timeout_s
                 self._publish(
                     "command",
                     {
                         "command": command_name(command),
                         "outcome": "IN_PROGRESS",
-                        "progress": seen_progress,
+                        "progress": pending.progress,
                     },
                 )
             if loop.time() >= deadline:
-                if seen_progress is not None or attempt >= self.retries:
+                if seen_progress_acks or attempt >= self.retries:
                     return CommandOutcome.TIMEOUT
                 attempt += 1
                 self._send(build(attempt))
