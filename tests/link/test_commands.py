@@ -64,6 +64,20 @@ async def test_in_progress_is_not_final_and_stops_retries(scripted: ScriptedSess
     assert progress[0]["progress"] == 40
 
 
+async def test_in_progress_without_a_final_answer_times_out_without_retries(
+    scripted: ScriptedSession,
+) -> None:
+    peer = scripted.peer
+    scripted.vehicle.commands.in_progress_timeout_s = 0.3
+    peer.on_command = lambda m: peer.ack(m.command, IN_PROGRESS, progress=10)
+
+    result = await scripted.vehicle.arm()
+
+    assert result.outcome is CommandOutcome.TIMEOUT
+    assert result.elapsed_ms >= 290
+    assert len(peer.commands(ARM)) == 1
+
+
 async def test_second_ack_of_set_mode_replaces_the_first(scripted: ScriptedSession) -> None:
     peer = scripted.peer
 
