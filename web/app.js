@@ -200,7 +200,7 @@ function onTelemetry(message) {
     log(message.severity || "INFO", message.text || "");
   } else if (message.type === "event") {
     onEvent(message);
-  } else if ("sysid" in message && "mode" in message) {
+  } else if (message.type === "state") {
     render(message);
   }
 }
@@ -274,6 +274,7 @@ function setpointSpeed(state) {
 
 function render(state) {
   page.state = state;
+  if (state.vehicle_type) page.vehicleType = state.vehicle_type;
   const link = state.link || {};
   const age = state.last_heartbeat_age_s;
   const loss = link.frames_in ? (100 * (link.lost_frames || 0)) / (link.frames_in + (link.lost_frames || 0)) : 0;
