@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 import viser
 
-from server.link.state import PositionNedState
+from server.link.state import PositionNedState, VehicleState
 from server.scene.frames import attitude_wxyz_enu
-from server.scene.styling import STATE_COLOURS
+from server.scene.styling import STATE_COLOURS, StateCategory
 from server.scene.vehicle_view import VehicleView, rtl_path_enu, setpoint_point_ned
 
 from .conftest import make_state
@@ -42,7 +42,7 @@ def test_model_sits_at_the_enu_position_with_the_attitude(scene: viser.SceneApi)
 
 def test_hull_colour_follows_armed_offboard_and_failsafe(scene: viser.SceneApi) -> None:
     view = VehicleView(scene, 12, "QUADROTOR")
-    cases = [
+    cases: list[tuple[VehicleState, StateCategory]] = [
         (make_state(), "disarmed"),
         (make_state(armed=True, system_status="ACTIVE"), "armed"),
         (make_state(armed=True, mode="OFFBOARD", user_mode="OFFBOARD"), "offboard"),
