@@ -10,8 +10,6 @@ import pytest
 
 from .harness import CHROMIUM, CHROMIUM_ARGS
 
-pytestmark = pytest.mark.browser
-
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     for item in items:
