@@ -114,6 +114,16 @@ def test_take_control_arm_and_take_off_by_clicking(page: Any, api: httpx.Client)
     assert vehicle_state(api)["armed"]
 
 
+def test_parameter_panel_writes_and_shows_the_vehicles_echo(page: Any,
+                                                              api: httpx.Client) -> None:
+    page.fill("#param-input-RTL_LAND_DELAY", "1")
+    click_and_wait_result(page, "#param-set-RTL_LAND_DELAY", expect="= 1")
+    assert page.text_content("#param-RTL_LAND_DELAY") == "1"
+    assert api.get("/vehicles/1/params/RTL_LAND_DELAY").json()["value"] == 1
+    page.fill("#param-input-RTL_LAND_DELAY", "0")
+    click_and_wait_result(page, "#param-set-RTL_LAND_DELAY", expect="= 0")
+
+
 def test_refused_command_shows_the_vehicles_reason(page: Any) -> None:
     text = click_and_wait_result(page, "#btn-disarm", expect="Disarm", confirm=True)
     assert "ACCEPTED" not in text
