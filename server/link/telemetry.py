@@ -247,7 +247,10 @@ class Telemetry:
         self._publish("statustext", {"severity": entry.severity, "text": text})
         lowered = text.lower()
         if lowered.startswith("rtl"):
-            self.rtl_phase = next((p for k, p in _RTL_PHASES if k in lowered), self.rtl_phase)
+            phase = next((p for k, p in _RTL_PHASES if k in lowered), self.rtl_phase)
+            if phase != self.rtl_phase:
+                self.rtl_phase = phase
+                self._publish("rtl", {"phase": phase})
 
 
 def _battery(voltage_v: float | None, current_ca: int, remaining_pct: int) -> BatteryState:

@@ -4,11 +4,13 @@ transitions, parameters."""
 
 from __future__ import annotations
 
+import asyncio
 import math
 
 import pytest
 
 from server.link.commands import CommandOutcome
+from server.link.events import VehicleEvent
 from server.link.setpoints import PositionNed, VelocityBody, VelocityNed
 from server.link.vehicle import Vehicle
 from tests.link.conftest import SimSession, open_sim, wait_for
@@ -61,7 +63,7 @@ async def test_offboard_position_setpoint_is_reached_within_half_a_metre() -> No
 
         assert result.ok
         assert vehicle.snapshot().mode == "OFFBOARD"
-        assert vehicle.stream_stats().gaps == 0
+        assert vehicle.streamer_active
 
 
 async def test_velocity_and_body_velocity_setpoints_move_the_vehicle() -> None:
@@ -109,21 +111,16 @@ async def test_rtl_lands_and_disarms_at_home_and_ends_the_stream() -> None:
         await _take_off(session, 5.0)
         await vehicle.start_offboard(PositionNed(12.0, -6.0, -8.0, yaw_deg=0))
         await wait_for(lambda: _distance_m(session.truth_ned_m, (12, -6, -8)) < 1.0, 40 / SPEED)
-        phases: set[str] = set()
-
-        def disarmed_and_watch_phase() -> bool:
-            state = vehicle.snapshot()
-            if state.rtl_phase is not None:
-                phases.add(state.rtl_phase)
-            return not state.armed
+        events = vehicle.subscribe_events(maxsize=1024)
 
         assert (await vehicle.return_to_launch()).ok
-        await wait_for(disarmed_and_watch_phase, 120 / SPEED, "landed and disarmed")
+        await wait_for(lambda: not vehicle.snapshot().armed, 120 / SPEED, "landed and disarmed")
 
         assert math.dist(session.truth_ned_m[:2], (0.0, 0.0)) < 1.0
         assert vehicle.snapshot().landed_state == "ON_GROUND"
         assert not vehicle.streamer_active
-        assert phases
+        seen = [e.data["phase"] for e in _drain(events) if e.kind == "rtl"]
+        assert "LANDED" in seen
 
 
 async def test_vtol_transitions_to_fixed_wing_and_back() -> None:
@@ -165,3 +162,10 @@ async def test_arming_refusal_in_offboard_without_signal_carries_the_reason() ->
         assert result.outcome is CommandOutcome.TEMPORARILY_REJECTED
         assert result.reason is not None
         assert "denied" in result.reason.lower()
+
+
+def _drain(queue: asyncio.Queue[VehicleEvent]) -> list[VehicleEvent]:
+    items = []
+    while not queue.empty():
+        items.append(queue.get_nowait())
+    return items
