@@ -9,7 +9,7 @@ encode/decode round trip so that source ids and field types are as on the wire.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from typing import Any
 
 import pytest
@@ -187,6 +187,12 @@ class Harness:
         self._gcs_codec = mavlink.MAVLink(None, srcSystem=GCS_SYSID, srcComponent=GCS_COMPID)
         self._parser = mavlink.MAVLink(None)
 
+    @property
+    def model(self) -> PointMassAirframe:
+        model = self.vehicle.model
+        assert isinstance(model, PointMassAirframe)
+        return model
+
     def run(self, seconds: float) -> None:
         for _ in range(round(seconds / PHYSICS_DT_S)):
             self.vehicle.step(PHYSICS_DT_S)
@@ -244,8 +250,11 @@ class Harness:
         return int(acks[-1].result)
 
 
+HarnessFactory = Callable[..., Harness]
+
+
 @pytest.fixture
-def make_harness() -> Iterator[Callable[..., Harness]]:
+def make_harness() -> HarnessFactory:
     def make(airframe: str = "quad", ready: bool = True) -> Harness:
         vehicle = SimVehicle(airframe, airframe_factory=PointMassAirframe,
                              defaults_factory=point_mass_defaults)

@@ -9,7 +9,7 @@ from pymavlink.dialects.v20 import development as mavlink
 
 from sim import modes
 from sim.commander import ObLossAction
-from tests.sim.conftest import Harness
+from tests.sim.conftest import Harness, HarnessFactory
 
 POSITION_AND_YAW = 0b0000_1011_1111_1000
 SET_MODE = mavlink.MAV_CMD_DO_SET_MODE
@@ -154,7 +154,7 @@ def test_home_is_set_at_arming_and_follows_while_disarmed_on_ground(harness: Har
     assert harness.api.of_type("HOME_POSITION")[-1].x == pytest.approx(85.0)
 
 
-def test_first_heartbeat_after_1_5_s_and_ready_after_3_s(make_harness) -> None:  # type: ignore[no-untyped-def]
+def test_first_heartbeat_after_1_5_s_and_ready_after_3_s(make_harness: HarnessFactory) -> None:
     h = make_harness(ready=False)
     h.run_until(lambda: bool(h.api.of_type("HEARTBEAT")), 5.0)
     assert h.vehicle.now_s == pytest.approx(1.5, abs=0.01)

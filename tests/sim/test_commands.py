@@ -8,7 +8,7 @@ import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
 from sim import modes
-from tests.sim.conftest import GCS_COMPID, GCS_SYSID, Harness
+from tests.sim.conftest import GCS_COMPID, GCS_SYSID, Harness, HarnessFactory
 
 ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
 TEMPORARILY_REJECTED = mavlink.MAV_RESULT_TEMPORARILY_REJECTED
@@ -73,7 +73,7 @@ def test_arming_twice_is_accepted_both_times(harness: Harness) -> None:
     assert [a.result for a in harness.api.acks(ARM)] == [ACCEPTED, ACCEPTED]
 
 
-def test_arming_before_ready_is_refused_with_reason(make_harness) -> None:  # type: ignore[no-untyped-def]
+def test_arming_before_ready_is_refused_with_reason(make_harness: HarnessFactory) -> None:
     h = make_harness(ready=False)
     h.run(2.0)
     h.arm()
@@ -163,7 +163,8 @@ def test_reposition_int_is_exact_and_keeps_nan_fields(harness: Harness) -> None:
     assert v.mode_name == "AUTO_LOITER"
     harness.run(0.004)
     north, east, down = v.navigator.hold_target_ned_m
-    assert (north, east) == (pytest.approx(30.0, abs=0.02), pytest.approx(-20.0, abs=0.02))
+    assert north == pytest.approx(30.0, abs=0.02)
+    assert east == pytest.approx(-20.0, abs=0.02)
     assert down == v.truth.position_ned_m[2]
 
 
@@ -192,15 +193,17 @@ def test_vtol_transition_has_no_ack_on_a_multicopter(harness: Harness) -> None:
     assert harness.api.acks() == []
 
 
-def test_vtol_transition_acks_and_refuses_front_transition_in_takeoff(make_harness) -> None:  # type: ignore[no-untyped-def]
+def test_vtol_transition_acks_and_refuses_front_transition_in_takeoff(
+    make_harness: HarnessFactory,
+) -> None:
     h = make_harness("vtol")
     transition = mavlink.MAV_CMD_DO_VTOL_TRANSITION
     h.command_long(transition, 4)
     assert h.last_ack(transition) == ACCEPTED
-    assert h.vehicle.model.transitions == [(True, False)]
+    assert h.model.transitions == [(True, False)]
     h.command_long(transition, 3, 1)
     assert h.last_ack(transition) == ACCEPTED
-    assert h.vehicle.model.transitions[-1] == (False, True)
+    assert h.model.transitions[-1] == (False, True)
     h.command_long(mavlink.MAV_CMD_NAV_TAKEOFF, *([math.nan] * 7))
     h.command_long(transition, 4)
     assert h.last_ack(transition) == TEMPORARILY_REJECTED

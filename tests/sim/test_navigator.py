@@ -8,7 +8,7 @@ import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
 from sim.navigator import RtlPhase
-from tests.sim.conftest import Harness
+from tests.sim.conftest import Harness, HarnessFactory
 
 NAN7 = [math.nan] * 7
 
@@ -148,17 +148,17 @@ def test_rtl_when_landed_is_idle(harness: Harness) -> None:
     assert harness.vehicle.rtl_phases == [RtlPhase.IDLE]
 
 
-def test_vtol_in_fixed_wing_transitions_back_before_landing(make_harness) -> None:  # type: ignore[no-untyped-def]
+def test_vtol_in_fixed_wing_transitions_back_before_landing(make_harness: HarnessFactory) -> None:
     h = make_harness("vtol")
     h.vehicle.params.set("MIS_TAKEOFF_ALT", 5.0)
     take_off(h)
     h.command_long(mavlink.MAV_CMD_DO_VTOL_TRANSITION, 4)
     h.command_long(mavlink.MAV_CMD_NAV_LAND)
     h.run(0.1)
-    assert h.vehicle.model.transitions[-1] == (False, False)
+    assert h.model.transitions[-1] == (False, False)
 
 
-def test_rover_returns_home_on_the_ground_and_stays_armed(make_harness) -> None:  # type: ignore[no-untyped-def]
+def test_rover_returns_home_on_the_ground_and_stays_armed(make_harness: HarnessFactory) -> None:
     h = make_harness("rover")
     v = h.vehicle
     h.arm()

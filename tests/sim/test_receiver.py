@@ -9,7 +9,7 @@ from pymavlink.dialects.v20 import development as mavlink
 
 from sim import modes
 from sim.topics import AttitudeSetpoint, RatesSetpoint, TrajectorySetpoint
-from tests.sim.conftest import Harness
+from tests.sim.conftest import Harness, HarnessFactory
 
 POSITION_ONLY = 0b0000_1011_1111_1000  # position and yaw: velocity, accel, yaw rate ignored
 VELOCITY_ONLY = 0b0000_1101_1100_0111  # ignore position, acceleration, yaw
@@ -125,7 +125,9 @@ def test_global_position_with_an_ignored_axis_is_not_used(harness: Harness) -> N
     assert "SET_POSITION_TARGET_GLOBAL_INT invalid" in harness.api.texts()
 
 
-def test_global_setpoint_dropped_silently_without_global_position(make_harness) -> None:  # type: ignore[no-untyped-def]
+def test_global_setpoint_dropped_silently_without_global_position(
+    make_harness: HarnessFactory,
+) -> None:
     h = make_harness(ready=False)
     h.run(2.0)  # booted, no GPS fix yet
     _global_int(h, mavlink.MAV_FRAME_GLOBAL_INT, 47.4, 8.5, 500.0)
@@ -162,7 +164,7 @@ def test_attitude_target_with_attitude_and_rates_ignored_is_invalid(harness: Har
     assert harness.vehicle.commander.offboard.setpoint is None
 
 
-def test_fixed_wing_thrust_is_along_plus_x(make_harness) -> None:  # type: ignore[no-untyped-def]
+def test_fixed_wing_thrust_is_along_plus_x(make_harness: HarnessFactory) -> None:
     h = make_harness("plane")
     _attitude_target(h, 0b111, (1.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.7)
     sp = h.vehicle.commander.offboard.setpoint

@@ -10,7 +10,7 @@ from pymavlink.dialects.v20 import development as mavlink
 
 from sim import modes
 from sim.streams import NORMAL_RATES_HZ, ONBOARD_RATES_HZ
-from tests.sim.conftest import Harness
+from tests.sim.conftest import Harness, HarnessFactory
 
 WINDOW_S = 10.0
 
@@ -78,12 +78,14 @@ def test_heartbeat_identity_mode_and_system_status(harness: Harness) -> None:
 
 @pytest.mark.parametrize(("airframe", "mav_type"), [("plane", 1), ("vtol", 22), ("rover", 10),
                                                      ("hexa", 13), ("octo", 14)])
-def test_heartbeat_type_follows_airframe(make_harness, airframe: str, mav_type: int) -> None:  # type: ignore[no-untyped-def]
+def test_heartbeat_type_follows_airframe(
+    make_harness: HarnessFactory, airframe: str, mav_type: int
+) -> None:
     h = make_harness(airframe)
     assert h.api.of_type("HEARTBEAT")[-1].type == mav_type
 
 
-def test_sys_status_reports_gps_and_prearm_only_once_ready(make_harness) -> None:  # type: ignore[no-untyped-def]
+def test_sys_status_reports_gps_and_prearm_only_once_ready(make_harness: HarnessFactory) -> None:
     h = make_harness(ready=False)
     h.run(2.0)
     before = h.api.of_type("SYS_STATUS")[-1]
