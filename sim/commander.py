@@ -62,6 +62,24 @@ _OBL_ACTION_MODES: dict[int, Px4Mode] = {
     ObLossAction.TERMINATE: modes.TERMINATION,
 }
 
+class DllAction(IntEnum):
+    """NAV_DLL_ACT values (GCS datalink loss)."""
+
+    DISABLED = 0
+    HOLD = 1
+    RETURN = 2
+    LAND = 3
+    TERMINATE = 5
+    DISARM = 6
+
+
+_DLL_ACTION_MODES: dict[int, Px4Mode] = {
+    DllAction.HOLD: modes.AUTO_LOITER,
+    DllAction.RETURN: modes.AUTO_RTL,
+    DllAction.LAND: modes.AUTO_LAND,
+    DllAction.TERMINATE: modes.TERMINATION,
+}
+
 # Known modes the simulated vehicle cannot run at all (nothing to follow, no beacon).
 _UNSUPPORTED_MODES = frozenset(
     {modes.AUTO_READY, modes.AUTO_FOLLOW_TARGET, modes.AUTO_PRECLAND, modes.ORBIT}
@@ -115,6 +133,9 @@ class Commander:
         self._offboard_lost_since_s: float | None = None
         self._offboard_resumed_at_s: float | None = None
         self._now_s = 0.0
+        self.gcs_heartbeat_s: float | None = None
+        self.onboard_heartbeat_s: float | None = None
+        self.datalink_lost = False
         self.mode_changes = 0
         self._arm_listeners: list[Callable[[bool], None]] = []
 
@@ -186,13 +207,41 @@ class Commander:
         if not was_fresh and self.user_mode == modes.OFFBOARD and self.nav_mode != modes.OFFBOARD:
             self._offboard_resumed_at_s = now_s
 
+    def on_heartbeat(self, is_gcs: bool, now_s: float) -> None:
+        """GCS and onboard-controller heartbeats are tracked apart, as in PX4."""
+        if not is_gcs:
+            self.onboard_heartbeat_s = now_s
+            return
+        self.gcs_heartbeat_s = now_s
+        if self.datalink_lost:
+            self.datalink_lost = False
+            self._announce(MAV_SEVERITY_INFO, "Data link regained")
+
     # -- periodic ----------------------------------------------------------------------
 
     def update(self, now_s: float, landed: bool) -> None:
         self._now_s = now_s
         self._track_landing(now_s, landed)
         self._check_offboard(now_s)
+        self._check_datalink(now_s)
         self._check_auto_disarm(now_s)
+
+    def _check_datalink(self, now_s: float) -> None:
+        last = self.gcs_heartbeat_s
+        if self.datalink_lost or last is None:
+            return
+        if now_s - last <= self._params.get("COM_DL_LOSS_T"):
+            return
+        self.datalink_lost = True
+        self._announce(MAV_SEVERITY_CRITICAL, "Failsafe: no connection to ground control")
+        action = int(self._params.get("NAV_DLL_ACT"))
+        if not self.armed or action == DllAction.DISABLED:
+            return
+        self.failsafe = True
+        if action == DllAction.DISARM:
+            self._disarm("Failsafe: disarming")
+        elif action in _DLL_ACTION_MODES:
+            self._set_nav_mode(_DLL_ACTION_MODES[action])
 
     def _track_landing(self, now_s: float, landed: bool) -> None:
         if not landed and self.armed:

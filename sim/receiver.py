@@ -117,6 +117,7 @@ class Receiver:
     def __init__(self, vehicle: SimVehicle) -> None:
         self._v = vehicle
         self._handlers: dict[int, Callable[[UdpLink, Message], None]] = {
+            mavlink.MAVLINK_MSG_ID_HEARTBEAT: self._on_heartbeat,
             mavlink.MAVLINK_MSG_ID_COMMAND_LONG: self._on_command_long,
             mavlink.MAVLINK_MSG_ID_COMMAND_INT: self._on_command_int,
             mavlink.MAVLINK_MSG_ID_SET_MODE: self._on_set_mode,
@@ -151,6 +152,12 @@ class Receiver:
 
     def _for_us(self, target_system: int, target_component: int) -> bool:
         return target_system == self._v.sysid and target_component in (self._v.compid, 0)
+
+    def _on_heartbeat(self, link: UdpLink, msg: Message) -> None:
+        if msg.get_srcSystem() == self._v.sysid and msg.type != mavlink.MAV_TYPE_GCS:
+            self._v.commander.on_heartbeat(is_gcs=False, now_s=self._v.now_s)
+        elif msg.type == mavlink.MAV_TYPE_GCS:
+            self._v.commander.on_heartbeat(is_gcs=True, now_s=self._v.now_s)
 
     # -- commands ----------------------------------------------------------------------
 

@@ -161,3 +161,30 @@ def test_first_heartbeat_after_1_5_s_and_ready_after_3_s(make_harness: HarnessFa
     assert not h.vehicle.ready
     h.run_until(lambda: h.vehicle.ready, 5.0)
     assert h.vehicle.now_s == pytest.approx(3.0, abs=0.01)
+
+
+def gcs_heartbeat(h: Harness) -> None:
+    h.deliver(mavlink.MAVLink_heartbeat_message(mavlink.MAV_TYPE_GCS, 8, 0, 0, 0, 3))
+
+
+def test_datalink_loss_is_only_reported_with_nav_dll_act_disabled(harness: Harness) -> None:
+    gcs_heartbeat(harness)
+    harness.command_long(mavlink.MAV_CMD_NAV_TAKEOFF, *([math.nan] * 7))
+    harness.arm()
+    harness.run(11.0)
+    assert "Failsafe: no connection to ground control" in harness.api.texts()
+    assert harness.vehicle.mode_name == "AUTO_LOITER"
+    assert not harness.vehicle.commander.failsafe
+    gcs_heartbeat(harness)
+    assert "Data link regained" in harness.api.texts()
+
+
+def test_datalink_loss_action_follows_nav_dll_act_after_com_dl_loss_t(harness: Harness) -> None:
+    harness.vehicle.params.set("NAV_DLL_ACT", 2)
+    harness.vehicle.params.set("COM_DL_LOSS_T", 3)
+    gcs_heartbeat(harness)
+    harness.command_long(mavlink.MAV_CMD_NAV_TAKEOFF, *([math.nan] * 7))
+    harness.arm()
+    took = harness.run_until(lambda: harness.vehicle.mode_name == "AUTO_RTL", 10.0)
+    assert took == pytest.approx(3.0, abs=0.05)
+    assert harness.vehicle.commander.user_mode != modes.AUTO_RTL
