@@ -13,6 +13,7 @@ from typing import Any
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
+from server.link.events import VehicleEvent
 from server.link.link import Link
 from server.link.vehicle import Vehicle
 
@@ -28,6 +29,14 @@ async def wait_for(
         if time.monotonic() > deadline:
             raise AssertionError(f"{what} not met within {timeout_s} s")
         await asyncio.sleep(0.005)
+
+
+def drain(queue: asyncio.Queue[VehicleEvent]) -> list[VehicleEvent]:
+    """Everything in an event queue right now."""
+    items = []
+    while not queue.empty():
+        items.append(queue.get_nowait())
+    return items
 
 
 class ScriptedPeer(asyncio.DatagramProtocol):

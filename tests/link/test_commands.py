@@ -9,8 +9,7 @@ import math
 from pymavlink.dialects.v20 import development as mavlink
 
 from server.link.commands import CommandOutcome
-from server.link.events import VehicleEvent
-from tests.link.conftest import ScriptedSession, wait_for
+from tests.link.conftest import ScriptedSession, drain, wait_for
 
 ARM = mavlink.MAV_CMD_COMPONENT_ARM_DISARM
 SET_MODE = mavlink.MAV_CMD_DO_SET_MODE
@@ -59,7 +58,7 @@ async def test_in_progress_is_not_final_and_stops_retries(scripted: ScriptedSess
 
     assert result.outcome is CommandOutcome.ACCEPTED
     assert len(peer.commands(ARM)) == 1  # no retry while the vehicle says it is working
-    progress = [e.data for e in _drain(events) if e.data.get("outcome") == "IN_PROGRESS"]
+    progress = [e.data for e in drain(events) if e.data.get("outcome") == "IN_PROGRESS"]
     assert progress
     assert progress[0]["progress"] == 40
 
@@ -170,10 +169,3 @@ async def test_pending_command_ends_as_link_lost_when_vehicle_goes_silent(
     result = await asyncio.wait_for(task, 1.0)
 
     assert result.outcome is CommandOutcome.LINK_LOST
-
-
-def _drain(queue: asyncio.Queue[VehicleEvent]) -> list[VehicleEvent]:
-    items = []
-    while not queue.empty():
-        items.append(queue.get_nowait())
-    return items

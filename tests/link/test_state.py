@@ -11,10 +11,9 @@ import math
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
-from server.link.events import VehicleEvent
 from server.link.state import BatteryState, GpsState, PositionNedState
 from server.link.statustext import StatusTextAssembler
-from tests.link.conftest import ScriptedSession, wait_for
+from tests.link.conftest import ScriptedSession, drain, wait_for
 
 HOLD = 0x3040000
 RTL = 0x5040000
@@ -129,7 +128,7 @@ async def test_mode_and_armed_changes_become_events(scripted: ScriptedSession) -
     scripted.peer.heartbeat()
     await wait_for(lambda: scripted.vehicle.snapshot().armed)
 
-    kinds = {e.kind: e.data for e in _drain(events)}
+    kinds = {e.kind: e.data for e in drain(events)}
     assert kinds["mode"] == {"mode": "OFFBOARD", "previous": "HOLD"}
     assert kinds["armed"] == {"armed": True}
 
@@ -139,7 +138,7 @@ async def test_event_queue_drops_oldest_when_full(scripted: ScriptedSession) -> 
     for i in range(5):
         scripted.vehicle.publish_event("lease", {"n": i})
 
-    assert [e.data["n"] for e in _drain(events)] == [2, 3, 4]
+    assert [e.data["n"] for e in drain(events)] == [2, 3, 4]
 
 
 async def test_subscription_is_latest_wins(scripted: ScriptedSession) -> None:
@@ -162,7 +161,7 @@ async def test_connection_loss_and_return_are_events(scripted: ScriptedSession) 
     scripted.vehicle.set_connected(False)
     scripted.vehicle.set_connected(True)
 
-    assert [e.data for e in _drain(events) if e.kind == "connection"] == [
+    assert [e.data for e in drain(events) if e.kind == "connection"] == [
         {"connected": False},
         {"connected": True},
     ]
@@ -171,10 +170,3 @@ async def test_connection_loss_and_return_are_events(scripted: ScriptedSession) 
 def _north_m(session: ScriptedSession) -> float | None:
     position = session.vehicle.snapshot().position_ned
     return None if position is None else position.north_m
-
-
-def _drain(queue: asyncio.Queue[VehicleEvent]) -> list[VehicleEvent]:
-    items = []
-    while not queue.empty():
-        items.append(queue.get_nowait())
-    return items

@@ -4,16 +4,14 @@ transitions, parameters."""
 
 from __future__ import annotations
 
-import asyncio
 import math
 
 import pytest
 
 from server.link.commands import CommandOutcome
-from server.link.events import VehicleEvent
 from server.link.setpoints import PositionNed, VelocityBody, VelocityNed
 from server.link.vehicle import Vehicle
-from tests.link.conftest import SimSession, open_sim, wait_for
+from tests.link.conftest import SimSession, drain, open_sim, wait_for
 
 SPEED = 5.0  # sim seconds per wall second
 
@@ -119,7 +117,7 @@ async def test_rtl_lands_and_disarms_at_home_and_ends_the_stream() -> None:
         assert math.dist(session.truth_ned_m[:2], (0.0, 0.0)) < 1.0
         assert vehicle.snapshot().landed_state == "ON_GROUND"
         assert not vehicle.streamer_active
-        seen = [e.data["phase"] for e in _drain(events) if e.kind == "rtl"]
+        seen = [e.data["phase"] for e in drain(events) if e.kind == "rtl"]
         assert "LANDED" in seen
 
 
@@ -162,10 +160,3 @@ async def test_arming_refusal_in_offboard_without_signal_carries_the_reason() ->
         assert result.outcome is CommandOutcome.TEMPORARILY_REJECTED
         assert result.reason is not None
         assert "denied" in result.reason.lower()
-
-
-def _drain(queue: asyncio.Queue[VehicleEvent]) -> list[VehicleEvent]:
-    items = []
-    while not queue.empty():
-        items.append(queue.get_nowait())
-    return items
