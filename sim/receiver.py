@@ -28,8 +28,7 @@ from sim.modes import Px4Mode
 from sim.topics import AttitudeSetpoint, ControlSetpoint, RatesSetpoint, TrajectorySetpoint
 
 if TYPE_CHECKING:
-    from sim.endpoint import UdpLink
-    from sim.vehicle import SimVehicle
+    from sim.vehicle import Link, SimVehicle
 
 # pymavlink messages carry their fields as dynamic attributes.
 Message: TypeAlias = Any
@@ -116,7 +115,7 @@ def _all_nan(v: list[float]) -> bool:
 class Receiver:
     def __init__(self, vehicle: SimVehicle) -> None:
         self._v = vehicle
-        self._handlers: dict[int, Callable[[UdpLink, Message], None]] = {
+        self._handlers: dict[int, Callable[[Link, Message], None]] = {
             mavlink.MAVLINK_MSG_ID_HEARTBEAT: self._on_heartbeat,
             mavlink.MAVLINK_MSG_ID_COMMAND_LONG: self._on_command_long,
             mavlink.MAVLINK_MSG_ID_COMMAND_INT: self._on_command_int,
@@ -130,7 +129,7 @@ class Receiver:
             mavlink.MAVLINK_MSG_ID_SET_GPS_GLOBAL_ORIGIN: self._on_set_gps_global_origin,
             mavlink.MAVLINK_MSG_ID_MISSION_REQUEST_LIST: self._on_mission_request_list,
         }
-        self._commands: dict[int, Callable[[Command, UdpLink], int | None]] = {
+        self._commands: dict[int, Callable[[Command, Link], int | None]] = {
             mavlink.MAV_CMD_COMPONENT_ARM_DISARM: self._cmd_arm_disarm,
             mavlink.MAV_CMD_DO_SET_MODE: self._cmd_do_set_mode,
             mavlink.MAV_CMD_NAV_TAKEOFF: self._cmd_takeoff,
@@ -145,7 +144,7 @@ class Receiver:
             mavlink.MAV_CMD_DO_SET_HOME: self._cmd_set_home,
         }
 
-    def handle(self, link: UdpLink, msg: Message) -> None:
+    def handle(self, link: Link, msg: Message) -> None:
         handler = self._handlers.get(msg.get_msgId())
         if handler is not None:
             handler(link, msg)
@@ -153,7 +152,7 @@ class Receiver:
     def _for_us(self, target_system: int, target_component: int) -> bool:
         return target_system == self._v.sysid and target_component in (self._v.compid, 0)
 
-    def _on_heartbeat(self, link: UdpLink, msg: Message) -> None:
+    def _on_heartbeat(self, link: Link, msg: Message) -> None:
         if msg.get_srcSystem() == self._v.sysid and msg.type != mavlink.MAV_TYPE_GCS:
             self._v.commander.on_heartbeat(is_gcs=False, now_s=self._v.now_s)
         elif msg.type == mavlink.MAV_TYPE_GCS:
@@ -161,14 +160,14 @@ class Receiver:
 
     # -- commands ----------------------------------------------------------------------
 
-    def _on_command_long(self, link: UdpLink, msg: Message) -> None:
+    def _on_command_long(self, link: Link, msg: Message) -> None:
         params = [msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6,
                   msg.param7]
         cmd = Command(msg.command, params, mavlink.MAV_FRAME_GLOBAL, False,
                       msg.get_srcSystem(), msg.get_srcComponent())
         self._dispatch(cmd, msg.target_system, msg.target_component, link)
 
-    def _on_command_int(self, link: UdpLink, msg: Message) -> None:
+    def _on_command_int(self, link: Link, msg: Message) -> None:
         lat = math.nan if msg.x == INT32_MAX else msg.x * 1e-7
         lon = math.nan if msg.y == INT32_MAX else msg.y * 1e-7
         params = [msg.param1, msg.param2, msg.param3, msg.param4, lat, lon, msg.z]
@@ -177,7 +176,7 @@ class Receiver:
         self._dispatch(cmd, msg.target_system, msg.target_component, link)
 
     def _dispatch(self, cmd: Command, target_system: int, target_component: int,
-                  link: UdpLink) -> None:
+                  link: Link) -> None:
         if not self._for_us(target_system, target_component) and not (
             target_system == 0 and self._is_any_target(cmd)
         ):
@@ -194,11 +193,11 @@ class Receiver:
         requested = _as_int(cmd.params[0])
         return cmd.command == mavlink.MAV_CMD_REQUEST_MESSAGE and requested in _VERSION_MESSAGES
 
-    def ack(self, link: UdpLink, cmd: Command, result: int) -> None:
+    def ack(self, link: Link, cmd: Command, result: int) -> None:
         link.send(mavlink.MAVLink_command_ack_message(
             cmd.command, result, 0, 0, cmd.source_system, cmd.source_component))
 
-    def _cmd_arm_disarm(self, cmd: Command, link: UdpLink) -> int | None:
+    def _cmd_arm_disarm(self, cmd: Command, link: Link) -> int | None:
         action = cmd.params[0]
         force = _as_int(cmd.params[1]) == ARM_DISARM_FORCE_MAGIC
         if action == 1.0:
@@ -207,7 +206,7 @@ class Receiver:
             return self._v.commander.disarm(force)
         return None  # PX4 leaves any other param1 unanswered
 
-    def _cmd_do_set_mode(self, cmd: Command, link: UdpLink) -> int | None:
+    def _cmd_do_set_mode(self, cmd: Command, link: Link) -> int | None:
         # PX4 v1.16 acks every DO_SET_MODE twice: ACCEPTED at once, then the real result.
         self.ack(link, cmd, MAV_RESULT_ACCEPTED)
         return self._set_mode(*(_as_int(p) for p in cmd.params[:3]))
@@ -219,7 +218,7 @@ class Receiver:
                                                              modes.MainMode.POSCTL) else 0)
         return self._v.commander.request_mode(mode)
 
-    def _on_set_mode(self, link: UdpLink, msg: Message) -> None:
+    def _on_set_mode(self, link: Link, msg: Message) -> None:
         if msg.target_system != self._v.sysid:
             return
         custom = modes.decode_custom_mode(msg.custom_mode)
@@ -229,21 +228,21 @@ class Receiver:
         self.ack(link, cmd, MAV_RESULT_ACCEPTED)
         self.ack(link, cmd, self._set_mode(msg.base_mode, custom.main, custom.sub))
 
-    def _cmd_takeoff(self, cmd: Command, link: UdpLink) -> int:
+    def _cmd_takeoff(self, cmd: Command, link: Link) -> int:
         v = self._v
         if not v.ready or v.airframe_name == "rover":
             return MAV_RESULT_TEMPORARILY_REJECTED
         v.navigator.request_takeoff(cmd.params[6])
         return v.commander.request_mode(modes.AUTO_TAKEOFF)
 
-    def _cmd_land(self, cmd: Command, link: UdpLink) -> int:
+    def _cmd_land(self, cmd: Command, link: Link) -> int:
         self._v.commander.switch_mode(modes.AUTO_LAND)
         return MAV_RESULT_ACCEPTED
 
-    def _cmd_rtl(self, cmd: Command, link: UdpLink) -> int:
+    def _cmd_rtl(self, cmd: Command, link: Link) -> int:
         return self._v.commander.request_mode(modes.AUTO_RTL)
 
-    def _cmd_reposition(self, cmd: Command, link: UdpLink) -> int:
+    def _cmd_reposition(self, cmd: Command, link: Link) -> int:
         v = self._v
         speed, flags, _radius, yaw, lat, lon, alt = cmd.params
         if _as_int(flags) != MAV_DO_REPOSITION_FLAGS_CHANGE_MODE:
@@ -273,7 +272,7 @@ class Receiver:
             return self._v.commander.home.position_ned_m[2] - alt_m
         return self._v.origin.down_of_altitude(alt_m)
 
-    def _cmd_vtol_transition(self, cmd: Command, link: UdpLink) -> int | None:
+    def _cmd_vtol_transition(self, cmd: Command, link: Link) -> int | None:
         v = self._v
         if not v.model.is_vtol:
             return None  # PX4 without a VTOL attitude controller leaves it unanswered
@@ -289,12 +288,12 @@ class Receiver:
             return MAV_RESULT_ACCEPTED
         return MAV_RESULT_DENIED
 
-    def _cmd_set_message_interval(self, cmd: Command, link: UdpLink) -> int:
+    def _cmd_set_message_interval(self, cmd: Command, link: Link) -> int:
         streams = self._v.streams_of(link)
         ok = streams.set_interval(_as_int(cmd.params[0]), cmd.params[1], self._v.now_s)
         return MAV_RESULT_ACCEPTED if ok else MAV_RESULT_FAILED
 
-    def _cmd_request_message(self, cmd: Command, link: UdpLink) -> int | None:
+    def _cmd_request_message(self, cmd: Command, link: Link) -> int | None:
         msg = self._v.messages.build(_as_int(cmd.params[0]))
         if msg is None:
             return MAV_RESULT_FAILED
@@ -302,19 +301,19 @@ class Receiver:
         link.send(msg)
         return None
 
-    def _reply_with(self, cmd: Command, link: UdpLink, msg_id: int) -> None:
+    def _reply_with(self, cmd: Command, link: Link, msg_id: int) -> None:
         msg = self._v.messages.build(msg_id)
         self.ack(link, cmd, MAV_RESULT_ACCEPTED if msg is not None else MAV_RESULT_FAILED)
         if msg is not None:
             link.send(msg)
 
-    def _cmd_request_capabilities(self, cmd: Command, link: UdpLink) -> None:
+    def _cmd_request_capabilities(self, cmd: Command, link: Link) -> None:
         self._reply_with(cmd, link, mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
 
-    def _cmd_get_home_position(self, cmd: Command, link: UdpLink) -> None:
+    def _cmd_get_home_position(self, cmd: Command, link: Link) -> None:
         self._reply_with(cmd, link, mavlink.MAVLINK_MSG_ID_HOME_POSITION)
 
-    def _cmd_set_home(self, cmd: Command, link: UdpLink) -> int:
+    def _cmd_set_home(self, cmd: Command, link: Link) -> int:
         v = self._v
         if not v.ready:
             return MAV_RESULT_TEMPORARILY_REJECTED
@@ -335,7 +334,7 @@ class Receiver:
     def _accept(self, setpoint: ControlSetpoint) -> None:
         self._v.commander.on_offboard_setpoint(setpoint, self._v.now_s)
 
-    def _on_local_ned(self, link: UdpLink, msg: Message) -> None:
+    def _on_local_ned(self, link: Link, msg: Message) -> None:
         if not self._for_us(msg.target_system, msg.target_component):
             return
         name = "SET_POSITION_TARGET_LOCAL_NED"
@@ -354,7 +353,7 @@ class Receiver:
             accel = _rotate(q, accel)
         self._publish_trajectory(name, mask, position, velocity, accel, msg.yaw, msg.yaw_rate)
 
-    def _on_global_int(self, link: UdpLink, msg: Message) -> None:
+    def _on_global_int(self, link: Link, msg: Message) -> None:
         if not self._for_us(msg.target_system, msg.target_component):
             return
         name = "SET_POSITION_TARGET_GLOBAL_INT"
@@ -398,7 +397,7 @@ class Receiver:
             yawspeed_rad_s=_nan_if(bool(mask & IGNORE_YAW_RATE), yaw_rate),
         ))
 
-    def _on_attitude_target(self, link: UdpLink, msg: Message) -> None:
+    def _on_attitude_target(self, link: Link, msg: Message) -> None:
         if not self._for_us(msg.target_system, msg.target_component):
             return
         mask = msg.type_mask
@@ -435,13 +434,13 @@ class Receiver:
             name.encode(), params.wire_value(name), params.param_type(name), len(params),
             params.index(name))
 
-    def _on_param_request_list(self, link: UdpLink, msg: Message) -> None:
+    def _on_param_request_list(self, link: Link, msg: Message) -> None:
         if not self._for_us(msg.target_system, msg.target_component):
             return
         for name in self._v.params:
             link.send(self._param_value(name))
 
-    def _on_param_request_read(self, link: UdpLink, msg: Message) -> None:
+    def _on_param_request_read(self, link: Link, msg: Message) -> None:
         if not self._for_us(msg.target_system, msg.target_component):
             return
         params = self._v.params
@@ -450,7 +449,7 @@ class Receiver:
             return  # PX4 stays silent about parameters it does not have
         link.send(self._param_value(name))
 
-    def _on_param_set(self, link: UdpLink, msg: Message) -> None:
+    def _on_param_set(self, link: Link, msg: Message) -> None:
         if not self._for_us(msg.target_system, msg.target_component):
             return
         params = self._v.params
@@ -462,7 +461,7 @@ class Receiver:
 
     # -- origin, missions --------------------------------------------------------------
 
-    def _on_set_gps_global_origin(self, link: UdpLink, msg: Message) -> None:
+    def _on_set_gps_global_origin(self, link: Link, msg: Message) -> None:
         if msg.target_system not in (self._v.sysid, 0):
             return
         self._v.set_origin(msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3)
@@ -470,7 +469,7 @@ class Receiver:
         if origin is not None:
             self._v.broadcast(origin)
 
-    def _on_mission_request_list(self, link: UdpLink, msg: Message) -> None:
+    def _on_mission_request_list(self, link: Link, msg: Message) -> None:
         if not self._for_us(msg.target_system, msg.target_component):
             return
         link.send(mavlink.MAVLink_mission_count_message(

@@ -151,7 +151,7 @@ class SimVehicle:
 
     def handle_message(self, link: Link, msg: Message) -> None:
         if self.booted:
-            self.receiver.handle(link, msg)  # type: ignore[arg-type]
+            self.receiver.handle(link, msg)
 
     def broadcast(self, msg: Message) -> None:
         for link, _ in self._links:
