@@ -51,6 +51,18 @@ class ClickPoint:
     alt_amsl_m: float | None
 
 
+def local_origin(state: VehicleState) -> tuple[float, float, float] | None:
+    """Geodetic point of the vehicle's local NED origin: reported by GPS_GLOBAL_ORIGIN, or
+    else worked back from home, whose position PX4 gives both ways."""
+    if state.origin is not None:
+        return (state.origin.lat_deg, state.origin.lon_deg, state.origin.alt_amsl_m)
+    home = state.home
+    if home is None:
+        return None
+    return enu_to_geodetic(-home.east_m, -home.north_m, home.down_m,
+                           home.lat_deg, home.lon_deg, home.alt_amsl_m)
+
+
 class SceneHub:
     def __init__(self, *, host: str = "127.0.0.1", port: int = 0,
                  max_rate_hz: float = 30.0) -> None:
@@ -214,10 +226,9 @@ class SceneHub:
 
     def _offset_enu(self, state: VehicleState) -> Vec3:
         """Each vehicle reports NED around its own origin; the scene uses the first one's."""
-        origin = state.origin
-        if origin is None:
+        here = local_origin(state)
+        if here is None:
             return (0.0, 0.0, 0.0)
-        here = (origin.lat_deg, origin.lon_deg, origin.alt_amsl_m)
         if self._reference is None:
             self._reference = here
         return geodetic_offset_enu(*here, *self._reference)

@@ -103,6 +103,20 @@ def test_scene_draws_the_vehicle_through_the_proxied_socket(page: Any, serve: Se
         empty = empty_canvas.screenshot()
         other.close()
     assert _changed_pixels(with_vehicle, empty) > 200
+
+
+def test_click_in_the_scene_fills_the_reposition_target(page: Any) -> None:
+    box = page.locator("#scene").bounding_box()
+    # Below the centre, where the camera looks down at the ground grid. Mouse events go
+    # straight to the canvas: software WebGL is too slow for Playwright's stability checks.
+    page.mouse.click(box["x"] + box["width"] * 0.5, box["y"] + box["height"] * 0.8)
+    page.wait_for_selector("#scene-click:not(.hidden)", timeout=20_000)
+    assert "clicked" in (page.text_content("#scene-click") or "")
+    lat = float(page.input_value("#repo-lat"))
+    lon = float(page.input_value("#repo-lon"))
+    state_global = page.evaluate("window.skyhelm.page.state.global")
+    assert abs(lat - state_global["lat_deg"]) < 0.001
+    assert abs(lon - state_global["lon_deg"]) < 0.001
     page.uncheck("#scene-enable")  # the rest of the flight needs no WebGL
     assert page.is_hidden("#scene")
 

@@ -11,12 +11,13 @@ import numpy as np
 import pytest
 import viser
 
-from server.link.state import PositionNedState, VehicleState
-from server.scene.frames import attitude_wxyz_enu
+from server.link.state import HomeState, PositionNedState, VehicleState
+from server.scene.frames import attitude_wxyz_enu, enu_to_geodetic
+from server.scene.hub import local_origin
 from server.scene.styling import STATE_COLOURS, StateCategory
 from server.scene.vehicle_view import VehicleView, rtl_path_enu, setpoint_point_ned
 
-from .conftest import make_state
+from .conftest import ORIGIN, make_state
 
 
 @pytest.fixture(scope="module")
@@ -104,3 +105,17 @@ def test_setpoint_point_from_position_or_velocity() -> None:
 def test_rtl_path_climbs_flies_over_home_and_descends() -> None:
     path = rtl_path_enu((30.0, 40.0, 10.0), (0.0, 0.0, 0.0))
     assert path == [(30.0, 40.0, 10.0), (30.0, 40.0, 10.0), (0.0, 0.0, 10.0), (0.0, 0.0, 0.0)]
+
+
+def test_local_origin_is_reported_or_worked_back_from_home() -> None:
+    origin = local_origin(make_state())
+    assert origin == (ORIGIN.lat_deg, ORIGIN.lon_deg, ORIGIN.alt_amsl_m)
+    home_lat, home_lon, home_alt = enu_to_geodetic(30.0, 40.0, -2.0, *origin)
+    from_home = make_state(origin=None, home=HomeState(home_lat, home_lon, home_alt,
+                                                       40.0, 30.0, 2.0))
+    worked_back = local_origin(from_home)
+    assert worked_back is not None
+    assert worked_back[:2] == pytest.approx((ORIGIN.lat_deg, ORIGIN.lon_deg), abs=1e-8)
+    # the ENU plane and the ellipsoid part by millimetres over 50 m
+    assert worked_back[2] == pytest.approx(ORIGIN.alt_amsl_m, abs=0.01)
+    assert local_origin(make_state(origin=None, home=None)) is None
