@@ -93,6 +93,19 @@ async def measure(count: int, seconds: float) -> dict[str, Any]:
     }
 
 
+def fit_cost(rows: list[dict[str, Any]]) -> tuple[float | None, float]:
+    """Least-squares line through CPU share over quad count: (per quad, fixed part)."""
+    if len(rows) < 2:
+        return None, 0.0
+    xs = [float(r["quads"]) for r in rows]
+    ys = [float(r["cpu_share_of_one_core"]) for r in rows]
+    mean_x, mean_y = sum(xs) / len(xs), sum(ys) / len(ys)
+    slope = sum((x - mean_x) * (y - mean_y) for x, y in zip(xs, ys, strict=True)) / sum(
+        (x - mean_x) ** 2 for x in xs
+    )
+    return round(slope, 5), round(mean_y - slope * mean_x, 4)
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seconds", type=float, default=10.0)
@@ -112,18 +125,24 @@ def main() -> int:
         )
     single = rows[0]["cpu_share_per_quad"] if rows and rows[0]["quads"] == 1 else None
     real_time_counts = [r["quads"] for r in rows if r["real_time"]]
+    marginal, fixed = fit_cost([r for r in rows if r["real_time"]])
     result = {
         "machine": {"cpus": os.cpu_count(), "load_avg_1m": os.getloadavg()[0]},
         "seconds_per_point": args.seconds,
         "rows": rows,
         "cpu_share_per_quad_single": single,
         "max_real_time_quads_measured": max(real_time_counts, default=0),
+        "cpu_share_per_additional_quad": marginal,
+        "cpu_share_fixed_overhead": fixed,
         "goal_cpu_share_per_quad": GOAL_CPU_SHARE_PER_QUAD,
         "goal_vehicles": GOAL_VEHICLES,
     }
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps(result, indent=2) + "\n")
     print(f"per quad (N=1): {100 * single:.2f} % of one core (goal ≤ 3 %)" if single else "")
+    if marginal is not None:
+        print(f"each additional quad: {100 * marginal:.2f} % of one core "
+              f"(fixed overhead of the process and its event loop {100 * fixed:.1f} %)")
     print(f"largest N in real time: {result['max_real_time_quads_measured']} (goal ≥ 20)")
     print(f"wrote {RESULTS}")
     return 0
