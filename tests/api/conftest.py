@@ -22,7 +22,7 @@ from sim.runner import SimCluster, SimInstance
 PILOT = "pilot-token-for-tests"
 OBSERVER = "observer-token-for-tests"
 # Sim seconds per wall second; PX4 timeouts inside the sim scale with it.
-SIM_SPEED = 5.0
+SIM_SPEED = 8.0
 
 
 def make_settings(url: str | None, **overrides: Any) -> Settings:
@@ -33,7 +33,7 @@ def make_settings(url: str | None, **overrides: Any) -> Settings:
         "scene": False,
         "log_dir": None,
         "web_dir": None,
-        "heartbeat_timeout_s": 1.5,
+        "heartbeat_timeout_s": 3.0,
     }
     values.update(overrides)
     return load_settings(**values)

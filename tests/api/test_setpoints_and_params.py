@@ -3,11 +3,34 @@ vehicle that goes silent."""
 
 from __future__ import annotations
 
+from collections.abc import AsyncIterator
 from typing import Any
 
 import pytest
+import pytest_asyncio
 
 from tests.api.conftest import Api, api_for, eventually, sim_cluster
+
+# One simulated quad serves the whole module: these tests refuse things or read, and each
+# leaves the vehicle on the ground without a control lease.
+pytestmark = pytest.mark.asyncio(loop_scope="module")
+
+
+@pytest_asyncio.fixture(loop_scope="module", scope="module")
+async def shared_quad() -> AsyncIterator[Api]:
+    async with sim_cluster("quad") as sim, api_for(sim) as api:
+        await api.wait_ready()
+        yield api
+
+
+@pytest_asyncio.fixture(loop_scope="module")
+async def quad_api(shared_quad: Api) -> AsyncIterator[Api]:
+    yield shared_quad
+    leases = shared_quad.app.state.api.leases
+    lease = leases.current(1)
+    if lease is not None:
+        leases.release(1, lease.lease_id)
+    shared_quad.lease_headers = {}
 
 
 def velocity(north_m_s: float = 0.0, down_m_s: float = 0.0) -> dict[str, Any]:
