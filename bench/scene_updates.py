@@ -1,0 +1,114 @@
+"""Cost of the 3D scene: per-vehicle update rate (target ≤ 30 Hz), time per batched tick,
+the server process's CPU while one browser-like client watches through the proxy, and the
+bytes that client receives.
+
+Run: .venv/bin/python -m bench.scene_updates
+Writes bench/results/scene_updates.json.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import statistics
+import time
+from pathlib import Path
+from typing import Any, cast
+
+import uvicorn
+import viser
+from fastapi import FastAPI
+from websockets.asyncio.client import connect
+from websockets.typing import Subprotocol
+
+from server.link import Vehicle
+from server.scene import SceneHub
+from tests.scene.conftest import FakeVehicle
+
+RESULTS = Path(__file__).resolve().parent / "results" / "scene_updates.json"
+TOKEN = "bench-scene-token"
+MEASURE_S = 5.0
+
+
+class _TimedHub(SceneHub):
+    """The hub with each batched tick timed."""
+
+    def __init__(self) -> None:
+        super().__init__(max_rate_hz=30.0)
+        self.tick_s: list[float] = []
+
+    def _tick(self, vehicles: list[Vehicle], now_s: float) -> None:
+        started = time.perf_counter()
+        super()._tick(vehicles, now_s)
+        self.tick_s.append(time.perf_counter() - started)
+
+
+async def measure(vehicle_count: int) -> dict[str, Any]:
+    vehicles = [FakeVehicle(i + 1) for i in range(vehicle_count)]
+    hub = _TimedHub()
+    app = FastAPI()
+    hub.mount(app, check_token=lambda t: t == TOKEN)
+    await hub.start(lambda: cast("list[Vehicle]", vehicles))
+    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=0, log_level="warning",
+                                           lifespan="off"))
+    task = asyncio.create_task(server.serve())
+    for _ in range(500):
+        if server.started:
+            break
+        await asyncio.sleep(0.02)
+    port = server.servers[0].sockets[0].getsockname()[1]
+    received_bytes = 0
+    try:
+        async with connect(f"ws://127.0.0.1:{port}/scene",
+                           subprotocols=[Subprotocol(f"viser-v{viser.__version__}")],
+                           additional_headers={"Cookie": f"skyhelm_token={TOKEN}"},
+                           max_size=None) as ws:
+            await asyncio.wait_for(ws.recv(), 10.0)
+            await asyncio.sleep(1.0)
+            hub.tick_s.clear()
+            applied0 = hub.updates_applied
+            cpu0, wall0 = time.process_time(), time.perf_counter()
+            while time.perf_counter() - wall0 < MEASURE_S:
+                try:
+                    message = await asyncio.wait_for(ws.recv(), 0.2)
+                    received_bytes += len(message)
+                except TimeoutError:
+                    pass
+            wall = time.perf_counter() - wall0
+            cpu = time.process_time() - cpu0
+            applied = hub.updates_applied - applied0
+    finally:
+        server.should_exit = True
+        await task
+        await hub.stop()
+    ticks_ms = sorted(t * 1000 for t in hub.tick_s)
+    return {
+        "vehicles": vehicle_count,
+        "update_rate_per_vehicle_hz": round(applied / vehicle_count / wall, 1),
+        "tick_p50_ms": round(statistics.median(ticks_ms), 2),
+        "tick_p99_ms": round(ticks_ms[int(0.99 * (len(ticks_ms) - 1))], 2),
+        "process_cpu_pct_of_one_core": round(100 * cpu / wall, 1),
+        "client_kbytes_per_s": round(received_bytes / 1024 / wall, 1),
+    }
+
+
+async def run() -> list[dict[str, Any]]:
+    return [await measure(n) for n in (1, 4)]
+
+
+def main() -> int:
+    rows = asyncio.run(run())
+    for row in rows:
+        print(
+            f"{row['vehicles']} vehicle(s): {row['update_rate_per_vehicle_hz']} Hz per vehicle "
+            f"(limit 30), tick p50 {row['tick_p50_ms']} ms / p99 {row['tick_p99_ms']} ms, "
+            f"CPU {row['process_cpu_pct_of_one_core']}% of one core, "
+            f"{row['client_kbytes_per_s']} kB/s to the client"
+        )
+    RESULTS.parent.mkdir(parents=True, exist_ok=True)
+    RESULTS.write_text(json.dumps({"measure_s": MEASURE_S, "rows": rows}, indent=2) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
