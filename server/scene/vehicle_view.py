@@ -66,6 +66,25 @@ def _polyline_segments(points: list[Vec3]) -> np.ndarray:
     return np.array([[points[i], points[i + 1]] for i in range(len(points) - 1)], dtype=np.float32)
 
 
+def _rounded(values: tuple[float, ...], digits: int = 3) -> tuple[float, ...]:
+    return tuple(round(v, digits) for v in values)
+
+
+class _Assigner:
+    """Sets a node's property only when its value changed: every set is a message to every
+    watching browser, and most of a hovering vehicle's scene does not change."""
+
+    def __init__(self) -> None:
+        self._last: dict[tuple[int, str], object] = {}
+
+    def __call__(self, handle: object, name: str, value: object) -> None:
+        key = (id(handle), name)
+        if key in self._last and self._last[key] == value:
+            return
+        self._last[key] = value
+        setattr(handle, name, value)
+
+
 class _Polyline:
     """A line-segment node that can be emptied (viser needs at least one segment)."""
 
@@ -98,6 +117,7 @@ class VehicleView:
         self.mav_type = mav_type
         self.position_enu: Vec3 | None = None
         self._root = scene.add_frame(base, show_axes=False)
+        self._set = _Assigner()
         self._kind = model_kind(mav_type)
         self.model: VehicleModel = build_model(scene, f"{base}/body", mav_type)
         self.label = scene.add_label(f"{base}/label", text=f"{sysid}", anchor="bottom-center")
@@ -136,20 +156,21 @@ class VehicleView:
         mode_text = state.mode if state.user_mode in (None, state.mode) else (
             f"{state.mode} (wants {state.user_mode})"
         )
-        self.label.text = f"{state.sysid} {mode_text}"
+        self._set(self.label, "text", f"{state.sysid} {mode_text}")
 
         position_ned: Vec3 | None = None
         if state.position_ned is not None:
             p = state.position_ned
             position_ned = (p.north_m, p.east_m, p.down_m)
             self.position_enu = _shift(ned_to_enu(*position_ned), offset_enu)
-            self.model.root.position = self.position_enu
-            self.label.position = _shift(self.position_enu, (0.0, 0.0, 0.8))
+            self._set(self.model.root, "position", _rounded(self.position_enu))
+            self._set(self.label, "position", _rounded(_shift(self.position_enu, (0.0, 0.0, 0.8))))
             if self.trail.add(now_s, self.position_enu) or now_s - self._trail_drawn_s > 5.0:
                 self._redraw_trail(now_s, colour)
         if state.attitude is not None:
             a = state.attitude
-            self.model.root.wxyz = attitude_wxyz_enu(a.roll_deg, a.pitch_deg, a.yaw_deg)
+            wxyz = attitude_wxyz_enu(a.roll_deg, a.pitch_deg, a.yaw_deg)
+            self._set(self.model.root, "wxyz", _rounded(wxyz, 5))
 
         self._update_setpoint(state, position_ned, offset_enu)
         home_enu = self._update_home(state, offset_enu)
@@ -176,23 +197,22 @@ class VehicleView:
             if _finite(t.north_m, t.east_m, t.down_m):
                 point_ned = (t.north_m, t.east_m, t.down_m)
         if point_ned is None or self.position_enu is None:
-            self.setpoint_marker.visible = False
+            self._set(self.setpoint_marker, "visible", False)
             self.setpoint_line.hide()
             return
         point_enu = _shift(ned_to_enu(*point_ned), offset_enu)
-        self.setpoint_marker.position = point_enu
-        self.setpoint_marker.visible = True
+        self._set(self.setpoint_marker, "position", _rounded(point_enu))
+        self._set(self.setpoint_marker, "visible", True)
         self.setpoint_line.show([self.position_enu, point_enu])
 
     def _update_home(self, state: VehicleState, offset_enu: Vec3) -> Vec3 | None:
         home = state.home
         if home is None or not _finite(home.north_m, home.east_m, home.down_m):
-            self.home_marker.visible = False
+            self._set(self.home_marker, "visible", False)
             return None
         home_enu = _shift(ned_to_enu(home.north_m, home.east_m, home.down_m), offset_enu)
-        self.home_marker.position = home_enu
-        self.home_marker.wxyz = (1.0, 0.0, 0.0, 0.0)
-        self.home_marker.visible = True
+        self._set(self.home_marker, "position", _rounded(home_enu))
+        self._set(self.home_marker, "visible", True)
         return home_enu
 
     def _update_target(self, state: VehicleState, offset_enu: Vec3) -> None:
@@ -203,7 +223,7 @@ class VehicleView:
             if _finite(t.north_m, t.east_m, t.down_m):
                 target = _shift(ned_to_enu(t.north_m, t.east_m, t.down_m), offset_enu)
         if target is None:
-            self.target_marker.visible = False
+            self._set(self.target_marker, "visible", False)
             return
-        self.target_marker.position = target
-        self.target_marker.visible = True
+        self._set(self.target_marker, "position", _rounded(target))
+        self._set(self.target_marker, "visible", True)

@@ -36,7 +36,7 @@ def test_model_sits_at_the_enu_position_with_the_attitude(scene: viser.SceneApi)
     state = make_state(position_ned=PositionNedState(10.0, 4.0, -3.0))
     view.update(state, (1.0, 2.0, 0.5), 0.0)
     np.testing.assert_allclose(view.model.root.position, (5.0, 12.0, 3.5))
-    np.testing.assert_allclose(view.model.root.wxyz, attitude_wxyz_enu(0.0, 0.0, 0.0))
+    np.testing.assert_allclose(view.model.root.wxyz, attitude_wxyz_enu(0.0, 0.0, 0.0), atol=1e-5)
     assert view.position_enu == (5.0, 12.0, 3.5)
     view.remove()
 
