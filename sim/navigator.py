@@ -155,7 +155,8 @@ class Navigator:
             self._hold_yaw_rad = yaw_of(truth)
         elif mode == modes.AUTO_RTL:
             self._start_rtl(now_s, truth)
-        elif mode in _TAKEOFF_MODES and self._commander.armed:
+        elif mode in _TAKEOFF_MODES:
+            # The target is fixed at the first armed step, from where the vehicle is then.
             self._takeoff_target = None
 
     # -- takeoff -----------------------------------------------------------------------

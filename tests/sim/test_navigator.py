@@ -7,6 +7,7 @@ import math
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
+from sim import modes
 from sim.navigator import RtlPhase
 from tests.sim.conftest import Harness, HarnessFactory
 
@@ -175,3 +176,15 @@ def test_rover_returns_home_on_the_ground_and_stays_armed(make_harness: HarnessF
     assert v.truth.position_ned_m[2] == 0.0
     h.run(12.0)
     assert v.armed  # no auto-disarm for an armed rover
+
+
+def test_second_takeoff_by_mode_change_climbs_from_where_it_is(harness: Harness) -> None:
+    take_off(harness)
+    harness.command_long(mavlink.MAV_CMD_NAV_LAND)
+    harness.run_until(lambda: not harness.vehicle.armed, 30.0)
+    harness.vehicle.params.set("MIS_TAKEOFF_ALT", 4.0)
+    harness.set_mode(modes.AUTO_TAKEOFF)  # disarmed: the target is not fixed yet
+    harness.arm()
+    harness.run_until(lambda: harness.vehicle.mode_name == "AUTO_LOITER", 30.0)
+    harness.run(3.0)
+    assert altitude_m(harness) == pytest.approx(4.0, abs=0.1)
