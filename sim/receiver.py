@@ -25,6 +25,7 @@ from sim.commander import (
     MAV_SEVERITY_CRITICAL,
 )
 from sim.modes import Px4Mode
+from sim.streams import MAVLINK_MSG_ID_PROTOCOL_VERSION
 from sim.topics import AttitudeSetpoint, ControlSetpoint, RatesSetpoint, TrajectorySetpoint
 
 if TYPE_CHECKING:
@@ -57,7 +58,9 @@ _ANY_TARGET_COMMANDS = frozenset(
         mavlink.MAV_CMD_REQUEST_PROTOCOL_VERSION,
     }
 )
-_VERSION_MESSAGES = frozenset({mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION, 300})
+_VERSION_MESSAGES = frozenset(
+    {mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION, MAVLINK_MSG_ID_PROTOCOL_VERSION}
+)
 # MC→FW transition is refused while the navigator flies these.
 _NO_FRONT_TRANSITION_MODES = frozenset(
     {modes.AUTO_TAKEOFF, modes.AUTO_VTOL_TAKEOFF, modes.AUTO_LAND, modes.AUTO_RTL, modes.ORBIT}
@@ -140,6 +143,7 @@ class Receiver:
             mavlink.MAV_CMD_SET_MESSAGE_INTERVAL: self._cmd_set_message_interval,
             mavlink.MAV_CMD_REQUEST_MESSAGE: self._cmd_request_message,
             mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: self._cmd_request_capabilities,
+            mavlink.MAV_CMD_REQUEST_PROTOCOL_VERSION: self._cmd_request_protocol_version,
             mavlink.MAV_CMD_GET_HOME_POSITION: self._cmd_get_home_position,
             mavlink.MAV_CMD_DO_SET_HOME: self._cmd_set_home,
         }
@@ -309,6 +313,9 @@ class Receiver:
 
     def _cmd_request_capabilities(self, cmd: Command, link: Link) -> None:
         self._reply_with(cmd, link, mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
+
+    def _cmd_request_protocol_version(self, cmd: Command, link: Link) -> None:
+        self._reply_with(cmd, link, MAVLINK_MSG_ID_PROTOCOL_VERSION)
 
     def _cmd_get_home_position(self, cmd: Command, link: Link) -> None:
         self._reply_with(cmd, link, mavlink.MAVLINK_MSG_ID_HOME_POSITION)

@@ -9,6 +9,7 @@ someone to send to.
 from __future__ import annotations
 
 import math
+import struct
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, Protocol, TypeAlias
 
@@ -91,6 +92,37 @@ MAV_STATE_ACTIVE = 4
 MAV_STATE_CRITICAL = 5
 
 
+MAVLINK_MSG_ID_PROTOCOL_VERSION = 300
+# MAVLink 2 spoken, MAVLink 1 and 2 understood (PROTOCOL_VERSION.version = 100 * major).
+MAVLINK_VERSION_2 = 200
+MAVLINK_VERSION_1 = 100
+
+
+class ProtocolVersionMessage(mavlink.MAVLink_message):  # type: ignore[misc]
+    """PROTOCOL_VERSION (300) from common.xml, which pymavlink's generated dialect lacks."""
+
+    id = MAVLINK_MSG_ID_PROTOCOL_VERSION
+    msgname = "PROTOCOL_VERSION"
+    crc_extra = 217
+    _wire = struct.Struct("<HHH8s8s")
+
+    def __init__(self, version: int, min_version: int, max_version: int) -> None:
+        super().__init__(self.id, self.msgname)
+        self._fieldnames = ["version", "min_version", "max_version", "spec_version_hash",
+                            "library_version_hash"]
+        self.version = version
+        self.min_version = min_version
+        self.max_version = max_version
+        self.spec_version_hash = bytes(8)
+        self.library_version_hash = bytes(8)
+
+    def pack(self, mav: Any, force_mavlink1: bool = False) -> bytes:
+        payload = self._wire.pack(self.version, self.min_version, self.max_version,
+                                  self.spec_version_hash, self.library_version_hash)
+        packed: bytes = self._pack(mav, self.crc_extra, payload, force_mavlink1=force_mavlink1)
+        return packed
+
+
 class MessageSink(Protocol):
     """A link as the streams see it."""
 
@@ -135,6 +167,7 @@ class MessageFactory:
             mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN: self.gps_global_origin,
             mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION: self.autopilot_version,
             mavlink.MAVLINK_MSG_ID_CURRENT_MODE: self.current_mode,
+            MAVLINK_MSG_ID_PROTOCOL_VERSION: self.protocol_version,
         }
 
     def build(self, msg_id: int) -> Message | None:
@@ -292,6 +325,9 @@ class MessageFactory:
             _CAPABILITIES, PX4_FLIGHT_SW_VERSION, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8,
             0, 0, 0x5348_0000 + sysid, [0] * 18,
         )
+
+    def protocol_version(self) -> Message:
+        return ProtocolVersionMessage(MAVLINK_VERSION_2, MAVLINK_VERSION_1, MAVLINK_VERSION_2)
 
     def current_mode(self) -> Message:
         commander = self._v.commander

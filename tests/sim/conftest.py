@@ -140,6 +140,7 @@ class RecordingLink:
         self.sent: list[Any] = []
         self._codec = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
         self._parser = mavlink.MAVLink(None)
+        self._parser.robust_parsing = True  # messages outside the dialect come as UNKNOWN_<id>
 
     @property
     def has_remote(self) -> bool:

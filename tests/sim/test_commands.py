@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import struct
 
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
@@ -270,3 +271,15 @@ def test_repeated_commands_are_safe(harness: Harness) -> None:
     assert [a.result for a in harness.api.acks(ARM)] == [ACCEPTED] * 3
     assert harness.vehicle.mode_name == "AUTO_TAKEOFF"
     assert harness.vehicle.armed
+
+
+def test_protocol_version_request_is_answered_with_mavlink_2(harness: Harness) -> None:
+    harness.command_long(mavlink.MAV_CMD_REQUEST_PROTOCOL_VERSION, 1, target_system=0)
+    assert harness.last_ack(mavlink.MAV_CMD_REQUEST_PROTOCOL_VERSION) == ACCEPTED
+    (frame,) = harness.api.of_type("UNKNOWN_300")  # not in pymavlink's generated dialect
+    data = bytes(frame.data)
+    payload = data[10:-2] + bytes(22)  # MAVLink 2 trims trailing zero bytes
+    assert struct.unpack_from("<HHH", payload) == (200, 100, 200)
+    crc = mavlink.x25crc(data[1:-2])
+    crc.accumulate(bytes([217]))  # PROTOCOL_VERSION's CRC_EXTRA in common.xml
+    assert struct.unpack("<H", data[-2:])[0] == crc.crc
