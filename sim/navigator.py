@@ -19,6 +19,8 @@ from sim.topics import TrajectorySetpoint, VehicleStateTruth, VtolState
 
 # PX4 ends the takeoff and switches to Hold slightly below the target altitude.
 TAKEOFF_DONE_FRACTION = 0.9
+# Smallest share of MPC_TKO_SPEED at the start of the takeoff ramp, so the climb starts.
+TAKEOFF_RAMP_FLOOR = 0.1
 # A manual mode without stick input (no RC attached) lets the vehicle sink slowly.
 NO_RC_DESCENT_SPEED_M_S = 0.8
 # Setpoint depth below ground used while landing, so the controller keeps descending
@@ -86,6 +88,7 @@ class Navigator:
         self._takeoff_alt_amsl_m = math.nan
         self._takeoff_target: list[float] | None = None
         self._takeoff_start_down_m = 0.0
+        self._takeoff_started_s = 0.0
         self._land_xy: list[float] = [0.0, 0.0]
         self.rtl_phase = RtlPhase.IDLE
         self.rtl_phases_seen: list[RtlPhase] = []
@@ -128,7 +131,7 @@ class Navigator:
         if not self._commander.armed:
             return None
         if mode in _TAKEOFF_MODES:
-            return self._takeoff(truth, origin_alt_m)
+            return self._takeoff(now_s, truth, origin_alt_m)
         if mode == modes.AUTO_LOITER:
             return self._hold(truth)
         if mode == modes.AUTO_LAND:
@@ -161,10 +164,13 @@ class Navigator:
 
     # -- takeoff -----------------------------------------------------------------------
 
-    def _takeoff(self, truth: VehicleStateTruth, origin_alt_m: float) -> TrajectorySetpoint:
+    def _takeoff(
+        self, now_s: float, truth: VehicleStateTruth, origin_alt_m: float
+    ) -> TrajectorySetpoint:
         if self._takeoff_target is None:
             self._takeoff_target = self._takeoff_target_from(truth, origin_alt_m)
             self._takeoff_start_down_m = truth.position_ned_m[2]
+            self._takeoff_started_s = now_s
             self._hold_yaw_rad = yaw_of(truth)
         target = self._takeoff_target
         climb_m = self._takeoff_start_down_m - target[2]
@@ -174,10 +180,13 @@ class Navigator:
             self._pending_hold = (list(target), self._hold_yaw_rad, math.nan)
             self._takeoff_alt_amsl_m = math.nan
             self._commander.switch_mode(modes.AUTO_LOITER)
+        # PX4 ramps the climb speed up over MPC_TKO_RAMP_T for a smooth lift-off.
+        ramp_s = self._params.get("MPC_TKO_RAMP_T")
+        ramp = min((now_s - self._takeoff_started_s) / ramp_s, 1.0) if ramp_s > 0 else 1.0
         return TrajectorySetpoint(
             position_ned_m=list(target),
             yaw_rad=self._hold_yaw_rad,
-            max_speed_up_m_s=self._params.get("MPC_TKO_SPEED"),
+            max_speed_up_m_s=self._params.get("MPC_TKO_SPEED") * max(ramp, TAKEOFF_RAMP_FLOOR),
         )
 
     def _takeoff_target_from(self, truth: VehicleStateTruth, origin_alt_m: float) -> list[float]:

@@ -43,6 +43,7 @@ PX4_DEFAULTS: dict[str, float | int] = {
     "RTL_TYPE": 0,
     # multicopter position control used by the navigator
     "MPC_TKO_SPEED": 1.5,
+    "MPC_TKO_RAMP_T": 3.0,
     "MPC_LAND_SPEED": 0.7,
     "MPC_LAND_ALT1": 10.0,
     "MPC_LAND_ALT2": 5.0,

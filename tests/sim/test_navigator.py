@@ -45,11 +45,13 @@ def test_takeoff_param7_is_amsl(harness: Harness) -> None:
     assert altitude_m(harness) == pytest.approx(8.0, abs=0.1)
 
 
-def test_takeoff_climbs_at_mpc_tko_speed(harness: Harness) -> None:
+def test_takeoff_climb_speed_ramps_up_to_mpc_tko_speed(harness: Harness) -> None:
     harness.vehicle.params.set("MIS_TAKEOFF_ALT", 10.0)
     harness.command_long(mavlink.MAV_CMD_NAV_TAKEOFF, *NAN7)
     harness.arm()
-    harness.run(3.0)
+    harness.run(1.5)  # half of MPC_TKO_RAMP_T
+    assert -harness.vehicle.truth.velocity_ned_m_s[2] == pytest.approx(0.75, abs=0.15)
+    harness.run(2.5)
     assert -harness.vehicle.truth.velocity_ned_m_s[2] == pytest.approx(1.5, abs=0.05)
 
 
