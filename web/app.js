@@ -157,6 +157,9 @@ function takeControl(takeover = false) {
         const holder = info.refusal?.holder || "another pilot";
         log("WARNING", `control is held by ${holder}`);
         $("take-over").classList.remove("hidden");
+      } else if (info.code === 4403) {
+        page.wantControl = false;
+        log("ERROR", `control refused: ${info.reason || "this token may only observe"}`);
       } else if (info.code === 4408) {
         log("WARNING", `control lease lost (${info.reason || "expired"})`);
       } else if (page.wantControl) {
@@ -214,8 +217,11 @@ function onEvent(message) {
   } else if (message.kind === "command") {
     return; // this page shows its own command answers; others' arrive in their summary
   } else {
-    const text = data.text || data.reason || data.action || JSON.stringify(data);
-    log(message.kind === "lease" ? "NOTICE" : "INFO", `${message.kind}: ${text}`);
+    const text = data.text || data.reason || Object.entries(data)
+      .filter(([, v]) => v !== null && v !== undefined)
+      .map(([k, v]) => `${k} ${typeof v === "object" ? JSON.stringify(v) : v}`).join(", ");
+    const severity = message.kind === "deadman" ? "WARNING" : message.kind === "lease" ? "NOTICE" : "INFO";
+    log(severity, `${message.kind}: ${text}`);
   }
 }
 

@@ -68,9 +68,9 @@ export class StripChart {
     }
     for (let s = 0; s <= WINDOW_S; s += 10) {
       const xx = x(nowS - s);
-      ctx.fillText(`-${s}s`, xx - 10 * dpr, h - 2 * dpr);
+      ctx.fillText(s === 0 ? "now" : `-${s}s`, xx - (s === 0 ? 18 : 10) * dpr, h - 2 * dpr);
     }
-    ctx.fillText(this.unit, w - pad.r - 20 * dpr, pad.t + 9 * dpr);
+    ctx.fillText(this.unit, pad.l + 4 * dpr, pad.t + 9 * dpr);
     this.line(ctx, x, y, 2, "#f5b041", dpr, [4 * dpr, 3 * dpr]);
     this.line(ctx, x, y, 1, "#5dade2", dpr, []);
     this.dirty = false;
