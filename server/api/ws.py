@@ -18,6 +18,7 @@ import asyncio
 import contextlib
 import json
 import logging
+import math
 import time
 from collections.abc import Awaitable
 from typing import Any
@@ -72,24 +73,37 @@ class _Sender:
 
 
 class StateText:
-    """Serialised snapshots shared by every telemetry client of a vehicle: one JSON encoding
-    per new snapshot, however many clients send it."""
+    """Serialised snapshots shared by every telemetry client of a vehicle. Clients at the same
+    rate send on the same clock ticks (see _next_tick), so one snapshot and one JSON encoding
+    serve all of them: an encoding younger than SHARE_WINDOW_S is reused as it is."""
+
+    SHARE_WINDOW_S = 0.002
 
     def __init__(self, context: ApiContext) -> None:
         self._context = context
-        self._cache: dict[int, tuple[float, str]] = {}
+        self._cache: dict[int, tuple[float, float, str]] = {}  # sysid: built_at, updated_s, text
 
     def text(self, vehicle: Vehicle) -> str:
+        now = time.monotonic()
+        cached = self._cache.get(vehicle.sysid)
+        if cached is not None and now - cached[0] < self.SHARE_WINDOW_S:
+            return cached[2]
         state = vehicle.snapshot()
-        cached = self._cache.get(state.sysid)
-        if cached is not None and cached[0] == state.updated_s:
-            return cached[1]
+        if cached is not None and cached[1] == state.updated_s:
+            self._cache[vehicle.sysid] = (now, state.updated_s, cached[2])
+            return cached[2]
         fields = state_dict(state, self._context.leases)
         # `type` names the message here, so the vehicle's type travels as vehicle_type.
         fields["vehicle_type"] = fields.pop("type")
         text = json.dumps({"type": "state", "vehicle": state.sysid, **fields})
-        self._cache[state.sysid] = (state.updated_s, text)
+        self._cache[vehicle.sysid] = (now, state.updated_s, text)
         return text
+
+
+def _next_tick(now: float, period_s: float) -> float:
+    """The next multiple of the period on the monotonic clock: every client at one rate
+    shares its ticks, and so shares the encoded snapshot."""
+    return (math.floor(now / period_s) + 1) * period_s
 
 
 def _context(websocket: WebSocket) -> ApiContext:
@@ -195,7 +209,7 @@ async def _pump_states(vehicle: Vehicle, sender: _Sender, state_text: StateText,
                 await asyncio.sleep(wait_s)
             # After the wait, send whatever is newest: latest wins.
             await sender.send_text(state_text.text(vehicle))
-            next_send = max(next_send + period_s, time.monotonic())
+            next_send = _next_tick(max(time.monotonic(), next_send), period_s)
     finally:
         subscription.close()
 

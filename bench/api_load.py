@@ -1,0 +1,223 @@
+"""API under load: 100 WebSocket telemetry clients at 10 Hz and 50 REST requests/s while the
+server streams 50 Hz setpoints to the simulated vehicle (a subprocess of `skyhelm serve`).
+
+Measured:
+- streamer interval p50/p99 and largest gap, from the server's own stream statistics
+  (GET /vehicles/1/stream, reset when the stream starts); error = |p99 − 20 ms|;
+- telemetry latency vehicle→client: the client's receive time minus the snapshot's
+  `updated_s` (time.monotonic() when the server took in the vehicle's newest message; both
+  processes read the same CLOCK_MONOTONIC);
+- REST latency p50/p99;
+- server CPU share of one core (utime+stime of the server process from /proc, sim excluded).
+
+Goals (issue 4): stream p99 error ≤ 2 ms, telemetry p99 ≤ 20 ms, server CPU < 50 % of one core.
+
+    .venv/bin/python -m bench.api_load [--seconds 30] [--clients 100]
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import json
+import os
+import platform
+import statistics
+import sys
+import time
+from collections.abc import AsyncIterator
+from pathlib import Path
+from typing import Any
+
+import httpx
+from websockets.asyncio.client import connect
+
+PROJECT_ROOT = Path(__file__).resolve().parent.parent
+RESULTS = PROJECT_ROOT / "bench" / "results" / "api_load.json"
+TOKEN = "bench-token-0123456789"
+STREAM_RATE_HZ = 50.0
+TELEMETRY_RATE_HZ = 10.0
+REST_RATE_HZ = 50.0
+WARMUP_S = 3.0
+CLK_TCK = os.sysconf("SC_CLK_TCK")
+
+
+def percentile(values: list[float], q: float) -> float | None:
+    if not values:
+        return None
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, round(q / 100 * (len(ordered) - 1)))]
+
+
+def cpu_seconds(pid: int) -> float:
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / CLK_TCK  # utime, stime
+
+
+@contextlib.asynccontextmanager
+async def skyhelm_serve() -> AsyncIterator[tuple[asyncio.subprocess.Process, str]]:
+    proc = await asyncio.create_subprocess_exec(
+        sys.executable, "-m", "server.cli", "serve", "--port", "0", "--token", TOKEN,
+        "--rate-hz", str(STREAM_RATE_HZ), "--no-scene", "--no-tlog", "--log-level", "warning",
+        "--lease-ttl-s", "5",
+        stdout=asyncio.subprocess.PIPE, cwd=PROJECT_ROOT,
+    )  # fmt: skip
+    try:
+        assert proc.stdout is not None
+        line = (await asyncio.wait_for(proc.stdout.readline(), 60)).decode()
+        if not line.startswith("SkyHelm ready: "):
+            raise RuntimeError(f"skyhelm serve did not start: {line!r}")
+        yield proc, line.split("SkyHelm ready: ")[1].split("/?token=")[0]
+    finally:
+        if proc.returncode is None:
+            proc.send_signal(2)
+            await asyncio.wait_for(proc.wait(), 20)
+
+
+async def telemetry_client(url: str, latencies_ms: list[float], counts: list[int],
+                           stop: asyncio.Event) -> None:  # fmt: skip
+    async with connect(url, max_size=2**22) as ws:
+        received = 0
+        while not stop.is_set():
+            try:
+                text = await asyncio.wait_for(ws.recv(), 1.0)
+            except TimeoutError:
+                continue
+            now = time.monotonic()
+            message = json.loads(text)
+            if message.get("type") == "state":
+                received += 1
+                latencies_ms.append((now - message["updated_s"]) * 1000.0)
+        counts.append(received)
+
+
+async def rest_load(client: httpx.AsyncClient, lease: dict[str, str], latencies_ms: list[float],
+                    errors: list[int], stop: asyncio.Event) -> None:  # fmt: skip
+    """REST_RATE_HZ requests on absolute deadlines, reads plus the pilot's lease renewals."""
+    paths = ["/api/v1/vehicles/1", "/api/v1/vehicles", "/api/v1/vehicles/1/stream",
+             "/api/v1/health", "/api/v1/vehicles/1/control"]  # fmt: skip
+    period_s = 1.0 / REST_RATE_HZ
+    start = time.monotonic()
+    k = 0
+    pending: set[asyncio.Task[None]] = set()
+
+    async def one(path: str, renew: bool) -> None:
+        t0 = time.monotonic()
+        if renew:
+            response = await client.put(path, headers=lease)
+        else:
+            response = await client.get(path)
+        latencies_ms.append((time.monotonic() - t0) * 1000.0)
+        if response.status_code != 200:
+            errors.append(response.status_code)
+
+    while not stop.is_set():
+        path = paths[k % len(paths)]
+        task = asyncio.create_task(one(path, renew=path.endswith("/control")))
+        pending.add(task)
+        task.add_done_callback(pending.discard)
+        k += 1
+        await asyncio.sleep(max(0.0, start + k * period_s - time.monotonic()))
+    await asyncio.gather(*pending, return_exceptions=True)
+
+
+async def run(seconds: float, clients: int) -> dict[str, Any]:
+    async with skyhelm_serve() as (proc, base):
+        headers = {"Authorization": f"Bearer {TOKEN}"}
+        async with httpx.AsyncClient(base_url=base, headers=headers, timeout=10) as client:
+            for _ in range(100):
+                if (await client.get("/api/v1/vehicles/1")).status_code == 200:
+                    break
+                await asyncio.sleep(0.1)
+            lease = {"X-Lease-Id": (await client.post("/api/v1/vehicles/1/control")).json()[
+                "lease_id"]}  # fmt: skip
+
+            stop = asyncio.Event()
+            telemetry_ms: list[float] = []
+            counts: list[int] = []
+            rest_ms: list[float] = []
+            errors: list[int] = []
+            ws_url = base.replace("http://", "ws://") + (
+                f"/api/v1/ws/telemetry?vehicle=1&rate_hz={TELEMETRY_RATE_HZ:g}&token={TOKEN}"
+            )
+            tasks = [
+                asyncio.create_task(telemetry_client(ws_url, telemetry_ms, counts, stop))
+                for _ in range(clients)
+            ]
+            tasks.append(asyncio.create_task(rest_load(client, lease, rest_ms, errors, stop)))
+            await asyncio.sleep(WARMUP_S)
+            # The stream starts once the load runs, so its statistics cover only loaded time.
+            hold = {"type": "position_ned", "north_m": 0.0, "east_m": 0.0, "down_m": 0.0}
+            sent = await client.put("/api/v1/vehicles/1/setpoint", json=hold, headers=lease)
+            sent.raise_for_status()
+            telemetry_ms.clear()
+            rest_ms.clear()
+            cpu_start, wall_start = cpu_seconds(proc.pid), time.monotonic()
+            await asyncio.sleep(seconds)
+            cpu_share = (cpu_seconds(proc.pid) - cpu_start) / (time.monotonic() - wall_start)
+            stream = (await client.get("/api/v1/vehicles/1/stream")).json()
+            stop.set()
+            await asyncio.gather(*tasks, return_exceptions=True)
+
+    period_ms = 1000.0 / STREAM_RATE_HZ
+    p99 = stream.get("interval_p99_ms")
+    return {
+        "seconds": seconds,
+        "telemetry_clients": clients,
+        "telemetry_rate_hz": TELEMETRY_RATE_HZ,
+        "rest_rate_hz": REST_RATE_HZ,
+        "stream_rate_hz_target": STREAM_RATE_HZ,
+        "stream": stream,
+        "stream_p99_error_ms": abs(p99 - period_ms) if p99 is not None else None,
+        "telemetry_messages": len(telemetry_ms),
+        "telemetry_rate_per_client_hz": statistics.fmean(counts) / (seconds + WARMUP_S)
+        if counts else None,
+        "telemetry_latency_p50_ms": percentile(telemetry_ms, 50),
+        "telemetry_latency_p99_ms": percentile(telemetry_ms, 99),
+        "rest_requests": len(rest_ms),
+        "rest_latency_p50_ms": percentile(rest_ms, 50),
+        "rest_latency_p99_ms": percentile(rest_ms, 99),
+        "rest_errors": len(errors),
+        "server_cpu_share_of_one_core": cpu_share,
+        "machine": {"cpus": os.cpu_count(), "python": platform.python_version()},
+    }  # fmt: skip
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=30.0)
+    parser.add_argument("--clients", type=int, default=100)
+    args = parser.parse_args()
+    result = asyncio.run(run(args.seconds, args.clients))
+    goals = {
+        "stream_p99_error_ms <= 2": (result["stream_p99_error_ms"] or 1e9) <= 2.0,
+        "telemetry_latency_p99_ms <= 20": (result["telemetry_latency_p99_ms"] or 1e9) <= 20.0,
+        "server_cpu_share < 0.5": result["server_cpu_share_of_one_core"] < 0.5,
+    }
+    result["goals_met"] = goals
+    RESULTS.parent.mkdir(parents=True, exist_ok=True)
+    RESULTS.write_text(json.dumps(result, indent=2) + "\n")
+    stream = result["stream"]
+    print(
+        f"stream: {stream.get('rate_hz', 0):.1f} Hz, interval p50 "
+        f"{stream.get('interval_p50_ms')} ms, p99 {stream.get('interval_p99_ms')} ms "
+        f"(error {result['stream_p99_error_ms']} ms), max gap {stream.get('max_gap_ms')} ms"
+    )
+    print(
+        f"telemetry: {result['telemetry_messages']} states to {args.clients} clients, "
+        f"latency p50 {result['telemetry_latency_p50_ms']:.1f} ms, "
+        f"p99 {result['telemetry_latency_p99_ms']:.1f} ms"
+    )
+    print(
+        f"rest: {result['rest_requests']} requests, p50 {result['rest_latency_p50_ms']:.1f} ms, "
+        f"p99 {result['rest_latency_p99_ms']:.1f} ms, errors {result['rest_errors']}"
+    )
+    print(f"server CPU: {100 * result['server_cpu_share_of_one_core']:.0f} % of one core")
+    print("goals:", ", ".join(f"{k}: {'met' if v else 'MISSED'}" for k, v in goals.items()))
+    print(f"wrote {RESULTS.relative_to(PROJECT_ROOT)}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
