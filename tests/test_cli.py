@@ -152,3 +152,12 @@ def test_sim_subcommand_execs_python_m_sim() -> None:
     )  # fmt: skip
     assert result.returncode == 0
     assert "--airframe" in result.stdout
+
+
+def test_ready_url_names_a_reachable_host_when_bound_to_all_interfaces() -> None:
+    from server.cli import ready_url
+
+    settings = settings_from_args(
+        build_parser().parse_args(["serve", "--host", "0.0.0.0", "--token", "s3cret-token"])
+    )
+    assert ready_url(settings, 8123) == "http://127.0.0.1:8123/?token=s3cret-token"
