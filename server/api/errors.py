@@ -82,6 +82,8 @@ CONTROL_RESPONSES: dict[int | str, dict[str, Any]] = {
 COMMAND_RESPONSES: dict[int | str, dict[str, Any]] = {
     **CONTROL_RESPONSES,
     202: _described(CommandResultOut, "the vehicle reported the command still in progress"),
+    # not connected before the call (ErrorOut), or the link lost during it (LINK_LOST)
+    503: {"model": ErrorOut | CommandResultOut, "description": "the vehicle is not connected"},
     409: _described(CommandResultOut, "the vehicle refused: MAV_RESULT and its reason"),
     504: _described(CommandResultOut, "no answer from the vehicle"),
 }
