@@ -180,7 +180,7 @@ async def test_disarm_on_the_ground_is_accepted(quad_api: Api) -> None:
     api = quad_api
     await api.take_control()
     assert (await api.control("arm")).status_code == 200
-    assert (await api.state())["armed"] is True
+    await api.wait_state(lambda s: s["armed"] is True, 5.0, "armed")
     disarm = await api.control("disarm", {"force": False})
     assert disarm.status_code == 200, disarm.text
     await api.wait_state(lambda s: s["armed"] is False, 5.0, "disarmed")
