@@ -20,6 +20,7 @@ const SETPOINT_SEND_INTERVAL_MS = 50;
 const CONFIRM_WINDOW_MS = 4000;
 const EARTH_RADIUS_M = 6378137;
 const LOG_LIMIT = 400;
+const RETAKE_DELAY_MS = 1000;
 
 const page = {
   vehicles: [],
@@ -163,7 +164,12 @@ function takeControl(takeover = false) {
       } else if (info.code === 4408) {
         log("WARNING", `control lease lost (${info.reason || "expired"})`);
       } else if (page.wantControl) {
-        log("WARNING", "control connection closed; it is taken again when the server answers");
+        log("WARNING", "control connection lost; taking control again when the server answers");
+        // A blip of the control socket alone: retry while the telemetry socket is up (a
+        // server restart is handled when telemetry reconnects).
+        setTimeout(() => {
+          if (page.wantControl && !page.control && page.connected) takeControl(false);
+        }, RETAKE_DELAY_MS);
       }
       updateControls();
     },
@@ -247,7 +253,7 @@ async function reloadAfterReconnect() {
   await loadVehicles();
   showScene($("scene-enable").checked);
   loadParams();
-  if (page.wantControl && !inControl()) {
+  if (page.wantControl && !page.control) {
     log("NOTICE", "taking control again");
     takeControl(false);
   }

@@ -233,7 +233,9 @@ def test_closing_the_page_triggers_the_deadman_hold(browser: Any, serve: Serve, 
     assert state["lease"]["holder"] is None
 
 
-def test_page_reconnects_after_a_server_restart(page: Any, serve: Serve) -> None:
+def test_page_reconnects_after_a_server_restart_and_takes_control_again(
+        page: Any, serve: Serve) -> None:
+    take_control(page)
     serve.restart()
     page.wait_for_function(
         "document.getElementById('conn-status').textContent === 'connected'"
@@ -243,3 +245,7 @@ def test_page_reconnects_after_a_server_restart(page: Any, serve: Serve) -> None
     page.wait_for_function("document.getElementById('mode').textContent !== '–'",
                            timeout=30_000)
     assert "connected" in (page.text_content("#conn-status") or "")
+    page.wait_for_selector("#release:not(.hidden)", timeout=30_000)
+    with serve.client() as api:
+        assert wait_for("the lease held again",
+                        lambda: api.get("/vehicles/1/control").json().get("holder"), 15.0)
