@@ -180,8 +180,14 @@ async def run(seconds: float, clients: int) -> dict[str, Any]:
         "rest_latency_p99_ms": percentile(rest_ms, 99),
         "rest_errors": len(errors),
         "server_cpu_share_of_one_core": cpu_share,
-        "machine": {"cpus": os.cpu_count(), "python": platform.python_version()},
+        # other processes on the machine share its cores: the figures depend on them too
+        "machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
+                    "load_average_1min": os.getloadavg()[0]},
     }  # fmt: skip
+
+
+def _ms(value: float | None) -> str:
+    return "n/a" if value is None else f"{value:.1f} ms"
 
 
 def main() -> int:

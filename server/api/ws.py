@@ -18,7 +18,6 @@ import asyncio
 import contextlib
 import json
 import logging
-import math
 import time
 from collections.abc import Awaitable
 from typing import Any
@@ -73,9 +72,9 @@ class _Sender:
 
 
 class StateText:
-    """Serialised snapshots shared by every telemetry client of a vehicle. Clients at the same
-    rate send on the same clock ticks (see _next_tick), so one snapshot and one JSON encoding
-    serve all of them: an encoding younger than SHARE_WINDOW_S is reused as it is."""
+    """Serialised snapshots shared by every telemetry client of a vehicle: one JSON encoding
+    per vehicle update however many clients send it, and an encoding younger than
+    SHARE_WINDOW_S is reused without even taking a new snapshot."""
 
     SHARE_WINDOW_S = 0.002
 
@@ -98,12 +97,6 @@ class StateText:
         text = json.dumps({"type": "state", "vehicle": state.sysid, **fields})
         self._cache[vehicle.sysid] = (now, state.updated_s, text)
         return text
-
-
-def _next_tick(now: float, period_s: float) -> float:
-    """The next multiple of the period on the monotonic clock: every client at one rate
-    shares its ticks, and so shares the encoded snapshot."""
-    return (math.floor(now / period_s) + 1) * period_s
 
 
 def _context(websocket: WebSocket) -> ApiContext:
@@ -207,9 +200,11 @@ async def _pump_states(vehicle: Vehicle, sender: _Sender, state_text: StateText,
             wait_s = next_send - time.monotonic()
             if wait_s > 0:
                 await asyncio.sleep(wait_s)
-            # After the wait, send whatever is newest: latest wins.
+            # After the wait, send whatever is newest: latest wins. Each client keeps the
+            # phase it connected with, so sends to many clients spread over the period
+            # instead of arriving as one burst that would delay the setpoint streamer.
             await sender.send_text(state_text.text(vehicle))
-            next_send = _next_tick(max(time.monotonic(), next_send), period_s)
+            next_send = max(next_send + period_s, time.monotonic())
     finally:
         subscription.close()
 
