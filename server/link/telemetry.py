@@ -46,7 +46,21 @@ _RTL_PHASES = (
 )
 
 
+# MAVLink renamed these VTOL types in 2024; pymavlink's generated enum still carries the
+# old reserved names, and a dashboard should show what the vehicle is.
+_RENAMED = {
+    ("MAV_TYPE", 19): "MAV_TYPE_VTOL_TAILSITTER_DUOROTOR",
+    ("MAV_TYPE", 20): "MAV_TYPE_VTOL_TAILSITTER_QUADROTOR",
+    ("MAV_TYPE", 22): "MAV_TYPE_VTOL_FIXEDROTOR",
+    ("MAV_TYPE", 23): "MAV_TYPE_VTOL_TAILSITTER",
+    ("MAV_TYPE", 24): "MAV_TYPE_VTOL_TILTWING",
+}
+
+
 def enum_name(enum: str, value: int, prefix: str) -> str:
+    renamed = _RENAMED.get((enum, value))
+    if renamed is not None:
+        return renamed.removeprefix(prefix)
     entry = mavlink.enums[enum].get(value)
     return entry.name.removeprefix(prefix) if entry is not None else str(value)
 
