@@ -252,8 +252,10 @@ async def test_deadman_holds_when_rest_renewals_stop(quad: Served) -> None:
     assert stopped["lease"]["holder"] is None
 
 
-@pytest.mark.parametrize(("policy", "mode"), [("land", "LAND"), ("rtl", "RTL")])
-async def test_deadman_applies_land_and_rtl_policies(policy: str, mode: str) -> None:
+@pytest.mark.parametrize(
+    ("policy", "mode"), [("land", "LAND"), ("rtl", "RTL"), ("hold-mode", "HOLD")]
+)
+async def test_deadman_applies_land_rtl_and_hold_mode_policies(policy: str, mode: str) -> None:
     async with served(on_operator_loss=policy) as s:
         ws = await fly_offboard_at_2_m_s(s)
         await ws.close()
