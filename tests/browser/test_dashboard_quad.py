@@ -71,6 +71,10 @@ def test_page_shows_the_vehicle_and_observes_until_control_is_taken(page: Any) -
     assert page.is_disabled("#btn-arm")
     assert page.is_disabled("#btn-takeoff")
     assert page.is_visible("#take-control")
+    modes = page.eval_on_selector_all("#mode-select option", "os => os.map(o => o.value)")
+    for mode in ("MANUAL", "ALTCTL", "POSCTL", "OFFBOARD", "HOLD", "TAKEOFF", "LAND", "RTL",
+                 "MISSION", "STABILIZED", "ACRO"):
+        assert mode in modes
 
 
 def test_scene_draws_the_vehicle_through_the_proxied_socket(page: Any, serve: Serve,
@@ -126,6 +130,10 @@ def test_take_control_arm_and_take_off_by_clicking(page: Any, api: httpx.Client)
     assert api.get("/vehicles/1").json()["lease"]["holder"]
     arm_and_take_off(page, api, 5.0)
     assert vehicle_state(api)["armed"]
+    log = page.text_content("#log") or ""
+    assert "Arm: ACCEPTED" in log
+    assert "Takeoff: ACCEPTED" in log
+    assert page.text_content("#armed") == "ARMED"
 
 
 def test_parameter_panel_writes_and_shows_the_vehicles_echo(page: Any,
@@ -156,6 +164,9 @@ def test_start_offboard_then_altitude_slider_moves_the_vehicle(page: Any,
     assert float(page.input_value("#sp-alt_m")) == pytest.approx(target)
     wait_for(f"altitude within 0.5 m of the slider's {target} m",
              lambda: abs(altitude_m(vehicle_state(api)) - target) < 0.5, 30.0)
+    assert page.text_content("#stream-active") == "streaming"
+    assert "Hz" in (page.text_content("#stream-rate") or "")
+    assert "ms" in (page.text_content("#stream-p99") or "")
 
 
 def test_keyboard_velocity_moves_the_vehicle_and_space_holds_it(page: Any,
