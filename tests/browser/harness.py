@@ -33,9 +33,9 @@ REPO = Path(__file__).resolve().parents[2]
 
 
 def skyhelm_command() -> list[str]:
-    return [sys.executable, "-m", "server.cli"] if not (REPO / ".venv/bin/skyhelm").exists() else [
-        str(REPO / ".venv/bin/skyhelm")
-    ]
+    """`skyhelm` as installed next to this interpreter, or the same CLI by module."""
+    script = Path(sys.executable).with_name("skyhelm")
+    return [str(script)] if script.exists() else [sys.executable, "-m", "server.cli"]
 
 
 @dataclass
