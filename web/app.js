@@ -339,7 +339,7 @@ function renderTelemetry(state) {
 }
 
 function renderStream(s) {
-  setText("stream-active", s.active ? "streaming" : "off", s.active ? "" : "");
+  setText("stream-active", s.active ? "streaming" : "off");
   $("stream-active").style.color = s.active ? "var(--ok)" : "var(--dim)";
   setText("stream-rate", s.rate_hz ? `${num(s.rate_hz, 1)} Hz` : "–");
   setText("stream-p99", Number.isFinite(s.interval_p99_ms) ? `${num(s.interval_p99_ms, 1)} ms` : "–");
@@ -671,5 +671,5 @@ async function main() {
 
 main();
 
-// Exposed for debugging from the browser console only.
+// The page's state, for the browser console and the browser tests.
 window.skyhelm = { page, SETPOINT_TYPES };
