@@ -221,7 +221,7 @@ function onEvent(message) {
   } else if (message.kind === "armed") {
     log("INFO", data.armed ? "armed" : "disarmed");
   } else if (message.kind === "command") {
-    return; // this page shows its own command answers; others' arrive in their summary
+    return; // this page logs its own answers; what others' commands did shows as mode/armed events
   } else {
     const text = data.text || data.reason || Object.entries(data)
       .filter(([, v]) => v !== null && v !== undefined)
