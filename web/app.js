@@ -428,6 +428,7 @@ function scheduleSetpoint() {
 }
 
 async function sendSetpoint(body = currentBody()) {
+  if (!page.control) return null; // released while a send was scheduled
   lastSentAt = performance.now();
   const answer = await page.control.setpoint(body);
   if (!answer.ok) {
