@@ -12,6 +12,7 @@ from pathlib import Path
 
 import httpx
 import pytest
+from websockets.sync.client import connect
 
 from server.cli import RedactTokens, build_parser, settings_from_args
 from server.settings import SettingsError
@@ -58,6 +59,9 @@ def test_serve_prints_url_answers_and_stops_sim_on_sigint(tmp_path: Path) -> Non
             ).json()
             assert [v["id"] for v in vehicles] == [1]
             assert httpx.get(f"{base}/api/v1/vehicles", params={"token": token}).status_code == 200
+            ws_url = base.replace("http://", "ws://") + f"/api/v1/ws/telemetry?token={token}"
+            with connect(ws_url) as ws:  # uvicorn logs WebSocket paths: the filter must act
+                assert '"type": "state"' in str(ws.recv(timeout=10))
 
             sims = _children(server.pid)
             assert sims, "the simulated vehicle runs as a child process"
@@ -74,6 +78,7 @@ def test_serve_prints_url_answers_and_stops_sim_on_sigint(tmp_path: Path) -> Non
                 server.wait()
     log = stderr_path.read_text()
     assert token not in log, "the token must never be logged"
+    assert "token=***" in log, "the WebSocket line is logged, redacted"
     assert list(tmp_path.glob("*.tlog")), "the session is recorded"
 
 
