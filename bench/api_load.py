@@ -58,11 +58,25 @@ def cpu_seconds(pid: int) -> float:
 @contextlib.asynccontextmanager
 async def skyhelm_serve() -> AsyncIterator[tuple[asyncio.subprocess.Process, str]]:
     proc = await asyncio.create_subprocess_exec(
-        sys.executable, "-m", "server.cli", "serve", "--port", "0", "--token", TOKEN,
-        "--rate-hz", str(STREAM_RATE_HZ), "--no-scene", "--no-tlog", "--log-level", "warning",
-        "--lease-ttl-s", "5",
-        stdout=asyncio.subprocess.PIPE, cwd=PROJECT_ROOT,
-    )  # fmt: skip
+        sys.executable,
+        "-m",
+        "server.cli",
+        "serve",
+        "--port",
+        "0",
+        "--token",
+        TOKEN,
+        "--rate-hz",
+        str(STREAM_RATE_HZ),
+        "--no-scene",
+        "--no-tlog",
+        "--log-level",
+        "warning",
+        "--lease-ttl-s",
+        "5",
+        stdout=asyncio.subprocess.PIPE,
+        cwd=PROJECT_ROOT,
+    )
     try:
         assert proc.stdout is not None
         line = (await asyncio.wait_for(proc.stdout.readline(), 60)).decode()
@@ -75,8 +89,9 @@ async def skyhelm_serve() -> AsyncIterator[tuple[asyncio.subprocess.Process, str
             await asyncio.wait_for(proc.wait(), 20)
 
 
-async def telemetry_client(url: str, latencies_ms: list[float], counts: list[int],
-                           stop: asyncio.Event) -> None:  # fmt: skip
+async def telemetry_client(
+    url: str, latencies_ms: list[float], counts: list[int], stop: asyncio.Event
+) -> None:
     async with connect(url, max_size=2**22) as ws:
         received = 0
         while not stop.is_set():
@@ -92,11 +107,21 @@ async def telemetry_client(url: str, latencies_ms: list[float], counts: list[int
         counts.append(received)
 
 
-async def rest_load(client: httpx.AsyncClient, lease: dict[str, str], latencies_ms: list[float],
-                    errors: list[int], stop: asyncio.Event) -> None:  # fmt: skip
+async def rest_load(
+    client: httpx.AsyncClient,
+    lease: dict[str, str],
+    latencies_ms: list[float],
+    errors: list[int],
+    stop: asyncio.Event,
+) -> None:
     """REST_RATE_HZ requests on absolute deadlines, reads plus the pilot's lease renewals."""
-    paths = ["/api/v1/vehicles/1", "/api/v1/vehicles", "/api/v1/vehicles/1/stream",
-             "/api/v1/health", "/api/v1/vehicles/1/control"]  # fmt: skip
+    paths = [
+        "/api/v1/vehicles/1",
+        "/api/v1/vehicles",
+        "/api/v1/vehicles/1/stream",
+        "/api/v1/health",
+        "/api/v1/vehicles/1/control",
+    ]
     period_s = 1.0 / REST_RATE_HZ
     start = time.monotonic()
     k = 0
@@ -130,8 +155,9 @@ async def run(seconds: float, clients: int) -> dict[str, Any]:
                 if (await client.get("/api/v1/vehicles/1")).status_code == 200:
                     break
                 await asyncio.sleep(0.1)
-            lease = {"X-Lease-Id": (await client.post("/api/v1/vehicles/1/control")).json()[
-                "lease_id"]}  # fmt: skip
+            lease = {
+                "X-Lease-Id": (await client.post("/api/v1/vehicles/1/control")).json()["lease_id"]
+            }
 
             stop = asyncio.Event()
             telemetry_ms: list[float] = []
@@ -172,7 +198,8 @@ async def run(seconds: float, clients: int) -> dict[str, Any]:
         "stream_p99_error_ms": abs(p99 - period_ms) if p99 is not None else None,
         "telemetry_messages": len(telemetry_ms),
         "telemetry_rate_per_client_hz": statistics.fmean(counts) / (seconds + WARMUP_S)
-        if counts else None,
+        if counts
+        else None,
         "telemetry_latency_p50_ms": percentile(telemetry_ms, 50),
         "telemetry_latency_p99_ms": percentile(telemetry_ms, 99),
         "rest_requests": len(rest_ms),
@@ -181,9 +208,12 @@ async def run(seconds: float, clients: int) -> dict[str, Any]:
         "rest_errors": len(errors),
         "server_cpu_share_of_one_core": cpu_share,
         # other processes on the machine share its cores: the figures depend on them too
-        "machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
-                    "load_average_1min": os.getloadavg()[0]},
-    }  # fmt: skip
+        "machine": {
+            "cpus": os.cpu_count(),
+            "python": platform.python_version(),
+            "load_average_1min": os.getloadavg()[0],
+        },
+    }
 
 
 def _ms(value: float | None) -> str:

@@ -29,9 +29,10 @@ class Pilot:
     def __init__(self, base: str, token: str, vehicle_id: int, lease_id: str) -> None:
         self.state_url = f"{base}/api/v1/vehicles/{vehicle_id}"
         self.http = httpx.AsyncClient(
-            base_url=f"{base}/api/v1/vehicles/{vehicle_id}", timeout=30.0,
+            base_url=f"{base}/api/v1/vehicles/{vehicle_id}",
+            timeout=30.0,
             headers={"Authorization": f"Bearer {token}", "X-Lease-Id": lease_id},
-        )  # fmt: skip
+        )
 
     async def command(self, path: str, body: dict[str, Any] | None = None) -> dict[str, Any]:
         response = await self.http.post(path, json=body or {})
@@ -56,8 +57,12 @@ class Pilot:
         raise SystemExit(f"timed out waiting for {what}")
 
     async def fly_to(self, north_m: float, east_m: float) -> None:
-        target = {"type": "position_ned", "north_m": north_m, "east_m": east_m,
-                  "down_m": -ALTITUDE_M}  # fmt: skip
+        target = {
+            "type": "position_ned",
+            "north_m": north_m,
+            "east_m": east_m,
+            "down_m": -ALTITUDE_M,
+        }
         response = await self.http.put("setpoint", json=target)
         if response.status_code != 200:
             raise SystemExit(f"setpoint refused: {response.json()}")

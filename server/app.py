@@ -39,9 +39,11 @@ def create_app(settings: Settings) -> FastAPI:
     observer = settings.observer_token.get_secret_value() if settings.observer_token else None
     tokens = TokenChecker(settings.pilot_token(), observer)
     envelope = Envelope(
-        max_alt_rel_m=settings.max_alt_rel_m, max_distance_m=settings.max_distance_m,
-        max_speed_xy_m_s=settings.max_speed_xy_m_s, max_speed_z_m_s=settings.max_speed_z_m_s,
-    )  # fmt: skip
+        max_alt_rel_m=settings.max_alt_rel_m,
+        max_distance_m=settings.max_distance_m,
+        max_speed_xy_m_s=settings.max_speed_xy_m_s,
+        max_speed_z_m_s=settings.max_speed_z_m_s,
+    )
     registry = VehicleRegistry(envelope, settings.rate_hz)
     leases = LeaseManager(settings.lease_ttl_s)
     deadman = Deadman(leases, registry, settings.on_operator_loss)
@@ -56,9 +58,10 @@ def create_app(settings: Settings) -> FastAPI:
                 await _open_links(registry, settings, settings.connect)
             else:
                 sim = SimProcess(
-                    airframe=settings.sim_airframe, count=settings.sim_count,
+                    airframe=settings.sim_airframe,
+                    count=settings.sim_count,
                     speed=settings.sim_speed,
-                )  # fmt: skip
+                )
                 app.state.sim = sim
                 instances = await sim.start()
                 await _open_links(registry, settings, [i.url for i in instances])
@@ -88,9 +91,11 @@ def create_app(settings: Settings) -> FastAPI:
     install_error_handlers(app)
     if settings.cors_origins:
         app.add_middleware(
-            CORSMiddleware, allow_origins=settings.cors_origins, allow_methods=["*"],
+            CORSMiddleware,
+            allow_origins=settings.cors_origins,
+            allow_methods=["*"],
             allow_headers=["Authorization", "Content-Type", "X-Lease-Id"],
-        )  # fmt: skip
+        )
     api = APIRouter(prefix=API_PREFIX)
     for module in (health, vehicles, control, commands, setpoint, params):
         api.include_router(module.router)
@@ -114,8 +119,9 @@ async def _open_links(registry: VehicleRegistry, settings: Settings, urls: list[
         registry.add_link(link)
 
 
-async def _wait_for_vehicles(registry: VehicleRegistry, sysids: list[int], settings: Settings
-                             ) -> None:  # fmt: skip
+async def _wait_for_vehicles(
+    registry: VehicleRegistry, sysids: list[int], settings: Settings
+) -> None:
     """The URL is printed only once every simulated vehicle is talking."""
     deadline = time.monotonic() + settings.vehicle_wait_s
     while True:

@@ -43,18 +43,21 @@ def configure_logging(level: str) -> None:
 
 def _serve_parser(sub: Any) -> None:
     serve = sub.add_parser(
-        "serve", help="run the dashboard (with a simulated vehicle unless --connect is given)",
+        "serve",
+        help="run the dashboard (with a simulated vehicle unless --connect is given)",
         argument_default=argparse.SUPPRESS,
-    )  # fmt: skip
+    )
     serve.add_argument("--config", type=Path, help="TOML file with the same settings")
     serve.add_argument("--host", help="bind address (default 127.0.0.1)")
     serve.add_argument("--port", type=int, help="HTTP port; 0 picks a free one (default 8000)")
     serve.add_argument("--token", help="pilot token (default: generated)")
     serve.add_argument("--observer-token", help="read-only token")
     serve.add_argument(
-        "--connect", action="append", metavar="URL",
+        "--connect",
+        action="append",
+        metavar="URL",
         help="vehicle link, e.g. udpin:127.0.0.1:14540 (repeatable; none = simulated vehicle)",
-    )  # fmt: skip
+    )
     serve.add_argument("--sim-airframe", help="quad|hexa|octo|plane|vtol|rover")
     serve.add_argument("--sim-count", type=int, help="number of simulated vehicles")
     serve.add_argument("--sim-speed", type=float, help="simulated time per wall second")
@@ -105,9 +108,14 @@ async def serve(settings: Settings) -> int:
     from server.app import create_app
 
     config = uvicorn.Config(
-        create_app(settings), host=settings.host, port=settings.port, log_config=None,
-        access_log=False, lifespan="on", ws="websockets-sansio",
-    )  # fmt: skip
+        create_app(settings),
+        host=settings.host,
+        port=settings.port,
+        log_config=None,
+        access_log=False,
+        lifespan="on",
+        ws="websockets-sansio",
+    )
     server = uvicorn.Server(config)
     running = asyncio.create_task(server.serve())
     while not server.started:

@@ -49,18 +49,35 @@ class SimProcess:
 
     def command(self) -> list[str]:
         return [
-            sys.executable, "-m", "sim", "--airframe", self.airframe, "--count", str(self.count),
-            "--speed", repr(self.speed), "--ready-json", "--exit-on-stdin-eof",
-            "--api-port", "0", "--gcs-port", "0", "--api-local-port", "0",
-            "--gcs-local-port", "0",
-        ]  # fmt: skip
+            sys.executable,
+            "-m",
+            "sim",
+            "--airframe",
+            self.airframe,
+            "--count",
+            str(self.count),
+            "--speed",
+            repr(self.speed),
+            "--ready-json",
+            "--exit-on-stdin-eof",
+            "--api-port",
+            "0",
+            "--gcs-port",
+            "0",
+            "--api-local-port",
+            "0",
+            "--gcs-local-port",
+            "0",
+        ]
 
     async def start(self) -> list[SimInstance]:
         # stdin stays open as a lifeline: if this process dies, the child sees EOF and exits.
         self._process = await asyncio.create_subprocess_exec(
-            *self.command(), stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE,
+            *self.command(),
+            stdin=asyncio.subprocess.PIPE,
+            stdout=asyncio.subprocess.PIPE,
             stderr=asyncio.subprocess.PIPE,
-        )  # fmt: skip
+        )
         try:
             ready = await asyncio.wait_for(self._read_ready_line(), READY_TIMEOUT_S)
         except (TimeoutError, SimProcessError) as exc:

@@ -85,8 +85,10 @@ def test_serve_prints_url_answers_and_stops_sim_on_sigint(tmp_path: Path) -> Non
 def test_bad_setting_values_exit_2_with_a_clear_message() -> None:
     result = subprocess.run(
         [str(SKYHELM), "serve", "--port", "99999", "--on-operator-loss", "panic"],
-        capture_output=True, text=True, timeout=60,
-    )  # fmt: skip
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert result.returncode == 2
     assert "port" in result.stderr
     assert "on_operator_loss" in result.stderr
@@ -141,10 +143,14 @@ def test_log_filter_redacts_tokens_in_urls() -> None:
     import logging
 
     record = logging.LogRecord(
-        "uvicorn.error", logging.INFO, __file__, 1,
-        '%s - "WebSocket %s" [accepted]', ("127.0.0.1", "/api/v1/ws/telemetry?token=abc&x=1"),
+        "uvicorn.error",
+        logging.INFO,
+        __file__,
+        1,
+        '%s - "WebSocket %s" [accepted]',
+        ("127.0.0.1", "/api/v1/ws/telemetry?token=abc&x=1"),
         None,
-    )  # fmt: skip
+    )
     assert RedactTokens().filter(record)
     assert "abc" not in record.getMessage()
     assert "token=***&x=1" in record.getMessage()
@@ -152,9 +158,12 @@ def test_log_filter_redacts_tokens_in_urls() -> None:
 
 def test_sim_subcommand_execs_python_m_sim() -> None:
     result = subprocess.run(
-        [str(SKYHELM), "sim", "--help"], capture_output=True, text=True, timeout=60,
+        [str(SKYHELM), "sim", "--help"],
+        capture_output=True,
+        text=True,
+        timeout=60,
         env={**os.environ},
-    )  # fmt: skip
+    )
     assert result.returncode == 0
     assert "--airframe" in result.stdout
 

@@ -16,10 +16,15 @@ from server.link import CommandOutcome, CommandResult, ParamError, SetpointRejec
 
 class ApiError(Exception):
     def __init__(
-        self, status_code: int, reason: str, *, field: str | None = None,
-        limit: float | None = None, holder: str | None = None,
+        self,
+        status_code: int,
+        reason: str,
+        *,
+        field: str | None = None,
+        limit: float | None = None,
+        holder: str | None = None,
         headers: dict[str, str] | None = None,
-    ) -> None:  # fmt: skip
+    ) -> None:
         super().__init__(reason)
         self.status_code = status_code
         self.detail: dict[str, Any] = {"reason": reason}

@@ -87,9 +87,13 @@ class LeaseManager:
             self._end(held, LeaseEnd.TAKEN_OVER)
         now = self._clock()
         lease = Lease(
-            lease_id=secrets.token_urlsafe(16), vehicle_id=vehicle_id, holder=holder,
-            session=session, ttl_s=self.ttl_s, expires_at=now + self.ttl_s,
-        )  # fmt: skip
+            lease_id=secrets.token_urlsafe(16),
+            vehicle_id=vehicle_id,
+            holder=holder,
+            session=session,
+            ttl_s=self.ttl_s,
+            expires_at=now + self.ttl_s,
+        )
         self._leases[vehicle_id] = lease
         self._notify(lease, "acquired")
         return lease

@@ -71,10 +71,14 @@ async def set_mode(vehicle: Vehicle, body: ModeBody) -> CommandResult:
 async def reposition(vehicle: Vehicle, body: RepositionBody) -> CommandResult:
     _check_reposition_envelope(vehicle, body)
     return await vehicle.reposition(
-        body.lat_deg, body.lon_deg, alt_amsl_m=body.alt_amsl_m, alt_rel_m=body.alt_rel_m,
-        ground_speed_m_s=body.ground_speed_m_s, yaw_deg=body.yaw_deg,
+        body.lat_deg,
+        body.lon_deg,
+        alt_amsl_m=body.alt_amsl_m,
+        alt_rel_m=body.alt_rel_m,
+        ground_speed_m_s=body.ground_speed_m_s,
+        yaw_deg=body.yaw_deg,
         loiter_radius_m=body.loiter_radius_m,
-    )  # fmt: skip
+    )
 
 
 async def vtol_transition(vehicle: Vehicle, body: VtolTransitionBody) -> CommandResult:
@@ -129,21 +133,23 @@ def _check_reposition_envelope(vehicle: Vehicle, body: RepositionBody) -> None:
             alt_rel_m = body.alt_amsl_m - home.alt_amsl_m
         if alt_rel_m is not None and alt_rel_m > envelope.max_alt_rel_m:
             raise ApiError(
-                422, "reposition altitude above the envelope",
+                422,
+                "reposition altitude above the envelope",
                 field="alt_rel_m" if body.alt_rel_m is not None else "alt_amsl_m",
                 limit=envelope.max_alt_rel_m,
-            )  # fmt: skip
+            )
     if envelope.max_distance_m is not None:
         distance_m = _ground_distance_m(home.lat_deg, home.lon_deg, body.lat_deg, body.lon_deg)
         if distance_m > envelope.max_distance_m:
             raise ApiError(
-                422, f"reposition target {distance_m:.0f} m from home, beyond the envelope",
-                field="lat_deg", limit=envelope.max_distance_m,
-            )  # fmt: skip
+                422,
+                f"reposition target {distance_m:.0f} m from home, beyond the envelope",
+                field="lat_deg",
+                limit=envelope.max_distance_m,
+            )
 
 
-def _ground_distance_m(lat1_deg: float, lon1_deg: float, lat2_deg: float, lon2_deg: float
-                       ) -> float:  # fmt: skip
+def _ground_distance_m(lat1_deg: float, lon1_deg: float, lat2_deg: float, lon2_deg: float) -> float:
     lat1, lat2 = math.radians(lat1_deg), math.radians(lat2_deg)
     dlat = lat2 - lat1
     dlon = math.radians(lon2_deg - lon1_deg)

@@ -188,11 +188,19 @@ SetpointBody = Annotated[
 _BODY_BY_LINK_TYPE: dict[type[Any], type[_SetpointBody]] = {
     body.link_type: body
     for body in (
-        PositionNedBody, VelocityNedBody, VelocityBodyBody, AccelerationNedBody,
-        PositionVelocityNedBody, PositionGlobalBody, AttitudeBody, BodyRatesBody,
-        OffsetNedBody, OffsetBodyBody, RawLocalBody,
+        PositionNedBody,
+        VelocityNedBody,
+        VelocityBodyBody,
+        AccelerationNedBody,
+        PositionVelocityNedBody,
+        PositionGlobalBody,
+        AttitudeBody,
+        BodyRatesBody,
+        OffsetNedBody,
+        OffsetBodyBody,
+        RawLocalBody,
     )
-}  # fmt: skip
+}
 
 
 def setpoint_as_dict(setpoint: Setpoint) -> dict[str, Any]:
@@ -294,9 +302,17 @@ class ParamValueBody(_Body):
 
 
 CommandResultName = Literal[
-    "ACCEPTED", "TEMPORARILY_REJECTED", "DENIED", "UNSUPPORTED", "FAILED", "IN_PROGRESS",
-    "CANCELLED", "TIMEOUT", "LINK_LOST", "NOT_CONFIRMED",
-]  # fmt: skip
+    "ACCEPTED",
+    "TEMPORARILY_REJECTED",
+    "DENIED",
+    "UNSUPPORTED",
+    "FAILED",
+    "IN_PROGRESS",
+    "CANCELLED",
+    "TIMEOUT",
+    "LINK_LOST",
+    "NOT_CONFIRMED",
+]
 
 
 class CommandResultOut(BaseModel):

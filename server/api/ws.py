@@ -164,8 +164,9 @@ async def _drain_until_disconnect(websocket: WebSocket) -> None:
 
 
 @router.websocket("/ws/telemetry")
-async def telemetry(websocket: WebSocket, vehicle: int | None = None, rate_hz: float = 10.0
-                    ) -> None:  # fmt: skip
+async def telemetry(
+    websocket: WebSocket, vehicle: int | None = None, rate_hz: float = 10.0
+) -> None:
     """`{type: "state"}` snapshots of one vehicle (or all) at rate_hz (capped), plus
     `{type: "statustext"}` and `{type: "event"}` as they happen."""
     context = await _admit(websocket, Role.OBSERVER)
@@ -191,8 +192,9 @@ async def telemetry(websocket: WebSocket, vehicle: int | None = None, rate_hz: f
     await _run_until_disconnect(websocket, *jobs)
 
 
-async def _pump_states(vehicle: Vehicle, sender: _Sender, state_text: StateText, period_s: float
-                       ) -> None:  # fmt: skip
+async def _pump_states(
+    vehicle: Vehicle, sender: _Sender, state_text: StateText, period_s: float
+) -> None:
     subscription = vehicle.subscribe()
     next_send = 0.0
     try:
@@ -222,10 +224,19 @@ async def _pump_events(vehicle: Vehicle, sender: _Sender) -> None:
 
 def event_message(vehicle_id: int, event: VehicleEvent) -> dict[str, Any]:
     if event.kind == "statustext":
-        return {"type": "statustext", "vehicle": vehicle_id, "time_s": event.time_s,
-                **finite(dict(event.data))}  # fmt: skip
-    return {"type": "event", "vehicle": vehicle_id, "kind": event.kind, "time_s": event.time_s,
-            "data": finite(_jsonable(event.data))}  # fmt: skip
+        return {
+            "type": "statustext",
+            "vehicle": vehicle_id,
+            "time_s": event.time_s,
+            **finite(dict(event.data)),
+        }
+    return {
+        "type": "event",
+        "vehicle": vehicle_id,
+        "kind": event.kind,
+        "time_s": event.time_s,
+        "data": finite(_jsonable(event.data)),
+    }
 
 
 def _jsonable(value: Any) -> Any:
@@ -236,8 +247,9 @@ def _jsonable(value: Any) -> Any:
 
 
 @router.websocket("/ws/control")
-async def control(websocket: WebSocket, vehicle: int, takeover: bool = False,
-                  client_name: str | None = None) -> None:  # fmt: skip
+async def control(
+    websocket: WebSocket, vehicle: int, takeover: bool = False, client_name: str | None = None
+) -> None:
     """The pilot session: holds the control lease while open and heartbeating."""
     context = await _admit(websocket, Role.PILOT)
     if context is None:
@@ -275,8 +287,9 @@ async def control(websocket: WebSocket, vehicle: int, takeover: bool = False,
 
 
 class _ControlSession:
-    def __init__(self, context: ApiContext, vehicle: Vehicle, lease: Lease, sender: _Sender
-                 ) -> None:  # fmt: skip
+    def __init__(
+        self, context: ApiContext, vehicle: Vehicle, lease: Lease, sender: _Sender
+    ) -> None:
         self._context = context
         self._vehicle = vehicle
         self._lease = lease
@@ -361,12 +374,19 @@ class _ControlSession:
         out = command_out(result).model_dump(mode="json")
         await self._reply(request_id, "command", COMMAND_STATUS[result.outcome], out)
 
-    async def _reply(self, request_id: Any, request: str, status: int, body: dict[str, Any]
-                     ) -> None:  # fmt: skip
+    async def _reply(
+        self, request_id: Any, request: str, status: int, body: dict[str, Any]
+    ) -> None:
         await self._sender.send_json(
-            {"type": "result", "id": request_id, "request": request, "status": status,
-             "ok": status < 300, "body": body}
-        )  # fmt: skip
+            {
+                "type": "result",
+                "id": request_id,
+                "request": request,
+                "status": status,
+                "ok": status < 300,
+                "body": body,
+            }
+        )
 
     async def _reply_error(self, request_id: Any, request: str, exc: Exception) -> None:
         answer = error_status(exc)

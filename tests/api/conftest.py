@@ -164,9 +164,14 @@ async def quad_api() -> AsyncIterator[Api]:
 async def uvicorn_serving(app: FastAPI) -> AsyncIterator[str]:
     """Serve an app (whose lifespan already runs) on 127.0.0.1:<ephemeral>; yield base URL."""
     config = uvicorn.Config(
-        app, host="127.0.0.1", port=0, log_config=None, access_log=False, lifespan="off",
+        app,
+        host="127.0.0.1",
+        port=0,
+        log_config=None,
+        access_log=False,
+        lifespan="off",
         ws="websockets-sansio",
-    )  # fmt: skip
+    )
     server = uvicorn.Server(config)
     task = asyncio.create_task(server.serve())
     try:

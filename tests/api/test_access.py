@@ -30,8 +30,7 @@ async def test_health_needs_no_token(empty_api: Api) -> None:
     "headers",
     [{}, {"Authorization": "Bearer wrong-token-value"}, {"Authorization": "Basic " + PILOT}],
 )
-async def test_reads_without_a_valid_token_are_401(empty_api: Api, headers: dict[str, str]
-                                                    ) -> None:  # fmt: skip
+async def test_reads_without_a_valid_token_are_401(empty_api: Api, headers: dict[str, str]) -> None:
     async with httpx.AsyncClient(
         transport=httpx.ASGITransport(app=empty_api.app), base_url="http://testserver"
     ) as anonymous:

@@ -67,9 +67,12 @@ async def test_full_flight_by_rest(quad_api: Api) -> None:
     home = state["home"]
     reposition = await api.control(
         "reposition",
-        {"lat_deg": home["lat_deg"] + 10.0 / 111_320.0, "lon_deg": home["lon_deg"],
-         "alt_rel_m": 6.0},
-    )  # fmt: skip
+        {
+            "lat_deg": home["lat_deg"] + 10.0 / 111_320.0,
+            "lon_deg": home["lon_deg"],
+            "alt_rel_m": 6.0,
+        },
+    )
     assert reposition.status_code == 200, reposition.text
     await api.wait_state(
         lambda s: s["mode"] == "HOLD" and abs(_north_m(s) - 10.0) < 1.5, 20.0, "reposition"

@@ -48,9 +48,13 @@ def generate_cases(operation: Any, count: int) -> list[Any]:
     cases: list[Any] = []
 
     @settings(
-        max_examples=count, derandomize=True, database=None, phases=[Phase.generate],
-        suppress_health_check=list(HealthCheck), deadline=None,
-    )  # fmt: skip
+        max_examples=count,
+        derandomize=True,
+        database=None,
+        phases=[Phase.generate],
+        suppress_health_check=list(HealthCheck),
+        deadline=None,
+    )
     @given(operation.as_strategy())
     def collect(case: Any) -> None:
         cases.append(case)

@@ -79,8 +79,10 @@ async def test_takeoff_above_the_envelope_is_422(quad_api: Api) -> None:
     response = await quad_api.control("takeoff", {"altitude_m": 500.0})
     assert response.status_code == 422
     assert response.json()["detail"] == {
-        "reason": "takeoff altitude above the envelope", "field": "altitude_m", "limit": 120.0,
-    }  # fmt: skip
+        "reason": "takeoff altitude above the envelope",
+        "field": "altitude_m",
+        "limit": 120.0,
+    }
 
 
 async def test_frame_px4_does_not_support_is_refused_with_px4_words(quad_api: Api) -> None:
@@ -160,8 +162,9 @@ async def test_lease_is_renewed_by_control_calls_and_released_by_delete(quad_api
     assert status["holder"] is not None
     assert (await client.delete("/api/v1/vehicles/1/control", headers=headers)).status_code == 204
     assert (await client.get("/api/v1/vehicles/1/control")).json() == {
-        "holder": None, "expires_in_s": None,
-    }  # fmt: skip
+        "holder": None,
+        "expires_in_s": None,
+    }
 
 
 async def test_unrenewed_lease_lapses_after_ttl() -> None:
@@ -184,9 +187,10 @@ async def test_params_round_trip(quad_api: Api) -> None:
     assert before.status_code == 200
     assert before.json() == {"name": "MIS_TAKEOFF_ALT", "value": 2.5}
     written = await client.put(
-        "/api/v1/vehicles/1/params/MIS_TAKEOFF_ALT", json={"value": 4.0},
+        "/api/v1/vehicles/1/params/MIS_TAKEOFF_ALT",
+        json={"value": 4.0},
         headers=quad_api.lease_headers,
-    )  # fmt: skip
+    )
     assert written.status_code == 200, written.text
     assert written.json()["value"] == 4.0
     several = await client.get(

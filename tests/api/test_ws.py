@@ -57,8 +57,9 @@ async def receive(ws: ClientConnection, timeout_s: float = 5.0) -> dict[str, Any
     return message
 
 
-async def receive_until(ws: ClientConnection, want: dict[str, Any], timeout_s: float = 10.0
-                        ) -> dict[str, Any]:  # fmt: skip
+async def receive_until(
+    ws: ClientConnection, want: dict[str, Any], timeout_s: float = 10.0
+) -> dict[str, Any]:
     """The first message whose keys include all of `want`'s items."""
     deadline = time.monotonic() + timeout_s
     while True:

@@ -40,21 +40,24 @@ async def run_operation(name: str, vehicle: Vehicle, body: BaseModel | None) -> 
 
 
 @router.post("/arm", response_model=CommandResultOut)
-async def arm(vehicle: ControlledVehicle, body: Annotated[ArmBody | None, Body()] = None
-              ) -> JSONResponse:  # fmt: skip
+async def arm(
+    vehicle: ControlledVehicle, body: Annotated[ArmBody | None, Body()] = None
+) -> JSONResponse:
     return await run_operation("arm", vehicle, body)
 
 
 @router.post("/disarm", response_model=CommandResultOut)
-async def disarm(vehicle: ControlledVehicle, body: Annotated[ArmBody | None, Body()] = None
-                 ) -> JSONResponse:  # fmt: skip
+async def disarm(
+    vehicle: ControlledVehicle, body: Annotated[ArmBody | None, Body()] = None
+) -> JSONResponse:
     """Without force PX4 refuses unless landed ("Disarming denied: not landed")."""
     return await run_operation("disarm", vehicle, body)
 
 
 @router.post("/takeoff", response_model=CommandResultOut)
-async def takeoff(vehicle: ControlledVehicle,
-                  body: Annotated[TakeoffBody | None, Body()] = None) -> JSONResponse:  # fmt: skip
+async def takeoff(
+    vehicle: ControlledVehicle, body: Annotated[TakeoffBody | None, Body()] = None
+) -> JSONResponse:
     """Climb to altitude_m above home (default: the vehicle's MIS_TAKEOFF_ALT)."""
     return await run_operation("takeoff", vehicle, body)
 
@@ -99,24 +102,25 @@ async def set_origin(vehicle: ControlledVehicle, body: OriginBody) -> JSONRespon
 
 
 @router.post("/home", response_model=CommandResultOut)
-async def set_home(vehicle: ControlledVehicle,
-                   body: Annotated[HomeBody | None, Body()] = None) -> JSONResponse:  # fmt: skip
+async def set_home(
+    vehicle: ControlledVehicle, body: Annotated[HomeBody | None, Body()] = None
+) -> JSONResponse:
     """MAV_CMD_DO_SET_HOME at the given point, or at the current position without a body."""
     return await run_operation("home", vehicle, body)
 
 
 @router.post("/offboard/start", response_model=CommandResultOut)
-async def offboard_start(vehicle: ControlledVehicle,
-                         body: Annotated[OffboardStartBody | None, Body()] = None
-                         ) -> JSONResponse:  # fmt: skip
+async def offboard_start(
+    vehicle: ControlledVehicle, body: Annotated[OffboardStartBody | None, Body()] = None
+) -> JSONResponse:
     """Stream the setpoint (default: hold here) and switch to OFFBOARD; resolves when the
     vehicle reports OFFBOARD."""
     return await run_operation("offboard_start", vehicle, body)
 
 
 @router.post("/offboard/stop", response_model=CommandResultOut)
-async def offboard_stop(vehicle: ControlledVehicle,
-                        body: Annotated[OffboardStopBody | None, Body()] = None
-                        ) -> JSONResponse:  # fmt: skip
+async def offboard_stop(
+    vehicle: ControlledVehicle, body: Annotated[OffboardStopBody | None, Body()] = None
+) -> JSONResponse:
     """Switch to then_mode, then stop streaming."""
     return await run_operation("offboard_stop", vehicle, body)

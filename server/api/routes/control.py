@@ -17,9 +17,11 @@ router = APIRouter(prefix="/vehicles/{vehicle_id}/control", tags=["control"])
 def lease_out(lease: Lease, context: Context) -> LeaseOut:
     _, expires_in_s = context.leases.status(lease.vehicle_id)
     return LeaseOut(
-        lease_id=lease.lease_id, ttl_s=lease.ttl_s, holder=lease.holder,
+        lease_id=lease.lease_id,
+        ttl_s=lease.ttl_s,
+        holder=lease.holder,
         expires_in_s=expires_in_s if expires_in_s is not None else 0.0,
-    )  # fmt: skip
+    )
 
 
 def holder_name(request: Request, client_name: str | None) -> str:
@@ -35,17 +37,24 @@ def holder_name(request: Request, client_name: str | None) -> str:
     responses={**CONTROL_RESPONSES, 409: {"model": ErrorOut, "description": "held by another"}},
 )
 async def acquire_control(
-    request: Request, _: Pilot, vehicle: KnownVehicle, context: Context,
-    body: Annotated[ControlBody | None, Body()] = None, x_lease_id: LeaseIdHeader = None,
-) -> LeaseOut:  # fmt: skip
+    request: Request,
+    _: Pilot,
+    vehicle: KnownVehicle,
+    context: Context,
+    body: Annotated[ControlBody | None, Body()] = None,
+    x_lease_id: LeaseIdHeader = None,
+) -> LeaseOut:
     """Take the control lease (409 while another pilot holds it, unless `takeover`).
     Sending the current X-Lease-Id renews it instead."""
     body = body or ControlBody()
     try:
         lease = context.leases.acquire(
-            vehicle.sysid, holder_name(request, body.client_name), session="rest",
-            takeover=body.takeover, lease_id=x_lease_id,
-        )  # fmt: skip
+            vehicle.sysid,
+            holder_name(request, body.client_name),
+            session="rest",
+            takeover=body.takeover,
+            lease_id=x_lease_id,
+        )
     except LeaseHeld as held:
         raise ApiError(409, str(held), holder=held.lease.holder) from None
     return lease_out(lease, context)

@@ -18,8 +18,10 @@ router = APIRouter(prefix="/vehicles/{vehicle_id}", tags=["setpoint"])
 def sent_out(sent: SentSetpoint) -> SentSetpointOut:
     return SentSetpointOut(
         setpoint=finite(setpoint_as_dict(sent.setpoint)),
-        message=sent.message, frame=sent.frame, type_mask=sent.type_mask,
-    )  # fmt: skip
+        message=sent.message,
+        frame=sent.frame,
+        type_mask=sent.type_mask,
+    )
 
 
 @router.put("/setpoint", response_model=SentSetpointOut, responses=CONTROL_RESPONSES)
