@@ -88,6 +88,8 @@ DEFAULT_TELEMETRY_RATES_HZ: Mapping[int, float] = {
     mavlink.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: 5.0,
 }
 # Sent once on connection: their values do not change often enough to stream.
+ONE_SHOT_RETRIES = 30
+ONE_SHOT_RETRY_INTERVAL_S = 1.0
 ONE_SHOT_MESSAGES = (mavlink.MAVLINK_MSG_ID_HOME_POSITION, mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN)
 
 
@@ -569,6 +571,23 @@ class Vehicle:
             self._note_telemetry_answer(
                 msg_id, await self.command_long(MAV_CMD_REQUEST_MESSAGE, msg_id)
             )
+        # PX4 has no home or origin until its estimator has a position, which can come
+        # seconds after the first heartbeat: ask again until both are known.
+        for _ in range(ONE_SHOT_RETRIES):
+            missing = self._missing_one_shots()
+            if not missing or not self.connected:
+                return
+            await asyncio.sleep(ONE_SHOT_RETRY_INTERVAL_S)
+            for msg_id in missing:
+                await self.command_long(MAV_CMD_REQUEST_MESSAGE, msg_id)
+
+    def _missing_one_shots(self) -> list[int]:
+        missing = []
+        if self.telemetry.home is None:
+            missing.append(mavlink.MAVLINK_MSG_ID_HOME_POSITION)
+        if self.telemetry.origin is None:
+            missing.append(mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN)
+        return missing
 
     def _note_telemetry_answer(self, msg_id: int, result: CommandResult, prefix: str = "") -> None:
         msg_class = mavlink.mavlink_map.get(msg_id)

@@ -47,6 +47,15 @@ async def test_vehicle_is_discovered_with_type_home_and_both_modes() -> None:
     assert state.landed_state == "ON_GROUND"
 
 
+async def test_gps_origin_is_known_once_the_vehicle_has_a_position() -> None:
+    async with open_sim(speed=SPEED) as session:
+        await wait_for(lambda: session.vehicle.snapshot().origin is not None, 10.0, "origin")
+        origin = session.vehicle.snapshot().origin
+
+    assert origin is not None
+    assert (origin.lat_deg, origin.lon_deg) == pytest.approx((47.397742, 8.545594), abs=1e-6)
+
+
 async def test_offboard_position_setpoint_is_reached_within_half_a_metre() -> None:
     async with open_sim(speed=SPEED) as session:
         vehicle = session.vehicle
