@@ -143,10 +143,9 @@ async def _run_until_disconnect(websocket: WebSocket, *jobs: Awaitable[None]) ->
     try:
         done, _ = await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
         for task in done:
-            if not task.cancelled() and isinstance(task.exception(), Exception):
-                exc = task.exception()
-                if not isinstance(exc, WebSocketDisconnect):
-                    raise exc  # type: ignore[misc]
+            exc = None if task.cancelled() else task.exception()
+            if exc is not None and not isinstance(exc, WebSocketDisconnect):
+                raise exc
     finally:
         for task in tasks:
             task.cancel()
@@ -317,7 +316,11 @@ class _ControlSession:
 
     async def _receive(self, websocket: WebSocket) -> None:
         while True:
-            text = await websocket.receive_text()
+            message = await websocket.receive()
+            if message["type"] == "websocket.disconnect":
+                return
+            # Binary frames are read as UTF-8 JSON too rather than ending the session.
+            text = message.get("text") or (message.get("bytes") or b"").decode(errors="replace")
             await self._handle(text)
 
     async def _handle(self, text: str) -> None:
