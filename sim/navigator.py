@@ -28,6 +28,8 @@ NO_RC_DESCENT_SPEED_M_S = 0.8
 LAND_TARGET_BELOW_GROUND_M = 1.0
 ALTITUDE_REACHED_M = 0.5
 MC_POSITION_REACHED_M = 1.0
+# A fixed wing counts as arrived anywhere on (or near) its loiter circle around the point.
+FW_LOITER_REACHED_FACTOR = 1.5
 
 _STICKLESS_MODES = frozenset(
     {modes.POSCTL, modes.ALTCTL, modes.STABILIZED, modes.MANUAL, modes.ACRO}
@@ -42,6 +44,7 @@ class RtlPhase(Enum):
     MOVE_TO_LOITER = "move_to_loiter"
     LOITER_DOWN = "loiter_down"
     LOITER_HOLD = "loiter_hold"
+    MOVE_TO_LAND = "move_to_land"
     TRANSITION_TO_MC = "transition_to_mc"
     MOVE_TO_LAND_HOVER = "move_to_land_hover"
     LAND = "land"
@@ -295,6 +298,7 @@ class Navigator:
             RtlPhase.MOVE_TO_LOITER: f"RTL: return at {altitude(self._rtl_return_down_m)}",
             RtlPhase.LOITER_DOWN: f"RTL: descend to {altitude(self._rtl_descend_down_m)}",
             RtlPhase.LOITER_HOLD: f"RTL: loiter {self._params.get('RTL_LAND_DELAY'):.1f}s",
+            RtlPhase.MOVE_TO_LAND: "RTL: move to land approach",
             RtlPhase.TRANSITION_TO_MC: "RTL: transition to multicopter",
             RtlPhase.MOVE_TO_LAND_HOVER: "RTL: move to land position",
             RtlPhase.LAND: "RTL: land at home",
@@ -320,10 +324,8 @@ class Navigator:
             reached = down <= self._rtl_return_down_m + ALTITUDE_REACHED_M
             return RtlPhase.MOVE_TO_LOITER if reached else None
         if phase == RtlPhase.MOVE_TO_LOITER:
-            radius = MC_POSITION_REACHED_M
-            if fixed_wing:
-                radius = self._params.get("NAV_LOITER_RAD") * 1.5
-            return RtlPhase.LOITER_DOWN if self._home_distance_m(truth) <= radius else None
+            reached = self._home_distance_m(truth) <= self._reach_radius_m(fixed_wing)
+            return RtlPhase.LOITER_DOWN if reached else None
         if phase == RtlPhase.LOITER_DOWN:
             reached = down >= self._rtl_descend_down_m - ALTITUDE_REACHED_M
             return RtlPhase.LOITER_HOLD if reached else None
@@ -331,14 +333,18 @@ class Navigator:
             delay = self._params.get("RTL_LAND_DELAY")
             if delay < 0 or now_s - self._rtl_phase_started_s < delay:
                 return None
-            if self._fixed_wing_only:
-                return None
-            return RtlPhase.TRANSITION_TO_MC if fixed_wing else RtlPhase.MOVE_TO_LAND_HOVER
+            # rtl_direct: only a VTOL in fixed-wing flight flies an approach and transitions;
+            # a plane goes on to land where it loiters.
+            vtol_in_fw = fixed_wing and self._airframe.is_vtol
+            return RtlPhase.MOVE_TO_LAND if vtol_in_fw else RtlPhase.MOVE_TO_LAND_HOVER
+        if phase == RtlPhase.MOVE_TO_LAND:
+            near = self._home_distance_m(truth) <= self._back_transition_distance_m(truth)
+            return RtlPhase.TRANSITION_TO_MC if near or not fixed_wing else None
         if phase == RtlPhase.TRANSITION_TO_MC:
             in_mc = self._airframe.vtol_state == VtolState.MC
             return RtlPhase.MOVE_TO_LAND_HOVER if in_mc else None
         if phase == RtlPhase.MOVE_TO_LAND_HOVER:
-            near = self._home_distance_m(truth) <= MC_POSITION_REACHED_M
+            near = self._home_distance_m(truth) <= self._reach_radius_m(fixed_wing)
             return RtlPhase.LAND if near else None
         if phase == RtlPhase.LAND:
             if self._ground_vehicle:
@@ -359,6 +365,8 @@ class Navigator:
             return TrajectorySetpoint(
                 position_ned_m=[north, east, self._rtl_return_down_m], yaw_rad=self._hold_yaw_rad
             )
+        if phase == RtlPhase.MOVE_TO_LAND and self._airframe.in_fixed_wing_flight:
+            return self._approach_home(truth)
         if phase == RtlPhase.TRANSITION_TO_MC:
             self._airframe.request_transition(to_fixed_wing=False, immediate=False)
         down = self._rtl_descend_down_m
@@ -368,6 +376,35 @@ class Navigator:
             position_ned_m=[home.position_ned_m[0], home.position_ned_m[1], down],
             yaw_rad=self._return_yaw_rad(truth),
             max_speed_xy_m_s=self._params.get("MPC_XY_CRUISE"),
+        )
+
+    def _reach_radius_m(self, fixed_wing: bool) -> float:
+        """A multicopter arrives over a point; a fixed wing once on its loiter circle."""
+        if fixed_wing:
+            return self._params.get("NAV_LOITER_RAD") * FW_LOITER_REACHED_FACTOR
+        return MC_POSITION_REACHED_M
+
+    def _back_transition_distance_m(self, truth: VehicleStateTruth) -> float:
+        """PX4's acceptance radius of a waypoint with a back transition: the distance the
+        VTOL needs to stop from its ground speed at VT_B_DEC_MSS."""
+        velocity = truth.velocity_ned_m_s
+        speed = math.hypot(velocity[0], velocity[1])
+        deceleration = self._params.get("VT_B_DEC_MSS")
+        if deceleration <= 0.0:
+            return MC_POSITION_REACHED_M
+        return max(speed * speed / (2.0 * deceleration), MC_POSITION_REACHED_M)
+
+    def _approach_home(self, truth: VehicleStateTruth) -> TrajectorySetpoint:
+        """Fixed-wing flight straight at home at the descend altitude (a course, so the
+        wing does not settle on a loiter circle around it)."""
+        home = self._commander.home.position_ned_m
+        bearing = math.atan2(
+            home[1] - truth.position_ned_m[1], home[0] - truth.position_ned_m[0]
+        )
+        speed = self._params.get("FW_AIRSPD_TRIM")
+        return TrajectorySetpoint(
+            position_ned_m=[math.nan, math.nan, self._rtl_descend_down_m],
+            velocity_ned_m_s=[speed * math.cos(bearing), speed * math.sin(bearing), math.nan],
         )
 
     def _return_yaw_rad(self, truth: VehicleStateTruth) -> float:

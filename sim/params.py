@@ -41,6 +41,7 @@ PX4_DEFAULTS: dict[str, float | int] = {
     "RTL_LAND_DELAY": 0.0,
     "RTL_MIN_DIST": 10.0,
     "RTL_TYPE": 0,
+    "VT_B_DEC_MSS": 2.0,
     # multicopter position control used by the navigator
     "MPC_TKO_SPEED": 1.5,
     "MPC_TKO_RAMP_T": 3.0,
