@@ -37,9 +37,12 @@ BOOT_TIME_S = 1.5
 READY_TIME_S = 3.0
 # While disarmed on the ground home follows the vehicle; refresh it this often.
 HOME_FOLLOW_PERIOD_S = 1.0
-# The stepping loop wakes at most this often and then runs every step that is due: two
-# 4 ms steps per wake-up at speed 1 halve the event-loop overhead, and nothing outside
-# (UDP at 50-100 Hz) sees a difference.
+# The stepping loop runs STEPS_PER_WAKE steps (20 ms of sim time) per wake-up, and wakes
+# no more often than MIN_WAKE_PERIOD_S of wall time when faster than real time. Wake-ups
+# cost the process more than the steps' own work at 125 Hz (bench/sim_cost.py), and
+# nothing outside can tell: every message keeps its own sim timestamp and every stream
+# its rate; the 100 Hz ATTITUDE reaches UDP peers in pairs.
+STEPS_PER_WAKE = 5
 MIN_WAKE_PERIOD_S = 0.008
 STATUSTEXT_MAX_LEN = 50
 STATUSTEXT_HISTORY = 200
@@ -336,8 +339,12 @@ class LoopStats:
         self.wakeups = 0
 
 
+class Steppable(Protocol):
+    def step(self, dt_s: float = PHYSICS_DT_S) -> None: ...
+
+
 async def run_vehicles(
-    vehicles: Sequence[SimVehicle],
+    vehicles: Sequence[Steppable],
     speed: float = 1.0,
     stats: LoopStats | None = None,
     dt_s: float = PHYSICS_DT_S,
@@ -345,12 +352,17 @@ async def run_vehicles(
 ) -> None:
     """Step every vehicle at 1/dt_s sim-Hz, sim time running `speed` times wall time.
 
-    Deadlines are absolute (t0 + k·dt/speed) so timer jitter does not accumulate; after a
-    stall the loop catches up at most `max_catch_up_steps` steps at once and then drops
-    the remainder, so sim time slows down rather than jumping.
+    Deadlines are absolute (t0 + k·dt/speed) so timer jitter does not accumulate; it wakes
+    every STEPS_PER_WAKE steps (at least MIN_WAKE_PERIOD_S apart) and runs the steps due.
+    After a stall it catches up at most `max_catch_up_steps` steps (or four wake-ups'
+    worth, if more) at once and then drops the remainder, so sim time slows down rather
+    than jumping.
     """
     stats = stats if stats is not None else LoopStats()
     wall_dt = dt_s / speed
+    wake_period_s = max(STEPS_PER_WAKE * wall_dt, MIN_WAKE_PERIOD_S)
+    # never less than a few wake-ups' worth, or a fast sim could never catch up at all
+    catch_up_limit = max(max_catch_up_steps, 4 * math.ceil(wake_period_s / wall_dt))
     t0 = time.perf_counter()
     k = 0
     intended_wake = t0
@@ -363,13 +375,13 @@ async def run_vehicles(
             stats.lag_sum_s += lag
             stats.max_lag_s = max(stats.max_lag_s, lag)
         todo = due - k
-        if todo > max_catch_up_steps:
-            t0 += (todo - max_catch_up_steps) * wall_dt
-            todo = max_catch_up_steps
+        if todo > catch_up_limit:
+            t0 += (todo - catch_up_limit) * wall_dt
+            todo = catch_up_limit
         for _ in range(todo):
             for vehicle in vehicles:
                 vehicle.step(dt_s)
         k += max(todo, 0)
         stats.steps += max(todo, 0)
-        intended_wake = max(t0 + (k + 1) * wall_dt, now + MIN_WAKE_PERIOD_S)
+        intended_wake = max(t0 + (k + 1) * wall_dt, now + wake_period_s)
         await asyncio.sleep(max(intended_wake - time.perf_counter(), 0.0))
