@@ -49,6 +49,7 @@ def create_app(settings: Settings) -> FastAPI:
     deadman = Deadman(leases, registry, settings.on_operator_loss)
     context = ApiContext(settings, tokens, registry, leases, deadman)
     hub = SceneHub() if settings.scene else None
+    state_text = ws.StateText(context)
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
@@ -71,6 +72,7 @@ def create_app(settings: Settings) -> FastAPI:
                 await hub.start(registry.all)
             yield
         finally:
+            await state_text.close()
             if hub is not None:
                 await hub.stop()
             await deadman.stop()
@@ -87,7 +89,7 @@ def create_app(settings: Settings) -> FastAPI:
     )
     app.state.api = context
     app.state.sim = None
-    app.state.state_text = ws.StateText(context)
+    app.state.state_text = state_text
     install_error_handlers(app)
     if settings.cors_origins:
         app.add_middleware(

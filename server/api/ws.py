@@ -72,30 +72,44 @@ class _Sender:
 
 
 class StateText:
-    """Serialised snapshots shared by every telemetry client of a vehicle: one JSON encoding
-    per vehicle update however many clients send it, and an encoding younger than
-    SHARE_WINDOW_S is reused without even taking a new snapshot."""
-
-    SHARE_WINDOW_S = 0.002
+    """Serialised snapshots shared by every telemetry client of a vehicle: one watcher per
+    vehicle marks it changed, and the first client to send after a change takes the snapshot
+    and encodes it; every other client sends that same text until the next change."""
 
     def __init__(self, context: ApiContext) -> None:
         self._context = context
-        self._cache: dict[int, tuple[float, float, str]] = {}  # sysid: built_at, updated_s, text
+        self._texts: dict[int, str] = {}
+        self._watchers: dict[int, asyncio.Task[None]] = {}
 
     def text(self, vehicle: Vehicle) -> str:
-        now = time.monotonic()
-        cached = self._cache.get(vehicle.sysid)
-        if cached is not None and now - cached[0] < self.SHARE_WINDOW_S:
-            return cached[2]
+        text = self._texts.get(vehicle.sysid)
+        if text is None:
+            if vehicle.sysid not in self._watchers:
+                self._watchers[vehicle.sysid] = asyncio.create_task(self._watch(vehicle))
+            text = self._encode(vehicle)
+        return text
+
+    async def close(self) -> None:
+        for task in self._watchers.values():
+            task.cancel()
+        await asyncio.gather(*self._watchers.values(), return_exceptions=True)
+        self._watchers.clear()
+
+    async def _watch(self, vehicle: Vehicle) -> None:
+        subscription = vehicle.subscribe()
+        try:
+            async for _ in subscription:
+                self._texts.pop(vehicle.sysid, None)
+        finally:
+            subscription.close()
+
+    def _encode(self, vehicle: Vehicle) -> str:
         state = vehicle.snapshot()
-        if cached is not None and cached[1] == state.updated_s:
-            self._cache[vehicle.sysid] = (now, state.updated_s, cached[2])
-            return cached[2]
         fields = state_dict(state, self._context.leases)
         # `type` names the message here, so the vehicle's type travels as vehicle_type.
         fields["vehicle_type"] = fields.pop("type")
         text = json.dumps({"type": "state", "vehicle": state.sysid, **fields})
-        self._cache[vehicle.sysid] = (now, state.updated_s, text)
+        self._texts[vehicle.sysid] = text
         return text
 
 
