@@ -15,6 +15,8 @@ from typing import Any, TypeAlias, cast
 
 from pymavlink.dialects.v20 import development as mavlink
 
+from sim.frames import pack_frame
+
 # pymavlink messages carry their fields as dynamic attributes.
 Message: TypeAlias = Any
 Address = tuple[str, int]
@@ -38,10 +40,15 @@ class MavlinkCodec:
     def __init__(self, sysid: int, compid: int) -> None:
         self._mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
         self._mav.robust_parsing = True
+        self._sysid = sysid
+        self._compid = compid
 
     def encode(self, msg: Message) -> bytes:
-        data: bytes = msg.pack(self._mav)
-        self._mav.seq = (self._mav.seq + 1) % 256
+        mav = self._mav
+        data = pack_frame(msg, mav.seq, self._sysid, self._compid)
+        if data is None:
+            data = msg.pack(mav)
+        mav.seq = (mav.seq + 1) % 256
         return data
 
     def decode(self, data: bytes) -> tuple[list[Message], int]:
