@@ -62,7 +62,9 @@ class _Sender:
     async def send_text(self, text: str) -> None:
         async with self._lock:
             try:
-                await asyncio.wait_for(self._websocket.send_text(text), SEND_TIMEOUT_S)
+                # asyncio.timeout, unlike wait_for, adds no task per message
+                async with asyncio.timeout(SEND_TIMEOUT_S):
+                    await self._websocket.send_text(text)
             except TimeoutError:
                 await _close(self._websocket, 1008, "client too slow")
                 raise WebSocketDisconnect(1008) from None
