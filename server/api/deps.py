@@ -1,8 +1,11 @@
-"""Request dependencies as Annotated aliases: context, token role, vehicle lookup, lease."""
+"""Request dependencies as Annotated aliases: context, token role, vehicle lookup, lease.
+
+All are coroutines so they run on the event loop, which owns the leases and the links
+(FastAPI would run plain functions in its thread pool)."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import AsyncIterator
 from dataclasses import dataclass
 from typing import Annotated
 
@@ -28,7 +31,7 @@ class ApiContext:
     deadman: Deadman
 
 
-def get_context(connection: HTTPConnection) -> ApiContext:
+async def get_context(connection: HTTPConnection) -> ApiContext:
     context: ApiContext = connection.app.state.api
     return context
 
@@ -40,7 +43,7 @@ _bearer = HTTPBearer(auto_error=False, description="pilot or observer token")
 _query_token = APIKeyQuery(name="token", auto_error=False, description="same token, in the URL")
 
 
-def get_role(
+async def get_role(
     request: Request,
     context: Context,
     _bearer_token: Annotated[HTTPAuthorizationCredentials | None, Security(_bearer)] = None,
@@ -56,7 +59,7 @@ def get_role(
 Reader = Annotated[Role, Depends(get_role)]
 
 
-def require_pilot(role: Reader) -> Role:
+async def require_pilot(role: Reader) -> Role:
     if role is not Role.PILOT:
         raise ApiError(403, "observer tokens may only read; this call needs the pilot token")
     return role
@@ -66,7 +69,7 @@ Pilot = Annotated[Role, Depends(require_pilot)]
 VehicleId = Annotated[int, Path(ge=0, le=255, description="the vehicle's MAVLink sysid")]
 
 
-def get_vehicle(vehicle_id: VehicleId, context: Context, _: Reader) -> Vehicle:
+async def get_vehicle(vehicle_id: VehicleId, context: Context, _: Reader) -> Vehicle:
     vehicle = context.registry.get(vehicle_id)
     if vehicle is None:
         raise ApiError(404, f"no vehicle {vehicle_id}")
@@ -82,7 +85,7 @@ def require_connected(vehicle: Vehicle) -> Vehicle:
     return vehicle
 
 
-def get_connected_vehicle(vehicle: KnownVehicle) -> Vehicle:
+async def get_connected_vehicle(vehicle: KnownVehicle) -> Vehicle:
     return require_connected(vehicle)
 
 
@@ -93,15 +96,15 @@ LeaseIdHeader = Annotated[
 ]
 
 
-def hold_lease(
+async def hold_lease(
     _: Pilot, vehicle: KnownVehicle, context: Context, x_lease_id: LeaseIdHeader = None
-) -> Iterator[Lease]:
+) -> AsyncIterator[Lease]:
     """Control calls renew the lease, and it cannot lapse while the call runs."""
     with context.leases.hold(vehicle.sysid, x_lease_id) as lease:
         yield lease
 
 
-def get_controlled_vehicle(
+async def get_controlled_vehicle(
     _lease: Annotated[Lease, Depends(hold_lease)], vehicle: KnownVehicle
 ) -> Vehicle:
     return require_connected(vehicle)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from importlib.metadata import PackageNotFoundError, version
 
 from fastapi import APIRouter
@@ -12,6 +13,7 @@ from server.api.schemas import HealthOut
 router = APIRouter(tags=["health"])
 
 
+@functools.cache
 def _version() -> str:
     try:
         return version("skyhelm")
