@@ -274,3 +274,15 @@ async def test_deadman_does_nothing_without_a_stream(quad: Served) -> None:
         assert lease_end["data"]["action"] == "closed"
         with pytest.raises(TimeoutError):
             await receive_until(telemetry, {"type": "event", "kind": "deadman"}, timeout_s=0.5)
+
+
+async def test_deadman_continue_policy_keeps_flying_and_says_so() -> None:
+    async with served(on_operator_loss="continue") as s:
+        async with connect(s.url("telemetry", vehicle=1, rate_hz=2)) as telemetry:
+            ws = await fly_offboard_at_2_m_s(s)
+            await ws.close()
+            event = await receive_until(telemetry, {"type": "event", "kind": "deadman"})
+            assert event["data"]["action"] == "continue"
+        state = await s.api.state()
+        assert state["mode"] == "OFFBOARD"
+        assert _speed(state) > 1.5
