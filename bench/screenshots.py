@@ -81,6 +81,7 @@ def shoot(context: Any, airframe: str, fly: Callable[[Any, Serve], None]) -> dic
         page.close()
     finally:
         serve.stop()
+        serve.discard_log()
     seconds = time.monotonic() - started
     print(f"{airframe}: {path.relative_to(ROOT)} after {seconds:.1f} s")
     return {"airframe": airframe, "image": str(path.relative_to(ROOT)), "wall_s": round(seconds, 1)}

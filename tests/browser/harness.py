@@ -54,6 +54,7 @@ class Serve:
         return f"http://127.0.0.1:{self.port}"
 
     def start(self, timeout_s: float = 60.0) -> str:
+        self.discard_log()
         # The file outlives this call: it is the server's stderr until stop().
         self._log = tempfile.NamedTemporaryFile(  # noqa: SIM115
             "w+", prefix="skyhelm-serve-", suffix=".log", delete=False
@@ -95,6 +96,14 @@ class Serve:
         except subprocess.TimeoutExpired:
             os.killpg(process.pid, signal.SIGKILL)
             process.wait(5.0)
+
+    def discard_log(self) -> None:
+        """Remove the server's stderr file (kept after stop() for log_tail())."""
+        log, self._log = self._log, None
+        if log is not None:
+            log.close()
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(log.name)
 
     def restart(self) -> str:
         """Same port and token, so an open page can find the server again."""

@@ -33,6 +33,7 @@ def serve() -> Iterator[Serve]:
         yield server
     finally:
         server.stop()
+        server.discard_log()
 
 
 @pytest.fixture(scope="module")

@@ -19,6 +19,7 @@ def serve() -> Iterator[Serve]:
         yield server
     finally:
         server.stop()
+        server.discard_log()
 
 
 def test_transition_buttons_reach_fixed_wing_and_back(browser: Any, serve: Serve) -> None:
