@@ -6,6 +6,7 @@ import asyncio
 import socket
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -50,8 +51,12 @@ MavsdkFactory = Callable[..., Awaitable[tuple[Any, SimCluster]]]
 
 
 @pytest.fixture
-async def mavsdk_drone() -> AsyncIterator[MavsdkFactory]:
+async def mavsdk_drone(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> AsyncIterator[MavsdkFactory]:
     """Start a sim and a real mavsdk_server connected to it; both stopped afterwards."""
+    # mavsdk_server caches component metadata under the temp directory: keep it in the test's.
+    monkeypatch.setenv("TMPDIR", str(tmp_path))
     try:
         import mavsdk_grpc as mavsdk
     except ImportError:  # pragma: no cover - the test extra installs it
