@@ -253,23 +253,8 @@ def _yaw_bits(yaw_deg: float | None, yaw_rate_deg_s: float | None) -> int:
     return bits
 
 
-@dataclass(frozen=True)
-class LocalFields:
-    """SET_POSITION_TARGET_LOCAL_NED fields of a setpoint (yaw in radians)."""
-
-    frame: int
-    type_mask: int
-    x: float = 0.0
-    y: float = 0.0
-    z: float = 0.0
-    vx: float = 0.0
-    vy: float = 0.0
-    vz: float = 0.0
-    afx: float = 0.0
-    afy: float = 0.0
-    afz: float = 0.0
-    yaw: float = 0.0
-    yaw_rate: float = 0.0
+# A raw setpoint is exactly the wire fields, so one type serves both.
+LocalFields = RawLocal
 
 
 def local_fields(sp: Setpoint) -> LocalFields | None:
@@ -330,7 +315,7 @@ def local_fields(sp: Setpoint) -> LocalFields | None:
             yaw=_rad(sp.yaw_deg),
         )
     if isinstance(sp, RawLocal):
-        return LocalFields(**asdict(sp))
+        return sp
     return None
 
 
