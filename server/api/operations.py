@@ -3,7 +3,6 @@ control session run the same table, so both refuse and answer alike."""
 
 from __future__ import annotations
 
-import math
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from typing import Any
@@ -23,8 +22,7 @@ from server.api.schemas import (
     VtolTransitionBody,
 )
 from server.link import CommandResult, Vehicle
-
-_EARTH_RADIUS_M = 6_371_000.0
+from server.link.geo import ground_distance_m
 
 
 class NoBody(BaseModel):
@@ -139,7 +137,7 @@ def _check_reposition_envelope(vehicle: Vehicle, body: RepositionBody) -> None:
                 limit=envelope.max_alt_rel_m,
             )
     if envelope.max_distance_m is not None:
-        distance_m = _ground_distance_m(home.lat_deg, home.lon_deg, body.lat_deg, body.lon_deg)
+        distance_m = ground_distance_m(home.lat_deg, home.lon_deg, body.lat_deg, body.lon_deg)
         if distance_m > envelope.max_distance_m:
             raise ApiError(
                 422,
@@ -147,11 +145,3 @@ def _check_reposition_envelope(vehicle: Vehicle, body: RepositionBody) -> None:
                 field="lat_deg",
                 limit=envelope.max_distance_m,
             )
-
-
-def _ground_distance_m(lat1_deg: float, lon1_deg: float, lat2_deg: float, lon2_deg: float) -> float:
-    lat1, lat2 = math.radians(lat1_deg), math.radians(lat2_deg)
-    dlat = lat2 - lat1
-    dlon = math.radians(lon2_deg - lon1_deg)
-    a = math.sin(dlat / 2) ** 2 + math.cos(lat1) * math.cos(lat2) * math.sin(dlon / 2) ** 2
-    return 2 * _EARTH_RADIUS_M * math.asin(min(1.0, math.sqrt(a)))

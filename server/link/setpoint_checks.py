@@ -10,6 +10,7 @@ import math
 from dataclasses import dataclass, fields
 from typing import Literal
 
+from server.link.geo import ground_distance_m
 from server.link.setpoints import (
     IGNORE_ACCELERATION,
     IGNORE_POSITION,
@@ -30,8 +31,6 @@ from server.link.setpoints import (
     VelocityNed,
     local_fields,
 )
-
-EARTH_RADIUS_M = 6_371_000.0
 
 VehicleClass = Literal["multicopter", "fixed_wing", "vtol_transition", "rover"]
 Kind = Literal["position", "velocity", "acceleration", "position_velocity", "attitude", "rates"]
@@ -179,10 +178,8 @@ def _target_from_home(
         if ref.home_lat_lon_alt is None:
             return None, sp.alt_m if sp.alt_frame == "relative" else None
         lat0, lon0, alt0 = ref.home_lat_lon_alt
-        d_north = math.radians(sp.lat_deg - lat0) * EARTH_RADIUS_M
-        d_east = math.radians(sp.lon_deg - lon0) * EARTH_RADIUS_M * math.cos(math.radians(lat0))
         alt = {"amsl": sp.alt_m - alt0, "relative": sp.alt_m, "terrain": None}[sp.alt_frame]
-        return math.hypot(d_north, d_east), alt
+        return ground_distance_m(lat0, lon0, sp.lat_deg, sp.lon_deg), alt
     if local is None or local.frame != MAV_FRAME_LOCAL_NED:
         return None, None
     if local.type_mask & IGNORE_POSITION == IGNORE_POSITION:
