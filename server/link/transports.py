@@ -156,12 +156,15 @@ class Transport(ABC):
 
 
 def create_transport(address: LinkUrl) -> Transport:
+    from .replay import ReplayTransport  # it builds on this module's classes
+
     transports: dict[str, type[Transport]] = {
         "udpin": UdpInTransport,
         "udpout": UdpOutTransport,
         "tcp": TcpClientTransport,
         "tcpin": TcpServerTransport,
         "serial": SerialTransport,
+        "tlog": ReplayTransport,
     }
     return transports[address.kind](address)
 

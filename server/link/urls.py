@@ -8,6 +8,7 @@ Accepted forms (the same strings MAVProxy, MAVSDK and pymavlink users already ty
 - ``tcpin:HOST:PORT``  serve TCP clients, one or several at once
 - ``DEVICE:BAUD`` / ``DEVICE,BAUD`` / ``serial:DEVICE:BAUD`` a serial port (``DEVICE`` alone
   uses :data:`DEFAULT_SERIAL_BAUD`)
+- ``tlog:PATH`` / ``tlog:PATH?speed=2&loop=1`` replay a recording (read-only, see replay.py)
 
 IPv6 hosts go in brackets (``udpin:[::1]:14540``). Listeners may use port 0 for an
 ephemeral port; ``udpin:`` with an empty host listens on every interface like pymavlink.
@@ -18,7 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
-LinkKind = Literal["udpin", "udpout", "tcp", "tcpin", "serial"]
+LinkKind = Literal["udpin", "udpout", "tcp", "tcpin", "serial", "tlog"]
 
 # pymavlink's mavlink_connection() default.
 DEFAULT_SERIAL_BAUD = 115200
@@ -32,6 +33,7 @@ _NETWORK_SCHEMES: dict[str, LinkKind] = {
 }
 _LISTENERS: frozenset[LinkKind] = frozenset({"udpin", "tcpin"})
 _UNSUPPORTED_SCHEMES = ("udpbcast", "mcast", "uds", "unix", "ws", "wss", "wsserver", "csv")
+_BOOLEANS = {"1": True, "true": True, "yes": True, "0": False, "false": False, "no": False}
 _STANDARD_BAUDS = frozenset(
     {1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200, 230400, 460800, 500000, 576000,
      921600, 1000000, 1500000, 2000000, 3000000}
@@ -50,6 +52,9 @@ class LinkUrl:
     port: int | None = None
     device: str | None = None
     baud: int | None = None
+    path: str | None = None
+    replay_speed: float = 1.0
+    replay_loop: bool = False
 
     @property
     def is_listener(self) -> bool:
@@ -58,6 +63,9 @@ class LinkUrl:
     @property
     def label(self) -> str:
         """A short name for logs and file names, e.g. ``udpin-127.0.0.1-14540``."""
+        if self.kind == "tlog":
+            assert self.path is not None
+            return f"tlog-{self.path.rsplit('/', 1)[-1].removesuffix('.tlog')}"
         if self.kind == "serial":
             assert self.device is not None
             return f"serial-{self.device.rsplit('/', 1)[-1]}"
@@ -80,6 +88,8 @@ def parse_link_url(url: str) -> LinkUrl:
             f"{scheme_lower}: connections are not supported ({text!r}); "
             "use udpin:, udpout:, tcp:, tcpin: or a serial DEVICE:BAUD"
         )
+    if sep and scheme_lower == "tlog":
+        return _parse_tlog(rest, text)
     if sep and scheme_lower == "serial":
         return _parse_serial(rest, text)
     return _parse_serial(text, text)
@@ -124,8 +134,31 @@ def _parse_serial(rest: str, text: str) -> LinkUrl:
         return LinkUrl(kind="serial", url=text, device=rest, baud=DEFAULT_SERIAL_BAUD)
     raise LinkUrlError(
         f"unrecognised connection string {text!r}; expected udpin:HOST:PORT, udpout:HOST:PORT, "
-        "tcp:HOST:PORT, tcpin:HOST:PORT or a serial DEVICE:BAUD such as /dev/ttyACM0:57600"
+        "tcp:HOST:PORT, tcpin:HOST:PORT, tlog:PATH or a serial DEVICE:BAUD such as "
+        "/dev/ttyACM0:57600"
     )
+
+
+def _parse_tlog(rest: str, text: str) -> LinkUrl:
+    path, _, query = rest.partition("?")
+    if not path:
+        raise LinkUrlError(f"{text!r}: missing file; expected tlog:PATH[?speed=S&loop=1]")
+    speed = 1.0
+    loop = False
+    for item in filter(None, query.split("&")):
+        key, _, value = item.partition("=")
+        if key == "speed":
+            try:
+                speed = float(value)
+            except ValueError:
+                raise LinkUrlError(f"{text!r}: speed {value!r} is not a number") from None
+            if not 0.0 < speed < float("inf"):
+                raise LinkUrlError(f"{text!r}: speed must be a positive number")
+        elif key == "loop" and value.lower() in _BOOLEANS:
+            loop = _BOOLEANS[value.lower()]
+        else:
+            raise LinkUrlError(f"{text!r}: unknown option {item!r}; expected speed=S or loop=0|1")
+    return LinkUrl(kind="tlog", url=text, path=path, replay_speed=speed, replay_loop=loop)
 
 
 def _looks_like_device(text: str) -> bool:
