@@ -41,12 +41,7 @@ class SetpointStreamer:
         self._started_s: float | None = None
         # statistics; the interval window is preallocated and overwritten in a ring
         self._intervals = array("d", bytes(8 * window))
-        self._ring_next = 0
-        self._ring_len = 0
-        self._sent = 0
-        self._gaps = 0
-        self._max_interval_s = 0.0
-        self._last_s: float | None = None
+        self._reset_stats()
 
     @staticmethod
     def _checked_rate(rate_hz: float) -> float:
@@ -73,9 +68,19 @@ class SetpointStreamer:
         self._msg = msg
         self._loop = asyncio.get_running_loop()
         if self._started_s is None:
+            # statistics describe the stream since it last started
+            self._reset_stats()
             self._started_s = self._loop.time()
         self._emit(self._loop.time())
         self._rephase()
+
+    def _reset_stats(self) -> None:
+        self._ring_next = 0
+        self._ring_len = 0
+        self._sent = 0
+        self._gaps = 0
+        self._max_interval_s = 0.0
+        self._last_s: float | None = None
 
     def stop(self) -> None:
         if self._handle is not None:

@@ -123,3 +123,25 @@ async def test_reported_rate_follows_a_rate_change() -> None:
     streamer.stop()
 
     assert streamer.stats().rate_hz == pytest.approx(50, rel=0.2)
+
+
+async def test_statistics_restart_with_the_stream() -> None:
+    sent: list[object] = []
+    streamer = SetpointStreamer(sent.append, rate_hz=50.0)
+    streamer.stream(_msg(1.0))
+    await asyncio.sleep(0.2)
+    streamer.stop()
+    first = streamer.stats()
+    await asyncio.sleep(0.15)
+
+    streamer.stream(_msg(2.0))
+    await asyncio.sleep(0.05)
+    streamer.stop()
+    second = streamer.stats()
+
+    assert first.sent >= 8
+    # the pause between the two streams is neither an interval nor a gap of the second one
+    assert second.sent < first.sent
+    assert second.max_gap_ms is not None
+    assert second.max_gap_ms < 100.0
+    assert second.gaps == 0
