@@ -1,5 +1,6 @@
 """The FastAPI application: API v1, the 3D scene, the static page, and a lifespan that opens
-the links (starting the simulated vehicle first when no --connect is given)."""
+the links (starting the simulated vehicle first when no --connect is given). A ``tlog:``
+link (``skyhelm replay``) makes the whole API read-only."""
 
 from __future__ import annotations
 
@@ -22,6 +23,7 @@ from server.api.lease import LeaseManager
 from server.api.registry import VehicleRegistry
 from server.api.routes import commands, control, health, params, setpoint, vehicles
 from server.link import Envelope, Link
+from server.link.urls import parse_link_url
 from server.scene import SceneHub
 from server.settings import Settings
 from server.simproc import SimProcess
@@ -47,7 +49,9 @@ def create_app(settings: Settings) -> FastAPI:
     registry = VehicleRegistry(envelope, settings.rate_hz)
     leases = LeaseManager(settings.lease_ttl_s)
     deadman = Deadman(leases, registry, settings.on_operator_loss)
-    context = ApiContext(settings, tokens, registry, leases, deadman)
+    context = ApiContext(
+        settings, tokens, registry, leases, deadman, read_only=is_replay(settings.connect)
+    )
     hub = SceneHub() if settings.scene else None
     state_text = ws.StateText(context)
 
@@ -110,11 +114,18 @@ def create_app(settings: Settings) -> FastAPI:
     return app
 
 
+def is_replay(urls: list[str]) -> bool:
+    """A server that replays a recording is read-only: there is no vehicle to command."""
+    return any(parse_link_url(url).kind == "tlog" for url in urls)
+
+
 async def _open_links(registry: VehicleRegistry, settings: Settings, urls: list[str]) -> None:
     for url in urls:
+        # Recording a replay would only copy the file being replayed.
+        log_dir = None if is_replay([url]) else settings.log_dir
         try:
             link = await Link.open(
-                url, log_dir=settings.log_dir, heartbeat_timeout_s=settings.heartbeat_timeout_s
+                url, log_dir=log_dir, heartbeat_timeout_s=settings.heartbeat_timeout_s
             )
         except OSError as exc:
             raise StartupError(f"cannot open {url}: {exc}") from exc

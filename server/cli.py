@@ -1,4 +1,5 @@
-"""The `skyhelm` command: `serve` (the dashboard), `sim` (the simulated vehicle alone)."""
+"""The `skyhelm` command: `serve` (the dashboard), `replay` (the dashboard, read-only, from a
+recorded .tlog), `sim` (the simulated vehicle alone)."""
 
 from __future__ import annotations
 
@@ -41,17 +42,25 @@ def configure_logging(level: str) -> None:
     root.setLevel(level.upper())
 
 
+def _server_options(parser: argparse.ArgumentParser) -> None:
+    """Options of every command that serves the dashboard."""
+    parser.add_argument("--config", type=Path, help="TOML file with the same settings")
+    parser.add_argument("--host", help="bind address (default 127.0.0.1)")
+    parser.add_argument("--port", type=int, help="HTTP port; 0 picks a free one (default 8000)")
+    parser.add_argument("--token", help="pilot token (default: generated)")
+    parser.add_argument("--observer-token", help="read-only token")
+    parser.add_argument("--cors-origin", action="append", dest="cors_origins", metavar="ORIGIN")
+    parser.add_argument("--no-scene", action="store_true", help="do not start the 3D scene")
+    parser.add_argument("--log-level", default="info", help="debug|info|warning|error")
+
+
 def _serve_parser(sub: Any) -> None:
     serve = sub.add_parser(
         "serve",
         help="run the dashboard (with a simulated vehicle unless --connect is given)",
         argument_default=argparse.SUPPRESS,
     )
-    serve.add_argument("--config", type=Path, help="TOML file with the same settings")
-    serve.add_argument("--host", help="bind address (default 127.0.0.1)")
-    serve.add_argument("--port", type=int, help="HTTP port; 0 picks a free one (default 8000)")
-    serve.add_argument("--token", help="pilot token (default: generated)")
-    serve.add_argument("--observer-token", help="read-only token")
+    _server_options(serve)
     serve.add_argument(
         "--connect",
         action="append",
@@ -70,24 +79,46 @@ def _serve_parser(sub: Any) -> None:
     serve.add_argument("--max-speed-z-m-s", type=float, help="envelope: vertical speed")
     serve.add_argument("--log-dir", type=Path, help="where .tlog recordings go (default logs)")
     serve.add_argument("--no-tlog", action="store_true", help="record no .tlog")
-    serve.add_argument("--cors-origin", action="append", dest="cors_origins", metavar="ORIGIN")
-    serve.add_argument("--no-scene", action="store_true", help="do not start the 3D scene")
-    serve.add_argument("--log-level", default="info", help="debug|info|warning|error")
+
+
+def _replay_parser(sub: Any) -> None:
+    replay = sub.add_parser(
+        "replay",
+        help="serve the dashboard, read-only, from a recorded .tlog (no simulated vehicle)",
+        argument_default=argparse.SUPPRESS,
+    )
+    replay.add_argument("file", type=Path, help="a .tlog, e.g. logs/20260101T120000Z-....tlog")
+    replay.add_argument(
+        "--speed", type=float, default=1.0, help="recorded seconds per wall second (default 1)"
+    )
+    replay.add_argument("--loop", action="store_true", help="start over at the end of the file")
+    _server_options(replay)
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="skyhelm", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
     _serve_parser(sub)
+    _replay_parser(sub)
     # `skyhelm sim` hands every argument to `python -m sim`, see main().
     sub.add_parser("sim", help="run the simulated PX4 vehicle alone, like PX4 SITL (sim --help)")
     return parser
 
 
+def replay_url(file: Path, speed: float, loop: bool) -> str:
+    """The ``tlog:`` link that replays ``file``."""
+    if not file.is_file():
+        raise SettingsError(f"no recording at {file}")
+    return f"tlog:{file}?speed={speed:g}&loop={int(loop)}"
+
+
 def settings_from_args(args: argparse.Namespace) -> Settings:
     flags = dict(vars(args))
-    for name in ("command", "config", "log_level", "no_tlog", "no_scene"):
+    for name in ("command", "config", "log_level", "no_tlog", "no_scene", "file", "speed", "loop"):
         flags.pop(name, None)
+    if args.command == "replay":
+        flags["connect"] = [replay_url(args.file, args.speed, getattr(args, "loop", False))]
+        flags["log_dir"] = None
     if getattr(args, "no_tlog", False):
         flags["log_dir"] = None
     if getattr(args, "no_scene", False):

@@ -29,6 +29,8 @@ class ApiContext:
     registry: VehicleRegistry
     leases: LeaseManager
     deadman: Deadman
+    # A replayed recording: nobody may control, whatever the token.
+    read_only: bool = False
 
 
 async def get_context(connection: HTTPConnection) -> ApiContext:
@@ -59,7 +61,12 @@ async def get_role(
 Reader = Annotated[Role, Depends(get_role)]
 
 
-async def require_pilot(role: Reader) -> Role:
+READ_ONLY_REASON = "read-only replay: this server shows a recording and sends nothing"
+
+
+async def require_pilot(role: Reader, context: Context) -> Role:
+    if context.read_only:
+        raise ApiError(403, READ_ONLY_REASON)
     if role is not Role.PILOT:
         raise ApiError(403, "observer tokens may only read; this call needs the pilot token")
     return role

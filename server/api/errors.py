@@ -80,7 +80,7 @@ READ_RESPONSES: dict[int | str, dict[str, Any]] = {
 }
 CONTROL_RESPONSES: dict[int | str, dict[str, Any]] = {
     **READ_RESPONSES,
-    403: _described(ErrorOut, "observer tokens may only read"),
+    403: _described(ErrorOut, "observer tokens may only read; a replay is read-only"),
     423: _described(ErrorOut, "the call needs the vehicle's control lease (X-Lease-Id)"),
     503: _described(ErrorOut, "the vehicle is not connected"),
 }

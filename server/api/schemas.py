@@ -357,6 +357,7 @@ class HealthOut(BaseModel):
     status: Literal["ok"]
     version: str
     vehicles: int
+    read_only: bool = Field(False, description="a replayed recording: control calls answer 403")
 
 
 class ParamsOut(BaseModel):

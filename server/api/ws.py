@@ -8,8 +8,9 @@ Slow-client policy (the one place it is decided):
 - a single send that does not complete within SEND_TIMEOUT_S closes the client (code 1008):
   a client that stops reading cannot hold server memory or the event loop.
 
-Close codes: 4401 no/wrong token, 4403 observer token on the control socket or foreign
-Origin, 4404 unknown vehicle, 4409 control held by another pilot, 4408 lease lost.
+Close codes: 4401 no/wrong token, 4403 observer token on the control socket, a read-only
+replay, or a foreign Origin, 4404 unknown vehicle, 4409 control held by another pilot,
+4408 lease lost.
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from pydantic import TypeAdapter
 from starlette.websockets import WebSocketState
 
 from server.api.auth import Role, token_from
-from server.api.deps import ApiContext
+from server.api.deps import READ_ONLY_REASON, ApiContext
 from server.api.errors import COMMAND_STATUS, ApiError, command_out, error_status
 from server.api.lease import Lease, LeaseEnd, LeaseHeld
 from server.api.operations import OPERATIONS
@@ -146,6 +147,9 @@ async def _admit(websocket: WebSocket, need: Role) -> ApiContext | None:
         return None
     if not _origin_allowed(websocket, context.settings.cors_origins):
         await _close(websocket, CLOSE_FORBIDDEN, "origin not allowed")
+        return None
+    if need is Role.PILOT and context.read_only:
+        await _close(websocket, CLOSE_FORBIDDEN, READ_ONLY_REASON)
         return None
     if need is Role.PILOT and role is not Role.PILOT:
         await _close(websocket, CLOSE_FORBIDDEN, "the control socket needs the pilot token")

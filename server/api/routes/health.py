@@ -23,4 +23,9 @@ def _version() -> str:
 
 @router.get("/health", response_model=HealthOut)
 async def health(context: Context) -> HealthOut:
-    return HealthOut(status="ok", version=_version(), vehicles=len(context.registry.all()))
+    return HealthOut(
+        status="ok",
+        version=_version(),
+        vehicles=len(context.registry.all()),
+        read_only=context.read_only,
+    )
