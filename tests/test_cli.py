@@ -175,3 +175,73 @@ def test_ready_url_names_a_reachable_host_when_bound_to_all_interfaces() -> None
         build_parser().parse_args(["serve", "--host", "0.0.0.0", "--token", "s3cret-token"])
     )
     assert ready_url(settings, 8123) == "http://127.0.0.1:8123/?token=s3cret-token"
+
+
+def _write_recording(path: Path, duration_s: int) -> None:
+    """A .tlog of a quad beating at 1 Hz, with our own GCS heartbeat interleaved."""
+    import asyncio
+
+    from pymavlink.dialects.v20 import development as mavlink
+
+    from server.link.tlog import TlogWriter
+
+    vehicle = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    gcs = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+    writer = TlogWriter(path)
+    for second in range(duration_s):
+        quad = vehicle.heartbeat_encode(
+            mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4, 1, 0x3040000, 3, 3
+        )
+        ours = gcs.heartbeat_encode(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 4)
+        for mav, msg in ((vehicle, quad), (gcs, ours)):
+            writer.record(msg.pack(mav), unix_time_s=1.7e9 + second)
+            mav.seq = (mav.seq + 1) % 256
+    asyncio.run(writer.close())
+
+
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads process children from /proc")
+def test_replay_serves_the_recorded_vehicle_read_only_and_stops_on_sigint(tmp_path: Path) -> None:
+    recording = tmp_path / "flight.tlog"
+    _write_recording(recording, duration_s=10)
+    command = [str(SKYHELM), "replay", str(recording), "--port", "0", "--speed", "5", "--loop",
+               "--no-scene"]  # fmt: skip
+    server = subprocess.Popen(
+        command, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, cwd=tmp_path
+    )
+    try:
+        assert server.stdout is not None
+        line = server.stdout.readline()
+        assert line.startswith(READY_PREFIX), line
+        base, _, token = line.removeprefix(READY_PREFIX).strip().partition("/?token=")
+        auth = {"Authorization": f"Bearer {token}"}
+
+        deadline = time.monotonic() + 10
+        while not (vehicles := httpx.get(f"{base}/api/v1/vehicles", headers=auth).json()):
+            assert time.monotonic() < deadline, "the recorded vehicle never appeared"
+            time.sleep(0.05)
+        assert [v["id"] for v in vehicles] == [1]
+        assert httpx.get(f"{base}/api/v1/health").json()["read_only"] is True
+        assert not _children(server.pid), "a replay starts no simulated vehicle"
+        for path in ("/api/v1/vehicles/1/control", "/api/v1/vehicles/1/arm"):
+            refused = httpx.post(f"{base}{path}", headers=auth)
+            assert refused.status_code == 403, path
+            assert "read-only replay" in refused.json()["detail"]["reason"]
+
+        server.send_signal(signal.SIGINT)
+        assert server.wait(timeout=20) == 0
+    finally:
+        if server.poll() is None:
+            server.kill()
+            server.wait()
+    assert not (tmp_path / "logs").exists(), "a replay records nothing"
+
+
+def test_replay_of_a_missing_file_exits_2(tmp_path: Path) -> None:
+    result = subprocess.run(
+        [str(SKYHELM), "replay", str(tmp_path / "none.tlog"), "--port", "0"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert result.returncode == 2
+    assert "no recording" in result.stderr
