@@ -32,6 +32,8 @@ class LinkCounters:
     rx_dropped: int = 0
     tx_messages: int = 0
     tx_errors: int = 0
+    # frames that could not be encoded: skipped so the telemetry loop keeps running
+    tx_unpackable: int = 0
 
 
 class MavlinkCodec:
@@ -123,7 +125,13 @@ class UdpLink(asyncio.DatagramProtocol):
     def send(self, msg: Message) -> None:
         if self._transport is None or self.remote is None:
             return
-        self._transport.sendto(self._codec.encode(msg), self.remote)
+        try:
+            data = self._codec.encode(msg)
+        except Exception:  # pymavlink raises struct, value and type errors on bad fields
+            self.counters.tx_unpackable += 1
+            log.debug("%s: could not pack %s", self.name, msg.get_type(), exc_info=True)
+            return
+        self._transport.sendto(data, self.remote)
         self.counters.tx_messages += 1
 
     def close(self) -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import pymap3d
@@ -12,6 +13,10 @@ SIH_LOC_LON0_DEG = 8.545594
 SIH_LOC_H0_M = 489.4
 
 
+# The largest altitude a MAVLink int32 millimetre field (HOME_POSITION.altitude) carries.
+MAVLINK_ALT_LIMIT_M = 2_147_483.0
+
+
 @dataclass
 class GeoPoint:
     lat_deg: float
@@ -19,11 +24,34 @@ class GeoPoint:
     alt_m: float
 
 
+def wrap_lon_deg(lon_deg: float) -> float:
+    """Longitude in [-180, 180): the antimeridian crossed, not overflowed."""
+    if -180.0 <= lon_deg < 180.0:
+        return lon_deg
+    return (lon_deg + 180.0) % 360.0 - 180.0
+
+
+def geo_point(lat_deg: float, lon_deg: float, alt_m: float) -> GeoPoint:
+    """A point on the globe: latitude within the poles, longitude wrapped."""
+    return GeoPoint(max(-90.0, min(90.0, lat_deg)), wrap_lon_deg(lon_deg), alt_m)
+
+
+def is_valid_lat_lon(lat_deg: float, lon_deg: float) -> bool:
+    """The range EKF2's checkLatLonValidity accepts for an origin."""
+    return (
+        math.isfinite(lat_deg) and abs(lat_deg) <= 90.0
+        and math.isfinite(lon_deg) and abs(lon_deg) <= 180.0
+    )
+
+
 # pymap3d's exact conversion costs a few hundred microseconds, too much for 50 Hz telemetry
 # of many vehicles. Within this distance of a point pymap3d converted exactly, positions
 # are mapped with pymap3d's own local derivatives there (error below a millimetre).
 LINEAR_RANGE_M = 50.0
 _DERIVATIVE_STEP_M = 1.0
+# Towards a pole longitude turns fast over a few metres and the linear map no longer holds:
+# beyond this latitude every conversion is exact.
+LINEAR_MAX_LAT_DEG = 89.0
 
 
 class _Anchor:
@@ -51,7 +79,7 @@ class _Anchor:
     def to_geodetic(self, north_m: float, east_m: float, down_m: float) -> GeoPoint:
         dn = north_m - self.ned_m[0]
         de = east_m - self.ned_m[1]
-        return GeoPoint(
+        return geo_point(
             self.point.lat_deg + self.dlat_dnorth * dn + self.dlat_deast * de,
             self.point.lon_deg + self.dlon_dnorth * dn + self.dlon_deast * de,
             self.point.alt_m - (down_m - self.ned_m[2])
@@ -78,13 +106,20 @@ class LocalOrigin:
         anchor = self._anchor
         if anchor is None or not anchor.covers(north_m, east_m, down_m):
             anchor = self._anchor = _Anchor(self, (north_m, east_m, down_m))
-        return anchor.to_geodetic(north_m, east_m, down_m)
+        if abs(anchor.point.lat_deg) > LINEAR_MAX_LAT_DEG:
+            return self.to_geodetic_exact(north_m, east_m, down_m)
+        point = anchor.to_geodetic(north_m, east_m, down_m)
+        return point if _is_finite_point(point) else self.to_geodetic_exact(north_m, east_m, down_m)
 
     def to_geodetic_exact(self, north_m: float, east_m: float, down_m: float) -> GeoPoint:
         lat, lon, alt = pymap3d.ned2geodetic(
             north_m, east_m, down_m, self.lat_deg, self.lon_deg, self.alt_m
         )
-        return GeoPoint(float(lat), float(lon), float(alt))
+        point = geo_point(float(lat), float(lon), float(alt))
+        if _is_finite_point(point):
+            return point
+        # no finite answer (a position overflowed far beyond the globe): report the origin
+        return geo_point(self.lat_deg, self.lon_deg, self.alt_m)
 
     def to_ned(self, lat_deg: float, lon_deg: float, alt_m: float) -> list[float]:
         north, east, down = pymap3d.geodetic2ned(
@@ -95,3 +130,8 @@ class LocalOrigin:
     def down_of_altitude(self, alt_m: float) -> float:
         """NED down of an AMSL altitude (flat-earth vertical, as PX4's local frame is)."""
         return self.alt_m - alt_m
+
+
+def _is_finite_point(point: GeoPoint) -> bool:
+    total = point.lat_deg + point.lon_deg + point.alt_m
+    return total - total == 0.0

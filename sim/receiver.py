@@ -24,6 +24,7 @@ from sim.commander import (
     MAV_RESULT_UNSUPPORTED,
     MAV_SEVERITY_CRITICAL,
 )
+from sim.geo import MAVLINK_ALT_LIMIT_M, is_valid_lat_lon
 from sim.modes import Px4Mode
 from sim.streams import MAVLINK_MSG_ID_PROTOCOL_VERSION
 from sim.topics import AttitudeSetpoint, ControlSetpoint, RatesSetpoint, TrajectorySetpoint
@@ -330,7 +331,14 @@ class Receiver:
             lat, lon, alt = cmd.params[4], cmd.params[5], cmd.params[6]
             if not (math.isfinite(lat) and math.isfinite(lon) and math.isfinite(alt)):
                 return MAV_RESULT_DENIED
-            v.set_home_at(lat, lon, alt, cmd.params[3])
+            # PX4 takes any finite point; one off the globe or beyond what HOME_POSITION
+            # carries would have no place in the local frame, so it is refused with a reason
+            if not is_valid_lat_lon(lat, lon) or abs(alt) > MAVLINK_ALT_LIMIT_M:
+                v.announce(MAV_SEVERITY_CRITICAL,
+                           f"Home not set: {lat:.7f}, {lon:.7f}, {alt:.1f} m out of range")
+                return MAV_RESULT_DENIED
+            # PX4's commander: param4 is the home yaw in degrees, NaN keeps it
+            v.set_home_at(lat, lon, alt, math.radians(cmd.params[3]))
         return MAV_RESULT_ACCEPTED
 
     # -- offboard setpoints ------------------------------------------------------------
@@ -471,7 +479,14 @@ class Receiver:
     def _on_set_gps_global_origin(self, link: Link, msg: Message) -> None:
         if msg.target_system not in (self._v.sysid, 0):
             return
-        self._v.set_origin(msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3)
+        lat, lon, alt = msg.latitude * 1e-7, msg.longitude * 1e-7, msg.altitude * 1e-3
+        if is_valid_lat_lon(lat, lon):
+            self._v.set_origin(lat, lon, alt)
+        else:
+            # EKF2 refuses the origin (checkLatLonValidity) and logs it; the reply below
+            # then shows the origin unchanged, as PX4's does
+            self._v.announce(mavlink.MAV_SEVERITY_ERROR,
+                             f"Failed to set new NED origin (LLA): {lat:.7f}, {lon:.7f}, {alt:.3f}")
         origin = self._v.messages.gps_global_origin()
         if origin is not None:
             self._v.broadcast(origin)

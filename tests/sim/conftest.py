@@ -15,6 +15,7 @@ from typing import Any
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
+from sim.endpoint import MavlinkCodec
 from sim.params import ParamReader
 from sim.topics import (
     AttitudeSetpoint,
@@ -138,7 +139,8 @@ class RecordingLink:
     def __init__(self, name: str = "api") -> None:
         self.name = name
         self.sent: list[Any] = []
-        self._codec = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+        # the vehicle's own encoder, as its UDP links use it
+        self._codec = MavlinkCodec(1, 1)
         self._parser = mavlink.MAVLink(None)
         self._parser.robust_parsing = True  # messages outside the dialect come as UNKNOWN_<id>
 
@@ -147,8 +149,7 @@ class RecordingLink:
         return True
 
     def send(self, msg: Any) -> None:
-        data = msg.pack(self._codec)
-        decoded = self._parser.parse_buffer(data)
+        decoded = self._parser.parse_buffer(self._codec.encode(msg))
         assert decoded is not None
         assert len(decoded) == 1
         self.sent.extend(decoded)

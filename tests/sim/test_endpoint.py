@@ -11,7 +11,7 @@ from typing import Any
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
-from sim.endpoint import MavlinkCodec
+from sim.endpoint import MavlinkCodec, UdpLink
 from sim.runner import SimCluster
 from tests.sim.conftest import PointMassAirframe, point_mass_defaults
 
@@ -163,3 +163,38 @@ async def test_wait_ready_returns_after_boot(peer: UdpPeer) -> None:
         await sim.wait_ready(timeout_s=5.0)
         assert sim.instances[0].vehicle.ready
         assert sim.instances[0].vehicle.now_s >= 3.0
+
+
+class _UnpackableMessage:
+    """A foreign message type whose own pack fails, as a malformed one would."""
+
+    def get_type(self) -> str:
+        return "UNPACKABLE"
+
+    def pack(self, mav: Any, force_mavlink1: bool = False) -> bytes:
+        raise ValueError("field out of range")
+
+
+class _RecordingTransport:
+    def __init__(self) -> None:
+        self.sent: list[bytes] = []
+
+    def sendto(self, data: bytes, addr: Any = None) -> None:
+        self.sent.append(data)
+
+    def get_extra_info(self, name: str, default: Any = None) -> Any:
+        return ("127.0.0.1", 0) if name == "sockname" else default
+
+
+def test_frame_that_cannot_be_packed_is_counted_and_skipped() -> None:
+    link = UdpLink("api", 1, 1, lambda link, msg: None, remote=("127.0.0.1", 9))
+    transport = _RecordingTransport()
+    link.connection_made(transport)  # type: ignore[arg-type]
+    link.send(_UnpackableMessage())
+    link.send(mavlink.MAVLink_heartbeat_message(2, 12, 0, 0, 3, 3))
+    assert link.counters.tx_unpackable == 1
+    assert link.counters.tx_messages == 1
+    (frame,) = transport.sent
+    (decoded,) = mavlink.MAVLink(None).parse_buffer(frame) or []
+    assert decoded.get_type() == "HEARTBEAT"
+    assert decoded.get_seq() == 0

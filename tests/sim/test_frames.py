@@ -81,3 +81,28 @@ def test_codec_numbers_frames_and_wraps_the_sequence() -> None:
     parsed = mavlink.MAVLink(None).parse_buffer(codec.encode(msg))
     assert parsed is not None
     assert parsed[0].get_srcSystem() == 3
+
+
+def test_fields_beyond_their_wire_type_are_saturated_not_raised() -> None:
+    msg = mavlink.MAVLink_global_position_int_message(
+        1, 2**40, float("nan"), -1e300, 5, 10**12, -(2**20), 3, 99999)
+    frame = pack_frame(msg, 0, 1, 1)
+    assert frame is not None
+    (decoded,) = mavlink.MAVLink(None).parse_buffer(frame) or []
+    assert decoded.lat == 2**31 - 1
+    assert decoded.lon == 0
+    assert decoded.alt == -(2**31)
+    assert decoded.relative_alt == 5
+    assert (decoded.vx, decoded.vy, decoded.vz) == (2**15 - 1, -(2**15), 3)
+    assert decoded.hdg == 65535
+    huge = mavlink.MAVLink_local_position_ned_message(1, 1e300, -1e300, float("inf"), 0, 0, 0)
+    (decoded,) = mavlink.MAVLink(None).parse_buffer(pack_frame(huge, 0, 1, 1) or b"") or []
+    assert decoded.x == pytest.approx(3.4028234663852886e38)
+    assert decoded.y == pytest.approx(-3.4028234663852886e38)
+    assert decoded.z == float("inf")
+
+
+def test_in_range_frames_are_not_altered_by_the_fitting() -> None:
+    msg = mavlink.MAVLink_global_position_int_message(
+        1, 2**31 - 1, -(2**31), 0, -5, 1, -(2**15), 2**15 - 1, 65535)
+    assert pack_frame(msg, 3, 1, 1) == pymavlink_frame(msg, 3)
