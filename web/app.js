@@ -33,7 +33,10 @@ const page = {
   state: null,
   lastClickSeq: null,
   vtol: { state: null, since: 0 },
+  readOnly: false, // a replayed recording: nobody may take control
 };
+
+const REPLAY_NOTICE = "Replay of a recording — observe only";
 
 const plots = {
   alt: new StripChart($("plot-alt"), { unit: "m", minSpan: 2 }),
@@ -74,11 +77,13 @@ function log(severity, text, time = new Date()) {
 
 function banner(text, ok = false) {
   const el = $("banner");
-  el.textContent = text;
+  // A replay keeps saying so whenever no other message is showing.
+  const shown = text || (page.readOnly ? REPLAY_NOTICE : "");
+  el.textContent = shown;
   el.classList.toggle("ok", ok);
-  el.classList.toggle("hidden", !text);
+  el.classList.toggle("hidden", !shown);
   clearTimeout(banner.timer);
-  if (ok) banner.timer = setTimeout(() => el.classList.add("hidden"), 3000);
+  if (ok) banner.timer = setTimeout(() => banner(""), 3000);
 }
 
 // ---- command answers ----------------------------------------------------------------------
@@ -197,7 +202,7 @@ function updateControls() {
   const pilot = inControl() && page.connected;
   document.body.classList.toggle("observing", !pilot);
   for (const el of document.querySelectorAll(".ctl")) el.disabled = !pilot;
-  $("take-control").classList.toggle("hidden", inControl());
+  $("take-control").classList.toggle("hidden", inControl() || page.readOnly);
   $("release").classList.toggle("hidden", !inControl());
   renderHolder(page.state?.lease?.holder);
 }
@@ -373,6 +378,19 @@ function renderVtol(state) {
 }
 
 // ---- vehicles -----------------------------------------------------------------------------
+
+async function loadServerMode() {
+  try {
+    page.readOnly = Boolean((await request("GET", "/health")).read_only);
+  } catch (err) {
+    log("ERROR", `server health: ${err.message}`);
+    return;
+  }
+  if (page.readOnly) {
+    banner("");
+    updateControls();
+  }
+}
 
 async function loadVehicles() {
   try {
@@ -662,6 +680,7 @@ async function main() {
   showSetpointType("position");
   updateControls();
   showScene($("scene-enable").checked);
+  await loadServerMode();
   await loadModes();
   await loadVehicles();
   setInterval(loadVehicles, 10000);
