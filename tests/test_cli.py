@@ -227,8 +227,8 @@ def test_replay_serves_the_recorded_vehicle_read_only_and_stops_on_sigint(tmp_pa
             refused = httpx.post(f"{base}{path}", headers=auth)
             assert refused.status_code == 403, path
             assert "read-only replay" in refused.json()["detail"]["reason"]
-        ws_base = base.replace("http://", "ws://")
-        with connect(f"{ws_base}/api/v1/ws/control?token={token}&vehicle=1") as ws, pytest.raises(ConnectionClosed) as closed:
+        control_url = f"{base.replace('http://', 'ws://')}/api/v1/ws/control?token={token}&vehicle=1"
+        with connect(control_url) as ws, pytest.raises(ConnectionClosed) as closed:
             ws.recv(timeout=10)
         assert closed.value.rcvd is not None
         assert (closed.value.rcvd.code, closed.value.rcvd.reason[:16]) == (4403, "read-only replay")
