@@ -9,6 +9,7 @@ import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
 from sim.geo import LocalOrigin
+from sim.vehicle import SimVehicle
 from tests.sim.conftest import Harness, HarnessFactory
 
 ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
@@ -167,3 +168,20 @@ def test_far_home_does_not_break_rtl(make_harness: HarnessFactory) -> None:
     harness.run(3.0)
     assert harness.vehicle.mode_name == "AUTO_RTL"
     assert_positions_on_the_globe(harness)
+
+
+def test_real_quad_keeps_running_when_origin_and_home_jump_across_the_globe() -> None:
+    harness = Harness(SimVehicle("quad"))
+    harness.wait_ready()
+    harness.command_long(mavlink.MAV_CMD_NAV_TAKEOFF, *([math.nan] * 7))
+    harness.arm()
+    harness.run_until(lambda: harness.vehicle.mode_name == "AUTO_LOITER", timeout_s=20.0)
+    set_origin(harness, -90.0, 180.0, -1.0e3)
+    harness.command_long(SET_HOME, 0, 0, 0, 0, 0.0, -179.9999999, 1.0e5)
+    assert harness.last_ack(SET_HOME) == ACCEPTED
+    harness.api.clear()
+    harness.run(2.0)
+    assert_positions_on_the_globe(harness)
+    truth = harness.vehicle.truth
+    assert all(math.isfinite(x) for x in (*truth.position_ned_m, *truth.velocity_ned_m_s))
+    assert len(harness.api.of_type("HEARTBEAT")) >= 1
