@@ -40,6 +40,11 @@ class SimInstance:
         """Garbage, truncated and bad-CRC datagram pieces dropped on both links."""
         return self.api_link.counters.rx_dropped + self.gcs_link.counters.rx_dropped
 
+    @property
+    def tx_unpackable(self) -> int:
+        """Outgoing messages that could not be encoded and were skipped, on both links."""
+        return self.api_link.counters.tx_unpackable + self.gcs_link.counters.tx_unpackable
+
     def close(self) -> None:
         self.api_link.close()
         self.gcs_link.close()
