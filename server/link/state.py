@@ -155,6 +155,10 @@ class StateSubscription:
         self._changed.set()  # a new subscriber gets the current state at once
         self._closed = False
 
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
     def notify(self) -> None:
         self._changed.set()
 
@@ -168,11 +172,26 @@ class StateSubscription:
         return self
 
     async def __anext__(self) -> VehicleState:
+        if not await self.changed():
+            raise StopAsyncIteration
+        return self._snapshot()
+
+    async def changed(self) -> bool:
+        """Wait for a change since the last read, without building a snapshot (a reader
+        that shares one encoding of the state needs only the signal); False once closed."""
         await self._changed.wait()
         if self._closed:
-            raise StopAsyncIteration
+            return False
         self._changed.clear()
-        return self._snapshot()
+        return True
+
+    def discard_pending(self) -> bool:
+        """Forget a change not read yet, so the next changed() waits for a newer one;
+        True if there was one."""
+        if self._closed or not self._changed.is_set():
+            return False
+        self._changed.clear()
+        return True
 
 
 class SubscriptionHub:
@@ -181,6 +200,9 @@ class SubscriptionHub:
     def __init__(self, snapshot: Callable[[], VehicleState]) -> None:
         self._snapshot = snapshot
         self._subs: weakref.WeakSet[StateSubscription] = weakref.WeakSet()
+        # counts notifications, so a cache of anything derived from the state can tell
+        # whether it is still current without subscribing
+        self.version = 0
 
     def subscribe(self) -> StateSubscription:
         holder: list[StateSubscription] = []
@@ -190,6 +212,7 @@ class SubscriptionHub:
         return sub
 
     def notify(self) -> None:
+        self.version += 1
         for sub in list(self._subs):
             sub.notify()
 

@@ -231,6 +231,12 @@ class Vehicle:
     def subscribe(self) -> StateSubscription:
         return self._hub.subscribe()
 
+    @property
+    def state_version(self) -> int:
+        """Changes with every state change: equal versions mean an equal snapshot (apart
+        from the ages and the stream figures, which move with the clock)."""
+        return self._hub.version
+
     def subscribe_events(self, maxsize: int = 256) -> asyncio.Queue[VehicleEvent]:
         return self._events.subscribe(maxsize)
 

@@ -156,6 +156,22 @@ async def test_subscription_is_latest_wins(scripted: ScriptedSession) -> None:
     sub.close()
 
 
+async def test_discarded_change_makes_the_reader_wait_for_a_newer_one(
+    scripted: ScriptedSession,
+) -> None:
+    sub = scripted.vehicle.subscribe()
+    assert sub.discard_pending()  # the state at subscription counts as a change
+    assert not sub.discard_pending()
+    version = scripted.vehicle.state_version
+    waiter = asyncio.ensure_future(sub.changed())
+    await asyncio.sleep(0)
+    scripted.peer.send(mavlink.MAVLink_local_position_ned_message(0, 7.0, 0, 0, 0, 0, 0))
+    assert await asyncio.wait_for(waiter, 1.0)
+    assert scripted.vehicle.state_version > version  # it waited for a change after the discard
+    sub.close()
+    assert not await asyncio.wait_for(sub.changed(), 1.0)
+
+
 async def test_connection_loss_and_return_are_events(scripted: ScriptedSession) -> None:
     events = scripted.vehicle.subscribe_events()
     scripted.vehicle.set_connected(False)
