@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import asdict
+from dataclasses import fields, is_dataclass
 from typing import Any
 
 from server.api.lease import LeaseManager
@@ -22,15 +22,37 @@ def finite(value: Any) -> Any:
     return value
 
 
+_FIELD_NAMES: dict[type, tuple[str, ...]] = {}
+
+
+def plain(value: Any) -> Any:
+    """dataclasses.asdict and finite() in one pass: dataclasses as dicts, tuples as lists,
+    NaN/inf as None. Several times faster than the two, and it runs for every snapshot the
+    API shows, on the event loop the setpoint streamer shares."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if value is None or isinstance(value, str | int):
+        return value
+    names = _FIELD_NAMES.get(type(value))
+    if names is None and is_dataclass(value) and not isinstance(value, type):
+        names = _FIELD_NAMES[type(value)] = tuple(f.name for f in fields(value))
+    if names is not None:
+        return {name: plain(getattr(value, name)) for name in names}
+    if isinstance(value, dict):
+        return {key: plain(item) for key, item in value.items()}
+    if isinstance(value, list | tuple):
+        return [plain(item) for item in value]
+    return value
+
+
 def state_dict(state: VehicleState, leases: LeaseManager) -> dict[str, Any]:
-    raw = asdict(state)
+    raw: dict[str, Any] = plain(state)
     raw["id"] = state.sysid
     raw["type"] = raw.pop("mav_type")
     raw["global"] = raw.pop("global_position")
     holder, expires_in_s = leases.status(state.sysid)
-    raw["lease"] = {"holder": holder, "expires_in_s": expires_in_s}
-    result: dict[str, Any] = finite(raw)
-    return result
+    raw["lease"] = plain({"holder": holder, "expires_in_s": expires_in_s})
+    return raw
 
 
 def summary_dict(state: VehicleState) -> dict[str, Any]:
@@ -43,12 +65,12 @@ def summary_dict(state: VehicleState) -> dict[str, Any]:
             "connected": state.connected,
             "mode": state.mode,
             "armed": state.armed,
-            "link": asdict(state.link),
+            "link": plain(state.link),
         }
     )
     return result
 
 
 def stream_dict(stats: StreamStats) -> dict[str, Any]:
-    result: dict[str, Any] = finite(asdict(stats))
+    result: dict[str, Any] = plain(stats)
     return result

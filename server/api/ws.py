@@ -19,7 +19,6 @@ import asyncio
 import contextlib
 import json
 import logging
-import time
 from collections.abc import Awaitable
 from typing import Any
 from urllib.parse import urlsplit
@@ -42,6 +41,8 @@ log = logging.getLogger(__name__)
 
 EVENT_BACKLOG = 256
 SEND_TIMEOUT_S = 5.0
+# How long a client whose period is up waits for a fresher state than the one it has missed.
+FRESH_WAIT_S = 0.05
 MIN_RATE_HZ = 0.1
 CLOSE_UNAUTHORIZED = 4401
 CLOSE_FORBIDDEN = 4403
@@ -75,45 +76,33 @@ class _Sender:
 
 
 class StateText:
-    """Serialised snapshots shared by every telemetry client of a vehicle: one watcher per
-    vehicle marks it changed, and the first client to send after a change takes the snapshot
-    and encodes it; every other client sends that same text until the next change."""
+    """Serialised snapshots shared by every telemetry client of a vehicle: the first client
+    to send after a change builds and encodes the snapshot; every other client sends that
+    same text until the vehicle's state_version moves on."""
 
     def __init__(self, context: ApiContext) -> None:
         self._context = context
-        self._texts: dict[int, str] = {}
-        self._watchers: dict[int, asyncio.Task[None]] = {}
+        self._texts: dict[int, tuple[Vehicle, int, str]] = {}
 
     def text(self, vehicle: Vehicle) -> str:
-        text = self._texts.get(vehicle.sysid)
-        if text is None:
-            if vehicle.sysid not in self._watchers:
-                self._watchers[vehicle.sysid] = asyncio.create_task(self._watch(vehicle))
-            text = self._encode(vehicle)
+        version = vehicle.state_version
+        cached = self._texts.get(vehicle.sysid)
+        if cached is not None and cached[0] is vehicle and cached[1] == version:
+            return cached[2]
+        text = self._encode(vehicle)
+        self._texts[vehicle.sysid] = (vehicle, version, text)
         return text
 
     async def close(self) -> None:
-        for task in self._watchers.values():
-            task.cancel()
-        await asyncio.gather(*self._watchers.values(), return_exceptions=True)
-        self._watchers.clear()
-
-    async def _watch(self, vehicle: Vehicle) -> None:
-        subscription = vehicle.subscribe()
-        try:
-            async for _ in subscription:
-                self._texts.pop(vehicle.sysid, None)
-        finally:
-            subscription.close()
+        self._texts.clear()
 
     def _encode(self, vehicle: Vehicle) -> str:
         state = vehicle.snapshot()
         fields = state_dict(state, self._context.leases)
         # `type` names the message here, so the vehicle's type travels as vehicle_type.
         fields["vehicle_type"] = fields.pop("type")
-        text = json.dumps({"type": "state", "vehicle": state.sysid, **fields})
-        self._texts[vehicle.sysid] = text
-        return text
+        message = {"type": "state", "vehicle": state.sysid, **fields}
+        return json.dumps(message, separators=(",", ":"))
 
 
 def _context(websocket: WebSocket) -> ApiContext:
@@ -215,17 +204,26 @@ async def _pump_states(
     vehicle: Vehicle, sender: _Sender, state_text: StateText, period_s: float
 ) -> None:
     subscription = vehicle.subscribe()
-    next_send = 0.0
+    loop = asyncio.get_running_loop()
+    next_send = loop.time()
     try:
-        async for _ in subscription:
-            wait_s = next_send - time.monotonic()
+        while True:
+            wait_s = next_send - loop.time()
             if wait_s > 0:
                 await asyncio.sleep(wait_s)
-            # After the wait, send whatever is newest: latest wins. Each client keeps the
-            # phase it connected with, so sends to many clients spread over the period
-            # instead of arriving as one burst that would delay the setpoint streamer.
+            # A change that came in during the wait is already old: send the next one as it
+            # arrives (the vehicle talks many times a second), so what the client gets is
+            # fresh rather than up to a telemetry interval old; the old one if none comes.
+            if subscription.discard_pending():
+                with contextlib.suppress(TimeoutError):
+                    async with asyncio.timeout(min(period_s, FRESH_WAIT_S)):
+                        await subscription.changed()
+            elif not await subscription.changed():
+                return
+            if subscription.closed:
+                return
             await sender.send_text(state_text.text(vehicle))
-            next_send = max(next_send + period_s, time.monotonic())
+            next_send = max(next_send + period_s, loop.time())
     finally:
         subscription.close()
 
