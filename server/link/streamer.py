@@ -81,6 +81,9 @@ class SetpointStreamer:
         self._gaps = 0
         self._max_interval_s = 0.0
         self._last_s: float | None = None
+        # (sent count they were computed at, p50 s, p99 s): snapshots ask far more often
+        # than intervals are added, and sorting the window is the costly part
+        self._percentiles: tuple[int, float, float] | None = None
 
     def stop(self) -> None:
         if self._handle is not None:
@@ -129,33 +132,36 @@ class SetpointStreamer:
         self._sent += 1
 
     def stats(self) -> StreamStats:
-        window = self._window()
         since_last_ms = None
         if self._last_s is not None:
             now = self._loop.time() if self._loop is not None else self._last_s
             since_last_ms = (now - self._last_s) * 1000.0
-        if not window:
+        if not self._ring_len:
             return StreamStats(active=self.active, sent=self._sent, since_last_ms=since_last_ms)
         # the rate over the last ~1 s, so it follows a rate change; percentiles use the window
-        recent = window[-max(2, round(self.rate_hz)) :]
-        ordered = sorted(window)
+        recent = self._recent(max(2, round(self.rate_hz)))
+        if self._percentiles is None or self._percentiles[0] != self._sent:
+            ordered = sorted(self._intervals[: self._ring_len])
+            self._percentiles = (self._sent, _percentile(ordered, 0.50), _percentile(ordered, 0.99))
+        _, p50_s, p99_s = self._percentiles
         return StreamStats(
             active=self.active,
             rate_hz=len(recent) / sum(recent) if sum(recent) > 0 else 0.0,
-            interval_p50_ms=_percentile(ordered, 0.50) * 1000.0,
-            interval_p99_ms=_percentile(ordered, 0.99) * 1000.0,
+            interval_p50_ms=p50_s * 1000.0,
+            interval_p99_ms=p99_s * 1000.0,
             max_gap_ms=self._max_interval_s * 1000.0,
             gaps=self._gaps,
             sent=self._sent,
             since_last_ms=since_last_ms,
         )
 
-    def _window(self) -> list[float]:
-        """The recorded intervals, oldest first."""
+    def _recent(self, count: int) -> list[float]:
+        """The last ``count`` recorded intervals (fewer if fewer were recorded)."""
         size = len(self._intervals)
-        if self._ring_len < size:
-            return list(self._intervals[: self._ring_len])
-        return list(self._intervals[self._ring_next :]) + list(self._intervals[: self._ring_next])
+        return [
+            self._intervals[(self._ring_next - 1 - i) % size]
+            for i in range(min(count, self._ring_len))
+        ]
 
 
 def _percentile(ordered: list[float], q: float) -> float:
