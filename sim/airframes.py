@@ -10,9 +10,9 @@ from __future__ import annotations
 from typing import Protocol
 
 from sim.fixed_wing import FixedWingModel
-from sim.mc_control import ParamReader
 from sim.mixer import GEOMETRIES
 from sim.multicopter import MulticopterModel
+from sim.params import ParamReader
 from sim.rigid_body import GRAVITY_M_S2
 from sim.rover import RoverModel
 from sim.topics import ControlSetpoint, VehicleStateTruth, VtolState

@@ -6,8 +6,8 @@ import math
 
 from sim.aero import WingGeometry, forces_and_moments
 from sim.fw_control import FixedWingControl, SurfacesThrottle
-from sim.mc_control import ParamReader
 from sim.multicopter import PARAM_REFRESH_PERIOD_S, make_rigid_body, refresh_rigid_body
+from sim.params import ParamReader
 from sim.quat import Vec3, rotate_body_to_ned, rotate_ned_to_body
 from sim.rigid_body import GRAVITY_M_S2, RigidBody
 from sim.setpoint_guard import safe_setpoint

@@ -13,8 +13,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from sim.mc_control import ParamReader
 from sim.numeric import clamp, finite_or, is_finite
+from sim.params import ParamReader
 from sim.quat import euler_from_quat, rotate_ned_to_body, wrap_pi
 from sim.rigid_body import GRAVITY_M_S2
 from sim.topics import (

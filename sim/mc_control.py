@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Protocol
 
 from sim.numeric import clamp, finite_or, is_finite
+from sim.params import ParamReader
 from sim.quat import (
     Vec3,
     body_z_axis_ned,
@@ -34,10 +34,6 @@ from sim.topics import (
 )
 
 POSITION_LOOP_PERIOD_S = 0.02
-
-
-class ParamReader(Protocol):
-    def get(self, name: str) -> float: ...
 
 
 @dataclass

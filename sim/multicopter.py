@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import math
 
-from sim.mc_control import MulticopterControl, ParamReader
+from sim.mc_control import MulticopterControl
 from sim.mixer import Mixer
+from sim.params import ParamReader
 from sim.quat import rotate_body_to_ned
 from sim.rigid_body import GRAVITY_M_S2, RigidBody
 from sim.setpoint_guard import safe_setpoint

@@ -80,7 +80,7 @@ AIRFRAME_OVERRIDES: dict[str, dict[str, float | int]] = {
 
 
 class ParamReader(Protocol):
-    """Read access to current parameter values (the same protocol sim.airframes uses)."""
+    """Read access to current parameter values; integers come back as float."""
 
     def get(self, name: str) -> float: ...
 

@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import math
 
-from sim.mc_control import ParamReader
 from sim.multicopter import PARAM_REFRESH_PERIOD_S
 from sim.numeric import clamp, is_finite
+from sim.params import ParamReader
 from sim.quat import quat_from_yaw, wrap_pi, yaw_from_quat
 from sim.setpoint_guard import safe_setpoint
 from sim.topics import (

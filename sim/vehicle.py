@@ -18,6 +18,7 @@ from typing import Any, Protocol, TypeAlias
 from pymavlink.dialects.v20 import development as mavlink
 
 from sim import modes
+from sim.airframes import AirframeModel
 from sim.battery import Battery
 from sim.commander import Commander
 from sim.geo import GeoPoint, LocalOrigin
@@ -46,25 +47,6 @@ STEPS_PER_WAKE = 5
 MIN_WAKE_PERIOD_S = 0.008
 STATUSTEXT_MAX_LEN = 50
 STATUSTEXT_HISTORY = 200
-
-
-class AirframeModel(Protocol):
-    """The part of sim.airframes.AirframeModel the vehicle uses."""
-
-    name: str
-    mav_type: int
-    is_vtol: bool
-    truth: VehicleStateTruth
-    vtol_state: VtolState
-    in_fixed_wing_flight: bool
-    actuator_outputs: list[float]
-    power_fraction: float
-
-    def step(self, dt_s: float, armed: bool, setpoint: ControlSetpoint | None) -> None: ...
-
-    def request_transition(self, to_fixed_wing: bool, immediate: bool) -> None: ...
-
-    def reset(self, position_ned_m: list[float], yaw_rad: float) -> None: ...
 
 
 AirframeFactory = Callable[[str, ParamReader], AirframeModel]

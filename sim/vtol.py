@@ -16,9 +16,10 @@ import math
 from sim.aero import WingGeometry
 from sim.fixed_wing import Airframe
 from sim.fw_control import FixedWingControl, SurfacesThrottle
-from sim.mc_control import MulticopterControl, ParamReader
+from sim.mc_control import MulticopterControl
 from sim.mixer import Mixer
 from sim.multicopter import RotorSet
+from sim.params import ParamReader
 from sim.quat import euler_from_quat, rotate_ned_to_body, yaw_from_quat
 from sim.setpoint_guard import safe_setpoint
 from sim.topics import ControlSetpoint, TrajectorySetpoint, VtolState
