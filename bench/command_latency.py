@@ -19,7 +19,6 @@ import asyncio
 import contextlib
 import json
 import os
-import platform
 import socket
 import statistics
 import sys
@@ -28,10 +27,10 @@ from collections.abc import AsyncIterator, Sequence
 from pathlib import Path
 from typing import Any
 
+from bench._results import machine_info, write_results
 from server.link import Link, Vehicle
 
 PROJECT_ROOT = Path(__file__).resolve().parent.parent
-RESULTS = PROJECT_ROOT / "bench" / "results" / "command_latency.json"
 READY_TIMEOUT_S = 30.0
 
 
@@ -148,10 +147,7 @@ async def run(count: int) -> dict[str, Any]:
         "median_ratio_skyhelm_over_mavsdk": ratio,
         "goal_met": ratio <= 1.0,
         "samples_ms": {"skyhelm": ours_wall, "mavsdk": theirs},
-        "machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
-                    "platform": platform.platform(),
-                    "load_average_before": load_average_before,
-                    "load_average_after": os.getloadavg()},
+        "machine": machine_info(load_average_before),
     }
 
 
@@ -169,9 +165,7 @@ def main(argv: Sequence[str] | None = None) -> int:
           f"{result['skyhelm_arm_elapsed_ms']['median_ms']:.2f} ms")
     print(f"median ratio SkyHelm/MAVSDK = {result['median_ratio_skyhelm_over_mavsdk']:.2f} "
           f"(goal ≤ 1: {'met' if result['goal_met'] else 'NOT met'})")
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    RESULTS.write_text(json.dumps(result, indent=2) + "\n")
-    print(f"wrote {RESULTS}")
+    write_results("command_latency", result)
     return 0
 
 

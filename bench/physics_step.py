@@ -10,17 +10,14 @@ alongside for reference.
 
 from __future__ import annotations
 
-import json
-import platform
 import statistics
 import time
-from pathlib import Path
 
+from bench._results import machine_info, write_results
 from sim.airframes import AirframeModel, default_params, make_airframe
 from sim.sim_run import PHYSICS_DT_S, fly
 from sim.topics import TrajectorySetpoint
 
-RESULTS = Path(__file__).resolve().parent / "results" / "physics_step.json"
 BLOCKS = 7
 STEPS_PER_BLOCK = 2500  # 10 s of simulated flight
 
@@ -87,21 +84,15 @@ def main() -> None:
             f" {r['step_us_max']:7.1f} {r['wall_step_us_median']:8.1f}"
             f" {r['core_percent_at_250_hz']:7.2f} {r['vehicles_per_core_physics_only']:9d}"
         )
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    RESULTS.write_text(
-        json.dumps(
-            {
-                "benchmark": "physics_step",
-                "physics_rate_hz": round(1.0 / PHYSICS_DT_S),
-                "python": platform.python_version(),
-                "machine": platform.machine(),
-                "airframes": results,
-            },
-            indent=2,
-        )
-        + "\n"
+    write_results(
+        "physics_step",
+        {
+            "benchmark": "physics_step",
+            "physics_rate_hz": round(1.0 / PHYSICS_DT_S),
+            "machine": machine_info(),
+            "airframes": results,
+        },
     )
-    print(f"wrote {RESULTS}")
 
 
 if __name__ == "__main__":

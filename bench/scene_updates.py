@@ -9,10 +9,8 @@ Writes bench/results/scene_updates.json.
 from __future__ import annotations
 
 import asyncio
-import json
 import statistics
 import time
-from pathlib import Path
 from typing import Any, cast
 
 import uvicorn
@@ -21,11 +19,11 @@ from fastapi import FastAPI
 from websockets.asyncio.client import connect
 from websockets.typing import Subprotocol
 
+from bench._results import machine_info, write_results
 from server.link import Vehicle
 from server.scene import SceneHub
 from tests.scene.conftest import FakeVehicle
 
-RESULTS = Path(__file__).resolve().parent / "results" / "scene_updates.json"
 TOKEN = "bench-scene-token"
 MEASURE_S = 5.0
 
@@ -105,8 +103,8 @@ def main() -> int:
             f"CPU {row['process_cpu_pct_of_one_core']}% of one core, "
             f"{row['client_kbytes_per_s']} kB/s to the client"
         )
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    RESULTS.write_text(json.dumps({"measure_s": MEASURE_S, "rows": rows}, indent=2) + "\n")
+    result = {"measure_s": MEASURE_S, "rows": rows, "machine": machine_info()}
+    write_results("scene_updates", result)
     return 0
 
 

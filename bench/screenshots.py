@@ -8,7 +8,6 @@ bench/results/screenshots.json (how long each flight took to set up).
 
 from __future__ import annotations
 
-import json
 import sys
 import tempfile
 import time
@@ -16,6 +15,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from bench._results import write_results
 from tests.browser.flows import (
     arm_and_take_off,
     click_and_wait_result,
@@ -27,7 +27,6 @@ from tests.browser.harness import CHROMIUM, CHROMIUM_ARGS, Serve, vehicle_state,
 
 ROOT = Path(__file__).resolve().parents[1]
 IMG_DIR = ROOT / "docs" / "img"
-RESULTS = ROOT / "bench" / "results" / "screenshots.json"
 WIDTH, HEIGHT = 1600, 1000
 
 
@@ -104,9 +103,7 @@ def main() -> int:
             shots = [shoot(context, "quad", fly_quad), shoot(context, "vtol", fly_vtol)]
         finally:
             context.close()
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    summary = {"viewport": [WIDTH, HEIGHT], "screenshots": shots}
-    RESULTS.write_text(json.dumps(summary, indent=2) + "\n")
+    write_results("screenshots", {"viewport": [WIDTH, HEIGHT], "screenshots": shots})
     return 0
 
 

@@ -14,18 +14,15 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import json
-import os
 import socket
 import time
-from pathlib import Path
 from typing import Any
 
+from bench._results import machine_info, write_results
 from sim import modes
 from sim.runner import SimCluster
 from sim.vehicle import PHYSICS_DT_S
 
-RESULTS = Path(__file__).resolve().parent / "results" / "sim_cost.json"
 GOAL_CPU_SHARE_PER_QUAD = 0.03
 GOAL_VEHICLES = 20
 REAL_TIME_RATIO = 0.98
@@ -127,7 +124,7 @@ def main() -> int:
     real_time_counts = [r["quads"] for r in rows if r["real_time"]]
     marginal, fixed = fit_cost([r for r in rows if r["real_time"]])
     result = {
-        "machine": {"cpus": os.cpu_count(), "load_avg_1m": os.getloadavg()[0]},
+        "machine": machine_info(),
         "seconds_per_point": args.seconds,
         "rows": rows,
         "cpu_share_per_quad_single": single,
@@ -137,14 +134,12 @@ def main() -> int:
         "goal_cpu_share_per_quad": GOAL_CPU_SHARE_PER_QUAD,
         "goal_vehicles": GOAL_VEHICLES,
     }
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    RESULTS.write_text(json.dumps(result, indent=2) + "\n")
+    write_results("sim_cost", result)
     print(f"per quad (N=1): {100 * single:.2f} % of one core (goal ≤ 3 %)" if single else "")
     if marginal is not None:
         print(f"each additional quad: {100 * marginal:.2f} % of one core "
               f"(fixed overhead of the process and its event loop {100 * fixed:.1f} %)")
     print(f"largest N in real time: {result['max_real_time_quads_measured']} (goal ≥ 20)")
-    print(f"wrote {RESULTS}")
     return 0
 
 

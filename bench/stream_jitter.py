@@ -21,7 +21,6 @@ import dataclasses
 import itertools
 import json
 import os
-import platform
 import socket
 import statistics
 import sys
@@ -30,10 +29,10 @@ from collections.abc import AsyncIterator, Sequence
 from pathlib import Path
 from typing import Any
 
+from bench._results import machine_info, write_results
 from server.link import Envelope, Link, PositionNed, Vehicle
 
 PROJECT_ROOT = Path(__file__).resolve().parent.parent
-RESULTS = PROJECT_ROOT / "bench" / "results" / "stream_jitter.json"
 SKYHELM_RATES_HZ = (20.0, 50.0, 100.0)
 MAVSDK_RATE_HZ = 20.0  # MAVSDK's OffboardImpl SEND_INTERVAL_S = 0.05, not configurable
 GAP_LIMIT_S = 0.100
@@ -233,10 +232,7 @@ async def run(seconds: float, load_period_s: float, load_encodes: int) -> dict[s
             "jitter_met": goal_jitter,
             "no_gap_over_100ms": goal_gaps,
         },
-        "machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
-                    "platform": platform.platform(),
-                    "load_average_before": load_average_before,
-                    "load_average_after": os.getloadavg()},
+        "machine": machine_info(load_average_before),
     }
 
 
@@ -259,9 +255,7 @@ def main(argv: Sequence[str] | None = None) -> int:
           f"{goal['mavsdk_20hz_p99_abs_error_ms']:.2f} ms -> "
           f"{'met' if goal['jitter_met'] else 'NOT met'}; no gap > 100 ms: "
           f"{'yes' if goal['no_gap_over_100ms'] else 'NO'}")
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    RESULTS.write_text(json.dumps(result, indent=2) + "\n")
-    print(f"wrote {RESULTS}")
+    write_results("stream_jitter", result)
     return 0
 
 
