@@ -41,8 +41,6 @@ log = logging.getLogger(__name__)
 
 EVENT_BACKLOG = 256
 SEND_TIMEOUT_S = 5.0
-# How long a client whose period is up waits for a fresher state than the one it has missed.
-FRESH_WAIT_S = 0.05
 MIN_RATE_HZ = 0.1
 CLOSE_UNAUTHORIZED = 4401
 CLOSE_FORBIDDEN = 4403
@@ -203,27 +201,13 @@ async def telemetry(
 async def _pump_states(
     vehicle: Vehicle, sender: _Sender, state_text: StateText, period_s: float
 ) -> None:
-    subscription = vehicle.subscribe()
-    loop = asyncio.get_running_loop()
-    next_send = loop.time()
+    # The subscription does the rate limit: each client gets the first change after its
+    # period is up, so what it receives is fresh; clients keep the phases they connected
+    # with, so a vehicle update wakes only the few whose period is up, not all at once.
+    subscription = vehicle.subscribe(min_interval_s=period_s)
     try:
-        while True:
-            wait_s = next_send - loop.time()
-            if wait_s > 0:
-                await asyncio.sleep(wait_s)
-            # A change that came in during the wait is already old: send the next one as it
-            # arrives (the vehicle talks many times a second), so what the client gets is
-            # fresh rather than up to a telemetry interval old; the old one if none comes.
-            if subscription.discard_pending():
-                with contextlib.suppress(TimeoutError):
-                    async with asyncio.timeout(min(period_s, FRESH_WAIT_S)):
-                        await subscription.changed()
-            elif not await subscription.changed():
-                return
-            if subscription.closed:
-                return
+        while await subscription.changed():
             await sender.send_text(state_text.text(vehicle))
-            next_send = max(next_send + period_s, loop.time())
     finally:
         subscription.close()
 

@@ -4,6 +4,7 @@ subscriptions to them."""
 from __future__ import annotations
 
 import asyncio
+import time
 import weakref
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -21,6 +22,9 @@ LANDED_STATE_NAMES: tuple[LandedState, ...] = (
 VTOL_STATE_NAMES: tuple[VtolState, ...] = (
     "UNDEFINED", "TRANSITION_TO_FW", "TRANSITION_TO_MC", "MC", "FW",
 )  # fmt: skip
+# How long a rate-limited subscriber whose interval is up waits for a change newer than
+# the one it missed (a PX4 vehicle sends several telemetry messages every 50 ms).
+LATE_CHANGE_WAIT_S = 0.05
 
 
 @dataclass(frozen=True)
@@ -146,25 +150,50 @@ class VehicleState:
 
 class StateSubscription:
     """Async iterator of snapshots. Latest wins: however many changes happen between two
-    reads, the reader gets one snapshot, built when it reads, so the backlog is one."""
+    reads, the reader gets one snapshot, built when it reads, so the backlog is one.
 
-    def __init__(self, snapshot: Callable[[], VehicleState], on_close: Callable[[], None]) -> None:
+    With min_interval_s, reads come at most that often and each one is the first change
+    after the interval is up, so the reader gets fresh state, not state that waited out the
+    interval; a change held back that way is let through LATE_CHANGE_WAIT_S after the
+    interval if no newer one has come by then. The reader sleeps until then (no timer wakes
+    it early), which matters when hundreds of readers share the event loop."""
+
+    def __init__(
+        self,
+        snapshot: Callable[[], VehicleState],
+        on_close: Callable[[], None],
+        min_interval_s: float = 0.0,
+    ) -> None:
         self._snapshot = snapshot
         self._on_close = on_close
         self._changed = asyncio.Event()
         self._changed.set()  # a new subscriber gets the current state at once
         self._closed = False
+        self._min_interval_s = min_interval_s
+        self._not_before_s = 0.0
+        self._held_back: asyncio.TimerHandle | None = None
 
     @property
     def closed(self) -> bool:
         return self._closed
 
-    def notify(self) -> None:
+    def notify(self, now_s: float | None = None) -> None:
+        """A change; now_s is time.monotonic(), passed in when many are notified at once."""
+        if self._min_interval_s > 0.0:
+            now_s = time.monotonic() if now_s is None else now_s
+            if now_s < self._not_before_s:
+                if self._held_back is None:
+                    self._held_back = asyncio.get_running_loop().call_later(
+                        self._not_before_s + LATE_CHANGE_WAIT_S - now_s, self._let_through
+                    )
+                return
+            self._cancel_held_back()
         self._changed.set()
 
     def close(self) -> None:
         if not self._closed:
             self._closed = True
+            self._cancel_held_back()
             self._on_close()
             self._changed.set()
 
@@ -183,15 +212,24 @@ class StateSubscription:
         if self._closed:
             return False
         self._changed.clear()
+        if self._min_interval_s > 0.0:
+            # on a grid, so the rate holds although each read comes a little after its
+            # slot; a new grid from now after the first read or a silence
+            now_s = time.monotonic()
+            following_s = self._not_before_s + self._min_interval_s
+            self._not_before_s = (
+                following_s if following_s > now_s else now_s + self._min_interval_s
+            )
         return True
 
-    def discard_pending(self) -> bool:
-        """Forget a change not read yet, so the next changed() waits for a newer one;
-        True if there was one."""
-        if self._closed or not self._changed.is_set():
-            return False
-        self._changed.clear()
-        return True
+    def _let_through(self) -> None:
+        self._held_back = None
+        self._changed.set()
+
+    def _cancel_held_back(self) -> None:
+        if self._held_back is not None:
+            self._held_back.cancel()
+            self._held_back = None
 
 
 class SubscriptionHub:
@@ -204,17 +242,20 @@ class SubscriptionHub:
         # whether it is still current without subscribing
         self.version = 0
 
-    def subscribe(self) -> StateSubscription:
+    def subscribe(self, min_interval_s: float = 0.0) -> StateSubscription:
         holder: list[StateSubscription] = []
-        sub = StateSubscription(self._snapshot, lambda: self._subs.discard(holder[0]))
+        sub = StateSubscription(
+            self._snapshot, lambda: self._subs.discard(holder[0]), min_interval_s
+        )
         holder.append(sub)
         self._subs.add(sub)
         return sub
 
     def notify(self) -> None:
         self.version += 1
+        now_s = time.monotonic()
         for sub in list(self._subs):
-            sub.notify()
+            sub.notify(now_s)
 
     def close_all(self) -> None:
         for sub in list(self._subs):

@@ -228,8 +228,9 @@ class Vehicle:
             telemetry_refused=tuple(sorted(self._telemetry_refused)),
         )
 
-    def subscribe(self) -> StateSubscription:
-        return self._hub.subscribe()
+    def subscribe(self, min_interval_s: float = 0.0) -> StateSubscription:
+        """Latest-wins state changes; at most one per min_interval_s (see StateSubscription)."""
+        return self._hub.subscribe(min_interval_s)
 
     @property
     def state_version(self) -> int:

@@ -7,6 +7,7 @@ import asyncio
 import dataclasses
 import json
 import math
+import time
 
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
@@ -156,18 +157,21 @@ async def test_subscription_is_latest_wins(scripted: ScriptedSession) -> None:
     sub.close()
 
 
-async def test_discarded_change_makes_the_reader_wait_for_a_newer_one(
+async def test_rate_limited_subscription_holds_changes_until_its_interval_is_up(
     scripted: ScriptedSession,
 ) -> None:
-    sub = scripted.vehicle.subscribe()
-    assert sub.discard_pending()  # the state at subscription counts as a change
-    assert not sub.discard_pending()
+    interval_s = 0.3
+    sub = scripted.vehicle.subscribe(min_interval_s=interval_s)
+    assert await asyncio.wait_for(sub.changed(), 1.0)  # the state at subscription, at once
+    read_s = time.monotonic()
     version = scripted.vehicle.state_version
-    waiter = asyncio.ensure_future(sub.changed())
-    await asyncio.sleep(0)
     scripted.peer.send(mavlink.MAVLink_local_position_ned_message(0, 7.0, 0, 0, 0, 0, 0))
-    assert await asyncio.wait_for(waiter, 1.0)
-    assert scripted.vehicle.state_version > version  # it waited for a change after the discard
+    await wait_for(lambda: _north_m(scripted) == 7.0)
+    assert scripted.vehicle.state_version > version
+
+    # held back, not dropped: it comes once the interval is up, with nothing newer needed
+    assert await asyncio.wait_for(sub.changed(), 2.0)
+    assert time.monotonic() - read_s >= interval_s
     sub.close()
     assert not await asyncio.wait_for(sub.changed(), 1.0)
 
