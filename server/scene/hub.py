@@ -5,8 +5,8 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import dataclasses
+import io
 import logging
-import sys
 import threading
 import time
 from collections.abc import Callable, Iterable
@@ -99,9 +99,10 @@ class SceneHub:
     async def start(self, vehicles: Callable[[], Iterable[Vehicle]]) -> None:
         if self._server is not None:
             return
-        # viser prints its own banner with its private port: keep the app's stdout for the
-        # one URL users should open. Construction takes a few ms, so it runs on the loop.
-        with contextlib.redirect_stdout(sys.stderr):
+        # viser prints a banner advertising its private, tokenless port: users should open
+        # only the app's URL, so the banner is swallowed. Construction takes a few ms, so it
+        # runs on the loop.
+        with contextlib.redirect_stdout(io.StringIO()):
             self._server = viser.ViserServer(host=self._host, port=self._port, verbose=False)
         self._set_up_scene(self._server)
         self._task = asyncio.create_task(self._run(vehicles), name="scene-hub")
@@ -114,7 +115,7 @@ class SceneHub:
             self._task = None
         if self._server is not None:
             server, self._server = self._server, None
-            with contextlib.redirect_stdout(sys.stderr):
+            with contextlib.redirect_stdout(io.StringIO()):
                 await asyncio.to_thread(server.stop)
         self._views.clear()
 
