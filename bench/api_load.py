@@ -8,15 +8,16 @@ Measured:
   `updated_s` (time.monotonic() when the server took in the vehicle's newest message; both
   processes read the same CLOCK_MONOTONIC). It starts when the server's loop handled the
   datagram, so time the datagram waited in the server's socket while the loop was busy is
-  not in it; the streamer figures show how long such waits are;
+  not in it (the streamer figures show how long such waits are), while time the client
+  process took to be scheduled is;
 - REST latency p50/p99;
 - how long the server's loop thread sat runnable waiting for a core (run_delay from
   /proc/PID/schedstat): what the machine's other load costs the server, which no change
   to the server can win back;
 - server CPU share of one core (utime+stime of the server process from /proc, sim excluded),
   and the telemetry client processes' share, since on a small machine they compete with the
-  server for the same cores: two client processes of 50 sockets cost no more CPU than four
-  of 25 and wake half as many processes per burst of sends.
+  server for the same cores: two client processes of 50 sockets do the work of four of 25
+  with half as many processes to wake per burst of sends (see CLIENT_NICE too).
 
 Goals (issue 4): stream p99 error ≤ 2 ms, telemetry p99 ≤ 20 ms, server CPU < 50 % of one core.
 
@@ -48,11 +49,13 @@ STREAM_RATE_HZ = 50.0
 TELEMETRY_RATE_HZ = 10.0
 REST_RATE_HZ = 50.0
 WARMUP_S = 3.0
-# The clients stand in for dashboards on other machines. Here they share the server's two
-# cores, and each send to one of them wakes its process, which the scheduler then often
-# runs in place of the server: at equal priority the server's loop waited ~90 ms per second
-# for a core even on an otherwise idle machine. Niced, they still get all the CPU they need
-# (~20 % of a core) but yield to the server, as remote clients would.
+# The clients (WebSocket and REST) stand in for dashboards and scripts on other machines.
+# Here they share the server's two cores, and each answer to one of them wakes its process,
+# which the scheduler then often runs in place of the server: at equal priority the
+# server's loop waited ~90 ms per second for a core on an otherwise idle machine. Niced
+# (this process once the server has started, and so the client processes it starts), they
+# still get all the CPU they need but yield to the server, as remote clients would. The
+# simulated vehicle, started by the server, keeps the server's priority.
 CLIENT_NICE = 10
 CLK_TCK = os.sysconf("SC_CLK_TCK")
 
@@ -147,7 +150,7 @@ async def telemetry_worker(url: str, clients: int, warmup_s: float, seconds: flo
 
 
 async def spawn_workers(
-    url: str, clients: int, workers: int, seconds: float, nice: int
+    url: str, clients: int, workers: int, seconds: float
 ) -> list[asyncio.subprocess.Process]:
     """The telemetry clients live in their own processes, so the figures are the server's
     and not one overloaded client loop's."""
@@ -168,8 +171,6 @@ async def spawn_workers(
                 str(count),
                 "--seconds",
                 str(seconds),
-                "--client-nice",
-                str(nice),
                 stdout=asyncio.subprocess.PIPE,
                 cwd=PROJECT_ROOT,
             )
@@ -233,6 +234,8 @@ async def rest_load(
 
 async def run(seconds: float, clients: int, workers: int, client_nice: int) -> dict[str, Any]:
     async with skyhelm_serve() as (proc, base):
+        if client_nice:
+            os.nice(client_nice)  # the server (and its simulated vehicle) keep their own
         headers = {"Authorization": f"Bearer {TOKEN}"}
         async with httpx.AsyncClient(base_url=base, headers=headers, timeout=10) as client:
             for _ in range(100):
@@ -251,7 +254,7 @@ async def run(seconds: float, clients: int, workers: int, client_nice: int) -> d
             ws_url = base.replace("http://", "ws://") + (
                 f"/api/v1/ws/telemetry?vehicle=1&rate_hz={TELEMETRY_RATE_HZ:g}&token={TOKEN}"
             )
-            worker_procs = await spawn_workers(ws_url, clients, workers, seconds, client_nice)
+            worker_procs = await spawn_workers(ws_url, clients, workers, seconds)
             tasks = [asyncio.create_task(rest_load(client, lease, rest_ms, errors, stop))]
             await asyncio.sleep(WARMUP_S)
             # The stream starts once the load runs, so its statistics cover only loaded time.
@@ -276,7 +279,7 @@ async def run(seconds: float, clients: int, workers: int, client_nice: int) -> d
         "seconds": seconds,
         "telemetry_clients": clients,
         "telemetry_client_processes": workers,
-        "telemetry_client_nice": client_nice,
+        "client_nice": client_nice,
         "telemetry_rate_hz": TELEMETRY_RATE_HZ,
         "rest_rate_hz": REST_RATE_HZ,
         "stream_rate_hz_target": STREAM_RATE_HZ,
@@ -317,13 +320,11 @@ def main() -> int:
         "--client-nice",
         type=int,
         default=CLIENT_NICE,
-        help="niceness of the telemetry client processes (0: compete with the server as equals)",
+        help="niceness of the client processes (0: they compete with the server as equals)",
     )
     parser.add_argument("--worker-url", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker_url:
-        if args.client_nice:
-            os.nice(args.client_nice)
         asyncio.run(telemetry_worker(args.worker_url, args.clients, WARMUP_S, args.seconds))
         return 0
     result = asyncio.run(run(args.seconds, args.clients, max(1, args.workers), args.client_nice))
