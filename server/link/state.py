@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import time
 import weakref
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Literal
@@ -23,8 +24,13 @@ VTOL_STATE_NAMES: tuple[VtolState, ...] = (
     "UNDEFINED", "TRANSITION_TO_FW", "TRANSITION_TO_MC", "MC", "FW",
 )  # fmt: skip
 # How long a rate-limited subscriber whose interval is up waits for a change newer than
-# the one it missed (a PX4 vehicle sends several telemetry messages every 50 ms).
-LATE_CHANGE_WAIT_S = 0.05
+# the one it missed: longer than the gaps between a vehicle's bursts of telemetry (50 ms
+# for the simulated PX4), or it would often get the old change just before a new one.
+LATE_CHANGE_WAIT_S = 0.2
+# Readers woken per event-loop iteration: one vehicle update can make dozens of telemetry
+# clients due at once, and their sends in one iteration would hold back the setpoint
+# streamer's timer for milliseconds; in batches, timers run between them.
+WAKE_BATCH = 8
 
 
 @dataclass(frozen=True)
@@ -172,22 +178,29 @@ class StateSubscription:
         self._min_interval_s = min_interval_s
         self._not_before_s = 0.0
         self._held_back: asyncio.TimerHandle | None = None
+        self.queued = False  # due, waiting for its turn in the hub's wake batches
 
     @property
     def closed(self) -> bool:
         return self._closed
 
-    def notify(self, now_s: float | None = None) -> None:
-        """A change; now_s is time.monotonic(), passed in when many are notified at once."""
+    def due(self, now_s: float) -> bool:
+        """Told of a change at now_s (time.monotonic()): True if the reader should be woken
+        for it now, False if it is held back (or the reader has not read the last one)."""
+        if self._changed.is_set() or self.queued:
+            return False
         if self._min_interval_s > 0.0:
-            now_s = time.monotonic() if now_s is None else now_s
             if now_s < self._not_before_s:
                 if self._held_back is None:
                     self._held_back = asyncio.get_running_loop().call_later(
                         self._not_before_s + LATE_CHANGE_WAIT_S - now_s, self._let_through
                     )
-                return
+                return False
             self._cancel_held_back()
+        return True
+
+    def wake(self) -> None:
+        self.queued = False
         self._changed.set()
 
     def close(self) -> None:
@@ -241,6 +254,7 @@ class SubscriptionHub:
         # counts notifications, so a cache of anything derived from the state can tell
         # whether it is still current without subscribing
         self.version = 0
+        self._to_wake: deque[StateSubscription] = deque()
 
     def subscribe(self, min_interval_s: float = 0.0) -> StateSubscription:
         holder: list[StateSubscription] = []
@@ -254,8 +268,19 @@ class SubscriptionHub:
     def notify(self) -> None:
         self.version += 1
         now_s = time.monotonic()
+        batch_pending = bool(self._to_wake)  # then a _wake_batch is already scheduled
         for sub in list(self._subs):
-            sub.notify(now_s)
+            if sub.due(now_s):
+                sub.queued = True
+                self._to_wake.append(sub)
+        if not batch_pending:
+            self._wake_batch()
+
+    def _wake_batch(self) -> None:
+        for _ in range(min(WAKE_BATCH, len(self._to_wake))):
+            self._to_wake.popleft().wake()
+        if self._to_wake:
+            asyncio.get_running_loop().call_soon(self._wake_batch)
 
     def close_all(self) -> None:
         for sub in list(self._subs):

@@ -12,7 +12,14 @@ import time
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
-from server.link.state import BatteryState, GpsState, PositionNedState
+from server.link.state import (
+    WAKE_BATCH,
+    BatteryState,
+    GpsState,
+    PositionNedState,
+    SubscriptionHub,
+    VehicleState,
+)
 from server.link.statustext import StatusTextAssembler
 from tests.link.conftest import ScriptedSession, drain, wait_for
 
@@ -174,6 +181,28 @@ async def test_rate_limited_subscription_holds_changes_until_its_interval_is_up(
     assert time.monotonic() - read_s >= interval_s
     sub.close()
     assert not await asyncio.wait_for(sub.changed(), 1.0)
+
+
+async def test_a_change_wakes_many_readers_in_batches_with_other_callbacks_between() -> None:
+    def no_snapshot() -> VehicleState:
+        raise AssertionError("waking readers needs no snapshot")
+
+    hub = SubscriptionHub(no_snapshot)
+    subs = [hub.subscribe() for _ in range(3 * WAKE_BATCH)]
+    for sub in subs:
+        assert await sub.changed()  # the state at subscription
+    still_queued: list[int] = []
+
+    hub.notify()
+    asyncio.get_running_loop().call_soon(
+        lambda: still_queued.append(sum(sub.queued for sub in subs))
+    )
+    assert sum(sub.queued for sub in subs) == 2 * WAKE_BATCH
+    woken = await asyncio.wait_for(asyncio.gather(*(sub.changed() for sub in subs)), 1.0)
+
+    assert all(woken)
+    # the callback queued right after the change ran while one batch was still waiting
+    assert still_queued == [WAKE_BATCH]
 
 
 async def test_connection_loss_and_return_are_events(scripted: ScriptedSession) -> None:
