@@ -3,6 +3,7 @@ vehicle, prints one URL, answers with the token, and takes the sim down on Ctrl-
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -62,7 +63,7 @@ def test_serve_prints_url_answers_and_stops_sim_on_sigint(tmp_path: Path) -> Non
             assert httpx.get(f"{base}/api/v1/vehicles", params={"token": token}).status_code == 200
             ws_url = base.replace("http://", "ws://") + f"/api/v1/ws/telemetry?token={token}"
             with connect(ws_url) as ws:  # uvicorn logs WebSocket paths: the filter must act
-                assert '"type": "state"' in str(ws.recv(timeout=10))
+                assert json.loads(ws.recv(timeout=10))["type"] == "state"
 
             sims = _children(server.pid)
             assert sims, "the simulated vehicle runs as a child process"
