@@ -586,7 +586,9 @@ class Vehicle:
                 return
             await asyncio.sleep(ONE_SHOT_RETRY_INTERVAL_S)
             for msg_id in missing:
-                await self.command_long(MAV_CMD_REQUEST_MESSAGE, msg_id)
+                self._note_telemetry_answer(
+                    msg_id, await self.command_long(MAV_CMD_REQUEST_MESSAGE, msg_id)
+                )
 
     def _missing_one_shots(self) -> list[int]:
         missing = []

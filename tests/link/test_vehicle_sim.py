@@ -56,6 +56,17 @@ async def test_gps_origin_is_known_once_the_vehicle_has_a_position() -> None:
     assert (origin.lat_deg, origin.lon_deg) == pytest.approx((47.397742, 8.545594), abs=1e-6)
 
 
+async def test_early_refusals_of_home_and_origin_are_cleared_once_they_come() -> None:
+    async with open_sim(speed=SPEED) as session:
+        vehicle = session.vehicle
+        await wait_for(
+            lambda: vehicle.snapshot().origin is not None and vehicle.snapshot().home is not None,
+            10.0,
+            "home and origin",
+        )
+        await wait_for(lambda: not vehicle.snapshot().telemetry_refused, 5.0, "no refusals")
+
+
 async def test_offboard_position_setpoint_is_reached_within_half_a_metre() -> None:
     async with open_sim(speed=SPEED) as session:
         vehicle = session.vehicle
