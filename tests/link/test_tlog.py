@@ -18,11 +18,11 @@ def _frame(src_system: int, seq: int, mav_type: int = mavlink.MAV_TYPE_QUADROTOR
 
 def test_tlog_path_is_utc_time_then_sanitised_link_name(tmp_path: Path) -> None:
     started = datetime(2026, 3, 4, 5, 6, 7, tzinfo=UTC)
-    first = tlog_path(tmp_path, "udpin:127.0.0.1:14540", started)
-    assert first.name == "20260304T050607Z-udpin_127.0.0.1_14540.tlog"
+    first = tlog_path(tmp_path, "udpin:127.0.0.1:24540", started)
+    assert first.name == "20260304T050607Z-udpin_127.0.0.1_24540.tlog"
     first.touch()
-    assert tlog_path(tmp_path, "udpin:127.0.0.1:14540", started).name == (
-        "20260304T050607Z-udpin_127.0.0.1_14540-1.tlog"
+    assert tlog_path(tmp_path, "udpin:127.0.0.1:24540", started).name == (
+        "20260304T050607Z-udpin_127.0.0.1_24540-1.tlog"
     )
 
 

@@ -42,7 +42,7 @@ def test_serial_urls_parse_to_device_and_baud(url: str, device: str, baud: int) 
     [
         ("", "empty"),
         ("udpin:127.0.0.1", "missing port"),
-        ("udpout::14540", "missing host"),
+        ("udpout::24540", "missing host"),
         ("tcp:host:http", "not a number"),
         ("udpout:127.0.0.1:0", "outside 1..65535"),
         ("tcpin:127.0.0.1:70000", "outside 0..65535"),
