@@ -46,9 +46,9 @@ def test_serial_urls_parse_to_device_and_baud(url: str, device: str, baud: int) 
         ("tcp:host:http", "not a number"),
         ("udpout:127.0.0.1:0", "outside 1..65535"),
         ("tcpin:127.0.0.1:70000", "outside 0..65535"),
-        ("udpin:::1:14540", "brackets"),
-        ("udpin:[::1:14540", "IPv6"),
-        ("udpbcast:255.255.255.255:14550", "not supported"),
+        ("udpin:::1:24540", "brackets"),
+        ("udpin:[::1:24540", "IPv6"),
+        ("udpbcast:255.255.255.255:24550", "not supported"),
         ("/dev/ttyACM0:12345", "not a standard rate"),
         ("quadcopter", "unrecognised"),
     ],
@@ -59,5 +59,5 @@ def test_bad_urls_are_refused_with_the_reason(url: str, complaint: str) -> None:
 
 
 def test_url_label_is_usable_in_file_names() -> None:
-    assert parse_link_url("udpin:127.0.0.1:14540").label == "udpin-127.0.0.1-14540"
+    assert parse_link_url("udpin:127.0.0.1:24540").label == "udpin-127.0.0.1-24540"
     assert parse_link_url("/dev/ttyACM0:57600").label == "serial-ttyACM0"

@@ -8,12 +8,21 @@ import socket
 import subprocess
 import sys
 import time
+from pathlib import Path
 from typing import Any
 
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
-from sim.cli import build_parser
+from sim.cli import (
+    SITL_API_LOCAL_PORT,
+    SITL_API_REMOTE_PORT,
+    SITL_GCS_LOCAL_PORT,
+    SITL_GCS_REMOTE_PORT,
+    build_parser,
+)
+
+README = Path(__file__).resolve().parents[2] / "README.md"
 
 EPHEMERAL = ["--api-port", "0", "--gcs-port", "0", "--api-local-port", "0",
              "--gcs-local-port", "0"]
@@ -41,9 +50,17 @@ def stop(proc: subprocess.Popen[str]) -> None:
 
 def test_defaults_are_px4_sitl_ports() -> None:
     args = build_parser().parse_args([])
-    assert (args.api_port, args.gcs_port) == (14540, 14550)
-    assert (args.api_local_port, args.gcs_local_port) == (14580, 18570)
+    assert (args.api_port, args.gcs_port) == (SITL_API_REMOTE_PORT, SITL_GCS_REMOTE_PORT)
+    assert (args.api_local_port, args.gcs_local_port) == (SITL_API_LOCAL_PORT, SITL_GCS_LOCAL_PORT)
     assert (args.airframe, args.count, args.speed) == ("quad", 1, 1.0)
+
+
+def test_readme_port_table_shows_the_defaults() -> None:
+    text = README.read_text()
+    api_row = f"| API / offboard | {SITL_API_LOCAL_PORT} + i | {SITL_API_REMOTE_PORT} + i |"
+    gcs_row = f"| GCS | {SITL_GCS_LOCAL_PORT} + i | {SITL_GCS_REMOTE_PORT} (shared) |"
+    assert api_row in text
+    assert gcs_row in text
 
 
 def test_ready_json_lists_instances_and_the_sim_answers_on_them() -> None:
