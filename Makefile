@@ -40,6 +40,7 @@ chromium:
 lint: $(TSTAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/mypy --strict server sim
+	$(VENV)/bin/lint-imports
 
 test: $(TSTAMP) chromium lint
 	$(VENV)/bin/pytest -q -p no:cacheprovider

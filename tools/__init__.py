@@ -1,0 +1,1 @@
+"""Project checks that run beside the code (import-linter contract types)."""
