@@ -4,22 +4,23 @@ PX4 reports position in local NED (x north, y east, z down) and attitude as the 
 the FRD body (forward, right, down) in NED. viser draws in a right-handed z-up world, which
 the scene treats as ENU (x east, y north, z up); vehicle models are built in FLU (forward,
 left, up), so a model drawn with the identity pose faces east, its nose along +x.
+Rotations are viser.transforms' and geodesy is pymap3d's (WGS-84).
 """
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import numpy.typing as npt
 import pymap3d
+import viser.transforms as vtf
 
 Vec3 = tuple[float, float, float]
 Quat = tuple[float, float, float, float]
 
-# Both are their own inverse: NED↔ENU swaps x/y and negates z; FRD↔FLU negates y and z.
-_NED_TO_ENU = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
-_FLU_TO_FRD = np.diag([1.0, -1.0, -1.0])
+# Both are half turns, so each is its own inverse: NED↔ENU swaps x/y and negates z (about the
+# north-east diagonal); FRD↔FLU negates y and z (about the nose).
+_ENU_FROM_NED = vtf.SO3.from_matrix(np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]]))
+_FRD_FROM_FLU = vtf.SO3.from_x_radians(np.pi)
 
 
 def ned_to_enu(north_m: float, east_m: float, down_m: float) -> Vec3:
@@ -30,56 +31,38 @@ def enu_to_ned(east_m: float, north_m: float, up_m: float) -> Vec3:
     return (north_m, east_m, -up_m)
 
 
-def rotation_ned_frd(roll_deg: float, pitch_deg: float, yaw_deg: float) -> npt.NDArray[np.float64]:
-    """Body FRD → NED rotation matrix from aerospace ZYX Euler angles (PX4's convention)."""
-    r, p, y = (math.radians(a) for a in (roll_deg, pitch_deg, yaw_deg))
-    cr, sr = math.cos(r), math.sin(r)
-    cp, sp = math.cos(p), math.sin(p)
-    cy, sy = math.cos(y), math.sin(y)
-    return np.array(
-        [
-            [cp * cy, sr * sp * cy - cr * sy, cr * sp * cy + sr * sy],
-            [cp * sy, sr * sp * sy + cr * cy, cr * sp * sy - sr * cy],
-            [-sp, sr * cp, cr * cp],
-        ]
+def attitude_enu_flu(roll_deg: float, pitch_deg: float, yaw_deg: float) -> vtf.SO3:
+    """Body FLU → ENU rotation for a vehicle whose NED attitude is (roll, pitch, yaw).
+
+    PX4's aerospace ZYX Euler angles (yaw, then pitch, then roll) are viser's
+    ``from_rpy_radians`` convention, applied to the FRD body in NED.
+    """
+    body_ned = vtf.SO3.from_rpy_radians(
+        np.radians(roll_deg), np.radians(pitch_deg), np.radians(yaw_deg)
     )
+    return _ENU_FROM_NED @ body_ned @ _FRD_FROM_FLU
 
 
 def rotation_enu_flu(roll_deg: float, pitch_deg: float, yaw_deg: float) -> npt.NDArray[np.float64]:
-    """Body FLU → ENU rotation for a vehicle whose NED attitude is (roll, pitch, yaw)."""
-    body_ned = rotation_ned_frd(roll_deg, pitch_deg, yaw_deg)
-    result: npt.NDArray[np.float64] = _NED_TO_ENU @ body_ned @ _FLU_TO_FRD
-    return result
+    """The same rotation as :func:`attitude_enu_flu`, as a 3×3 matrix."""
+    return attitude_enu_flu(roll_deg, pitch_deg, yaw_deg).as_matrix().astype(np.float64)
 
 
 def quat_wxyz_from_matrix(m: npt.NDArray[np.float64]) -> Quat:
     """Unit quaternion (w, x, y, z) of a proper rotation matrix, w ≥ 0."""
-    trace = float(m[0, 0] + m[1, 1] + m[2, 2])
-    if trace > 0.0:
-        s = 2.0 * math.sqrt(trace + 1.0)
-        q = (0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s)
-    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
-        s = 2.0 * math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
-        q = ((m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s)
-    elif m[1, 1] > m[2, 2]:
-        s = 2.0 * math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
-        q = ((m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s)
-    else:
-        s = 2.0 * math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
-        q = ((m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s)
-    w, x, y, z = (float(c) for c in q)
-    sign = -1.0 if w < 0.0 else 1.0
-    return (sign * w, sign * x, sign * y, sign * z)
+    return _wxyz(vtf.SO3.from_matrix(m))
 
 
 def attitude_wxyz_enu(roll_deg: float, pitch_deg: float, yaw_deg: float) -> Quat:
     """viser orientation (wxyz) of an FLU model for a vehicle with this NED attitude."""
-    return quat_wxyz_from_matrix(rotation_enu_flu(roll_deg, pitch_deg, yaw_deg))
+    return _wxyz(attitude_enu_flu(roll_deg, pitch_deg, yaw_deg))
 
 
-def yaw_wxyz_enu(yaw_deg: float) -> Quat:
-    """Orientation of a level model heading `yaw_deg` (0 = north, clockwise seen from above)."""
-    return attitude_wxyz_enu(0.0, 0.0, yaw_deg)
+def _wxyz(rotation: vtf.SO3) -> Quat:
+    # q and -q are the same rotation; one sign (w ≥ 0) keeps successive poses comparable.
+    w, x, y, z = (float(c) for c in rotation.wxyz)
+    sign = -1.0 if w < 0.0 else 1.0
+    return (sign * w, sign * x, sign * y, sign * z)
 
 
 def geodetic_offset_enu(

@@ -6,6 +6,7 @@ import math
 from dataclasses import dataclass, field
 
 import viser
+import viser.transforms as vtf
 
 from .styling import Rgb, rotor_colour
 
@@ -92,12 +93,11 @@ def _add_multicopter(scene: viser.SceneApi, base: str, count: int, model: Vehicl
     scene.add_box(f"{base}/nose", dimensions=(0.12, 0.06, 0.06), position=(0.2, 0.0, 0.0),
                   color=(255, 255, 255))
     for i, (x, y) in enumerate(rotor_positions_flu(count, arm_m)):
-        yaw = math.atan2(y, x)
         model.hull.append(
             scene.add_box(
                 f"{base}/arm{i}", dimensions=(arm_m, 0.04, 0.03),
                 position=(x / 2, y / 2, 0.0),
-                wxyz=(math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)),
+                wxyz=vtf.SO3.from_z_radians(math.atan2(y, x)).wxyz,
             )
         )
         model.rotors.append(
