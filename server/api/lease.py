@@ -53,8 +53,18 @@ class LeaseInvalid(Exception):
 LeaseListener = Callable[[Lease, str], None]
 
 
+def loop_clock() -> float:
+    """The running event loop's time, so a lease lapses on the same clock the deadman's
+    checker sleeps on (virtual in tests); time.monotonic, the loop's own clock on Linux,
+    where no loop runs."""
+    try:
+        return asyncio.get_running_loop().time()
+    except RuntimeError:
+        return time.monotonic()
+
+
 class LeaseManager:
-    def __init__(self, ttl_s: float, clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(self, ttl_s: float, clock: Callable[[], float] = loop_clock) -> None:
         self.ttl_s = ttl_s
         self._clock = clock
         self._leases: dict[int, Lease] = {}

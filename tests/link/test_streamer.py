@@ -1,17 +1,24 @@
-"""The setpoint streamer's clock: absolute deadlines, immediate send on change, statistics."""
+"""The setpoint streamer's clock: absolute deadlines, immediate send on change, statistics.
+
+Every test runs on virtual loop time (looptime), so times are exact: a send due at
+t0 + k·period happens at that loop time, not somewhere near it.
+"""
 
 from __future__ import annotations
 
 import asyncio
-import time
+from collections.abc import Callable
 
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
 from server.link.streamer import SetpointStreamer
-from tests.link.conftest import wait_for
+
+pytestmark = pytest.mark.looptime
 
 MAV = mavlink.MAVLink(None)
+# Exact to floating-point rounding: virtual time has no jitter.
+EXACT_S = 1e-9
 
 
 def _msg(x: float) -> mavlink.MAVLink_message:
@@ -21,77 +28,130 @@ def _msg(x: float) -> mavlink.MAVLink_message:
 
 
 class _Recorder:
-    def __init__(self) -> None:
-        self.sent: list[tuple[float, float]] = []  # (loop time, x)
+    """A sender that records (loop time, x) of every send. A send can cost loop time, as a
+    slow transport write or a busy loop would: the clock moves on by ``cost_s(index)``
+    while the send runs, so whatever the streamer schedules after it sees the later time."""
+
+    def __init__(
+        self, monkeypatch: pytest.MonkeyPatch, cost_s: Callable[[int], float] = lambda _: 0.0
+    ) -> None:
+        self.sent: list[tuple[float, float]] = []
+        self._cost_s = cost_s
+        self._spent_s = 0.0
+        self._loop = asyncio.get_running_loop()
+        loop_time = self._loop.time
+        # asyncio schedules and fires timers by loop.time(), so this is the clock everyone sees
+        monkeypatch.setattr(self._loop, "time", lambda: loop_time() + self._spent_s)
 
     def __call__(self, msg: mavlink.MAVLink_message) -> None:
-        self.sent.append((asyncio.get_running_loop().time(), msg.x))
+        self.sent.append((self._loop.time(), msg.x))
+        self.spend(self._cost_s(len(self.sent) - 1))
+
+    def spend(self, duration_s: float) -> None:
+        """Hold the loop for ``duration_s`` of virtual time, as blocking work would."""
+        self._spent_s += duration_s
+
+    @property
+    def times(self) -> list[float]:
+        return [t for t, _ in self.sent]
 
 
-async def test_ticks_fall_on_absolute_deadlines_at_the_configured_rate() -> None:
-    rec = _Recorder()
+def _now() -> float:
+    return asyncio.get_running_loop().time()
+
+
+def _assert_times(actual: list[float], expected: list[float]) -> None:
+    assert len(actual) == len(expected)
+    worst = max((abs(a - e), k) for k, (a, e) in enumerate(zip(actual, expected, strict=True)))
+    assert worst[0] < EXACT_S, f"send {worst[1]} is {worst[0]:.3g} s off its deadline"
+
+
+async def test_every_send_is_on_its_absolute_deadline_even_when_sends_cost_time(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    periods = 5000
+    # each send takes 0..15 ms of a 20 ms period: a "sleep one period after sending"
+    # schedule would drift by the sum of these, the deadline schedule must not move at all
+    rec = _Recorder(monkeypatch, cost_s=lambda k: (k * 7 % 16) * 0.001)
     streamer = SetpointStreamer(rec, rate_hz=50)
     streamer.stream(_msg(1))
-    await wait_for(lambda: len(rec.sent) >= 26, 3.0)
+    t0 = rec.times[0]
+    # and every tenth tick finds the loop busy until 3 ms after its deadline: that send is
+    # 3 ms late, the one after it on time again (lateness never carries over)
+    late_ticks = range(5, periods + 1, 10)
+    for k in late_ticks:
+        asyncio.get_running_loop().call_at(t0 + k * 0.02 - 0.001, rec.spend, 0.004)
+    await asyncio.sleep(t0 + periods * 0.02 + 0.01 - _now())
+    stats = streamer.stats()
     streamer.stop()
 
-    t0 = rec.sent[0][0]
-    # each send is near t0 + k/50: lateness does not accumulate over the run
-    lateness = [t - (t0 + k * 0.02) for k, (t, _) in enumerate(rec.sent[:26])]
-    assert max(abs(x) for x in lateness) < 0.04
-    stats = streamer.stats()
-    assert stats.sent == len(rec.sent)
-    assert stats.interval_p50_ms == pytest.approx(20, abs=5)
-    assert stats.rate_hz == pytest.approx(50, rel=0.2)
-    assert not stats.active
+    late_s = [0.003 if k in late_ticks else 0.0 for k in range(periods + 1)]
+    _assert_times(rec.times, [t0 + k * 0.02 + late_s[k] for k in range(periods + 1)])
+    assert stats.sent == periods + 1
+    assert stats.gaps == 0
+    assert stats.rate_hz == pytest.approx(50, rel=1e-9)
+    assert stats.interval_p50_ms == pytest.approx(20, rel=1e-9)
+    assert stats.interval_p99_ms == pytest.approx(23, rel=1e-9)
+    assert stats.max_gap_ms == pytest.approx(23, rel=1e-9)
+    assert stats.since_last_ms == pytest.approx(10, rel=1e-6)
+    assert stats.active
 
 
-async def test_changed_setpoint_goes_out_at_once_and_rephases() -> None:
-    rec = _Recorder()
+async def test_changed_setpoint_goes_out_at_once_and_rephases(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    rec = _Recorder(monkeypatch)
     streamer = SetpointStreamer(rec, rate_hz=2)  # slow, so "at once" is clearly not a tick
     streamer.stream(_msg(1))
+    t0 = rec.times[0]
     await asyncio.sleep(0.05)
-    changed_at = asyncio.get_running_loop().time()
+    changed_at = _now()
     streamer.stream(_msg(2))
-    await wait_for(lambda: len(rec.sent) >= 3, 2.0)
+    await asyncio.sleep(1.2)
     streamer.stop()
 
-    (_t1, x1), (t2, x2), (t3, x3) = rec.sent[:3]
-    assert (x1, x2, x3) == (1, 2, 2)
-    assert t2 - changed_at < 0.005
-    assert t3 - t2 == pytest.approx(0.5, abs=0.05)  # next tick counts from the change
+    assert [x for _, x in rec.sent] == [1, 2, 2, 2]
+    assert changed_at == pytest.approx(t0 + 0.05, abs=EXACT_S)
+    # the next ticks count from the change, not from the first stream
+    _assert_times(rec.times, [t0, changed_at, changed_at + 0.5, changed_at + 1.0])
 
 
-async def test_a_stalled_loop_skips_missed_ticks_and_counts_a_gap() -> None:
-    rec = _Recorder()
+async def test_a_send_that_overruns_skips_missed_ticks_and_counts_a_gap(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # send 5 holds the loop for 210 ms, ten and a half periods at 50 Hz
+    rec = _Recorder(monkeypatch, cost_s=lambda k: 0.21 if k == 5 else 0.0)
     streamer = SetpointStreamer(rec, rate_hz=50)
     streamer.stream(_msg(1))
-    await asyncio.sleep(0.1)
-    time.sleep(0.2)  # noqa: ASYNC251 - blocks the event loop for ten periods on purpose
-    stall_end = asyncio.get_running_loop().time()
-    await asyncio.sleep(0.1)
+    t0 = rec.times[0]
+    await asyncio.sleep(t0 + 0.4 + 0.01 - _now())
     streamer.stop()
-    end = asyncio.get_running_loop().time()
-    after = [t for t, _ in rec.sent if t >= stall_end]
     stats = streamer.stats()
-    # the ten missed ticks are skipped, not sent in a catch-up burst
-    assert len(after) <= (end - stall_end) * 50 + 2
-    assert stats.gaps >= 1
-    assert stats.max_gap_ms is not None
-    assert stats.max_gap_ms >= 190
+
+    # the overdue tick goes as soon as the loop is free; the ten missed ones are skipped,
+    # not sent in a burst; then the sends are back on the original grid
+    on_time = [t0 + k * 0.02 for k in range(6)]
+    late = t0 + 0.1 + 0.21
+    back_on_grid = [t0 + k * 0.02 for k in range(16, 21)]
+    _assert_times(rec.times, [*on_time, late, *back_on_grid])
+    assert stats.gaps == 1
+    assert stats.max_gap_ms == pytest.approx(210, rel=1e-9)
 
 
-async def test_stop_ends_the_stream() -> None:
-    rec = _Recorder()
+async def test_stop_ends_the_stream(monkeypatch: pytest.MonkeyPatch) -> None:
+    rec = _Recorder(monkeypatch)
     streamer = SetpointStreamer(rec, rate_hz=100)
     streamer.stream(_msg(1))
-    await asyncio.sleep(0.05)
+    t0 = rec.times[0]
+    await asyncio.sleep(0.055)
     streamer.stop()
-    count = len(rec.sent)
-    await asyncio.sleep(0.05)
+    await asyncio.sleep(1.0)
 
-    assert len(rec.sent) == count
-    assert streamer.stats().since_last_ms is not None
+    _assert_times(rec.times, [t0 + k * 0.01 for k in range(6)])
+    stats = streamer.stats()
+    assert not stats.active
+    assert stats.since_last_ms == pytest.approx(1005, rel=1e-9)
+    assert streamer.streaming_for_s() == 0.0
 
 
 @pytest.mark.parametrize("rate_hz", [1.0, 101.0])
@@ -100,48 +160,53 @@ def test_rate_outside_2_to_100_hz_is_refused(rate_hz: float) -> None:
         SetpointStreamer(lambda _m: None, rate_hz=rate_hz)
 
 
-async def test_rate_change_while_streaming_takes_effect() -> None:
-    rec = _Recorder()
+async def test_rate_change_while_streaming_counts_from_the_last_send(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    rec = _Recorder(monkeypatch)
     streamer = SetpointStreamer(rec, rate_hz=10)
     streamer.stream(_msg(1))
-    await asyncio.sleep(0.05)
+    t0 = rec.times[0]
+    await asyncio.sleep(0.055)
     streamer.rate_hz = 100
-    start = len(rec.sent)
     await asyncio.sleep(0.2)
     streamer.stop()
 
-    assert len(rec.sent) - start >= 12
+    # t0 + 10 ms is already past at the change: that tick goes at once, the rest on the
+    # 100 Hz grid from t0
+    _assert_times(rec.times, [t0, t0 + 0.055, *(t0 + k * 0.01 for k in range(6, 26))])
 
 
-async def test_reported_rate_follows_a_rate_change() -> None:
-    rec = _Recorder()
+async def test_reported_rate_follows_a_rate_change(monkeypatch: pytest.MonkeyPatch) -> None:
+    rec = _Recorder(monkeypatch)
     streamer = SetpointStreamer(rec, rate_hz=10)
     streamer.stream(_msg(1))
-    await asyncio.sleep(0.5)
+    await asyncio.sleep(0.55)
+    assert streamer.stats().rate_hz == pytest.approx(10, rel=1e-9)
     streamer.rate_hz = 50
     await asyncio.sleep(1.3)
     streamer.stop()
 
-    assert streamer.stats().rate_hz == pytest.approx(50, rel=0.2)
+    assert streamer.stats().rate_hz == pytest.approx(50, rel=1e-9)
 
 
-async def test_statistics_restart_with_the_stream() -> None:
-    sent: list[object] = []
-    streamer = SetpointStreamer(sent.append, rate_hz=50.0)
+async def test_statistics_restart_with_the_stream(monkeypatch: pytest.MonkeyPatch) -> None:
+    rec = _Recorder(monkeypatch)
+    streamer = SetpointStreamer(rec, rate_hz=50.0)
     streamer.stream(_msg(1.0))
-    await asyncio.sleep(0.2)
+    await asyncio.sleep(0.205)
+    assert streamer.streaming_for_s() == pytest.approx(0.205, abs=EXACT_S)
     streamer.stop()
     first = streamer.stats()
     await asyncio.sleep(0.15)
 
     streamer.stream(_msg(2.0))
-    await asyncio.sleep(0.05)
+    await asyncio.sleep(0.055)
     streamer.stop()
     second = streamer.stats()
 
-    assert first.sent >= 8
+    assert first.sent == 11
     # the pause between the two streams is neither an interval nor a gap of the second one
-    assert second.sent < first.sent
-    assert second.max_gap_ms is not None
-    assert second.max_gap_ms < 100.0
+    assert second.sent == 3
+    assert second.max_gap_ms == pytest.approx(20, rel=1e-9)
     assert second.gaps == 0
