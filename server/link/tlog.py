@@ -9,7 +9,6 @@ one small write per second instead of one per frame; a full buffer is written at
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import re
 import struct
 import time
@@ -17,6 +16,8 @@ from collections.abc import Iterator
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import BinaryIO
+
+from .tasks import cancel_and_wait
 
 _TIMESTAMP = struct.Struct(">Q")
 _UNSAFE_NAME_CHARS = re.compile(r"[^A-Za-z0-9._-]+")
@@ -83,11 +84,8 @@ class TlogWriter:
         self._buffer.clear()
 
     async def close(self) -> None:
-        if self._flusher is not None:
-            self._flusher.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._flusher
-            self._flusher = None
+        await cancel_and_wait(self._flusher)
+        self._flusher = None
         self.flush()
         if self._file is not None:
             self._file.close()

@@ -13,8 +13,8 @@ import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
 from server.link.link import Link
-from server.link.replay import vehicle_frames
 from server.link.tlog import TlogWriter, iter_tlog
+from server.link.transports.replay import vehicle_frames
 from server.link.urls import LinkUrlError, parse_link_url
 from server.link.vehicle import Vehicle
 from tests.link.conftest import wait_for

@@ -15,16 +15,16 @@ heartbeat watchdog reports the vehicle lost, unless ``loop`` starts it over.
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from pymavlink.dialects.v20 import development as mavlink
 
-from .tlog import iter_tlog
-from .transports import FrameDecoder, FrameSink, Transport, deliver
-from .urls import LinkUrl
+from ..tasks import cancel_and_wait
+from ..tlog import iter_tlog
+from ..urls import LinkUrl
+from .base import FrameDecoder, FrameSink, Transport, deliver
 
 log = logging.getLogger(__name__)
 
@@ -135,10 +135,7 @@ class ReplayTransport(Transport):
         return False
 
     async def close(self) -> None:
-        if self._runner is not None:
-            self._runner.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._runner
+        await cancel_and_wait(self._runner)
 
     async def _play(self, sink: FrameSink, frames: list[tuple[float, bytes]]) -> None:
         if not frames:

@@ -1,0 +1,176 @@
+"""What every transport shares: the sink it reports to, frame decoding, the reconnect backoff
+and the routing of frames to the peers that spoke from each system."""
+
+from __future__ import annotations
+
+import asyncio
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Hashable
+from typing import Any, Protocol
+
+from pymavlink.dialects.v20 import development as mavlink
+
+from ..urls import LinkUrl
+
+Peer = Hashable  # a UDP (host, port) address, a TCP client, or None for point-to-point links
+
+RECONNECT_BACKOFF_MIN_S = 0.5
+RECONNECT_BACKOFF_MAX_S = 5.0
+# Peers remembered per listening link; beyond this the longest silent one is forgotten.
+MAX_PEERS = 64
+
+
+class FrameSink(Protocol):
+    """What a transport reports to its link; every call happens on the event loop."""
+
+    def frame_received(self, msg: mavlink.MAVLink_message, peer: Peer) -> None: ...
+
+    def bad_frames_received(self, count: int) -> None: ...
+
+    def bytes_received(self, count: int) -> None: ...
+
+    def connection_changed(self, connected: bool) -> None: ...
+
+
+class FrameDecoder:
+    """pymavlink's parser in robust mode: garbage, bad CRC and truncation become counts."""
+
+    def __init__(self) -> None:
+        self._mav = mavlink.MAVLink(None)
+        self._mav.robust_parsing = True
+
+    def feed(self, data: bytes) -> tuple[list[mavlink.MAVLink_message], int]:
+        """Decode what ``data`` completes; return (good frames, bad frame count)."""
+        parsed = self._mav.parse_buffer(data) or []
+        good = [m for m in parsed if not isinstance(m, mavlink.MAVLink_bad_data)]
+        return good, len(parsed) - len(good)
+
+    def discard_partial(self) -> bool:
+        """Forget a frame still incomplete; True when there was one (it was truncated)."""
+        if self._mav.buf_len() == 0:
+            return False
+        self._mav.buf = bytearray()
+        self._mav.buf_index = 0
+        self._mav.expected_length = mavlink.HEADER_LEN_V1 + 2
+        return True
+
+
+FrameHook = Callable[[mavlink.MAVLink_message, Peer], None]
+
+
+def deliver(
+    sink: FrameSink,
+    decoder: FrameDecoder,
+    data: bytes,
+    peer: Peer,
+    *,
+    datagram: bool,
+    before_each: FrameHook | None = None,
+) -> None:
+    """Decode ``data`` and report it; ``before_each`` sees every good frame before the sink."""
+    sink.bytes_received(len(data))
+    frames, bad = decoder.feed(data)
+    if datagram and decoder.discard_partial():
+        bad += 1
+    if bad:
+        sink.bad_frames_received(bad)
+    for msg in frames:
+        if before_each is not None:
+            before_each(msg, peer)
+        sink.frame_received(msg, peer)
+
+
+def loop_time_s() -> float:
+    """The running event loop's clock (time.monotonic on Linux; virtual in tests)."""
+    return asyncio.get_running_loop().time()
+
+
+def host_port(address: Any) -> tuple[str, int]:
+    """(host, port) of a socket address, IPv4 or IPv6 (which has two more fields)."""
+    host, port = address[:2]
+    return str(host), int(port)
+
+
+class PeerRouter:
+    """Sends a frame for system S to the peer S was last heard from; others to every peer.
+
+    Peers heard from longer than ``expiry_s`` ago get no broadcasts (None: they always do).
+    Every call happens on the event loop, whose clock ages them.
+    """
+
+    def __init__(self, expiry_s: float | None, clock: Callable[[], float] = loop_time_s) -> None:
+        self._expiry_s = expiry_s
+        self._clock = clock
+        self._peer_by_system: dict[int, Peer] = {}
+        self._last_heard: dict[Peer, float] = {}
+
+    def heard(self, peer: Peer, src_system: int) -> bool:
+        """Note a frame from ``peer``; True when the peer was not known before."""
+        self._peer_by_system[src_system] = peer
+        is_new = self._last_heard.pop(peer, None) is None  # re-insert: order is recency
+        self._last_heard[peer] = self._clock()
+        if len(self._last_heard) > MAX_PEERS:
+            self.forget(next(iter(self._last_heard)))
+        return is_new
+
+    def forget(self, peer: Peer) -> None:
+        self._last_heard.pop(peer, None)
+        for system in [s for s, p in self._peer_by_system.items() if p == peer]:
+            del self._peer_by_system[system]
+
+    def peer_of(self, target_system: int | None) -> Peer | None:
+        """The peer a targeted frame should go to; None for broadcasts and unknown systems."""
+        if not target_system:
+            return None
+        peer = self._peer_by_system.get(target_system)
+        return peer if peer in self._last_heard else None
+
+    def destinations(self, target_system: int | None) -> list[Peer]:
+        peer = self.peer_of(target_system)
+        if peer is not None:
+            return [peer]
+        if not self._last_heard:
+            return []
+        if self._expiry_s is None:
+            return list(self._last_heard)
+        oldest_allowed = self._clock() - self._expiry_s
+        recent = [p for p, t in self._last_heard.items() if t >= oldest_allowed]
+        # Nobody recent: still answer the last one who spoke, as pymavlink's udpin does.
+        return recent or [next(reversed(self._last_heard))]
+
+
+class Transport(ABC):
+    """One connection of a link. ``start`` binds or connects; ``write`` never blocks."""
+
+    def __init__(self, address: LinkUrl) -> None:
+        self.address = address
+        self.reconnects = 0
+        # The wait before the next attempt to open a connection that failed or went away.
+        self.backoff_s = RECONNECT_BACKOFF_MIN_S
+        self._ever_connected = False
+        self._sink: FrameSink | None = None
+
+    @property
+    def local_address(self) -> tuple[str, int] | None:
+        """The bound (host, port), e.g. to learn an ephemeral port; None for serial."""
+        return None
+
+    @abstractmethod
+    async def start(self, sink: FrameSink) -> None: ...
+
+    @abstractmethod
+    def write(self, frame: bytes, target_system: int | None) -> bool: ...
+
+    @abstractmethod
+    async def close(self) -> None: ...
+
+    def _opened(self) -> None:
+        """A connection is up: count it if it is a reconnect, and retry quickly next time."""
+        if self._ever_connected:
+            self.reconnects += 1
+        self._ever_connected = True
+        self.backoff_s = RECONNECT_BACKOFF_MIN_S
+
+    def _waited_in_vain(self) -> None:
+        """A wait of ``backoff_s`` after a failed attempt is over: the next wait is longer."""
+        self.backoff_s = min(self.backoff_s * 2, RECONNECT_BACKOFF_MAX_S)
