@@ -54,13 +54,19 @@ def _server_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--log-level", default="info", help="debug|info|warning|error")
 
 
-def _serve_parser(sub: Any) -> None:
-    serve = sub.add_parser(
-        "serve",
-        help="run the dashboard (with a simulated vehicle unless --connect is given)",
-        argument_default=argparse.SUPPRESS,
+def _dashboard_command(sub: Any, name: str, help_text: str) -> argparse.ArgumentParser:
+    """A command that serves the dashboard; options left out keep the settings' values."""
+    parser: argparse.ArgumentParser = sub.add_parser(
+        name, help=help_text, argument_default=argparse.SUPPRESS
     )
-    _server_options(serve)
+    _server_options(parser)
+    return parser
+
+
+def _serve_parser(sub: Any) -> None:
+    serve = _dashboard_command(
+        sub, "serve", "run the dashboard (with a simulated vehicle unless --connect is given)"
+    )
     serve.add_argument(
         "--connect",
         action="append",
@@ -82,17 +88,16 @@ def _serve_parser(sub: Any) -> None:
 
 
 def _replay_parser(sub: Any) -> None:
-    replay = sub.add_parser(
+    replay = _dashboard_command(
+        sub,
         "replay",
-        help="serve the dashboard, read-only, from a recorded .tlog (no simulated vehicle)",
-        argument_default=argparse.SUPPRESS,
+        "serve the dashboard, read-only, from a recorded .tlog (no simulated vehicle)",
     )
     replay.add_argument("file", type=Path, help="a .tlog, e.g. logs/20260101T120000Z-....tlog")
     replay.add_argument(
         "--speed", type=float, default=1.0, help="recorded seconds per wall second (default 1)"
     )
     replay.add_argument("--loop", action="store_true", help="start over at the end of the file")
-    _server_options(replay)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -15,7 +15,6 @@ from pymavlink.dialects.v20 import development as mavlink
 from server.link.link import Link
 from server.link.tlog import TlogWriter, iter_tlog
 from server.link.transports.replay import vehicle_frames
-from server.link.urls import LinkUrlError, parse_link_url
 from server.link.vehicle import Vehicle
 from tests.link.conftest import wait_for
 
@@ -192,35 +191,6 @@ async def test_a_looping_replay_starts_over_and_keeps_the_vehicle(recording: Rec
     async with await Link.open(url, log_dir=None, heartbeat_timeout_s=0.5) as link:
         await wait_for(lambda: link.stats().frames_in > 2 * one_pass, 10.0, "a second pass")
         assert link.vehicles[1].connected
-
-
-@pytest.mark.parametrize(
-    ("url", "speed", "loop"),
-    [
-        ("tlog:/data/a.tlog", 1.0, False),
-        ("tlog:/data/a.tlog?speed=2.5", 2.5, False),
-        ("tlog:rel/a.tlog?speed=4&loop=1", 4.0, True),
-    ],
-)
-def test_tlog_url_carries_path_speed_and_loop(url: str, speed: float, loop: bool) -> None:
-    address = parse_link_url(url)
-    assert address.kind == "tlog"
-    assert address.path == url.removeprefix("tlog:").partition("?")[0]
-    assert (address.replay_speed, address.replay_loop) == (speed, loop)
-
-
-@pytest.mark.parametrize(
-    ("url", "complaint"),
-    [
-        ("tlog:", "missing file"),
-        ("tlog:a.tlog?speed=0", "positive"),
-        ("tlog:a.tlog?speed=fast", "not a number"),
-        ("tlog:a.tlog?rewind=1", "unknown option"),
-    ],
-)
-def test_bad_tlog_urls_say_what_is_wrong(url: str, complaint: str) -> None:
-    with pytest.raises(LinkUrlError, match=complaint):
-        parse_link_url(url)
 
 
 async def test_a_missing_recording_fails_to_open(tmp_path: Path) -> None:

@@ -38,6 +38,21 @@ def test_serial_urls_parse_to_device_and_baud(url: str, device: str, baud: int) 
 
 
 @pytest.mark.parametrize(
+    ("url", "speed", "loop"),
+    [
+        ("tlog:/data/a.tlog", 1.0, False),
+        ("tlog:/data/a.tlog?speed=2.5", 2.5, False),
+        ("tlog:rel/a.tlog?speed=4&loop=1", 4.0, True),
+    ],
+)
+def test_tlog_url_carries_path_speed_and_loop(url: str, speed: float, loop: bool) -> None:
+    address = parse_link_url(url)
+    assert address.kind == "tlog"
+    assert address.path == url.removeprefix("tlog:").partition("?")[0]
+    assert (address.replay_speed, address.replay_loop) == (speed, loop)
+
+
+@pytest.mark.parametrize(
     ("url", "complaint"),
     [
         ("", "empty"),
@@ -51,6 +66,10 @@ def test_serial_urls_parse_to_device_and_baud(url: str, device: str, baud: int) 
         ("udpbcast:255.255.255.255:24550", "not supported"),
         ("/dev/ttyACM0:12345", "not a standard rate"),
         ("quadcopter", "unrecognised"),
+        ("tlog:", "missing file"),
+        ("tlog:a.tlog?speed=0", "positive"),
+        ("tlog:a.tlog?speed=fast", "not a number"),
+        ("tlog:a.tlog?rewind=1", "unknown option"),
     ],
 )
 def test_bad_urls_are_refused_with_the_reason(url: str, complaint: str) -> None:

@@ -1,8 +1,14 @@
 """Vehicle commands. Each answers with the vehicle's real result: 200 ACCEPTED, 409 refused
-(MAV_RESULT and the vehicle's reason), 504 no answer, 503 link lost."""
+(MAV_RESULT and the vehicle's reason), 504 no answer, 503 link lost.
+
+There is one route per operation of :data:`server.api.operations.OPERATIONS`, taking that
+operation's body: the WebSocket control session runs the same table, so both refuse and
+answer alike. A body whose fields all have defaults may be left out."""
 
 from __future__ import annotations
 
+import inspect
+from collections.abc import Awaitable, Callable
 from typing import Annotated
 
 from fastapi import APIRouter, Body
@@ -12,24 +18,39 @@ from pydantic import BaseModel
 from server.api.deps import ControlledVehicle
 from server.api.errors import COMMAND_RESPONSES, command_response
 from server.api.operations import OPERATIONS
-from server.api.schemas import (
-    ArmBody,
-    CommandResultOut,
-    HomeBody,
-    ModeBody,
-    OffboardStartBody,
-    OffboardStopBody,
-    OriginBody,
-    RepositionBody,
-    TakeoffBody,
-    VtolTransitionBody,
-)
+from server.api.schemas import CommandResultOut
 from server.link import Vehicle
 
 router = APIRouter(
     prefix="/vehicles/{vehicle_id}",
     tags=["commands"],
     responses=COMMAND_RESPONSES,
+)
+
+# (operation, path, route name (it names the OpenAPI operationId), what the route documents)
+_ROUTES: tuple[tuple[str, str, str, str | None], ...] = (
+    ("arm", "/arm", "arm", None),
+    ("disarm", "/disarm", "disarm",
+     'Without force PX4 refuses unless landed ("Disarming denied: not landed").'),
+    ("takeoff", "/takeoff", "takeoff",
+     "Climb to altitude_m above home (default: the vehicle's MIS_TAKEOFF_ALT)."),
+    ("land", "/land", "land", None),
+    ("rtl", "/rtl", "rtl", None),
+    ("hold", "/hold", "hold", None),
+    ("mode", "/mode", "set_mode", "Resolves when the vehicle reports the mode (or says why not)."),
+    ("reposition", "/reposition", "reposition",
+     "MAV_CMD_DO_REPOSITION: fly there and hold (ends OFFBOARD)."),
+    ("vtol_transition", "/vtol/transition", "vtol_transition",
+     "With wait, resolves when EXTENDED_SYS_STATE shows the new VTOL state."),
+    ("origin", "/origin", "set_origin",
+     "SET_GPS_GLOBAL_ORIGIN, confirmed by the GPS_GLOBAL_ORIGIN the vehicle sends back."),
+    ("home", "/home", "set_home",
+     "MAV_CMD_DO_SET_HOME at the given point, or at the current position without a body."),
+    ("offboard_start", "/offboard/start", "offboard_start",
+     "Stream the setpoint (default: hold here) and switch to OFFBOARD; resolves when the\n"
+     "vehicle reports OFFBOARD."),
+    ("offboard_stop", "/offboard/stop", "offboard_stop",
+     "Switch to then_mode, then stop streaming."),
 )
 
 
@@ -39,88 +60,48 @@ async def run_operation(name: str, vehicle: Vehicle, body: BaseModel | None) -> 
     return command_response(result)
 
 
-@router.post("/arm", response_model=CommandResultOut)
-async def arm(
-    vehicle: ControlledVehicle, body: Annotated[ArmBody | None, Body()] = None
-) -> JSONResponse:
-    return await run_operation("arm", vehicle, body)
+def _body_parameter(model: type[BaseModel]) -> inspect.Parameter | None:
+    """The route's body: none for an empty model, optional when every field has a default."""
+    if not model.model_fields:
+        return None
+    if any(field.is_required() for field in model.model_fields.values()):
+        return inspect.Parameter("body", inspect.Parameter.KEYWORD_ONLY, annotation=model)
+    return inspect.Parameter(
+        "body",
+        inspect.Parameter.KEYWORD_ONLY,
+        annotation=Annotated[model | None, Body()],
+        default=None,
+    )
 
 
-@router.post("/disarm", response_model=CommandResultOut)
-async def disarm(
-    vehicle: ControlledVehicle, body: Annotated[ArmBody | None, Body()] = None
-) -> JSONResponse:
-    """Without force PX4 refuses unless landed ("Disarming denied: not landed")."""
-    return await run_operation("disarm", vehicle, body)
+_Endpoint = Callable[..., Awaitable[JSONResponse]]
 
 
-@router.post("/takeoff", response_model=CommandResultOut)
-async def takeoff(
-    vehicle: ControlledVehicle, body: Annotated[TakeoffBody | None, Body()] = None
-) -> JSONResponse:
-    """Climb to altitude_m above home (default: the vehicle's MIS_TAKEOFF_ALT)."""
-    return await run_operation("takeoff", vehicle, body)
+def _endpoint(name: str, route_name: str, doc: str | None) -> _Endpoint:
+    async def endpoint(vehicle: Vehicle, body: BaseModel | None = None) -> JSONResponse:
+        return await run_operation(name, vehicle, body)
+
+    parameters = [
+        inspect.Parameter(
+            "vehicle", inspect.Parameter.POSITIONAL_OR_KEYWORD, annotation=ControlledVehicle
+        )
+    ]
+    body = _body_parameter(OPERATIONS[name].body)
+    if body is not None:
+        parameters.append(body)
+    # FastAPI reads a route's parameters from its signature: this one is built from the table.
+    endpoint.__signature__ = inspect.Signature(  # type: ignore[attr-defined]
+        parameters, return_annotation=JSONResponse
+    )
+    endpoint.__name__ = endpoint.__qualname__ = route_name
+    endpoint.__doc__ = doc
+    return endpoint
 
 
-@router.post("/land", response_model=CommandResultOut)
-async def land(vehicle: ControlledVehicle) -> JSONResponse:
-    return await run_operation("land", vehicle, None)
-
-
-@router.post("/rtl", response_model=CommandResultOut)
-async def rtl(vehicle: ControlledVehicle) -> JSONResponse:
-    return await run_operation("rtl", vehicle, None)
-
-
-@router.post("/hold", response_model=CommandResultOut)
-async def hold(vehicle: ControlledVehicle) -> JSONResponse:
-    return await run_operation("hold", vehicle, None)
-
-
-@router.post("/mode", response_model=CommandResultOut)
-async def set_mode(vehicle: ControlledVehicle, body: ModeBody) -> JSONResponse:
-    """Resolves when the vehicle reports the mode (or says why not)."""
-    return await run_operation("mode", vehicle, body)
-
-
-@router.post("/reposition", response_model=CommandResultOut)
-async def reposition(vehicle: ControlledVehicle, body: RepositionBody) -> JSONResponse:
-    """MAV_CMD_DO_REPOSITION: fly there and hold (ends OFFBOARD)."""
-    return await run_operation("reposition", vehicle, body)
-
-
-@router.post("/vtol/transition", response_model=CommandResultOut)
-async def vtol_transition(vehicle: ControlledVehicle, body: VtolTransitionBody) -> JSONResponse:
-    """With wait, resolves when EXTENDED_SYS_STATE shows the new VTOL state."""
-    return await run_operation("vtol_transition", vehicle, body)
-
-
-@router.post("/origin", response_model=CommandResultOut)
-async def set_origin(vehicle: ControlledVehicle, body: OriginBody) -> JSONResponse:
-    """SET_GPS_GLOBAL_ORIGIN, confirmed by the GPS_GLOBAL_ORIGIN the vehicle sends back."""
-    return await run_operation("origin", vehicle, body)
-
-
-@router.post("/home", response_model=CommandResultOut)
-async def set_home(
-    vehicle: ControlledVehicle, body: Annotated[HomeBody | None, Body()] = None
-) -> JSONResponse:
-    """MAV_CMD_DO_SET_HOME at the given point, or at the current position without a body."""
-    return await run_operation("home", vehicle, body)
-
-
-@router.post("/offboard/start", response_model=CommandResultOut)
-async def offboard_start(
-    vehicle: ControlledVehicle, body: Annotated[OffboardStartBody | None, Body()] = None
-) -> JSONResponse:
-    """Stream the setpoint (default: hold here) and switch to OFFBOARD; resolves when the
-    vehicle reports OFFBOARD."""
-    return await run_operation("offboard_start", vehicle, body)
-
-
-@router.post("/offboard/stop", response_model=CommandResultOut)
-async def offboard_stop(
-    vehicle: ControlledVehicle, body: Annotated[OffboardStopBody | None, Body()] = None
-) -> JSONResponse:
-    """Switch to then_mode, then stop streaming."""
-    return await run_operation("offboard_stop", vehicle, body)
+for _name, _path, _route_name, _doc in _ROUTES:
+    router.add_api_route(
+        _path,
+        _endpoint(_name, _route_name, _doc),
+        methods=["POST"],
+        response_model=CommandResultOut,
+    )
