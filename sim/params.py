@@ -85,6 +85,11 @@ class ParamReader(Protocol):
     def get(self, name: str) -> float: ...
 
 
+def param_or(params: ParamReader | None, name: str, default: float) -> float:
+    """A parameter's current value, or the PX4 default given when there is no store."""
+    return default if params is None else float(params.get(name))
+
+
 def encode_param_value(value: float | int, param_type: int) -> float:
     """The float PX4 puts in PARAM_VALUE.param_value: INT32 bits copied, REAL32 as is."""
     if param_type == MAV_PARAM_TYPE_INT32:
