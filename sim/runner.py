@@ -12,8 +12,10 @@ import contextlib
 from dataclasses import dataclass
 from types import TracebackType
 
+from sim.clock import Clock
 from sim.endpoint import UdpLink, open_link
-from sim.vehicle import AirframeFactory, DefaultsFactory, LoopStats, SimVehicle, run_vehicles
+from sim.run_loop import LoopStats, run_vehicles
+from sim.vehicle import AirframeFactory, DefaultsFactory, SimVehicle
 
 # Spacing of the instances' spawn points along east, so they do not start inside each other.
 SPAWN_SPACING_M = 2.0
@@ -67,6 +69,7 @@ class SimCluster:
         *,
         airframe_factory: AirframeFactory | None = None,
         defaults_factory: DefaultsFactory | None = None,
+        clock: Clock | None = None,
     ) -> None:
         if count < 1:
             raise ValueError("count must be at least 1")
@@ -85,6 +88,7 @@ class SimCluster:
         self.loop_stats = LoopStats()
         self._airframe_factory = airframe_factory
         self._defaults_factory = defaults_factory
+        self._clock = clock
         self._task: asyncio.Task[None] | None = None
 
     async def start(self) -> None:
@@ -96,7 +100,8 @@ class SimCluster:
             raise
         vehicles = [inst.vehicle for inst in self.instances]
         self._task = asyncio.create_task(
-            run_vehicles(vehicles, self.speed, self.loop_stats), name="sim-vehicles"
+            run_vehicles(vehicles, self.speed, self.loop_stats, clock=self._clock),
+            name="sim-vehicles",
         )
 
     async def _open_instance(self, index: int) -> SimInstance:

@@ -11,15 +11,12 @@ from __future__ import annotations
 import math
 import struct
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any, Protocol, TypeAlias
+from typing import Any, Protocol
 
 from pymavlink.dialects.v20 import development as mavlink
 
-if TYPE_CHECKING:
-    from sim.vehicle import SimVehicle
-
-# pymavlink messages carry their fields as dynamic attributes.
-Message: TypeAlias = Any
+from sim.quat import euler_from_quat, yaw_from_quat
+from sim.vehicle_interface import Message, VehicleInterface
 
 ONBOARD_RATES_HZ: dict[int, float] = {
     mavlink.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
@@ -132,14 +129,6 @@ class MessageSink(Protocol):
     def send(self, msg: Message) -> None: ...
 
 
-def euler_of(q_wxyz: list[float]) -> tuple[float, float, float]:
-    w, x, y, z = q_wxyz
-    roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
-    pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))
-    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-    return roll, pitch, yaw
-
-
 def _pwm(output: float) -> int:
     return round(1000.0 + 1000.0 * min(max(output, 0.0), 1.0))
 
@@ -147,7 +136,7 @@ def _pwm(output: float) -> int:
 class MessageFactory:
     """Builds each telemetry message from the vehicle's current state."""
 
-    def __init__(self, vehicle: SimVehicle) -> None:
+    def __init__(self, vehicle: VehicleInterface) -> None:
         self._v = vehicle
         self.builders: dict[int, Callable[[], Message | None]] = {
             mavlink.MAVLINK_MSG_ID_HEARTBEAT: self.heartbeat,
@@ -204,7 +193,7 @@ class MessageFactory:
 
     def attitude(self) -> Message:
         truth = self._v.truth
-        roll, pitch, yaw = euler_of(truth.q_wxyz)
+        roll, pitch, yaw = euler_from_quat(truth.q_wxyz)
         p, q, r = truth.rates_body_rad_s
         return mavlink.MAVLink_attitude_message(self._boot_ms, roll, pitch, yaw, p, q, r)
 
@@ -230,7 +219,7 @@ class MessageFactory:
         geo = v.geodetic()
         vn, ve, vd = v.truth.velocity_ned_m_s
         relative_alt_m = v.commander.home.position_ned_m[2] - v.truth.position_ned_m[2]
-        heading_cdeg = round(math.degrees(euler_of(v.truth.q_wxyz)[2]) % 360.0 * 100.0) % 36000
+        heading_cdeg = round(math.degrees(yaw_from_quat(v.truth.q_wxyz)) % 360.0 * 100.0) % 36000
         return mavlink.MAVLink_global_position_int_message(
             self._boot_ms, round(geo.lat_deg * 1e7), round(geo.lon_deg * 1e7),
             round(geo.alt_m * 1000.0), round(relative_alt_m * 1000.0),
@@ -240,7 +229,7 @@ class MessageFactory:
     def vfr_hud(self) -> Message:
         v = self._v
         vn, ve, vd = v.truth.velocity_ned_m_s
-        heading_deg = round(math.degrees(euler_of(v.truth.q_wxyz)[2]) % 360.0) % 360
+        heading_deg = round(math.degrees(yaw_from_quat(v.truth.q_wxyz)) % 360.0) % 360
         throttle = round(100.0 * v.model.power_fraction) if v.commander.armed else 0
         return mavlink.MAVLink_vfr_hud_message(
             v.truth.airspeed_m_s, math.hypot(vn, ve), heading_deg, throttle,

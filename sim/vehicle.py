@@ -1,19 +1,17 @@
 """One simulated PX4 vehicle: airframe model, commander, navigator, MAVLink in and out.
 
-`SimVehicle.step()` is the 250 Hz heartbeat of everything; `run_vehicles()` calls it
-for a group of vehicles on absolute sim-time deadlines (t0 + k·dt), optionally faster
-than real time.
+`SimVehicle.step()` is the 250 Hz heartbeat of everything and the only thing that moves
+its time (`now_s`, sim seconds); `sim.run_loop.run_vehicles()` calls it for a group of
+vehicles, paced by a wall clock.
 """
 
 from __future__ import annotations
 
 import asyncio
 import math
-import time
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol, TypeAlias
 
 from pymavlink.dialects.v20 import development as mavlink
 
@@ -23,45 +21,38 @@ from sim.battery import Battery
 from sim.commander import Commander
 from sim.geo import GeoPoint, LocalOrigin
 from sim.land_detector import LandDetector, MavLandedState
-from sim.navigator import Navigator, RtlPhase, yaw_of
+from sim.navigator import Navigator
 from sim.params import ParamReader, ParamStore
+from sim.quat import yaw_from_quat
 from sim.receiver import Receiver
+from sim.rtl_direct import RtlPhase
+from sim.sim_run import PHYSICS_DT_S
 from sim.streams import NORMAL_RATES_HZ, ONBOARD_RATES_HZ, MessageFactory, StreamSet
 from sim.topics import ControlSetpoint, TrajectorySetpoint, VehicleStateTruth, VtolState
+from sim.vehicle_interface import Link, Message
 
-# pymavlink messages carry their fields as dynamic attributes.
-Message: TypeAlias = Any
+__all__ = [
+    "BOOT_TIME_S",
+    "PHYSICS_DT_S",
+    "READY_TIME_S",
+    "AirframeFactory",
+    "DefaultsFactory",
+    "Link",
+    "SimVehicle",
+    "StatusText",
+]
 
-PHYSICS_DT_S = 0.004
 # PX4 SITL: first HEARTBEAT about 1.5 s after start, GPS fix and ready to arm about 3 s.
 BOOT_TIME_S = 1.5
 READY_TIME_S = 3.0
 # While disarmed on the ground home follows the vehicle; refresh it this often.
 HOME_FOLLOW_PERIOD_S = 1.0
-# The stepping loop runs STEPS_PER_WAKE steps (20 ms of sim time) per wake-up, and wakes
-# no more often than MIN_WAKE_PERIOD_S of wall time when faster than real time. Waking
-# alone costs this machine ~2 % of a core at 125 Hz and ~0.8 % at 50 Hz, and a batch runs
-# on warmer caches; nothing outside can tell: every message keeps its own sim timestamp
-# and every stream its rate, the 100 Hz ATTITUDE reaching UDP peers in pairs.
-STEPS_PER_WAKE = 5
-MIN_WAKE_PERIOD_S = 0.008
 STATUSTEXT_MAX_LEN = 50
 STATUSTEXT_HISTORY = 200
 
 
 AirframeFactory = Callable[[str, ParamReader], AirframeModel]
 DefaultsFactory = Callable[[str], dict[str, float | int]]
-
-
-class Link(Protocol):
-    """A MAVLink link as the vehicle sees it (sim.endpoint.UdpLink or a test double)."""
-
-    name: str
-
-    @property
-    def has_remote(self) -> bool: ...
-
-    def send(self, msg: Message) -> None: ...
 
 
 @dataclass
@@ -215,7 +206,7 @@ class SimVehicle:
         home = self.commander.home
         geo = self.geodetic()
         home.position_ned_m = list(self.truth.position_ned_m)
-        home.yaw_rad = yaw_of(self.truth)
+        home.yaw_rad = yaw_from_quat(self.truth.q_wxyz)
         home.lat_deg, home.lon_deg, home.alt_m = geo.lat_deg, geo.lon_deg, geo.alt_m
         home.valid = True
         self._home_refreshed_s = self.now_s
@@ -299,71 +290,3 @@ class SimVehicle:
         if isinstance(setpoint, TrajectorySetpoint):
             self.last_trajectory_setpoint = setpoint
         return setpoint
-
-
-@dataclass
-class LoopStats:
-    """How late the stepping loop wakes up against its intended times (wall clock)."""
-
-    steps: int = 0
-    max_lag_s: float = 0.0
-    lag_sum_s: float = 0.0
-    wakeups: int = 0
-
-    @property
-    def mean_lag_s(self) -> float:
-        return self.lag_sum_s / self.wakeups if self.wakeups else 0.0
-
-    def reset(self) -> None:
-        self.steps = 0
-        self.max_lag_s = 0.0
-        self.lag_sum_s = 0.0
-        self.wakeups = 0
-
-
-class Steppable(Protocol):
-    def step(self, dt_s: float = PHYSICS_DT_S) -> None: ...
-
-
-async def run_vehicles(
-    vehicles: Sequence[Steppable],
-    speed: float = 1.0,
-    stats: LoopStats | None = None,
-    dt_s: float = PHYSICS_DT_S,
-    max_catch_up_steps: int = 50,
-) -> None:
-    """Step every vehicle at 1/dt_s sim-Hz, sim time running `speed` times wall time.
-
-    Deadlines are absolute (t0 + k·dt/speed) so timer jitter does not accumulate; it wakes
-    every STEPS_PER_WAKE steps (at least MIN_WAKE_PERIOD_S apart) and runs the steps due.
-    After a stall it catches up at most `max_catch_up_steps` steps (or four wake-ups'
-    worth, if more) at once and then drops the remainder, so sim time slows down rather
-    than jumping.
-    """
-    stats = stats if stats is not None else LoopStats()
-    wall_dt = dt_s / speed
-    wake_period_s = max(STEPS_PER_WAKE * wall_dt, MIN_WAKE_PERIOD_S)
-    # never less than a few wake-ups' worth, or a fast sim could never catch up at all
-    catch_up_limit = max(max_catch_up_steps, 4 * math.ceil(wake_period_s / wall_dt))
-    t0 = time.perf_counter()
-    k = 0
-    intended_wake = t0
-    while True:
-        now = time.perf_counter()
-        due = int((now - t0) / wall_dt)
-        lag = now - intended_wake
-        stats.wakeups += 1
-        if lag > 0:
-            stats.lag_sum_s += lag
-            stats.max_lag_s = max(stats.max_lag_s, lag)
-        todo = due - k
-        if todo > catch_up_limit:
-            t0 += (todo - catch_up_limit) * wall_dt
-            todo = catch_up_limit
-        for _ in range(todo):
-            for vehicle in vehicles:
-                vehicle.step(dt_s)
-        k += max(todo, 0)
-        stats.steps += max(todo, 0)
-        intended_wake = max(t0 + (k + 1) * wall_dt, now + wake_period_s)
-        await asyncio.sleep(max(intended_wake - time.perf_counter(), 0.0))

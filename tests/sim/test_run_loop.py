@@ -1,43 +1,98 @@
-"""The stepping loop: absolute sim-time deadlines, steps batched per wake-up, catch-up."""
+"""The stepping loop: absolute sim-time deadlines, steps batched per wake-up, catch-up.
+
+It runs on a ManualClock, so wall time is whatever the test says it is: pacing is checked
+exactly and no test waits for real time to pass.
+"""
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-import time
+from collections.abc import AsyncIterator, Awaitable, Callable
 
-from sim.vehicle import PHYSICS_DT_S, STEPS_PER_WAKE, LoopStats, run_vehicles
+import pytest
+
+from sim.clock import ManualClock
+from sim.run_loop import MIN_WAKE_PERIOD_S, STEPS_PER_WAKE, LoopStats, run_vehicles
+from sim.sim_run import PHYSICS_DT_S
 
 
 class CountingVehicle:
     def __init__(self) -> None:
         self.now_s = 0.0
+        self.steps = 0
 
     def step(self, dt_s: float = PHYSICS_DT_S) -> None:
         self.now_s += dt_s
+        self.steps += 1
 
 
-async def run_for(speed: float, wall_s: float) -> tuple[CountingVehicle, LoopStats, float]:
-    vehicle, stats = CountingVehicle(), LoopStats()
-    task = asyncio.create_task(run_vehicles([vehicle], speed, stats))
-    start = time.perf_counter()
-    await asyncio.sleep(wall_s)
-    elapsed = time.perf_counter() - start
-    task.cancel()
-    with contextlib.suppress(asyncio.CancelledError):
-        await task
-    return vehicle, stats, elapsed
+class Loop:
+    """run_vehicles on a ManualClock with one CountingVehicle."""
+
+    def __init__(self, speed: float, max_catch_up_steps: int) -> None:
+        self.clock = ManualClock()
+        self.vehicle = CountingVehicle()
+        self.stats = LoopStats()
+        self.task = asyncio.create_task(run_vehicles(
+            [self.vehicle], speed, self.stats, max_catch_up_steps=max_catch_up_steps,
+            clock=self.clock))
 
 
-async def test_real_time_runs_several_steps_per_wake_up_and_keeps_up() -> None:
-    vehicle, stats, elapsed = await run_for(1.0, 0.6)
-    assert vehicle.now_s >= 0.8 * elapsed
-    assert vehicle.now_s <= elapsed + 2 * STEPS_PER_WAKE * PHYSICS_DT_S
-    assert stats.steps / stats.wakeups >= STEPS_PER_WAKE - 1
+LoopStarter = Callable[..., Awaitable[Loop]]
 
 
-async def test_much_faster_than_real_time_still_keeps_its_speed() -> None:
+@pytest.fixture
+async def start_loop() -> AsyncIterator[LoopStarter]:
+    loops: list[Loop] = []
+
+    async def start(speed: float, max_catch_up_steps: int = 50) -> Loop:
+        loop = Loop(speed, max_catch_up_steps)
+        loops.append(loop)
+        await loop.clock.advance(0.0)  # the task takes its start time
+        return loop
+
+    yield start
+    for loop in loops:
+        loop.task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await loop.task
+
+
+async def test_real_time_runs_several_steps_per_wake_up_and_keeps_up(
+    start_loop: LoopStarter,
+) -> None:
+    loop = await start_loop(1.0)
+    await loop.clock.advance(0.6)
+    # the steps due by the last wake-up have run, and none ahead of time
+    due = round(0.6 / PHYSICS_DT_S)
+    assert due - STEPS_PER_WAKE <= loop.vehicle.steps <= due
+    assert loop.stats.steps / loop.stats.wakeups >= STEPS_PER_WAKE - 1
+    assert loop.stats.max_lag_s == 0.0
+
+
+async def test_much_faster_than_real_time_still_keeps_its_speed(start_loop: LoopStarter) -> None:
     # 100x: 200 steps are due per 8 ms wake-up, more than the default catch-up limit of 50
     speed = 100.0
-    vehicle, _, elapsed = await run_for(speed, 0.5)
-    assert vehicle.now_s >= 0.7 * speed * elapsed
+    loop = await start_loop(speed)
+    await loop.clock.advance(0.5)
+    assert loop.vehicle.now_s == pytest.approx(speed * 0.5, abs=speed * MIN_WAKE_PERIOD_S)
+    # wake-ups are MIN_WAKE_PERIOD_S apart however many steps each one runs
+    assert loop.stats.wakeups <= 0.5 / MIN_WAKE_PERIOD_S + 2
+
+
+async def test_after_a_stall_catches_up_a_bounded_number_of_steps_then_slows_down(
+    start_loop: LoopStarter,
+) -> None:
+    loop = await start_loop(1.0, max_catch_up_steps=50)
+    await loop.clock.advance(0.1)
+    before = loop.vehicle.steps
+    loop.clock.stall(2.0)  # 500 steps' worth of wall time with nobody woken
+    await loop.clock.advance(0.0)
+    assert loop.vehicle.steps - before == 50
+    # woken late by the stall, less the part of a wake period that was still to come
+    assert 2.0 - STEPS_PER_WAKE * PHYSICS_DT_S <= loop.stats.max_lag_s <= 2.0
+    # from then on it keeps pace again, the dropped steps never made up
+    await loop.clock.advance(1.0)
+    resumed = loop.vehicle.steps - before - 50
+    assert round(1.0 / PHYSICS_DT_S) - STEPS_PER_WAKE <= resumed <= round(1.0 / PHYSICS_DT_S)
