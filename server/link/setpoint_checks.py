@@ -7,10 +7,11 @@ all) is refused here with the reason, before it reaches the link.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Literal
 
 from server.link.geo import ground_distance_m
+from server.link.setpoint_kinds import Attitude, BodyRates, PositionGlobal, RawLocal, kind_fields
 from server.link.setpoints import (
     IGNORE_ACCELERATION,
     IGNORE_POSITION,
@@ -18,17 +19,8 @@ from server.link.setpoints import (
     MAV_FRAME_BODY_NED,
     MAV_FRAME_LOCAL_NED,
     POSITION_TARGET_TYPEMASK_FORCE_SET,
-    AccelerationNed,
-    Attitude,
-    BodyRates,
     LocalFields,
-    PositionGlobal,
-    PositionNed,
-    PositionVelocityNed,
-    RawLocal,
     Setpoint,
-    VelocityBody,
-    VelocityNed,
     local_fields,
 )
 
@@ -103,7 +95,7 @@ def check(sp: Setpoint, vclass: VehicleClass, envelope: Envelope, ref: Reference
 
     ``sp`` must be resolved (offsets already turned into positions).
     """
-    _check_finite(sp)
+    _check_quantities(sp)
     local = local_fields(sp)
     if isinstance(sp, RawLocal) and local is not None:
         _check_raw(local)
@@ -113,16 +105,24 @@ def check(sp: Setpoint, vclass: VehicleClass, envelope: Envelope, ref: Reference
             f"PX4 ignores {kind.replace('_', '+')} setpoints on {_CLASS_LABEL[vclass]}",
             field="type",
         )
-    if isinstance(sp, Attitude | BodyRates) and not 0.0 <= sp.thrust <= 1.0:
-        raise SetpointRejected("thrust must be within 0..1", field="thrust", limit=1.0)
     _check_envelope(sp, local, envelope, ref)
 
 
-def _check_finite(sp: Setpoint) -> None:
-    for f in fields(sp):
-        value = getattr(sp, f.name)
-        if isinstance(value, float) and not math.isfinite(value):
-            raise SetpointRejected(f"{f.name} is not a finite number", field=f.name)
+def _check_quantities(sp: Setpoint) -> None:
+    """Every number finite and within its kind's limits (which the wire can carry)."""
+    for field in kind_fields(type(sp)):
+        value = getattr(sp, field.name)
+        if field.quantity is None or value is None:
+            continue
+        if not math.isfinite(value):
+            raise SetpointRejected(f"{field.name} is not a finite number", field=field.name)
+        if not field.quantity.admits(value):
+            q = field.quantity
+            raise SetpointRejected(
+                f"{field.name} must be within {q.ge:g}..{q.le:g}",
+                field=field.name,
+                limit=q.le if value > q.le else q.ge,
+            )
 
 
 def _check_raw(local: LocalFields) -> None:
@@ -147,19 +147,14 @@ def _present(type_mask: int) -> tuple[bool, bool, bool]:
 
 
 def _kind(sp: Setpoint, local: LocalFields | None) -> Kind:
+    """What PX4 makes of a setpoint: for a local one, whatever its type_mask leaves in, as
+    PX4's mavlink_receiver reads it, so a new local kind needs nothing here."""
     if isinstance(sp, BodyRates):
         return "rates"
     if isinstance(sp, Attitude):
         return "attitude"
-    if isinstance(sp, PositionGlobal | PositionNed):
+    if isinstance(sp, PositionGlobal) or local is None:
         return "position"
-    if isinstance(sp, VelocityNed | VelocityBody):
-        return "velocity"
-    if isinstance(sp, AccelerationNed):
-        return "acceleration"
-    if isinstance(sp, PositionVelocityNed):
-        return "position_velocity"
-    assert local is not None
     pos, vel, acc = _present(local.type_mask)
     if acc:
         return "acceleration"

@@ -1,5 +1,6 @@
-"""Offboard setpoint types (units in every field) and their exact MAVLink encoding.
+"""Offboard setpoints to MAVLink: resolving offsets and the exact encoding of each kind.
 
+The kinds themselves (fields, units, limits) are defined in ``setpoint_kinds``.
 Type masks follow MAVSDK's offboard plugin, so a PX4 that flies MAVSDK flies these:
 position+yaw 2552, velocity NED+yaw 2503, velocity body+yaw rate 1479, ...
 """
@@ -7,10 +8,27 @@ position+yaw 2552, velocity NED+yaw 2503, velocity body+yaw rate 1479, ...
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, replace
-from typing import Literal
+from dataclasses import dataclass, replace
 
 from pymavlink.dialects.v20 import development as mavlink
+
+from server.link.setpoint_kinds import (
+    SETPOINT_KINDS,
+    AccelerationNed,
+    AltFrame,
+    Attitude,
+    BodyRates,
+    OffsetBody,
+    OffsetNed,
+    PositionGlobal,
+    PositionNed,
+    PositionVelocityNed,
+    RawLocal,
+    Setpoint,
+    VelocityBody,
+    VelocityNed,
+    describe,
+)
 
 MAV_FRAME_GLOBAL_INT = 5
 MAV_FRAME_LOCAL_NED = 1
@@ -60,134 +78,34 @@ IGNORE_BODY_RATES = (
     | ATTITUDE_TARGET_TYPEMASK_BODY_YAW_RATE_IGNORE
 )
 
-AltFrame = Literal["amsl", "relative", "terrain"]
-GLOBAL_FRAMES: dict[str, int] = {
+__all__ = [
+    "SETPOINT_KINDS",
+    "AccelerationNed",
+    "AltFrame",
+    "Attitude",
+    "BodyRates",
+    "LocalFields",
+    "OffsetBody",
+    "OffsetNed",
+    "PositionGlobal",
+    "PositionNed",
+    "PositionVelocityNed",
+    "RawLocal",
+    "SentSetpoint",
+    "Setpoint",
+    "VelocityBody",
+    "VelocityNed",
+    "describe",
+    "encode",
+    "local_fields",
+    "resolve",
+]
+
+GLOBAL_FRAMES: dict[AltFrame, int] = {
     "amsl": MAV_FRAME_GLOBAL_INT,
     "relative": MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
     "terrain": MAV_FRAME_GLOBAL_TERRAIN_ALT_INT,
 }
-
-
-@dataclass(frozen=True)
-class PositionNed:
-    north_m: float
-    east_m: float
-    down_m: float
-    yaw_deg: float | None = None
-
-
-@dataclass(frozen=True)
-class VelocityNed:
-    north_m_s: float
-    east_m_s: float
-    down_m_s: float
-    yaw_deg: float | None = None
-    yaw_rate_deg_s: float | None = None
-
-
-@dataclass(frozen=True)
-class VelocityBody:
-    forward_m_s: float
-    right_m_s: float
-    down_m_s: float
-    yaw_rate_deg_s: float | None = None
-
-
-@dataclass(frozen=True)
-class AccelerationNed:
-    north_m_s2: float
-    east_m_s2: float
-    down_m_s2: float
-    yaw_deg: float | None = None
-
-
-@dataclass(frozen=True)
-class PositionVelocityNed:
-    north_m: float
-    east_m: float
-    down_m: float
-    north_m_s: float
-    east_m_s: float
-    down_m_s: float
-    north_m_s2: float | None = None
-    east_m_s2: float | None = None
-    down_m_s2: float | None = None
-    yaw_deg: float | None = None
-
-
-@dataclass(frozen=True)
-class PositionGlobal:
-    lat_deg: float
-    lon_deg: float
-    alt_m: float
-    alt_frame: AltFrame = "amsl"
-    yaw_deg: float | None = None
-
-
-@dataclass(frozen=True)
-class Attitude:
-    roll_deg: float
-    pitch_deg: float
-    yaw_deg: float
-    thrust: float
-
-
-@dataclass(frozen=True)
-class BodyRates:
-    roll_rate_deg_s: float
-    pitch_rate_deg_s: float
-    yaw_rate_deg_s: float
-    thrust: float
-
-
-@dataclass(frozen=True)
-class OffsetNed:
-    north_m: float
-    east_m: float
-    down_m: float
-    yaw_deg: float | None = None
-
-
-@dataclass(frozen=True)
-class OffsetBody:
-    forward_m: float
-    right_m: float
-    down_m: float
-    yaw_deg: float | None = None
-
-
-@dataclass(frozen=True)
-class RawLocal:
-    """SET_POSITION_TARGET_LOCAL_NED as-is, for experts; yaw in radians as on the wire."""
-
-    frame: int
-    type_mask: int
-    x: float = 0.0
-    y: float = 0.0
-    z: float = 0.0
-    vx: float = 0.0
-    vy: float = 0.0
-    vz: float = 0.0
-    afx: float = 0.0
-    afy: float = 0.0
-    afz: float = 0.0
-    yaw: float = 0.0
-    yaw_rate: float = 0.0
-
-
-Setpoint = (
-    PositionNed
-    | VelocityNed
-    | VelocityBody
-    | AccelerationNed
-    | PositionVelocityNed
-    | PositionGlobal
-    | Attitude
-    | BodyRates
-    | OffsetNed
-    | OffsetBody
-    | RawLocal
-)
 
 
 @dataclass(frozen=True)
@@ -198,11 +116,6 @@ class SentSetpoint:
     message: str
     frame: int
     type_mask: int
-
-
-def describe(sp: Setpoint) -> dict[str, object]:
-    """JSON-able form: the type name plus its fields."""
-    return {"type": type(sp).__name__, **asdict(sp)}
 
 
 def resolve(
@@ -398,7 +311,7 @@ def encode(
             math.radians(sp.yaw_rate_deg_s),
         )
     else:
-        raise TypeError(f"offsets must be resolved before encoding: {sp!r}")
+        raise TypeError(f"no MAVLink form for {sp!r} (offsets are resolved before encoding)")
     msg = mav.set_attitude_target_encode(
         time_boot_ms, target_system, target_component, mask, q, *rates, sp.thrust
     )

@@ -110,7 +110,7 @@ async def test_offset_body_setpoint_goes_out_as_local_ned_target(scripted: Scrip
     assert sent.frame == msg.coordinate_frame == 1
     assert (msg.x, msg.y, msg.z) == pytest.approx((10.0, 2.0, -6.0), abs=1e-5)
     assert scripted.vehicle.snapshot().setpoint == {
-        "type": "PositionNed",
+        "type": "position_ned",
         "north_m": pytest.approx(10.0),
         "east_m": pytest.approx(2.0),
         "down_m": -6.0,

@@ -114,6 +114,22 @@ def test_thrust_outside_zero_to_one_is_refused() -> None:
 @pytest.mark.parametrize(
     ("setpoint", "field", "limit"),
     [
+        (sp.PositionNed(0, 0, -5, yaw_deg=400), "yaw_deg", 360.0),
+        (sp.VelocityNed(-2e3, 0, 0), "north_m_s", -1e3),
+        (sp.RawLocal(frame=1, type_mask=2552, x=1e39), "x", 1e6),
+    ],
+)  # fmt: skip
+def test_numbers_outside_their_kinds_limits_are_refused_naming_the_field(
+    setpoint: sp.Setpoint, field: str, limit: float
+) -> None:
+    refusal = _refusal(setpoint)
+
+    assert (refusal.field, refusal.limit) == (field, limit)
+
+
+@pytest.mark.parametrize(
+    ("setpoint", "field", "limit"),
+    [
         (sp.PositionNed(0, 0, -130), "max_alt_rel_m", 120.0),
         (sp.PositionNed(400, 400, -10), "max_distance_m", 500.0),
         (sp.VelocityNed(10, 10, 0), "max_speed_xy_m_s", 12.0),

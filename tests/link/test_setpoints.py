@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import math
+import struct
 
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
 from server.link import setpoints as sp
+from server.link.setpoint_kinds import kind_fields
 from server.link.setpoints import encode, resolve
 
 MAV = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
@@ -113,8 +115,27 @@ def test_missing_yaw_is_pinned_to_the_current_heading_but_yaw_rate_is_kept() -> 
     assert resolve(with_rate, (0, 0, 0), 30.0) == with_rate
 
 
-def test_describe_names_the_type_and_its_fields() -> None:
+def test_describe_names_the_kind_and_its_fields() -> None:
     assert sp.describe(sp.VelocityBody(1, 0, 0)) == {
-        "type": "VelocityBody", "forward_m_s": 1, "right_m_s": 0, "down_m_s": 0,
+        "type": "velocity_body", "forward_m_s": 1, "right_m_s": 0, "down_m_s": 0,
         "yaw_rate_deg_s": None,
     }  # fmt: skip
+
+
+def test_every_kind_has_one_snake_case_name_and_units_on_its_numbers() -> None:
+    assert list(sp.SETPOINT_KINDS) == [kind.kind for kind in sp.SETPOINT_KINDS.values()]
+    for name, kind in sp.SETPOINT_KINDS.items():
+        assert name == name.lower()
+        assert " " not in name
+        for field in kind_fields(kind):
+            if field.quantity is not None:
+                assert field.quantity.ge < field.quantity.le, (name, field.name)
+
+
+def test_every_limit_is_packable_into_the_float32_the_wire_carries() -> None:
+    for kind in sp.SETPOINT_KINDS.values():
+        for field in kind_fields(kind):
+            if field.quantity is not None:
+                for bound in (field.quantity.ge, field.quantity.le):
+                    struct.pack("<f", bound)
+                    assert abs(bound) < 3.4e38

@@ -1,0 +1,110 @@
+"""Command requests (arm, takeoff, modes, reposition, home, offboard) and their result."""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from pydantic import AfterValidator, BaseModel, Field, model_validator
+
+from server.api.schemas.common import AltM, LatDeg, LonDeg, StrictBody, YawDeg
+from server.api.schemas.setpoints import SetpointBody
+from server.link import PX4_MODE_NAMES
+
+
+class ArmBody(StrictBody):
+    force: bool = False
+
+
+class TakeoffBody(StrictBody):
+    altitude_m: Annotated[float | None, Field(gt=0.0, le=1.0e4)] = Field(
+        None, description="above home; None = the vehicle's MIS_TAKEOFF_ALT"
+    )
+
+
+def _known_mode(mode: str) -> str:
+    if mode not in PX4_MODE_NAMES:
+        raise ValueError(f"unknown mode {mode!r}; PX4 modes are {', '.join(PX4_MODE_NAMES)}")
+    return mode
+
+
+ModeName = Annotated[
+    str,
+    Field(json_schema_extra={"enum": list(PX4_MODE_NAMES)}, examples=["OFFBOARD", "HOLD"]),
+    AfterValidator(_known_mode),
+]
+
+
+class ModeBody(StrictBody):
+    mode: ModeName
+
+
+class RepositionBody(StrictBody):
+    lat_deg: LatDeg
+    lon_deg: LonDeg
+    alt_amsl_m: AltM | None = None
+    alt_rel_m: AltM | None = None
+    ground_speed_m_s: Annotated[float | None, Field(gt=0.0, le=1.0e3)] = None
+    yaw_deg: YawDeg = None
+    loiter_radius_m: Annotated[float | None, Field(gt=0.0, le=1.0e5)] = None
+
+    @model_validator(mode="after")
+    def _one_altitude(self) -> RepositionBody:
+        if self.alt_amsl_m is not None and self.alt_rel_m is not None:
+            raise ValueError("give alt_amsl_m or alt_rel_m, not both")
+        return self
+
+
+class VtolTransitionBody(StrictBody):
+    to: Literal["fixed_wing", "multicopter"]
+    immediate: bool = False
+    wait: bool = True
+
+
+class OriginBody(StrictBody):
+    lat_deg: LatDeg
+    lon_deg: LonDeg
+    alt_amsl_m: AltM
+
+
+class HomeBody(StrictBody):
+    """All three fields, or none for the current position."""
+
+    lat_deg: LatDeg | None = None
+    lon_deg: LonDeg | None = None
+    alt_amsl_m: AltM | None = None
+
+    @model_validator(mode="after")
+    def _lat_lon_together(self) -> HomeBody:
+        if (self.lat_deg is None) != (self.lon_deg is None):
+            raise ValueError("give lat_deg and lon_deg together, or neither")
+        return self
+
+
+class OffboardStartBody(StrictBody):
+    setpoint: SetpointBody | None = None
+
+
+class OffboardStopBody(StrictBody):
+    then_mode: ModeName = "HOLD"
+
+
+CommandResultName = Literal[
+    "ACCEPTED",
+    "TEMPORARILY_REJECTED",
+    "DENIED",
+    "UNSUPPORTED",
+    "FAILED",
+    "IN_PROGRESS",
+    "CANCELLED",
+    "TIMEOUT",
+    "LINK_LOST",
+    "NOT_CONFIRMED",
+]
+
+
+class CommandResultOut(BaseModel):
+    command: str = Field(examples=["MAV_CMD_COMPONENT_ARM_DISARM"])
+    result: CommandResultName
+    result_code: int | None = Field(description="MAV_RESULT as received")
+    elapsed_ms: float
+    reason: str | None = Field(None, description="the vehicle's STATUSTEXT explaining a refusal")

@@ -1,0 +1,65 @@
+"""What every request and error shares: strict bodies, error answers, the health answer,
+and the command bodies' number types with the limits and units the link defines."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+from pydantic.fields import FieldInfo
+
+from server.link.setpoint_kinds import (
+    AltitudeM,
+    Degrees,
+    LatitudeDeg,
+    LongitudeDeg,
+    Quantity,
+    quantity_of,
+)
+
+
+def limits_of(hint: Any) -> FieldInfo:
+    """pydantic's form of the Quantity in a link type: its range, and its unit as x-unit."""
+    quantity = quantity_of(hint)
+    if not isinstance(quantity, Quantity):
+        raise TypeError(f"{hint!r} carries no Quantity")
+    limits: FieldInfo = Field(ge=quantity.ge, le=quantity.le)
+    if quantity.unit is not None:
+        limits = Field(ge=quantity.ge, le=quantity.le, json_schema_extra={"x-unit": quantity.unit})
+    return limits
+
+
+LatDeg = Annotated[float, limits_of(LatitudeDeg)]
+LonDeg = Annotated[float, limits_of(LongitudeDeg)]
+AltM = Annotated[float, limits_of(AltitudeM)]
+YawDeg = Annotated[float | None, limits_of(Degrees)]
+
+
+class StrictBody(BaseModel):
+    """A request body: unknown fields and NaN/inf are a 422, never passed on."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+
+class ErrorDetail(BaseModel):
+    reason: str
+    field: str | None = None
+    limit: float | None = None
+    holder: str | None = None
+
+
+class ErrorOut(BaseModel):
+    detail: ErrorDetail
+
+
+class HealthOut(BaseModel):
+    status: Literal["ok"]
+    version: str
+    vehicles: int
+    read_only: bool = Field(False, description="a replayed recording: control calls answer 403")
+
+
+class UnprocessableOut(BaseModel):
+    detail: list[dict[str, Any]] | ErrorDetail = Field(
+        description="pydantic's list of field errors, or the envelope/PX4 refusal"
+    )
