@@ -183,7 +183,7 @@ def test_keyboard_velocity_moves_the_vehicle_and_space_holds_it(page: Any,
     assert math.hypot(moved["north_m"] - start["north_m"], moved["east_m"] - start["east_m"]) > 1.0
     held = wait_for(
         "a position hold with the vehicle stopped",
-        lambda: (s := vehicle_state(api))["setpoint"]["type"] == "PositionNed"
+        lambda: (s := vehicle_state(api))["setpoint"]["type"] == "position_ned"
         and speed_m_s(s) < 0.3 and s, 15.0)
     assert held["mode"] == "OFFBOARD"
     time.sleep(1.0)
