@@ -15,22 +15,22 @@ from server.link import CommandOutcome, CommandResult, ParamError, SetpointRejec
 
 
 class ApiError(Exception):
+    """A failure the client can act on: the status, a reason, and what names the cause
+    (``field`` the offending input, ``limit`` the bound it broke, ``holder`` who holds the
+    lease); keys given as None are left out of ``detail``."""
+
     def __init__(
         self,
         status_code: int,
         reason: str,
         *,
-        field: str | None = None,
-        limit: float | None = None,
-        holder: str | None = None,
         headers: dict[str, str] | None = None,
+        **cause: str | float | None,
     ) -> None:
         super().__init__(reason)
         self.status_code = status_code
         self.detail: dict[str, Any] = {"reason": reason}
-        for key, value in (("field", field), ("limit", limit), ("holder", holder)):
-            if value is not None:
-                self.detail[key] = value
+        self.detail.update((key, value) for key, value in cause.items() if value is not None)
         self.headers = headers
 
 

@@ -9,18 +9,8 @@ from typing import Any
 
 from pydantic import BaseModel
 
+from server.api import schemas
 from server.api.errors import ApiError
-from server.api.schemas import (
-    ArmBody,
-    HomeBody,
-    ModeBody,
-    OffboardStartBody,
-    OffboardStopBody,
-    OriginBody,
-    RepositionBody,
-    TakeoffBody,
-    VtolTransitionBody,
-)
 from server.link import CommandResult, Vehicle
 from server.link.geo import ground_distance_m
 
@@ -35,15 +25,15 @@ class Operation:
     run: Callable[[Vehicle, Any], Awaitable[CommandResult]]
 
 
-async def arm(vehicle: Vehicle, body: ArmBody) -> CommandResult:
+async def arm(vehicle: Vehicle, body: schemas.ArmBody) -> CommandResult:
     return await vehicle.arm(force=body.force)
 
 
-async def disarm(vehicle: Vehicle, body: ArmBody) -> CommandResult:
+async def disarm(vehicle: Vehicle, body: schemas.ArmBody) -> CommandResult:
     return await vehicle.disarm(force=body.force)
 
 
-async def takeoff(vehicle: Vehicle, body: TakeoffBody) -> CommandResult:
+async def takeoff(vehicle: Vehicle, body: schemas.TakeoffBody) -> CommandResult:
     limit = vehicle.envelope.max_alt_rel_m
     if body.altitude_m is not None and limit is not None and body.altitude_m > limit:
         raise ApiError(422, "takeoff altitude above the envelope", field="altitude_m", limit=limit)
@@ -62,11 +52,11 @@ async def hold(vehicle: Vehicle, _: NoBody) -> CommandResult:
     return await vehicle.hold()
 
 
-async def set_mode(vehicle: Vehicle, body: ModeBody) -> CommandResult:
+async def set_mode(vehicle: Vehicle, body: schemas.ModeBody) -> CommandResult:
     return await vehicle.set_mode(body.mode)
 
 
-async def reposition(vehicle: Vehicle, body: RepositionBody) -> CommandResult:
+async def reposition(vehicle: Vehicle, body: schemas.RepositionBody) -> CommandResult:
     _check_reposition_envelope(vehicle, body)
     return await vehicle.reposition(
         body.lat_deg,
@@ -79,47 +69,47 @@ async def reposition(vehicle: Vehicle, body: RepositionBody) -> CommandResult:
     )
 
 
-async def vtol_transition(vehicle: Vehicle, body: VtolTransitionBody) -> CommandResult:
+async def vtol_transition(vehicle: Vehicle, body: schemas.VtolTransitionBody) -> CommandResult:
     return await vehicle.vtol_transition(
         body.to == "fixed_wing", immediate=body.immediate, wait=body.wait
     )
 
 
-async def set_origin(vehicle: Vehicle, body: OriginBody) -> CommandResult:
+async def set_origin(vehicle: Vehicle, body: schemas.OriginBody) -> CommandResult:
     return await vehicle.set_gps_origin(body.lat_deg, body.lon_deg, body.alt_amsl_m)
 
 
-async def set_home(vehicle: Vehicle, body: HomeBody) -> CommandResult:
+async def set_home(vehicle: Vehicle, body: schemas.HomeBody) -> CommandResult:
     return await vehicle.set_home(body.lat_deg, body.lon_deg, body.alt_amsl_m)
 
 
-async def offboard_start(vehicle: Vehicle, body: OffboardStartBody) -> CommandResult:
+async def offboard_start(vehicle: Vehicle, body: schemas.OffboardStartBody) -> CommandResult:
     setpoint = body.setpoint.to_link() if body.setpoint is not None else None
     return await vehicle.start_offboard(setpoint)
 
 
-async def offboard_stop(vehicle: Vehicle, body: OffboardStopBody) -> CommandResult:
+async def offboard_stop(vehicle: Vehicle, body: schemas.OffboardStopBody) -> CommandResult:
     return await vehicle.stop_offboard(body.then_mode)
 
 
 OPERATIONS: dict[str, Operation] = {
-    "arm": Operation(ArmBody, arm),
-    "disarm": Operation(ArmBody, disarm),
-    "takeoff": Operation(TakeoffBody, takeoff),
+    "arm": Operation(schemas.ArmBody, arm),
+    "disarm": Operation(schemas.ArmBody, disarm),
+    "takeoff": Operation(schemas.TakeoffBody, takeoff),
     "land": Operation(NoBody, land),
     "rtl": Operation(NoBody, rtl),
     "hold": Operation(NoBody, hold),
-    "mode": Operation(ModeBody, set_mode),
-    "reposition": Operation(RepositionBody, reposition),
-    "vtol_transition": Operation(VtolTransitionBody, vtol_transition),
-    "origin": Operation(OriginBody, set_origin),
-    "home": Operation(HomeBody, set_home),
-    "offboard_start": Operation(OffboardStartBody, offboard_start),
-    "offboard_stop": Operation(OffboardStopBody, offboard_stop),
+    "mode": Operation(schemas.ModeBody, set_mode),
+    "reposition": Operation(schemas.RepositionBody, reposition),
+    "vtol_transition": Operation(schemas.VtolTransitionBody, vtol_transition),
+    "origin": Operation(schemas.OriginBody, set_origin),
+    "home": Operation(schemas.HomeBody, set_home),
+    "offboard_start": Operation(schemas.OffboardStartBody, offboard_start),
+    "offboard_stop": Operation(schemas.OffboardStopBody, offboard_stop),
 }
 
 
-def _check_reposition_envelope(vehicle: Vehicle, body: RepositionBody) -> None:
+def _check_reposition_envelope(vehicle: Vehicle, body: schemas.RepositionBody) -> None:
     """The envelope guards repositions as it guards setpoints: they fly the vehicle too."""
     envelope = vehicle.envelope
     home = vehicle.snapshot().home
