@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections import deque
+from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
@@ -15,12 +16,12 @@ _MIN_SPACING_S = 0.2
 _MIN_STEP_M = 0.05
 
 
+@dataclass(eq=False)
 class Trail:
-    """Samples at most every 0.2 s (and only when the vehicle moved), kept for 60 s."""
+    """Samples at most every 0.2 s (and only when the vehicle moved), kept for ``span_s``."""
 
-    def __init__(self, span_s: float = TRAIL_SPAN_S) -> None:
-        self.span_s = span_s
-        self._points: deque[tuple[float, Vec3]] = deque()
+    span_s: float = TRAIL_SPAN_S
+    _points: deque[tuple[float, Vec3]] = field(default_factory=deque, init=False, repr=False)
 
     def __len__(self) -> int:
         return len(self._points)
