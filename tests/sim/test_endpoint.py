@@ -3,32 +3,42 @@
 from __future__ import annotations
 
 import asyncio
-import socket
 import time
-from collections.abc import AsyncIterator, Callable
-from typing import Any
+from collections.abc import AsyncIterator
+from typing import Any, cast
 
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
+from sim.clock import ManualClock
 from sim.endpoint import MavlinkCodec, UdpLink
+from sim.run_loop import MIN_WAKE_PERIOD_S
 from sim.runner import SimCluster
+from sim.vehicle import PHYSICS_DT_S, READY_TIME_S
 from tests.sim.conftest import PointMassAirframe, point_mass_defaults
 
 
-class UdpPeer:
+class UdpPeer(asyncio.DatagramProtocol):
     """A GCS-like UDP socket on an ephemeral port, decoding what it receives."""
 
     def __init__(self) -> None:
-        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.sock.bind(("127.0.0.1", 0))
-        self.sock.setblocking(False)
-        self.port: int = self.sock.getsockname()[1]
-        self._mav = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+        self.port = 0
         self.received: list[Any] = []
+        self._transport: asyncio.DatagramTransport | None = None
+        self._arrived = asyncio.Event()
+        self._mav = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        self._transport = cast(asyncio.DatagramTransport, transport)
+        self.port = transport.get_extra_info("sockname")[1]
+
+    def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
+        self.received.extend(mavlink.MAVLink(None).parse_buffer(data) or [])
+        self._arrived.set()
 
     def send_bytes(self, data: bytes, port: int) -> None:
-        self.sock.sendto(data, ("127.0.0.1", port))
+        assert self._transport is not None
+        self._transport.sendto(data, ("127.0.0.1", port))
 
     def encode(self, msg: Any) -> bytes:
         data: bytes = msg.pack(self._mav)
@@ -38,41 +48,31 @@ class UdpPeer:
     def send(self, msg: Any, port: int) -> None:
         self.send_bytes(self.encode(msg), port)
 
-    def drain(self) -> None:
-        parser = mavlink.MAVLink(None)
-        while True:
-            try:
-                data = self.sock.recv(65536)
-            except BlockingIOError:
-                return
-            self.received.extend(parser.parse_buffer(data) or [])
-
     async def wait_for(self, type_name: str, timeout_s: float = 5.0,
                        sysid: int | None = None) -> Any:
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
-            self.drain()
-            for m in self.received:
-                if m.get_type() == type_name and (sysid is None or m.get_srcSystem() == sysid):
-                    return m
-            await asyncio.sleep(0.01)
-        raise AssertionError(f"no {type_name} within {timeout_s} s")
+        """The first message of that type (and sender) received, waiting for it to come."""
+        async with asyncio.timeout(timeout_s):
+            while True:
+                for m in self.received:
+                    if m.get_type() == type_name and (sysid is None or m.get_srcSystem() == sysid):
+                        return m
+                self._arrived.clear()
+                await self._arrived.wait()
 
     def close(self) -> None:
-        self.sock.close()
+        if self._transport is not None:
+            self._transport.close()
 
 
-async def poll_until(condition: Callable[[], bool], timeout_s: float) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"condition not met within {timeout_s} s")
-        await asyncio.sleep(0.01)
+async def open_peer() -> UdpPeer:
+    _, peer = await asyncio.get_running_loop().create_datagram_endpoint(
+        UdpPeer, local_addr=("127.0.0.1", 0))
+    return peer
 
 
 @pytest.fixture
 async def peer() -> AsyncIterator[UdpPeer]:
-    p = UdpPeer()
+    p = await open_peer()
     yield p
     p.close()
 
@@ -94,7 +94,7 @@ async def test_answers_whoever_talks_on_either_socket(peer: UdpPeer) -> None:
         peer.send(heartbeat(), inst.api_local_port)
         hb = await peer.wait_for("HEARTBEAT")
         assert (hb.get_srcSystem(), hb.get_srcComponent()) == (1, 1)
-        other = UdpPeer()
+        other = await open_peer()
         try:
             other.send(heartbeat(), inst.gcs_local_port)
             await other.wait_for("HEARTBEAT")
@@ -120,6 +120,7 @@ async def test_garbage_truncated_and_bad_crc_datagrams_are_counted_and_dropped(
     peer: UdpPeer,
 ) -> None:
     async with cluster(speed=5.0) as sim:
+        await sim.wait_ready(timeout_s=5.0)
         inst = sim.instances[0]
         port = inst.api_local_port
         arm = mavlink.MAVLink_command_long_message(
@@ -130,15 +131,13 @@ async def test_garbage_truncated_and_bad_crc_datagrams_are_counted_and_dropped(
         peer.send_bytes(b"this is not mavlink", port)
         peer.send_bytes(frame[: len(frame) // 2], port)
         peer.send_bytes(bytes(bad_crc), port)
-        await poll_until(lambda: inst.api_link.counters.rx_datagrams >= 3, 5.0)
-        assert inst.rx_dropped == 3
-        assert inst.api_link.counters.rx_messages == 0
-        assert not inst.vehicle.armed
-        await sim.wait_ready(timeout_s=5.0)
-        peer.send(mavlink.MAVLink_command_long_message(
-            1, 1, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0), port)
+        peer.send(arm, port)
+        # datagrams from one socket to another on loopback arrive in order: once the ack
+        # of the last one is back, the three before it have been dealt with
         ack = await peer.wait_for("COMMAND_ACK")
         assert ack.result == mavlink.MAV_RESULT_ACCEPTED
+        assert inst.rx_dropped == 3
+        assert inst.api_link.counters.rx_messages == 1
 
 
 def test_codec_decodes_two_frames_in_one_datagram() -> None:
@@ -150,19 +149,24 @@ def test_codec_decodes_two_frames_in_one_datagram() -> None:
 
 
 async def test_speed_runs_sim_time_faster_than_wall_time() -> None:
+    clock = ManualClock()
+    async with cluster(speed=5.0, clock=clock) as sim:
+        await clock.advance(1.0)
+        # sim time is 5 s less what is due after the last wake-up (one wake period)
+        now_s = sim.instances[0].vehicle.now_s
+        assert 5.0 - 5.0 * MIN_WAKE_PERIOD_S - PHYSICS_DT_S <= now_s <= 5.0 + 1e-9
+
+
+async def test_wait_ready_returns_after_boot_at_the_speed_asked_for() -> None:
     async with cluster(speed=5.0) as sim:
         start_wall = time.monotonic()
-        start_sim = sim.instances[0].vehicle.now_s
-        await asyncio.sleep(1.0)
-        ratio = (sim.instances[0].vehicle.now_s - start_sim) / (time.monotonic() - start_wall)
-        assert 3.5 < ratio <= 5.2
-
-
-async def test_wait_ready_returns_after_boot(peer: UdpPeer) -> None:
-    async with cluster(speed=5.0) as sim:
         await sim.wait_ready(timeout_s=5.0)
-        assert sim.instances[0].vehicle.ready
-        assert sim.instances[0].vehicle.now_s >= 3.0
+        elapsed_wall = time.monotonic() - start_wall
+        vehicle = sim.instances[0].vehicle
+        assert vehicle.ready
+        assert vehicle.now_s >= READY_TIME_S
+        # real time: sim time runs five times as fast, give or take the loop's start-up
+        assert 3.5 < vehicle.now_s / elapsed_wall <= 5.2
 
 
 class _UnpackableMessage:
