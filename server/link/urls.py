@@ -46,12 +46,17 @@ class LinkUrlError(ValueError):
 
 @dataclass(frozen=True)
 class LinkUrl:
+    """A parsed connection string; ``kind`` says which of the groups below is set."""
+
     kind: LinkKind
-    url: str
+    url: str  # as the user typed it, for logs and errors
+    # udpin, udpout, tcp, tcpin
     host: str | None = None
     port: int | None = None
+    # serial
     device: str | None = None
     baud: int | None = None
+    # tlog
     path: str | None = None
     replay_speed: float = 1.0
     replay_loop: bool = False
