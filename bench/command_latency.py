@@ -17,52 +17,29 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
-import json
 import os
 import socket
 import statistics
-import sys
 import time
 from collections.abc import AsyncIterator, Sequence
-from pathlib import Path
 from typing import Any
 
 from bench._results import machine_info, write_results
 from server.link import Link, Vehicle
+from server.simproc import SimInstance, SimProcess
 
-PROJECT_ROOT = Path(__file__).resolve().parent.parent
 READY_TIMEOUT_S = 30.0
 
 
 @contextlib.asynccontextmanager
-async def simulated_vehicle() -> AsyncIterator[dict[str, int]]:
-    """``python -m sim`` with ephemeral ports; yields its ready line's first instance."""
-    proc = await asyncio.create_subprocess_exec(
-        sys.executable, "-m", "sim", "--api-port", "0", "--gcs-port", "0",
-        "--api-local-port", "0", "--gcs-local-port", "0", "--ready-json",
-        "--exit-on-stdin-eof",
-        stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE, cwd=PROJECT_ROOT,
-    )
+async def simulated_vehicle() -> AsyncIterator[SimInstance]:
+    """``python -m sim`` started as ``skyhelm serve`` starts it, on ephemeral ports."""
+    sim = SimProcess()
+    instances = await sim.start()
     try:
-        assert proc.stdout is not None
-        while True:
-            line = await asyncio.wait_for(proc.stdout.readline(), READY_TIMEOUT_S)
-            if not line:
-                raise RuntimeError("the simulated vehicle exited before it was ready")
-            with contextlib.suppress(ValueError):
-                ready = json.loads(line)
-                if isinstance(ready, dict) and ready.get("event") == "ready":
-                    break
-        instance: dict[str, int] = ready["instances"][0]
-        yield instance
+        yield instances[0]
     finally:
-        if proc.stdin is not None:
-            proc.stdin.close()
-        try:
-            await asyncio.wait_for(proc.wait(), 5.0)
-        except TimeoutError:
-            proc.kill()
-            await proc.wait()
+        await sim.stop()
 
 
 async def _until_ready(vehicle: Vehicle) -> None:
@@ -114,13 +91,13 @@ async def run(count: int) -> dict[str, Any]:
 
     load_average_before = os.getloadavg()
     async with simulated_vehicle() as instance:
-        link = await Link.open(f"udpout:127.0.0.1:{instance['api_local_port']}",
+        link = await Link.open(instance.url,
                                name="bench-latency")
         drone = mavsdk.System(port=_free_tcp_port())
         try:
             vehicle = await asyncio.wait_for(link.subscribe_vehicles().get(), READY_TIMEOUT_S)
             await _until_ready(vehicle)
-            await drone.connect(system_address=f"udpout://127.0.0.1:{instance['gcs_local_port']}")
+            await drone.connect(system_address=f"udpout://127.0.0.1:{instance.gcs_local_port}")
             async for state in drone.core.connection_state():
                 if state.is_connected:
                     break

@@ -12,6 +12,8 @@ import signal
 import sys
 from dataclasses import dataclass
 
+from server.link.tasks import cancel_and_wait
+
 log = logging.getLogger(__name__)
 
 READY_TIMEOUT_S = 30.0
@@ -144,9 +146,6 @@ class SimProcess:
                 await process.wait()
         if process.stdin is not None:
             process.stdin.close()
-        if self._reader is not None:
-            self._reader.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._reader
-            self._reader = None
+        await cancel_and_wait(self._reader)
+        self._reader = None
         log.info("simulated vehicle stopped (exit code %s)", process.returncode)
