@@ -10,11 +10,11 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-import time
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType, TracebackType
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from pymavlink.dialects.v20 import development as mavlink
 
@@ -22,9 +22,7 @@ from .link_stats import LinkStats, SequenceGapCounter
 from .tlog import TlogWriter
 from .transports import Peer, Transport, create_transport
 from .urls import LinkUrl, parse_link_url
-
-if TYPE_CHECKING:
-    from .vehicle import Vehicle
+from .vehicle import Vehicle
 
 log = logging.getLogger(__name__)
 
@@ -37,15 +35,7 @@ HEARTBEAT_CHECK_PERIOD_S = 0.5
 # subscribe_vehicles() queues hold this many announcements and drop the oldest beyond it.
 VEHICLE_QUEUE_SIZE = 32
 
-VehicleFactory = Callable[..., "Vehicle"]
-
-
-def _vehicle_class() -> VehicleFactory:
-    # Imported on first discovery: the vehicle side imports this module's types.
-    from .vehicle import Vehicle
-
-    factory: VehicleFactory = Vehicle
-    return factory
+VehicleFactory = Callable[..., Vehicle]
 
 
 class Link:
@@ -69,6 +59,8 @@ class Link:
         self.heartbeat_timeout_s = heartbeat_timeout_s
         self.mav = mavlink.MAVLink(None, srcSystem=gcs_sysid, srcComponent=gcs_compid)
         self.frames_dropped_out = 0  # frames send() could not write (no peer, not connected)
+        # taken once: stats() may be called from other threads (the scene)
+        self._loop = asyncio.get_running_loop()
         self._transport = transport
         self._tlog = tlog
         self._vehicle_factory = vehicle_factory
@@ -112,7 +104,7 @@ class Link:
             tlog=tlog, heartbeat_timeout_s=heartbeat_timeout_s, vehicle_factory=vehicle_factory,
         )
         try:
-            await transport.start(_LinkReceiver(link))
+            await transport.start(_LinkReceiver.of(link))
         except BaseException:
             if tlog is not None:
                 await tlog.close()
@@ -166,8 +158,8 @@ class Link:
         return self._closed
 
     def now(self) -> float:
-        """Monotonic seconds, the clock the link's heartbeat ages use."""
-        return time.monotonic()
+        """Seconds on the event loop's clock, the one the link's heartbeat ages use."""
+        return self._loop.time()
 
     def subscribe_vehicles(self) -> asyncio.Queue[Vehicle]:
         """A bounded queue of vehicles as they are discovered (already known ones first);
@@ -258,7 +250,7 @@ class Link:
             vehicle.set_connected(True)
 
     def _discover(self, sysid: int, heartbeat: mavlink.MAVLink_message) -> None:
-        factory = self._vehicle_factory or _vehicle_class()
+        factory = self._vehicle_factory or Vehicle
         vehicle = factory(link=self, sysid=sysid, compid=MAV_COMP_ID_AUTOPILOT1,
                           heartbeat=heartbeat)
         self._vehicles[sysid] = vehicle
@@ -313,23 +305,21 @@ class Link:
                 self._vehicles[sysid].set_connected(False)
 
 
+@dataclass(frozen=True)
 class _LinkReceiver:
     """The link's side of the transport's FrameSink protocol, kept off Link's public surface."""
 
-    def __init__(self, link: Link) -> None:
-        self._link = link
+    frame_received: Callable[[mavlink.MAVLink_message, Peer], None]
+    bad_frames_received: Callable[[int], None]
+    bytes_received: Callable[[int], None]
+    connection_changed: Callable[[bool], None]
 
-    def frame_received(self, msg: mavlink.MAVLink_message, peer: Peer) -> None:
-        self._link._frame_received(msg)
-
-    def bad_frames_received(self, count: int) -> None:
-        self._link._bad_frames_received(count)
-
-    def bytes_received(self, count: int) -> None:
-        self._link._bytes_received(count)
-
-    def connection_changed(self, connected: bool) -> None:
-        self._link._connection_changed(connected)
+    @classmethod
+    def of(cls, link: Link) -> _LinkReceiver:
+        return cls(
+            lambda msg, _peer: link._frame_received(msg), link._bad_frames_received,
+            link._bytes_received, link._connection_changed,
+        )  # fmt: skip
 
 
 def _header_ids(frame: bytes | bytearray) -> tuple[int, int, int]:

@@ -9,10 +9,12 @@ from __future__ import annotations
 import asyncio
 import math
 import struct
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import development as mavlink
+
+from server.link.requests import Requester
 
 MAV_PARAM_TYPE_UINT8 = 1
 MAV_PARAM_TYPE_INT8 = 2
@@ -80,27 +82,20 @@ class ParamClient:
 
     def __init__(
         self,
+        requests: Requester,
         *,
-        send: Callable[[mavlink.MAVLink_message], None],
-        mav: mavlink.MAVLink,
-        target_system: int,
-        target_component: int,
         timeout_s: float = 0.5,
-        retries: int = 3,
         list_quiet_s: float = 0.5,
         list_rounds: int = 5,
     ) -> None:
-        self._send = send
-        self._mav = mav
-        self._target = (target_system, target_component)
-        self.timeout_s = timeout_s
-        self.retries = retries
+        self._requests = requests
+        self.timeout_s = timeout_s  # per try; the number of retries is the requester's
         self.list_quiet_s = list_quiet_s
         self.list_rounds = list_rounds
         self.cache: dict[str, ParamEntry] = {}
         self._by_index: dict[int, str] = {}
         self._count: int | None = None
-        self._changed = asyncio.Event()
+        self._received = 0  # PARAM_VALUEs taken in, so a wait can tell a new one came
         self._set_lock = asyncio.Lock()
 
     def handle_param_value(self, msg: mavlink.MAVLink_param_value_message) -> None:
@@ -115,30 +110,17 @@ class ParamClient:
         if 0 <= msg.param_index < 0xFFFF:
             self._by_index[msg.param_index] = name
         self._count = msg.param_count
-        self._changed.set()
+        self._received += 1
 
-    async def _wait_change(self, timeout_s: float) -> bool:
-        self._changed.clear()
-        try:
-            await asyncio.wait_for(self._changed.wait(), timeout_s)
-        except TimeoutError:
-            return False
-        return True
+    async def _wait_value(self, timeout_s: float) -> bool:
+        """True when a PARAM_VALUE arrives within timeout_s."""
+        seen = self._received
+        return await self._requests.wait_until(lambda: self._received != seen, timeout_s)
 
-    async def _request_until(self, request: Callable[[], None], done: Callable[[], bool]) -> bool:
-        """Send ``request`` up to 1 + retries times until ``done()``."""
-        loop = asyncio.get_running_loop()
-        for _ in range(self.retries + 1):
-            request()
-            deadline = loop.time() + self.timeout_s
-            while not done():
-                remaining = deadline - loop.time()
-                if remaining <= 0:
-                    break
-                await self._wait_change(remaining)
-            if done():
-                return True
-        return False
+    def _request_read(self, wire_name: bytes, index: int = -1) -> None:
+        """PARAM_REQUEST_READ by name, or by index when one is given."""
+        requests = self._requests
+        requests.send(requests.mav.param_request_read_encode(*requests.target, wire_name, index))
 
     async def get(self, name: str) -> float | int:
         """Read one parameter. TimeoutError when the vehicle stays silent: PX4 never answers
@@ -146,10 +128,9 @@ class ParamClient:
         wire_name = name.encode("ascii")[:PARAM_ID_LEN]
         self.cache.pop(name, None)
 
-        def request() -> None:
-            self._send(self._mav.param_request_read_encode(*self._target, wire_name, -1))
-
-        if not await self._request_until(request, lambda: name in self.cache):
+        if not await self._requests.until(
+            lambda: self._request_read(wire_name), lambda: name in self.cache, self.timeout_s
+        ):
             raise TimeoutError(f"no answer for parameter {name}")
         return self.cache[name].value
 
@@ -161,24 +142,23 @@ class ParamClient:
         """PARAM_REQUEST_LIST, then PARAM_REQUEST_READ by index for whatever went missing."""
         self._by_index.clear()
         self._count = None
-        self._send(self._mav.param_request_list_encode(*self._target))
-        got_any = False
-        for _ in range(self.retries + 1):
-            if await self._wait_change(self.timeout_s):
-                got_any = True
-                break
-            self._send(self._mav.param_request_list_encode(*self._target))
-        if not got_any:
+
+        requests = self._requests
+
+        def request() -> None:
+            requests.send(requests.mav.param_request_list_encode(*requests.target))
+
+        if not await requests.until(request, lambda: self._count is not None, self.timeout_s):
             raise TimeoutError("no answer to PARAM_REQUEST_LIST")
         for _ in range(self.list_rounds):
-            while await self._wait_change(self.list_quiet_s):
+            while await self._wait_value(self.list_quiet_s):
                 if self._missing() == []:
                     break
             missing = self._missing()
             if not missing:
                 return {name: self.cache[name].value for name in self._by_index.values()}
             for index in missing:
-                self._send(self._mav.param_request_read_encode(*self._target, b"", index))
+                self._request_read(b"", index)
         raise TimeoutError(
             f"parameters still missing after {self.list_rounds} rounds: "
             f"{len(self._missing())} of {self._count}"
@@ -201,10 +181,14 @@ class ParamClient:
             wire_name = name.encode("ascii")[:PARAM_ID_LEN]
             self.cache.pop(name, None)
 
-            def request() -> None:
-                self._send(self._mav.param_set_encode(*self._target, wire_name, wire, param_type))
+            requests = self._requests
 
-            if not await self._request_until(request, lambda: name in self.cache):
+            def request() -> None:
+                requests.send(
+                    requests.mav.param_set_encode(*requests.target, wire_name, wire, param_type)
+                )
+
+            if not await requests.until(request, lambda: name in self.cache, self.timeout_s):
                 raise TimeoutError(f"no echo for parameter {name}")
             echoed = self.cache[name].value
             if not same_value(echoed, value, param_type):

@@ -71,24 +71,21 @@ def _pwm_to_unit(pwm: float) -> float:
 
 
 class Telemetry:
-    """The latest reported value of each state part, updated by handle()."""
+    """The latest reported value of each state part, kept by one handler per message type."""
 
     def __init__(
         self,
         *,
-        heartbeat: mavlink.MAVLink_heartbeat_message | None,
+        clock: Callable[[], float],
         texts: RecentTexts,
         publish: Callable[[str, dict[str, object]], None],
-        on_mode: Callable[[], None],
     ) -> None:
+        self._clock = clock
         self._texts = texts
         self._publish = publish
-        self._on_mode = on_mode
-        self._assembler = StatusTextAssembler(time.monotonic)
+        self._mode_listeners: list[Callable[[], None]] = []
+        self._assembler = StatusTextAssembler(clock)
         self._current_mode_s: float | None = None
-        self.mav_type = heartbeat.type if heartbeat is not None else 0
-        self.autopilot = heartbeat.autopilot if heartbeat is not None else 0
-        self.last_heartbeat_s = time.monotonic()
         self.mode = "UNKNOWN"
         self.user_mode: str | None = None
         self.armed = False
@@ -111,7 +108,7 @@ class Telemetry:
         self.actuators: tuple[float, ...] = ()
         self.statustext: list[StatusText] = []
         self.rtl_phase: str | None = None
-        self._handlers: dict[str, Callable[[Any], None]] = {
+        self.handlers: dict[str, Callable[[Any], None]] = {
             "HEARTBEAT": self._on_heartbeat,
             "CURRENT_MODE": self._on_current_mode,
             "EXTENDED_SYS_STATE": self._on_extended_sys_state,
@@ -130,13 +127,13 @@ class Telemetry:
             "STATUSTEXT": self._on_statustext,
         }
 
-    def handle(self, msg: mavlink.MAVLink_message) -> bool:
-        """Take in a message; False if it carries no telemetry."""
-        handler = self._handlers.get(msg.get_type())
-        if handler is None:
-            return False
-        handler(msg)
-        return True
+    def on_mode(self, listener: Callable[[], None]) -> None:
+        """Call ``listener()`` whenever a HEARTBEAT or CURRENT_MODE told the mode."""
+        self._mode_listeners.append(listener)
+
+    def _mode_reported(self) -> None:
+        for listener in self._mode_listeners:
+            listener()
 
     @property
     def landed_state_name(self) -> str:
@@ -154,9 +151,6 @@ class Telemetry:
                 self.rtl_phase = None
 
     def _on_heartbeat(self, msg: mavlink.MAVLink_heartbeat_message) -> None:
-        self.last_heartbeat_s = time.monotonic()
-        self.mav_type = msg.type
-        self.autopilot = msg.autopilot
         self.system_status = enum_name("MAV_STATE", msg.system_status, "MAV_STATE_")
         armed = bool(msg.base_mode & modes.MAV_MODE_FLAG_SAFETY_ARMED)
         if armed != self.armed:
@@ -164,18 +158,18 @@ class Telemetry:
             self._publish("armed", {"armed": armed})
         current_mode_fresh = (
             self._current_mode_s is not None
-            and time.monotonic() - self._current_mode_s < CURRENT_MODE_FRESH_S
+            and self._clock() - self._current_mode_s < CURRENT_MODE_FRESH_S
         )
         if msg.base_mode & modes.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED and not current_mode_fresh:
             self._set_mode(modes.name_from_custom_mode(msg.custom_mode))
-            self._on_mode()
+            self._mode_reported()
 
     def _on_current_mode(self, msg: mavlink.MAVLink_current_mode_message) -> None:
-        self._current_mode_s = time.monotonic()
+        self._current_mode_s = self._clock()
         self._set_mode(modes.name_from_custom_mode(msg.custom_mode))
         if msg.intended_custom_mode:
             self.user_mode = modes.name_from_custom_mode(msg.intended_custom_mode)
-        self._on_mode()
+        self._mode_reported()
 
     def _on_extended_sys_state(self, msg: mavlink.MAVLink_extended_sys_state_message) -> None:
         if 0 <= msg.landed_state < len(LANDED_STATE_NAMES):

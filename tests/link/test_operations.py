@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import asyncio
 import math
 
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
 from server.link.commands import CommandOutcome
-from server.link.vehicle import DEFAULT_TELEMETRY_RATES_HZ
+from server.link.telemetry_requests import DEFAULT_TELEMETRY_RATES_HZ
 from tests.link.conftest import ScriptedSession, open_scripted, wait_for
 
 HOME_ALT_M = 489.4
@@ -175,7 +174,7 @@ async def test_telemetry_is_requested_on_connection_and_refusals_are_noted() -> 
             lambda: len(peer.commands(mavlink.MAV_CMD_REQUEST_MESSAGE)) == 2,
             what="telemetry requests",
         )
-        await asyncio.sleep(0.05)
+        await session.vehicle_heard_all()  # the answers to them
 
         intervals = {
             int(m.param1): m.param2 for m in peer.commands(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL)

@@ -1,0 +1,206 @@
+"""Action: what a vehicle is told to do (arm, take off, land, return, hold, modes,
+reposition, VTOL transitions, home and GPS origin). Every answer is the vehicle's own,
+through the core's requester; where PX4 acks before it acts, the reported state confirms.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+from pymavlink.dialects.v20 import development as mavlink
+
+from server.link import modes
+from server.link.commands import CommandInt, CommandResult, not_sent
+from server.link.core import VehicleCore
+from server.link.requests import Confirmation
+from server.link.state import VTOL_STATE_NAMES
+from server.link.telemetry import Telemetry
+
+MAV_CMD_NAV_RETURN_TO_LAUNCH = 20
+MAV_CMD_NAV_LAND = 21
+MAV_CMD_NAV_TAKEOFF = 22
+MAV_CMD_DO_SET_MODE = 176
+MAV_CMD_DO_SET_HOME = 179
+MAV_CMD_DO_REPOSITION = 192
+MAV_CMD_COMPONENT_ARM_DISARM = 400
+MAV_CMD_DO_VTOL_TRANSITION = 3000
+MAV_DO_REPOSITION_FLAGS_CHANGE_MODE = 1
+MAV_FRAME_GLOBAL = 0
+MAV_VTOL_STATE_TRANSITION_TO_FW = 1
+MAV_VTOL_STATE_TRANSITION_TO_MC = 2
+MAV_VTOL_STATE_MC = 3
+MAV_VTOL_STATE_FW = 4
+MAVLINK_MSG_ID_SET_GPS_GLOBAL_ORIGIN = 48
+PX4_ARM_DISARM_FORCE = 21196
+NAN = math.nan
+
+
+def _deg_e7(deg: float) -> int:
+    return round(deg * 1e7)
+
+
+class Action:
+    """Commands and mode changes for one vehicle."""
+
+    def __init__(self, core: VehicleCore, telemetry: Telemetry) -> None:
+        self._core = core
+        self._telemetry = telemetry
+        self.mode_confirm_timeout_s = 3.0
+        self.origin_timeout_s = 0.5  # per try of SET_GPS_GLOBAL_ORIGIN
+
+    async def command_long(
+        self, command: int, *params: float, confirm_timeout_s: float | None = None
+    ) -> CommandResult:
+        return await self._core.requests.command_long(command, *params, timeout_s=confirm_timeout_s)
+
+    async def arm(self, force: bool = False) -> CommandResult:
+        return await self.command_long(
+            MAV_CMD_COMPONENT_ARM_DISARM, 1, PX4_ARM_DISARM_FORCE if force else 0
+        )
+
+    async def disarm(self, force: bool = False) -> CommandResult:
+        return await self.command_long(
+            MAV_CMD_COMPONENT_ARM_DISARM, 0, PX4_ARM_DISARM_FORCE if force else 0
+        )
+
+    async def takeoff(self, altitude_rel_m: float | None = None) -> CommandResult:
+        """Climb to altitude_rel_m above home (None: PX4's MIS_TAKEOFF_ALT)."""
+        alt_amsl = NAN
+        if altitude_rel_m is not None:
+            home_alt = self._home_alt_amsl()
+            if home_alt is None:
+                return not_sent(MAV_CMD_NAV_TAKEOFF, "no home position yet")
+            alt_amsl = home_alt + altitude_rel_m
+        return await self.command_long(MAV_CMD_NAV_TAKEOFF, NAN, NAN, NAN, NAN, NAN, NAN, alt_amsl)
+
+    async def land(self) -> CommandResult:
+        return await self.command_long(MAV_CMD_NAV_LAND)
+
+    async def return_to_launch(self) -> CommandResult:
+        return await self.command_long(MAV_CMD_NAV_RETURN_TO_LAUNCH)
+
+    async def hold(self) -> CommandResult:
+        return await self.set_mode("HOLD")
+
+    async def set_mode(self, mode: str) -> CommandResult:
+        """DO_SET_MODE, ACCEPTED only once the vehicle reports the mode."""
+        target = mode.upper()
+        main, sub = modes.main_sub_from_name(target)
+        t = self._telemetry
+        confirm = Confirmation(
+            reached=lambda: t.mode == target,
+            timeout_s=self.mode_confirm_timeout_s,
+            explain=lambda _s: f"accepted, but the vehicle still reports {t.mode}",
+        )
+        return await self._core.requests.command_long(
+            MAV_CMD_DO_SET_MODE, modes.set_mode_base_mode(t.armed), main, sub,
+            confirm=confirm, name=f"SET_MODE:{target}",
+        )  # fmt: skip
+
+    async def reposition(
+        self,
+        lat_deg: float,
+        lon_deg: float,
+        *,
+        alt_amsl_m: float | None = None,
+        alt_rel_m: float | None = None,
+        ground_speed_m_s: float | None = None,
+        yaw_deg: float | None = None,
+        loiter_radius_m: float | None = None,
+    ) -> CommandResult:
+        """DO_REPOSITION as COMMAND_INT (degE7 is exact; float degrees are not)."""
+        if alt_amsl_m is not None and alt_rel_m is not None:
+            raise ValueError("give alt_amsl_m or alt_rel_m, not both")
+        alt = NAN if alt_amsl_m is None else alt_amsl_m
+        if alt_rel_m is not None:
+            home_alt = self._home_alt_amsl()
+            if home_alt is None:
+                return not_sent(MAV_CMD_DO_REPOSITION, "no home position yet")
+            alt = home_alt + alt_rel_m
+        where = CommandInt(MAV_FRAME_GLOBAL, _deg_e7(lat_deg), _deg_e7(lon_deg), alt)
+        return await self._core.requests.command_int(
+            MAV_CMD_DO_REPOSITION, where,
+            -1.0 if ground_speed_m_s is None else ground_speed_m_s,
+            MAV_DO_REPOSITION_FLAGS_CHANGE_MODE,
+            NAN if loiter_radius_m is None else loiter_radius_m,
+            NAN if yaw_deg is None else math.radians(yaw_deg),
+        )  # fmt: skip
+
+    async def vtol_transition(
+        self,
+        to_fixed_wing: bool,
+        immediate: bool = False,
+        wait: bool = True,
+        timeout_s: float = 30.0,
+    ) -> CommandResult:
+        """PX4 acks at once; with wait, resolve when EXTENDED_SYS_STATE shows the end state.
+        Back where it started after a transition means PX4 aborted it (quadchute, timeout)."""
+        target = MAV_VTOL_STATE_FW if to_fixed_wing else MAV_VTOL_STATE_MC
+        opposite = MAV_VTOL_STATE_MC if to_fixed_wing else MAV_VTOL_STATE_FW
+        t = self._telemetry
+        in_transition = False
+
+        def aborted() -> bool:
+            nonlocal in_transition
+            in_transition = in_transition or t.vtol_state in (
+                MAV_VTOL_STATE_TRANSITION_TO_FW,
+                MAV_VTOL_STATE_TRANSITION_TO_MC,
+            )
+            return in_transition and t.vtol_state == opposite
+
+        confirm = Confirmation(
+            reached=lambda: t.vtol_state == target,
+            timeout_s=timeout_s,
+            explain=lambda s: f"vtol_state is {VTOL_STATE_NAMES[t.vtol_state]} after {s:.1f} s",
+            aborted=aborted,
+        )
+        return await self._core.requests.command_long(
+            MAV_CMD_DO_VTOL_TRANSITION, target, 1 if immediate else 0,
+            confirm=confirm if wait else None,
+        )  # fmt: skip
+
+    async def set_gps_origin(
+        self, lat_deg: float, lon_deg: float, alt_amsl_m: float
+    ) -> CommandResult:
+        """SET_GPS_GLOBAL_ORIGIN is a message, not a command: PX4 answers with
+        GPS_GLOBAL_ORIGIN, so that echo is the confirmation."""
+        lat_e7, lon_e7 = _deg_e7(lat_deg), _deg_e7(lon_deg)
+        core = self._core
+
+        def build() -> mavlink.MAVLink_message:
+            # time_usec is a wall-clock (UNIX) time
+            return core.mav.set_gps_global_origin_encode(
+                core.sysid, lat_e7, lon_e7, round(alt_amsl_m * 1e3), int(time.time() * 1e6)
+            )
+
+        def echoed() -> bool:
+            o = self._telemetry.origin
+            return (o is not None and (_deg_e7(o.lat_deg), _deg_e7(o.lon_deg)) == (lat_e7, lon_e7)
+                    and abs(o.alt_amsl_m - alt_amsl_m) < 0.01)  # fmt: skip
+
+        return await core.requests.message(
+            "SET_GPS_GLOBAL_ORIGIN", MAVLINK_MSG_ID_SET_GPS_GLOBAL_ORIGIN, build, echoed,
+            timeout_s=self.origin_timeout_s,
+        )  # fmt: skip
+
+    async def set_home(
+        self,
+        lat_deg: float | None = None,
+        lon_deg: float | None = None,
+        alt_amsl_m: float | None = None,
+    ) -> CommandResult:
+        """DO_SET_HOME at the given place, or here when no place is given."""
+        if lat_deg is None and lon_deg is None:
+            return await self.command_long(MAV_CMD_DO_SET_HOME, 1)
+        if lat_deg is None or lon_deg is None:
+            raise ValueError("give both lat_deg and lon_deg, or neither")
+        if alt_amsl_m is None:
+            here = self._telemetry.global_position
+            alt_amsl_m = here.alt_amsl_m if here is not None else NAN
+        where = CommandInt(MAV_FRAME_GLOBAL, _deg_e7(lat_deg), _deg_e7(lon_deg), alt_amsl_m)
+        return await self._core.requests.command_int(MAV_CMD_DO_SET_HOME, where, 0)
+
+    def _home_alt_amsl(self) -> float | None:
+        home = self._telemetry.home
+        return home.alt_amsl_m if home is not None else None

@@ -1,0 +1,139 @@
+"""What every vehicle plugin shares: who the vehicle is, whether it is heard, how to send
+to it, the one request protocol, its events and its state notifications.
+
+The core knows nothing of the Link: it is given a ``Sender`` (the Link is one), and it
+routes each message the Link hands it to the handlers the plugins registered.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Callable
+from typing import Any, Protocol
+
+from pymavlink.dialects.v20 import development as mavlink
+
+from server.link.events import EventHub, VehicleEvent
+from server.link.link_stats import LinkStats
+from server.link.requests import Requester
+from server.link.state import StateSubscription, SubscriptionHub, VehicleState
+from server.link.statustext import RecentTexts
+
+MessageHandler = Callable[[Any], None]
+
+
+class Sender(Protocol):
+    """What a vehicle needs of its connection: a codec with the GCS's own ids, a way to
+    send, and the connection's statistics."""
+
+    mav: mavlink.MAVLink
+
+    def send(self, msg: mavlink.MAVLink_message) -> None: ...
+
+    def stats(self) -> LinkStats: ...
+
+
+class VehicleCore:
+    """Identity, HEARTBEAT and connection state, the send path and the requester."""
+
+    def __init__(
+        self,
+        *,
+        sender: Sender,
+        sysid: int,
+        compid: int,
+        heartbeat: mavlink.MAVLink_heartbeat_message | None,
+        snapshot: Callable[[], VehicleState],
+    ) -> None:
+        # taken once: snapshot() may be called from other threads (the scene), and the
+        # loop's clock is the one a test can make virtual
+        self._loop = asyncio.get_running_loop()
+        self.sender = sender
+        self.sysid = sysid
+        self.compid = compid
+        self.mav_type = heartbeat.type if heartbeat is not None else 0
+        self.autopilot = heartbeat.autopilot if heartbeat is not None else 0
+        self.connected = True
+        self.created_s = self.last_heartbeat_s = self.updated_s = self.now()
+        self.events = EventHub()
+        self.hub = SubscriptionHub(snapshot)
+        self.texts = RecentTexts(self.now)
+        self.requests = Requester(
+            send=sender.send, mav=sender.mav, target=(sysid, compid), texts=self.texts,
+            publish=self.publish_event,
+        )  # fmt: skip
+        self._handlers: dict[str, list[MessageHandler]] = {
+            "HEARTBEAT": [self._on_heartbeat],
+            "COMMAND_ACK": [lambda ack: self.requests.handle_ack(ack, ack.get_srcComponent())],
+        }
+        self._on_connection: list[Callable[[bool], None]] = []
+
+    def now(self) -> float:
+        """Seconds on the event loop's clock."""
+        return self._loop.time()
+
+    @property
+    def mav(self) -> mavlink.MAVLink:
+        return self.sender.mav
+
+    def send(self, msg: mavlink.MAVLink_message) -> None:
+        self.sender.send(msg)
+
+    # -- wiring (plugins register at construction) ---------------------------------------
+    def on_message(self, kind: str, handler: MessageHandler) -> None:
+        """Call ``handler(msg)`` for every message of this type from the vehicle."""
+        self._handlers.setdefault(kind, []).append(handler)
+
+    def on_connection(self, handler: Callable[[bool], None]) -> None:
+        """Call ``handler(connected)`` when the vehicle is lost or back."""
+        self._on_connection.append(handler)
+
+    # -- feeding (called by the Link through the Vehicle) ----------------------------------
+    def handle_message(self, msg: mavlink.MAVLink_message) -> None:
+        kind = msg.get_type()
+        # STATUSTEXT from any component: a camera's or gimbal's warnings matter too
+        if msg.get_srcComponent() != self.compid and kind != "STATUSTEXT":
+            return
+        handlers = self._handlers.get(kind)
+        if handlers is None:
+            return
+        for handler in handlers:
+            handler(msg)
+        self.updated_s = self.now()
+        self.changed()
+
+    def set_connected(self, connected: bool) -> None:
+        if connected == self.connected:
+            return
+        self.connected = connected
+        self.publish_event("connection", {"connected": connected})
+        if not connected:
+            self.requests.fail_all()
+        for handler in self._on_connection:
+            handler(connected)
+        self.changed()
+
+    def changed(self) -> None:
+        """The state changed: wake waiters and subscribers."""
+        self.requests.changed()
+        self.hub.notify()
+
+    def _on_heartbeat(self, msg: mavlink.MAVLink_heartbeat_message) -> None:
+        self.last_heartbeat_s = self.now()
+        self.mav_type = msg.type
+        self.autopilot = msg.autopilot
+
+    # -- observing ------------------------------------------------------------------------
+    def publish_event(self, kind: str, data: dict[str, object]) -> None:
+        self.events.publish(kind, data)
+
+    def subscribe(self, min_interval_s: float = 0.0) -> StateSubscription:
+        """Latest-wins state changes; at most one per min_interval_s (see StateSubscription)."""
+        return self.hub.subscribe(min_interval_s)
+
+    def subscribe_events(self, maxsize: int = 256) -> asyncio.Queue[VehicleEvent]:
+        return self.events.subscribe(maxsize)
+
+    async def wait_until(self, predicate: Callable[[], bool], timeout_s: float) -> bool:
+        """Wait until ``predicate()`` holds after some message; False on timeout."""
+        return await self.requests.wait_until(predicate, timeout_s)

@@ -1,0 +1,109 @@
+"""Asking a vehicle for the telemetry the dashboard needs, on every (re)connection, and
+noting which requests it refused."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from collections.abc import Mapping
+
+from pymavlink.dialects.v20 import development as mavlink
+
+from server.link.commands import CommandResult
+from server.link.core import VehicleCore
+from server.link.telemetry import Telemetry
+
+MAV_CMD_SET_MESSAGE_INTERVAL = 511
+MAV_CMD_REQUEST_MESSAGE = 512
+
+# What the dashboard needs, in Hz. CURRENT_MODE at >= 5 Hz because HEARTBEAT (1 Hz) shows
+# failsafe mode changes late.
+DEFAULT_TELEMETRY_RATES_HZ: Mapping[int, float] = {
+    mavlink.MAVLINK_MSG_ID_CURRENT_MODE: 5.0,
+    mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 5.0,
+    mavlink.MAVLINK_MSG_ID_HOME_POSITION: 1.0,
+    mavlink.MAVLINK_MSG_ID_ATTITUDE: 20.0,
+    mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 20.0,
+    mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 10.0,
+    mavlink.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED: 5.0,
+    mavlink.MAVLINK_MSG_ID_VFR_HUD: 4.0,
+    mavlink.MAVLINK_MSG_ID_SYS_STATUS: 2.0,
+    mavlink.MAVLINK_MSG_ID_GPS_RAW_INT: 1.0,
+    mavlink.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: 5.0,
+}
+# Requested once per connection: their values do not change often enough to stream.
+ONE_SHOT_RETRIES = 30
+ONE_SHOT_RETRY_INTERVAL_S = 1.0
+ONE_SHOT_MESSAGES = (mavlink.MAVLINK_MSG_ID_HOME_POSITION, mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN)
+
+
+class TelemetryRequests:
+    """SET_MESSAGE_INTERVAL for each streamed message, REQUEST_MESSAGE for home and origin."""
+
+    def __init__(
+        self,
+        core: VehicleCore,
+        telemetry: Telemetry,
+        rates_hz: Mapping[int, float] | None = None,
+    ) -> None:
+        self._core = core
+        self._telemetry = telemetry
+        self._rates_hz = DEFAULT_TELEMETRY_RATES_HZ if rates_hz is None else rates_hz
+        self._task: asyncio.Task[None] | None = None
+        self.refused: dict[str, str] = {}  # message name -> outcome of its last request
+        core.on_connection(self._connection_changed)
+        self.start()
+
+    def start(self) -> None:
+        if not self._rates_hz:
+            return
+        if self._task is not None and not self._task.done():
+            self._task.cancel()
+        self._task = asyncio.get_running_loop().create_task(
+            self._request_all(), name=f"telemetry-request:{self._core.sysid}"
+        )
+
+    async def close(self) -> None:
+        if self._task is not None:
+            self._task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._task
+
+    def _connection_changed(self, connected: bool) -> None:
+        if connected:
+            self.start()
+
+    async def _request_all(self) -> None:
+        for msg_id, rate_hz in self._rates_hz.items():
+            self._note(msg_id, await self._ask(MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / rate_hz))
+        for msg_id in ONE_SHOT_MESSAGES:
+            self._note(msg_id, await self._ask(MAV_CMD_REQUEST_MESSAGE, msg_id))
+        # PX4 has no home or origin until its estimator has a position, which can come
+        # seconds after the first heartbeat: ask again until both are known.
+        for _ in range(ONE_SHOT_RETRIES):
+            missing = self._missing_one_shots()
+            if not missing or not self._core.connected:
+                return
+            await asyncio.sleep(ONE_SHOT_RETRY_INTERVAL_S)
+            for msg_id in missing:
+                self._note(msg_id, await self._ask(MAV_CMD_REQUEST_MESSAGE, msg_id))
+
+    async def _ask(self, command: int, *params: float) -> CommandResult:
+        return await self._core.requests.command_long(command, *params)
+
+    def _missing_one_shots(self) -> list[int]:
+        missing = []
+        if self._telemetry.home is None:
+            missing.append(mavlink.MAVLINK_MSG_ID_HOME_POSITION)
+        if self._telemetry.origin is None:
+            missing.append(mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN)
+        return missing
+
+    def _note(self, msg_id: int, result: CommandResult) -> None:
+        msg_class = mavlink.mavlink_map.get(msg_id)
+        name = msg_class.msgname if msg_class is not None else str(msg_id)
+        if result.ok:
+            self.refused.pop(name, None)
+            return
+        self.refused[name] = result.outcome.value
+        self._core.publish_event("stream", {"message": name, "outcome": result.outcome.value})
