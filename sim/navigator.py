@@ -1,9 +1,9 @@
 """Autonomous modes of the simulated vehicle, after PX4's navigator.
 
-Takeoff, Hold (loiter), Land and DO_REPOSITION here, Return in `sim.rtl_direct`, the
-landing descent in `sim.land`, plus the stick-less behaviour of the manual modes. Each
-mode turns into a TrajectorySetpoint for the airframe's controllers; None means motors
-idle.
+Takeoff, Hold (loiter), Land and DO_REPOSITION here, Return in `sim.rtl_direct`, what
+the modes share (the landing descent among it) in `sim.mission_block`, plus the
+stick-less behaviour of the manual modes. Each mode turns into a TrajectorySetpoint for
+the airframe's controllers; None means motors idle.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import math
 
 from sim import modes
 from sim.commander import MAV_SEVERITY_INFO, Announce, Commander
-from sim.land import Land, VtolAirframe
+from sim.mission_block import MissionBlock, VtolAirframe
 from sim.modes import Px4Mode
 from sim.params import ParamReader
 from sim.quat import yaw_from_quat
@@ -45,13 +45,9 @@ class Navigator:
         fixed_wing_only: bool = False,
         ground_vehicle: bool = False,
     ) -> None:
-        self._params = params
-        self._commander = commander
-        self._announce = announce
+        self._block = MissionBlock(params, commander, airframe, announce, ground_vehicle)
+        self._rtl = RtlDirect(self._block)
         self._fixed_wing_only = fixed_wing_only
-        self._land = Land(params, commander, airframe, ground_vehicle=ground_vehicle)
-        self._rtl = RtlDirect(params, commander, airframe, announce, self._land,
-                              ground_vehicle=ground_vehicle)
         self._active: Px4Mode | None = None
         self._hold_target: list[float] = [0.0, 0.0, 0.0]
         self._hold_yaw_rad = math.nan
@@ -95,24 +91,24 @@ class Navigator:
         return self._rtl.phases_seen
 
     def land_speed_m_s(self, altitude_m: float) -> float:
-        return self._land.speed_m_s(altitude_m)
+        return self._block.land_speed_m_s(altitude_m)
 
     # -- per step ----------------------------------------------------------------------
 
     def setpoint(
         self, now_s: float, truth: VehicleStateTruth, origin_alt_m: float
     ) -> TrajectorySetpoint | None:
-        mode = self._commander.nav_mode
+        mode = self._block.commander.nav_mode
         if mode != self._active:
             self._activate(mode, now_s, truth)
-        if not self._commander.armed:
+        if not self._block.commander.armed:
             return None
         if mode in _TAKEOFF_MODES:
             return self._takeoff(now_s, truth, origin_alt_m)
         if mode == modes.AUTO_LOITER:
             return self._hold(truth)
         if mode == modes.AUTO_LAND:
-            return self._land.setpoint(truth, self._land_xy, self._hold_yaw_rad)
+            return self._block.land_setpoint(truth, self._land_xy, self._hold_yaw_rad)
         if mode == modes.AUTO_RTL:
             return self._rtl.setpoint(now_s, truth)
         if mode in _STICKLESS_MODES:
@@ -153,17 +149,18 @@ class Navigator:
         climb_m = self._takeoff_start_down_m - target[2]
         climbed_m = self._takeoff_start_down_m - truth.position_ned_m[2]
         if climb_m <= 0.0 or climbed_m >= TAKEOFF_DONE_FRACTION * climb_m:
-            self._announce(MAV_SEVERITY_INFO, "Takeoff complete, holding position")
+            self._block.announce(MAV_SEVERITY_INFO, "Takeoff complete, holding position")
             self._pending_hold = (list(target), self._hold_yaw_rad, math.nan)
             self._takeoff_alt_amsl_m = math.nan
-            self._commander.switch_mode(modes.AUTO_LOITER)
+            self._block.commander.switch_mode(modes.AUTO_LOITER)
         # PX4 ramps the climb speed up over MPC_TKO_RAMP_T for a smooth lift-off.
-        ramp_s = self._params.get("MPC_TKO_RAMP_T")
+        params = self._block.params
+        ramp_s = params.get("MPC_TKO_RAMP_T")
         ramp = min((now_s - self._takeoff_started_s) / ramp_s, 1.0) if ramp_s > 0 else 1.0
         return TrajectorySetpoint(
             position_ned_m=list(target),
             yaw_rad=self._hold_yaw_rad,
-            max_speed_up_m_s=self._params.get("MPC_TKO_SPEED") * max(ramp, TAKEOFF_RAMP_FLOOR),
+            max_speed_up_m_s=params.get("MPC_TKO_SPEED") * max(ramp, TAKEOFF_RAMP_FLOOR),
         )
 
     def _takeoff_target_from(self, truth: VehicleStateTruth, origin_alt_m: float) -> list[float]:
@@ -171,19 +168,19 @@ class Navigator:
         if math.isfinite(self._takeoff_alt_amsl_m):
             target_down = origin_alt_m - self._takeoff_alt_amsl_m
         else:
-            home_down = self._commander.home.position_ned_m[2]
-            base_down = min(down, home_down) if self._commander.home.valid else down
-            target_down = base_down - self._params.get("MIS_TAKEOFF_ALT")
+            home_down = self._block.commander.home.position_ned_m[2]
+            base_down = min(down, home_down) if self._block.commander.home.valid else down
+            target_down = base_down - self._block.params.get("MIS_TAKEOFF_ALT")
         if self._fixed_wing_only:
             yaw = yaw_from_quat(truth.q_wxyz)
-            ahead_m = self._params.get("NAV_LOITER_RAD") * 2.0
+            ahead_m = self._block.params.get("NAV_LOITER_RAD") * 2.0
             return [north + ahead_m * math.cos(yaw), east + ahead_m * math.sin(yaw), target_down]
         return [north, east, target_down]
 
     # -- hold, land, stick-less --------------------------------------------------------
 
     def _hold(self, truth: VehicleStateTruth) -> TrajectorySetpoint | None:
-        if self._commander.landed and not self._commander.took_off_since_arming:
+        if self._block.commander.landed and not self._block.commander.took_off_since_arming:
             return None
         return TrajectorySetpoint(
             position_ned_m=list(self._hold_target),
@@ -192,6 +189,7 @@ class Navigator:
         )
 
     def _stickless(self, truth: VehicleStateTruth) -> TrajectorySetpoint | None:
-        if self._commander.landed:
+        if self._block.commander.landed:
             return None
-        return self._land.descend(self._land_xy, NO_RC_DESCENT_SPEED_M_S, self._hold_yaw_rad)
+        return self._block.descend_setpoint(
+            self._land_xy, NO_RC_DESCENT_SPEED_M_S, self._hold_yaw_rad)

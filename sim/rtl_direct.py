@@ -9,9 +9,8 @@ from __future__ import annotations
 import math
 from enum import Enum
 
-from sim.commander import MAV_SEVERITY_INFO, Announce, Commander
-from sim.land import Land, VtolAirframe
-from sim.params import ParamReader
+from sim.commander import MAV_SEVERITY_INFO
+from sim.mission_block import MissionBlock
 from sim.quat import yaw_from_quat
 from sim.topics import TrajectorySetpoint, VehicleStateTruth, VtolState
 
@@ -36,22 +35,8 @@ class RtlPhase(Enum):
 
 
 class RtlDirect:
-    def __init__(
-        self,
-        params: ParamReader,
-        commander: Commander,
-        airframe: VtolAirframe,
-        announce: Announce,
-        land: Land,
-        *,
-        ground_vehicle: bool = False,
-    ) -> None:
-        self._params = params
-        self._commander = commander
-        self._airframe = airframe
-        self._announce = announce
-        self._land = land
-        self._ground_vehicle = ground_vehicle
+    def __init__(self, block: MissionBlock) -> None:
+        self._block = block
         self.phase = RtlPhase.IDLE
         self.phases_seen: list[RtlPhase] = []
         self._return_down_m = 0.0
@@ -63,20 +48,20 @@ class RtlDirect:
 
     def start(self, now_s: float, truth: VehicleStateTruth) -> None:
         self.phases_seen = []
-        home = self._commander.home
+        home = self._block.commander.home
         home_down = home.position_ned_m[2]
         down = truth.position_ned_m[2]
-        far = self._home_distance_m(truth) > self._params.get("RTL_MIN_DIST")
-        far = far and not self._ground_vehicle
-        return_down = home_down - self._params.get("RTL_RETURN_ALT")
+        far = self._home_distance_m(truth) > self._block.params.get("RTL_MIN_DIST")
+        far = far and not self._block.ground_vehicle
+        return_down = home_down - self._block.params.get("RTL_RETURN_ALT")
         self._return_down_m = min(return_down, down) if far else down
         self._descend_down_m = max(
-            self._return_down_m, home_down - self._params.get("RTL_DESCEND_ALT")
+            self._return_down_m, home_down - self._block.params.get("RTL_DESCEND_ALT")
         )
         self._yaw_rad = yaw_from_quat(truth.q_wxyz)
         self._land_xy = [home.position_ned_m[0], home.position_ned_m[1]]
         self._climb_xy = [truth.position_ned_m[0], truth.position_ned_m[1]]
-        if self._commander.landed:
+        if self._block.commander.landed:
             self._enter_phase(RtlPhase.IDLE, now_s)
         elif down > self._return_down_m + ALTITUDE_REACHED_M:
             self._enter_phase(RtlPhase.CLIMBING, now_s)
@@ -93,7 +78,7 @@ class RtlDirect:
         return self._phase_setpoint(phase, truth)
 
     def _home_distance_m(self, truth: VehicleStateTruth) -> float:
-        home = self._commander.home.position_ned_m
+        home = self._block.commander.home.position_ned_m
         return math.hypot(truth.position_ned_m[0] - home[0], truth.position_ned_m[1] - home[1])
 
     def _enter_phase(self, phase: RtlPhase, now_s: float) -> None:
@@ -102,11 +87,11 @@ class RtlDirect:
         self._phase_started_s = now_s
         text = self._phase_text(phase)
         if text:
-            self._announce(MAV_SEVERITY_INFO, text)
+            self._block.announce(MAV_SEVERITY_INFO, text)
 
     def _phase_text(self, phase: RtlPhase) -> str:
-        home_down = self._commander.home.position_ned_m[2]
-        home_alt = self._commander.home.alt_m
+        home_down = self._block.commander.home.position_ned_m[2]
+        home_alt = self._block.commander.home.alt_m
 
         def altitude(down: float) -> str:
             return f"{home_alt + home_down - down:.0f} m ({home_down - down:.0f} m above home)"
@@ -115,7 +100,7 @@ class RtlDirect:
             RtlPhase.CLIMBING: f"RTL: climb to {altitude(self._return_down_m)}",
             RtlPhase.MOVE_TO_LOITER: f"RTL: return at {altitude(self._return_down_m)}",
             RtlPhase.LOITER_DOWN: f"RTL: descend to {altitude(self._descend_down_m)}",
-            RtlPhase.LOITER_HOLD: f"RTL: loiter {self._params.get('RTL_LAND_DELAY'):.1f}s",
+            RtlPhase.LOITER_HOLD: f"RTL: loiter {self._block.params.get('RTL_LAND_DELAY'):.1f}s",
             RtlPhase.MOVE_TO_LAND: "RTL: move to land approach",
             RtlPhase.TRANSITION_TO_MC: "RTL: transition to multicopter",
             RtlPhase.MOVE_TO_LAND_HOVER: "RTL: move to land position",
@@ -128,7 +113,7 @@ class RtlDirect:
         self, phase: RtlPhase, now_s: float, truth: VehicleStateTruth
     ) -> RtlPhase | None:
         down = truth.position_ned_m[2]
-        fixed_wing = self._airframe.in_fixed_wing_flight
+        fixed_wing = self._block.airframe.in_fixed_wing_flight
         if phase == RtlPhase.CLIMBING:
             reached = down <= self._return_down_m + ALTITUDE_REACHED_M
             return RtlPhase.MOVE_TO_LOITER if reached else None
@@ -139,58 +124,58 @@ class RtlDirect:
             reached = down >= self._descend_down_m - ALTITUDE_REACHED_M
             return RtlPhase.LOITER_HOLD if reached else None
         if phase == RtlPhase.LOITER_HOLD:
-            delay = self._params.get("RTL_LAND_DELAY")
+            delay = self._block.params.get("RTL_LAND_DELAY")
             if delay < 0 or now_s - self._phase_started_s < delay:
                 return None
             # rtl_direct: only a VTOL in fixed-wing flight flies an approach and transitions;
             # a plane goes on to land where it loiters.
-            vtol_in_fw = fixed_wing and self._airframe.is_vtol
+            vtol_in_fw = fixed_wing and self._block.airframe.is_vtol
             return RtlPhase.MOVE_TO_LAND if vtol_in_fw else RtlPhase.MOVE_TO_LAND_HOVER
         if phase == RtlPhase.MOVE_TO_LAND:
             near = self._home_distance_m(truth) <= self._back_transition_distance_m(truth)
             return RtlPhase.TRANSITION_TO_MC if near or not fixed_wing else None
         if phase == RtlPhase.TRANSITION_TO_MC:
-            in_mc = self._airframe.vtol_state == VtolState.MC
+            in_mc = self._block.airframe.vtol_state == VtolState.MC
             return RtlPhase.MOVE_TO_LAND_HOVER if in_mc else None
         if phase == RtlPhase.MOVE_TO_LAND_HOVER:
             near = self._home_distance_m(truth) <= self._reach_radius_m(fixed_wing)
             return RtlPhase.LAND if near else None
         if phase == RtlPhase.LAND:
-            if self._ground_vehicle:
+            if self._block.ground_vehicle:
                 return RtlPhase.IDLE  # arrived: a rover stops and stays armed
-            return RtlPhase.IDLE if self._commander.landed else None
+            return RtlPhase.IDLE if self._block.commander.landed else None
         return None
 
     def _phase_setpoint(
         self, phase: RtlPhase, truth: VehicleStateTruth
     ) -> TrajectorySetpoint | None:
-        home = self._commander.home
+        home = self._block.commander.home
         if phase == RtlPhase.IDLE:
             return None
         if phase == RtlPhase.LAND:
-            return self._land.setpoint(truth, self._land_xy, self._yaw_rad)
+            return self._block.land_setpoint(truth, self._land_xy, self._yaw_rad)
         if phase == RtlPhase.CLIMBING:
             north, east = self._climb_xy
             return TrajectorySetpoint(
                 position_ned_m=[north, east, self._return_down_m], yaw_rad=self._yaw_rad
             )
-        if phase == RtlPhase.MOVE_TO_LAND and self._airframe.in_fixed_wing_flight:
+        if phase == RtlPhase.MOVE_TO_LAND and self._block.airframe.in_fixed_wing_flight:
             return self._approach_home(truth)
         if phase == RtlPhase.TRANSITION_TO_MC:
-            self._airframe.request_transition(to_fixed_wing=False, immediate=False)
+            self._block.airframe.request_transition(to_fixed_wing=False, immediate=False)
         down = self._descend_down_m
         if phase == RtlPhase.MOVE_TO_LOITER:
             down = self._return_down_m
         return TrajectorySetpoint(
             position_ned_m=[home.position_ned_m[0], home.position_ned_m[1], down],
             yaw_rad=self._return_yaw_rad(truth),
-            max_speed_xy_m_s=self._params.get("MPC_XY_CRUISE"),
+            max_speed_xy_m_s=self._block.params.get("MPC_XY_CRUISE"),
         )
 
     def _reach_radius_m(self, fixed_wing: bool) -> float:
         """A multicopter arrives over a point; a fixed wing once on its loiter circle."""
         if fixed_wing:
-            return self._params.get("NAV_LOITER_RAD") * FW_LOITER_REACHED_FACTOR
+            return self._block.params.get("NAV_LOITER_RAD") * FW_LOITER_REACHED_FACTOR
         return MC_POSITION_REACHED_M
 
     def _back_transition_distance_m(self, truth: VehicleStateTruth) -> float:
@@ -198,7 +183,7 @@ class RtlDirect:
         VTOL needs to stop from its ground speed at VT_B_DEC_MSS."""
         velocity = truth.velocity_ned_m_s
         speed = math.hypot(velocity[0], velocity[1])
-        deceleration = self._params.get("VT_B_DEC_MSS")
+        deceleration = self._block.params.get("VT_B_DEC_MSS")
         if deceleration <= 0.0:
             return MC_POSITION_REACHED_M
         return max(speed * speed / (2.0 * deceleration), MC_POSITION_REACHED_M)
@@ -206,11 +191,11 @@ class RtlDirect:
     def _approach_home(self, truth: VehicleStateTruth) -> TrajectorySetpoint:
         """Fixed-wing flight straight at home at the descend altitude (a course, so the
         wing does not settle on a loiter circle around it)."""
-        home = self._commander.home.position_ned_m
+        home = self._block.commander.home.position_ned_m
         bearing = math.atan2(
             home[1] - truth.position_ned_m[1], home[0] - truth.position_ned_m[0]
         )
-        speed = self._params.get("FW_AIRSPD_TRIM")
+        speed = self._block.params.get("FW_AIRSPD_TRIM")
         return TrajectorySetpoint(
             position_ned_m=[math.nan, math.nan, self._descend_down_m],
             velocity_ned_m_s=[speed * math.cos(bearing), speed * math.sin(bearing), math.nan],
@@ -218,8 +203,8 @@ class RtlDirect:
 
     def _return_yaw_rad(self, truth: VehicleStateTruth) -> float:
         """Towards home while far, home's yaw within RTL_MIN_DIST (seed 004)."""
-        home = self._commander.home
-        if self._home_distance_m(truth) < self._params.get("RTL_MIN_DIST"):
+        home = self._block.commander.home
+        if self._home_distance_m(truth) < self._block.params.get("RTL_MIN_DIST"):
             return home.yaw_rad
         return math.atan2(
             home.position_ned_m[1] - truth.position_ned_m[1],
