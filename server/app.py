@@ -5,9 +5,10 @@ link (``skyhelm replay``) makes the whole API read-only."""
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import logging
 import time
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
 
 from fastapi import APIRouter, FastAPI
@@ -20,11 +21,12 @@ from server.api.deadman import Deadman
 from server.api.deps import ApiContext
 from server.api.errors import install_error_handlers
 from server.api.lease import LeaseManager
+from server.api.publisher import StatePublishers
 from server.api.registry import VehicleRegistry
 from server.api.routes import commands, control, health, params, setpoint, vehicles
 from server.link import Envelope, Link
 from server.link.urls import parse_link_url
-from server.scene import SceneHub
+from server.scene import ClickPoint, SceneHub
 from server.settings import Settings
 from server.simproc import SimProcess
 
@@ -53,7 +55,9 @@ def create_app(settings: Settings) -> FastAPI:
         settings, tokens, registry, leases, deadman, read_only=is_replay(settings.connect)
     )
     hub = SceneHub() if settings.scene else None
-    state_text = ws.StateText(context)
+    publishers = StatePublishers(
+        registry.all, leases.status, max_rate_hz=settings.telemetry_max_rate_hz
+    )
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
@@ -72,13 +76,15 @@ def create_app(settings: Settings) -> FastAPI:
                 await _open_links(registry, settings, [i.url for i in instances])
                 await _wait_for_vehicles(registry, [i.sysid for i in instances], settings)
             await deadman.start()
+            await publishers.start(registry.links)
             if hub is not None:
-                await hub.start(registry.all)
+                hub.on_click = _on_loop(publishers.publish_click)
+                await hub.start(publishers)
             yield
         finally:
-            await state_text.close()
             if hub is not None:
                 await hub.stop()
+            await publishers.close()
             await deadman.stop()
             for link in registry.remove_links():
                 await link.close()
@@ -93,7 +99,7 @@ def create_app(settings: Settings) -> FastAPI:
     )
     app.state.api = context
     app.state.sim = None
-    app.state.state_text = state_text
+    app.state.publishers = publishers
     install_error_handlers(app)
     if settings.cors_origins:
         app.add_middleware(
@@ -112,6 +118,16 @@ def create_app(settings: Settings) -> FastAPI:
     if settings.web_dir is not None:
         app.mount("/", StaticFiles(directory=settings.web_dir, html=True), name="web")
     return app
+
+
+def _on_loop(publish: Callable[[dict[str, object]], None]) -> Callable[[ClickPoint], None]:
+    """Clicks come from viser's thread; the page learns of them on its telemetry socket."""
+    loop = asyncio.get_running_loop()
+
+    def on_click(click: ClickPoint) -> None:
+        loop.call_soon_threadsafe(publish, dataclasses.asdict(click))
+
+    return on_click
 
 
 def is_replay(urls: list[str]) -> bool:

@@ -1,14 +1,72 @@
 """Vehicle state as the API shows it: the link's snapshot with API names (`id`, `type`,
-`global`), the lease, and non-finite numbers as null (JSON has no NaN)."""
+`global`), the lease, and non-finite numbers as null (JSON has no NaN).
+
+The snapshot is encoded by pydantic from the link's dataclasses (no copy into dicts first);
+the few fields that differ between the REST body and the WebSocket message (`type`, `id`,
+`lease`) are written around that one encoding, so both share it."""
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import math
-from dataclasses import fields, is_dataclass
 from typing import Any
 
-from server.api.lease import LeaseManager
+from pydantic import ConfigDict, TypeAdapter
+
 from server.link import StreamStats, VehicleState
+
+# The API's names for the snapshot's fields; `type` is written by the callers, since the
+# WebSocket message uses that key for the message's own type.
+_API_NAMES = {"global_position": "global"}
+# Not part of the shared encoding: the vehicle's type goes under a different key in REST and
+# WS; the list of refused telemetry streams is shown on the WebSocket only, as before.
+_WRITTEN_AROUND = {"mav_type", "telemetry_refused"}
+
+
+@dataclasses.dataclass(frozen=True)
+class _StateOut(VehicleState):
+    """VehicleState with the API's field names; pydantic writes NaN/inf as null."""
+
+    __pydantic_config__ = ConfigDict(
+        alias_generator=lambda name: _API_NAMES.get(name, name), serialize_by_alias=True
+    )
+
+
+_STATE_JSON: TypeAdapter[VehicleState] = TypeAdapter(_StateOut)
+
+
+def encode_state(state: VehicleState) -> bytes:
+    """The snapshot as a JSON object without `type`, `id` and `lease`: the expensive part
+    of every state the API shows, so it is done once per snapshot and shared."""
+    return _STATE_JSON.dump_json(state, exclude=_WRITTEN_AROUND)
+
+
+LeaseStatus = tuple[str | None, float | None]
+
+
+def _lease_json(lease: LeaseStatus) -> str:
+    holder, expires_in_s = lease
+    lease_out = {"holder": holder, "expires_in_s": finite(expires_in_s)}
+    return json.dumps(lease_out, separators=(",", ":"))
+
+
+def state_json(state: VehicleState, body: bytes, lease: LeaseStatus) -> bytes:
+    """GET /vehicles/{id}: the encoded body with the vehicle's `id`, `type` and `lease`."""
+    head = f'{{"id":{state.sysid},"type":{json.dumps(state.mav_type)},"lease":{_lease_json(lease)},'
+    return head.encode() + body[1:]
+
+
+def state_message(state: VehicleState, body: bytes, lease: LeaseStatus) -> str:
+    """The telemetry socket's `{type: "state"}` message: `type` names the message, so the
+    vehicle's type travels as `vehicle_type`."""
+    head = (
+        f'{{"type":"state","vehicle":{state.sysid},"id":{state.sysid},'
+        f'"vehicle_type":{json.dumps(state.mav_type)},'
+        f'"telemetry_refused":{json.dumps(list(state.telemetry_refused))},'
+        f'"lease":{_lease_json(lease)},'
+    )
+    return head + body[1:].decode()
 
 
 def finite(value: Any) -> Any:
@@ -22,39 +80,6 @@ def finite(value: Any) -> Any:
     return value
 
 
-_FIELD_NAMES: dict[type, tuple[str, ...]] = {}
-
-
-def plain(value: Any) -> Any:
-    """dataclasses.asdict and finite() in one pass: dataclasses as dicts, tuples as lists,
-    NaN/inf as None. Several times faster than the two, and it runs for every snapshot the
-    API shows, on the event loop the setpoint streamer shares."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if value is None or isinstance(value, str | int):
-        return value
-    names = _FIELD_NAMES.get(type(value))
-    if names is None and is_dataclass(value) and not isinstance(value, type):
-        names = _FIELD_NAMES[type(value)] = tuple(f.name for f in fields(value))
-    if names is not None:
-        return {name: plain(getattr(value, name)) for name in names}
-    if isinstance(value, dict):
-        return {key: plain(item) for key, item in value.items()}
-    if isinstance(value, list | tuple):
-        return [plain(item) for item in value]
-    return value
-
-
-def state_dict(state: VehicleState, leases: LeaseManager) -> dict[str, Any]:
-    raw: dict[str, Any] = plain(state)
-    raw["id"] = state.sysid
-    raw["type"] = raw.pop("mav_type")
-    raw["global"] = raw.pop("global_position")
-    holder, expires_in_s = leases.status(state.sysid)
-    raw["lease"] = plain({"holder": holder, "expires_in_s": expires_in_s})
-    return raw
-
-
 def summary_dict(state: VehicleState) -> dict[str, Any]:
     result: dict[str, Any] = finite(
         {
@@ -65,12 +90,12 @@ def summary_dict(state: VehicleState) -> dict[str, Any]:
             "connected": state.connected,
             "mode": state.mode,
             "armed": state.armed,
-            "link": plain(state.link),
+            "link": dataclasses.asdict(state.link),
         }
     )
     return result
 
 
 def stream_dict(stats: StreamStats) -> dict[str, Any]:
-    result: dict[str, Any] = plain(stats)
+    result: dict[str, Any] = finite(dataclasses.asdict(stats))
     return result

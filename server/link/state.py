@@ -4,6 +4,7 @@ subscriptions to them."""
 from __future__ import annotations
 
 import asyncio
+import math
 import time
 import weakref
 from collections import deque
@@ -31,6 +32,32 @@ LATE_CHANGE_WAIT_S = 0.2
 # clients due at once, and their sends in one iteration would hold back the setpoint
 # streamer's timer for milliseconds; in batches, timers run between them.
 WAKE_BATCH = 8
+
+
+def loop_time_s() -> float:
+    """The running event loop's clock (time.monotonic on Linux), which a test can make
+    virtual; time.monotonic itself outside a loop."""
+    try:
+        return asyncio.get_running_loop().time()
+    except RuntimeError:
+        return time.monotonic()
+
+
+class RateGrid:
+    """At most one go per interval, on a grid: each go is allowed one interval after the
+    previous one's slot, so the rate holds although each go comes a little after its slot;
+    after a pause longer than an interval a new grid starts from now, never a burst."""
+
+    def __init__(self, interval_s: float) -> None:
+        self.interval_s = interval_s
+        self.next_s = -math.inf  # the first go is due at once
+
+    def due(self, now_s: float) -> bool:
+        return now_s >= self.next_s
+
+    def take(self, now_s: float) -> None:
+        following_s = self.next_s + self.interval_s
+        self.next_s = following_s if following_s > now_s else now_s + self.interval_s
 
 
 @dataclass(frozen=True)
@@ -175,8 +202,7 @@ class StateSubscription:
         self._changed = asyncio.Event()
         self._changed.set()  # a new subscriber gets the current state at once
         self._closed = False
-        self._min_interval_s = min_interval_s
-        self._not_before_s = 0.0
+        self._grid = RateGrid(min_interval_s)
         self._held_back: asyncio.TimerHandle | None = None
         self.queued = False  # due, waiting for its turn in the hub's wake batches
 
@@ -185,15 +211,15 @@ class StateSubscription:
         return self._closed
 
     def due(self, now_s: float) -> bool:
-        """Told of a change at now_s (time.monotonic()): True if the reader should be woken
+        """Told of a change at now_s (loop time): True if the reader should be woken
         for it now, False if it is held back (or the reader has not read the last one)."""
         if self._changed.is_set() or self.queued:
             return False
-        if self._min_interval_s > 0.0:
-            if now_s < self._not_before_s:
+        if self._grid.interval_s > 0.0:
+            if not self._grid.due(now_s):
                 if self._held_back is None:
                     self._held_back = asyncio.get_running_loop().call_later(
-                        self._not_before_s + LATE_CHANGE_WAIT_S - now_s, self._let_through
+                        self._grid.next_s + LATE_CHANGE_WAIT_S - now_s, self._let_through
                     )
                 return False
             self._cancel_held_back()
@@ -225,14 +251,8 @@ class StateSubscription:
         if self._closed:
             return False
         self._changed.clear()
-        if self._min_interval_s > 0.0:
-            # on a grid, so the rate holds although each read comes a little after its
-            # slot; a new grid from now after the first read or a silence
-            now_s = time.monotonic()
-            following_s = self._not_before_s + self._min_interval_s
-            self._not_before_s = (
-                following_s if following_s > now_s else now_s + self._min_interval_s
-            )
+        if self._grid.interval_s > 0.0:
+            self._grid.take(loop_time_s())
         return True
 
     def _let_through(self) -> None:
@@ -267,7 +287,7 @@ class SubscriptionHub:
 
     def notify(self) -> None:
         self.version += 1
-        now_s = time.monotonic()
+        now_s = loop_time_s()
         batch_pending = bool(self._to_wake)  # then a _wake_batch is already scheduled
         for sub in list(self._subs):
             if sub.due(now_s):

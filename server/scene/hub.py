@@ -1,4 +1,5 @@
-"""SceneHub: the viser server, fed from vehicle snapshots, and its place in the app."""
+"""SceneHub: the viser server, fed with vehicle snapshots pushed by a state source (the
+app's state publishers), and its place in the app."""
 
 from __future__ import annotations
 
@@ -9,8 +10,8 @@ import io
 import logging
 import threading
 import time
-from collections.abc import Callable, Iterable
-from typing import TYPE_CHECKING
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 import viser
@@ -18,11 +19,10 @@ from fastapi import FastAPI
 
 from .frames import Vec3, enu_to_geodetic, geodetic_offset_enu, ray_hits_plane_z
 from .proxy import SceneProxy
-from .throttle import Throttle
 from .vehicle_view import VehicleView
 
 if TYPE_CHECKING:
-    from server.link import Vehicle, VehicleState
+    from server.link import VehicleState
 
 _log = logging.getLogger(__name__)
 
@@ -31,6 +31,21 @@ _log = logging.getLogger(__name__)
 _IDLE_RATE_HZ = 2.0
 _FOLLOW_OFF = "off"
 _CAMERA_OFFSET_ENU = np.array([-6.0, -6.0, 4.0])
+
+
+class StateWatch(Protocol):
+    async def next_states(self) -> list[VehicleState]:
+        """Wait for, then return, the newest state of each vehicle that changed since the
+        last call: latest wins, so a scene that falls behind skips states, never queues."""
+        ...
+
+    def close(self) -> None: ...
+
+
+class StateSource(Protocol):
+    def watch_states(self, rate_hz: float) -> StateWatch:
+        """Every vehicle's state, now and discovered later, at most rate_hz per vehicle."""
+        ...
 
 
 @dataclasses.dataclass(frozen=True)
@@ -69,11 +84,9 @@ class SceneHub:
         self._host = host
         self._port = port
         self.max_rate_hz = max_rate_hz
-        self._throttle = Throttle(max_rate_hz)
         self._server: viser.ViserServer | None = None
         self._task: asyncio.Task[None] | None = None
         self._views: dict[int, VehicleView] = {}
-        self._last_update_s: dict[int, float] = {}
         self._reference: tuple[float, float, float] | None = None
         self._ground_z = 0.0
         self._click: ClickPoint | None = None
@@ -85,6 +98,8 @@ class SceneHub:
         self._grid: viser.GridHandle | None = None
         self._proxy: SceneProxy | None = None
         self.updates_applied = 0
+        # Told of every click (in viser's thread), after it is stored.
+        self.on_click: Callable[[ClickPoint], None] | None = None
 
     @property
     def port(self) -> int:
@@ -96,7 +111,8 @@ class SceneHub:
     def last_click(self) -> ClickPoint | None:
         return self._click
 
-    async def start(self, vehicles: Callable[[], Iterable[Vehicle]]) -> None:
+    async def start(self, states: StateSource | None = None) -> None:
+        """Serve the scene, drawing every vehicle states pushes (none without it)."""
         if self._server is not None:
             return
         # viser prints a banner advertising its private, tokenless port: users should open
@@ -105,7 +121,8 @@ class SceneHub:
         with contextlib.redirect_stdout(io.StringIO()):
             self._server = viser.ViserServer(host=self._host, port=self._port, verbose=False)
         self._set_up_scene(self._server)
-        self._task = asyncio.create_task(self._run(vehicles), name="scene-hub")
+        if states is not None:
+            self._task = asyncio.create_task(self._follow_states(states), name="scene-hub")
 
     async def stop(self) -> None:
         if self._task is not None:
@@ -167,49 +184,42 @@ class SceneHub:
             lat, lon, alt = enu_to_geodetic(hit[0], hit[1], hit[2], *self._reference)
         with self._click_lock:
             seq = 1 if self._click is None else self._click.seq + 1
-            self._click = ClickPoint(seq, time.time(), hit[0], hit[1], hit[2], lat, lon, alt)
+            click = ClickPoint(seq, time.time(), hit[0], hit[1], hit[2], lat, lon, alt)
+            self._click = click
         self._click_marker.position = hit
         self._click_marker.visible = True
+        if self.on_click is not None:
+            self.on_click(click)
 
-    async def _run(self, vehicles: Callable[[], Iterable[Vehicle]]) -> None:
-        period_s = 1.0 / self.max_rate_hz
-        next_s = time.monotonic()
-        while True:
-            try:
-                self._tick(list(vehicles()), time.monotonic())
-            except Exception:
-                # A bad snapshot must not kill the scene for the whole session.
-                _log.exception("scene update failed")
-            next_s += period_s if self._watched() else 1.0 / _IDLE_RATE_HZ
-            now = time.monotonic()
-            if next_s < now:
-                next_s = now
-            await asyncio.sleep(next_s - now)
+    async def _follow_states(self, states: StateSource) -> None:
+        watch = states.watch_states(self.max_rate_hz)
+        loop = asyncio.get_running_loop()
+        try:
+            while True:
+                changed = await watch.next_states()
+                try:
+                    self._apply_states(changed, loop.time())
+                except Exception:
+                    # A bad snapshot must not kill the scene for the whole session.
+                    _log.exception("scene update failed")
+                if not self._watched():
+                    # the watch keeps only the newest state meanwhile, so nothing piles up
+                    await asyncio.sleep(1.0 / _IDLE_RATE_HZ)
+        finally:
+            watch.close()
 
     def _watched(self) -> bool:
         if self._proxy is not None and self._proxy.open_sockets > 0:
             return True
         return self._server is not None and bool(self._server.get_clients())
 
-    def _tick(self, vehicles: list[Vehicle], now_s: float) -> None:
+    def _apply_states(self, states: list[VehicleState], now_s: float) -> None:
         server = self._server
         if server is None:
             return
-        seen: set[int] = set()
         with server.atomic():
-            for vehicle in vehicles:
-                state = vehicle.snapshot()
-                seen.add(state.sysid)
-                if self._last_update_s.get(state.sysid) == state.updated_s:
-                    continue
-                if not self._throttle.ready(state.sysid, now_s):
-                    continue
-                self._last_update_s[state.sysid] = state.updated_s
+            for state in states:
                 self._apply(server, state, now_s)
-            for sysid in set(self._views) - seen:
-                self._views.pop(sysid).remove()
-                self._throttle.forget(sysid)
-                self._last_update_s.pop(sysid, None)
             self._follow_camera(server)
 
     def _apply(self, server: viser.ViserServer, state: VehicleState, now_s: float) -> None:

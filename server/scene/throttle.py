@@ -4,9 +4,12 @@ from __future__ import annotations
 
 from collections.abc import Hashable
 
+from server.link.state import RateGrid
+
 
 class Throttle:
-    """Accepts an update for a key when at least 1 / max_rate_hz has passed since the last.
+    """Accepts an update for a key when at least 1 / max_rate_hz has passed since the last,
+    on a grid per key (RateGrid: no drift when called slightly late, no burst after a pause).
 
     Rejected updates are simply skipped: the caller always holds the newest state and
     offers it again on its next tick, so nothing queues up.
@@ -16,19 +19,16 @@ class Throttle:
         if max_rate_hz <= 0.0:
             raise ValueError("max_rate_hz must be positive")
         self.min_interval_s = 1.0 / max_rate_hz
-        self._last_s: dict[Hashable, float] = {}
+        self._grids: dict[Hashable, RateGrid] = {}
 
     def ready(self, key: Hashable, now_s: float) -> bool:
-        last = self._last_s.get(key)
-        if last is not None and now_s - last < self.min_interval_s:
+        grid = self._grids.get(key)
+        if grid is None:
+            grid = self._grids[key] = RateGrid(self.min_interval_s)
+        if not grid.due(now_s):
             return False
-        # Keep the cadence on the ideal grid when called slightly late, but never let
-        # a long pause produce a burst afterwards.
-        if last is not None and now_s - last < 2.0 * self.min_interval_s:
-            self._last_s[key] = last + self.min_interval_s
-        else:
-            self._last_s[key] = now_s
+        grid.take(now_s)
         return True
 
     def forget(self, key: Hashable) -> None:
-        self._last_s.pop(key, None)
+        self._grids.pop(key, None)

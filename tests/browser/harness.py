@@ -177,7 +177,7 @@ def empty_scene() -> Iterator[tuple[str, str]]:
         hub = SceneHub()
         app = FastAPI()
         hub.mount(app, check_token=lambda t: t == token)
-        await hub.start(lambda: [])
+        await hub.start()
         server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=0,
                                                log_level="warning", lifespan="off"))
         holder["server"] = server

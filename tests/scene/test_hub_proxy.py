@@ -17,8 +17,10 @@ from fastapi import FastAPI
 from websockets.asyncio.client import connect
 from websockets.typing import Subprotocol
 
+from server.api.publisher import StatePublishers
 from server.link import Vehicle
-from server.scene import SceneHub
+from server.link.state import StateSubscription, SubscriptionHub
+from server.scene import ClickPoint, SceneHub
 
 from .conftest import FakeVehicle
 
@@ -30,17 +32,44 @@ SUBPROTOCOL = Subprotocol(f"viser-v{viser.__version__}")
 class Served:
     hub: SceneHub
     base: str
-    vehicles: list[FakeVehicle]
+    vehicles: list[_PushingVehicle]
+
+
+class _PushingVehicle(FakeVehicle):
+    """A fake that tells its subscribers of a change, as a link vehicle does."""
+
+    def __init__(self, sysid: int, mav_type: str = "QUADROTOR") -> None:
+        super().__init__(sysid, mav_type)
+        self.connected = True
+        self.hub = SubscriptionHub(self.snapshot)
+
+    @property
+    def state_version(self) -> int:
+        return self.hub.version
+
+    def subscribe(self, min_interval_s: float = 0.0) -> StateSubscription:
+        return self.hub.subscribe(min_interval_s)
+
+
+async def _change_at_50_hz(vehicles: list[_PushingVehicle]) -> None:
+    while True:
+        for vehicle in vehicles:
+            vehicle.hub.notify()
+        await asyncio.sleep(0.02)
 
 
 @pytest.fixture
 async def served() -> AsyncIterator[Served]:
-    vehicles = [FakeVehicle(1), FakeVehicle(2, "VTOL_FIXEDROTOR")]
+    vehicles = [_PushingVehicle(1), _PushingVehicle(2, "VTOL_FIXEDROTOR")]
     hub = SceneHub(max_rate_hz=20.0)
     app = FastAPI()
     hub.mount(app, check_token=lambda token: token == TOKEN)
-    # The hub reads only snapshot(), which the fakes provide.
-    await hub.start(lambda: cast("list[Vehicle]", vehicles))
+    publishers = StatePublishers(
+        lambda: cast("list[Vehicle]", vehicles), lambda _sysid: (None, None)
+    )
+    await publishers.start([])
+    changing = asyncio.create_task(_change_at_50_hz(vehicles))
+    await hub.start(publishers)
     server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=0, log_level="warning",
                                            lifespan="off"))
     task = asyncio.create_task(server.serve())
@@ -55,6 +84,8 @@ async def served() -> AsyncIterator[Served]:
         server.should_exit = True
         await task
         await hub.stop()
+        changing.cancel()
+        await publishers.close()
 
 
 async def test_scene_page_is_served_with_token_and_sets_scene_cookie(served: Served) -> None:
@@ -147,8 +178,11 @@ async def test_click_endpoint_reports_the_ground_point_with_lat_lon(served: Serv
         while served.hub.status()["vehicles"] != [1, 2]:
             assert time.monotonic() < deadline
             await asyncio.sleep(0.05)
+        pushed: list[ClickPoint] = []
+        served.hub.on_click = pushed.append
         served.hub.record_click((0.0, -20.0, 10.0), (0.0, 1.0, -0.5))
         click = (await client.get("/scene/api/click", params={"token": TOKEN})).json()
+    assert [point.seq for point in pushed] == [1]
     assert click["seq"] == 1
     assert click["north_m"] == pytest.approx(0.0, abs=1e-6)
     assert click["east_m"] == pytest.approx(0.0, abs=1e-6)

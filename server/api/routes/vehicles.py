@@ -4,12 +4,13 @@ from __future__ import annotations
 
 from typing import Any
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Request, Response
 
 from server.api.deps import Context, KnownVehicle, Reader
 from server.api.errors import AUTH_RESPONSES, READ_RESPONSES
+from server.api.publisher import StatePublishers
 from server.api.schemas import StreamOut, VehicleStateOut, VehicleSummaryOut
-from server.api.views import state_dict, stream_dict, summary_dict
+from server.api.views import stream_dict, summary_dict
 
 router = APIRouter(tags=["vehicles"])
 
@@ -20,8 +21,12 @@ async def list_vehicles(context: Context, _: Reader) -> list[dict[str, Any]]:
 
 
 @router.get("/vehicles/{vehicle_id}", response_model=VehicleStateOut, responses=READ_RESPONSES)
-async def get_vehicle_state(vehicle: KnownVehicle, context: Context) -> dict[str, Any]:
-    return state_dict(vehicle.snapshot(), context.leases)
+async def get_vehicle_state(vehicle: KnownVehicle, request: Request) -> Response:
+    """The state publisher's latest encoding (the one the telemetry sockets send), with
+    the lease as it is now."""
+    publishers: StatePublishers = request.app.state.publishers
+    body = publishers.for_vehicle(vehicle).rest_json()
+    return Response(body, media_type="application/json")
 
 
 @router.get("/vehicles/{vehicle_id}/stream", response_model=StreamOut, responses=READ_RESPONSES)

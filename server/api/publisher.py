@@ -1,0 +1,440 @@
+"""One state publisher per vehicle: a snapshot taken once per tick, encoded once, fanned out
+at rate tiers to every telemetry socket, REST read and the scene.
+
+Data path: the vehicle's SubscriptionHub wakes the publisher on a change, at most
+max_rate_hz; the publisher takes one snapshot (a tick, a `Published`) and hands that same
+object to the consumers whose rate tier is due. Its JSON is made on first use and kept on
+the object, so a tick is encoded at most once however many sockets send it, and not at all
+when only the scene (which wants the snapshot itself) is watching.
+
+Slow-consumer policy, the one place it is decided: every consumer reads through a slot of
+size one (`Slot`, or the scene's `FleetWatch`, one slot per vehicle): a newer value replaces
+one not yet read, so a consumer that falls behind gets the newest state, never a backlog.
+What a telemetry socket does with a send that stalls is in ws_common.py.
+
+Rate tiers: consumers that ask for the same rate share one tier: one RateGrid, one decision
+per tick. A due tier delivers at once; a tier not yet due delivers the newest tick when its
+slot on the grid comes, so what a consumer receives is never older than one tick.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+from collections import deque
+from collections.abc import AsyncIterator, Callable, Iterable
+from typing import Generic, Protocol, TypeVar
+
+from server.api.views import LeaseStatus, encode_state, state_json, state_message, summary_dict
+from server.link import Link, Vehicle, VehicleState
+from server.link.state import WAKE_BATCH, RateGrid, StateSubscription, loop_time_s
+
+T = TypeVar("T")
+
+DEFAULT_MAX_RATE_HZ = 50.0
+
+
+class PublishedVehicle(Protocol):
+    """What a publisher reads of a vehicle."""
+
+    @property
+    def sysid(self) -> int: ...
+    @property
+    def connected(self) -> bool: ...
+    @property
+    def state_version(self) -> int: ...
+    def snapshot(self) -> VehicleState: ...
+    def subscribe(self, min_interval_s: float = 0.0) -> StateSubscription: ...
+
+
+class Published:
+    """One tick: the snapshot, the lease at that moment, and the encodings, each made once
+    on first use and then shared by every consumer of the tick."""
+
+    def __init__(
+        self,
+        state: VehicleState,
+        version: int,
+        lease: LeaseStatus,
+        taken_s: float,
+        encode: Callable[[VehicleState], bytes],
+    ) -> None:
+        self.state = state
+        self.version = version
+        self.lease = lease
+        self.taken_s = taken_s
+        self._encode = encode
+        self._body: bytes | None = None
+        self._message: str | None = None
+
+    @property
+    def body(self) -> bytes:
+        if self._body is None:
+            self._body = self._encode(self.state)
+        return self._body
+
+    @property
+    def message(self) -> str:
+        """The telemetry socket's `{type: "state"}` text."""
+        if self._message is None:
+            self._message = state_message(self.state, self.body, self.lease)
+        return self._message
+
+
+class Sink(Protocol):
+    def put(self, published: Published) -> None: ...
+
+
+class Slot(Generic[T]):
+    """Latest wins: holds at most one value; put() replaces a value not yet read. Read it
+    with `async for`, which ends once the slot is closed."""
+
+    def __init__(self) -> None:
+        self._value: T | None = None
+        self._full = False
+        self._ready = asyncio.Event()
+        self.closed = False
+        self.replaced = 0  # values overwritten before they were read
+
+    def put(self, value: T) -> None:
+        if self._full:
+            self.replaced += 1
+        self._value = value
+        self._full = True
+        self._ready.set()
+
+    def close(self) -> None:
+        self.closed = True
+        self._ready.set()
+
+    def __aiter__(self) -> AsyncIterator[T]:
+        return self
+
+    async def __anext__(self) -> T:
+        await self._ready.wait()
+        if self.closed or self._value is None:
+            raise StopAsyncIteration
+        value, self._value, self._full = self._value, None, False
+        self._ready.clear()
+        return value
+
+
+class _Tier:
+    def __init__(self, publisher: StatePublisher, interval_s: float) -> None:
+        self._publisher = publisher
+        self.grid = RateGrid(interval_s)
+        self.sinks: set[Sink] = set()
+        self._sent: Published | None = None
+        self._timer: asyncio.TimerHandle | None = None
+
+    def offer(self, now_s: float) -> None:
+        if self._timer is not None:
+            return  # a delivery is booked; it takes the newest tick when it runs
+        if self.grid.due(now_s):
+            self._deliver(now_s)
+        else:
+            self._timer = asyncio.get_running_loop().call_at(self.grid.next_s, self._booked)
+
+    def cancel(self) -> None:
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
+
+    def _booked(self) -> None:
+        self._timer = None
+        self._deliver(loop_time_s())
+
+    def _deliver(self, now_s: float) -> None:
+        published = self._publisher.current
+        if published is None or published is self._sent:
+            return
+        self._sent = published
+        self.grid.take(now_s)
+        self._publisher.fan_out(published, self.sinks)
+
+
+class StatePublisher:
+    """The state of one vehicle, for every consumer: subscribe(rate_hz) for a latest-wins
+    slot of ticks at that rate (capped at max_rate_hz), latest() / rest_json() for reads."""
+
+    def __init__(
+        self,
+        vehicle: PublishedVehicle,
+        lease_status: Callable[[int], LeaseStatus],
+        *,
+        max_rate_hz: float = DEFAULT_MAX_RATE_HZ,
+        encode: Callable[[VehicleState], bytes] = encode_state,
+        on_listing_change: Callable[[], None] | None = None,
+    ) -> None:
+        self.vehicle = vehicle
+        self.max_rate_hz = max_rate_hz
+        self.current: Published | None = None
+        self.encodes = 0  # JSON encodings made: at most one per tick
+        self.ticks = 0
+        self._lease_status = lease_status
+        self._encode_state = encode
+        self._on_listing_change = on_listing_change
+        self._listing = vehicle.connected
+        self._tiers: dict[float, _Tier] = {}
+        self._tier_of: dict[Sink, _Tier] = {}
+        self._to_put: deque[tuple[Sink, Published]] = deque()
+        self._task: asyncio.Task[None] | None = None
+
+    def start(self) -> None:
+        if self._task is None:
+            self._task = asyncio.create_task(self._run(), name=f"state-{self.vehicle.sysid}")
+
+    async def close(self) -> None:
+        if self._task is not None:
+            self._task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._task
+            self._task = None
+        self._close_sinks()
+
+    def subscribe(self, rate_hz: float) -> Slot[Published]:
+        slot: Slot[Published] = Slot()
+        self.add(slot, rate_hz)
+        return slot
+
+    def add(self, sink: Sink, rate_hz: float) -> None:
+        """Deliver ticks to sink at most rate_hz (and the current state at once)."""
+        self.remove(sink)
+        interval_s = round(1.0 / min(rate_hz, self.max_rate_hz), 6)
+        tier = self._tiers.get(interval_s)
+        if tier is None:
+            tier = self._tiers[interval_s] = _Tier(self, interval_s)
+        tier.sinks.add(sink)
+        self._tier_of[sink] = tier
+        sink.put(self.latest())
+
+    def remove(self, sink: Sink) -> None:
+        tier = self._tier_of.pop(sink, None)
+        if tier is None:
+            return
+        tier.sinks.discard(sink)
+        if not tier.sinks:
+            tier.cancel()
+            del self._tiers[tier.grid.interval_s]
+
+    def unsubscribe(self, slot: Slot[Published]) -> None:
+        self.remove(slot)
+        slot.close()
+
+    @property
+    def consumers(self) -> int:
+        return len(self._tier_of)
+
+    def latest(self, max_age_s: float | None = None) -> Published:
+        """The current tick, or a new one if the state changed since (or, with max_age_s,
+        if the tick is older than that: the heartbeat age in it grows with time)."""
+        current = self.current
+        if (
+            current is None
+            or current.version != self.vehicle.state_version
+            or (max_age_s is not None and loop_time_s() - current.taken_s > max_age_s)
+        ):
+            current = self._take()
+        return current
+
+    def rest_json(self) -> bytes:
+        """GET /vehicles/{id}: the latest encoding, with the lease as it is now."""
+        published = self.latest(max_age_s=1.0 / self.max_rate_hz)
+        lease = self._lease_status(published.state.sysid)
+        return state_json(published.state, published.body, lease)
+
+    def fan_out(self, published: Published, sinks: Iterable[Sink]) -> None:
+        """Hand one tick to sinks, WAKE_BATCH per event-loop iteration: a tick can make
+        dozens of sockets due at once, and their sends in one iteration would hold back the
+        setpoint streamer's timer for milliseconds; in batches, timers run between them."""
+        batch_pending = bool(self._to_put)
+        self._to_put.extend((sink, published) for sink in sinks)
+        if not batch_pending:
+            self._put_batch()
+
+    def _put_batch(self) -> None:
+        for _ in range(min(WAKE_BATCH, len(self._to_put))):
+            sink, published = self._to_put.popleft()
+            sink.put(published)
+        if self._to_put:
+            asyncio.get_running_loop().call_soon(self._put_batch)
+
+    def _take(self) -> Published:
+        self.ticks += 1
+        state = self.vehicle.snapshot()
+        self.current = Published(
+            state,
+            self.vehicle.state_version,
+            self._lease_status(state.sysid),
+            loop_time_s(),
+            self._encode,
+        )
+        return self.current
+
+    def _encode(self, state: VehicleState) -> bytes:
+        self.encodes += 1
+        return self._encode_state(state)
+
+    async def _run(self) -> None:
+        subscription = self.vehicle.subscribe(min_interval_s=1.0 / self.max_rate_hz)
+        try:
+            while await subscription.changed():
+                self._check_listing()
+                if self._tiers:
+                    self._take()
+                    now_s = loop_time_s()
+                    for tier in list(self._tiers.values()):
+                        tier.offer(now_s)
+        finally:
+            subscription.close()
+            self._close_sinks()
+
+    def _check_listing(self) -> None:
+        if self.vehicle.connected != self._listing:
+            self._listing = self.vehicle.connected
+            if self._on_listing_change is not None:
+                self._on_listing_change()
+
+    def _close_sinks(self) -> None:
+        for tier in self._tiers.values():
+            tier.cancel()
+        for sink in list(self._tier_of):
+            self.remove(sink)
+            if isinstance(sink, Slot):
+                sink.close()
+
+
+class FleetWatch:
+    """Every vehicle's newest state at one rate (the scene): one slot per vehicle."""
+
+    def __init__(self, on_close: Callable[[FleetWatch], None]) -> None:
+        self._on_close = on_close
+        self._pending: dict[int, VehicleState] = {}
+        self._ready = asyncio.Event()
+
+    def put(self, published: Published) -> None:
+        self._pending[published.state.sysid] = published.state
+        self._ready.set()
+
+    async def next_states(self) -> list[VehicleState]:
+        """The newest state of each vehicle that changed since the last call."""
+        await self._ready.wait()
+        self._ready.clear()
+        states = list(self._pending.values())
+        self._pending.clear()
+        return states
+
+    def close(self) -> None:
+        self._on_close(self)
+
+
+class Broadcast:
+    """One topic for every telemetry socket (the vehicle list, scene clicks), latest wins."""
+
+    def __init__(self) -> None:
+        self._slots: set[Slot[str]] = set()
+
+    def subscribe(self, current: str | None = None) -> Slot[str]:
+        slot: Slot[str] = Slot()
+        if current is not None:
+            slot.put(current)
+        self._slots.add(slot)
+        return slot
+
+    def unsubscribe(self, slot: Slot[str]) -> None:
+        self._slots.discard(slot)
+        slot.close()
+
+    def publish(self, text: str) -> None:
+        for slot in self._slots:
+            slot.put(text)
+
+
+class StatePublishers:
+    """The publishers of every vehicle, made when a vehicle is discovered or first asked
+    for, and the page-wide topics: the vehicle list and clicks in the 3D scene."""
+
+    def __init__(
+        self,
+        vehicles: Callable[[], list[Vehicle]],
+        lease_status: Callable[[int], LeaseStatus],
+        *,
+        max_rate_hz: float = DEFAULT_MAX_RATE_HZ,
+    ) -> None:
+        self._vehicles = vehicles
+        self._lease_status = lease_status
+        self.max_rate_hz = max_rate_hz
+        self._publishers: dict[int, StatePublisher] = {}
+        self._watches: dict[FleetWatch, float] = {}
+        self._tasks: list[asyncio.Task[None]] = []
+        self.vehicle_list = Broadcast()
+        self.scene_clicks = Broadcast()
+
+    async def start(self, links: Iterable[Link]) -> None:
+        for link in links:
+            self._tasks.append(asyncio.create_task(self._discover(link)))
+        self._refresh()
+
+    async def close(self) -> None:
+        for task in self._tasks:
+            task.cancel()
+        await asyncio.gather(*self._tasks, return_exceptions=True)
+        self._tasks.clear()
+        for publisher in list(self._publishers.values()):
+            await publisher.close()
+        self._publishers.clear()
+
+    def for_vehicle(self, vehicle: Vehicle) -> StatePublisher:
+        publisher = self._publishers.get(vehicle.sysid)
+        if publisher is None or publisher.vehicle is not vehicle:
+            publisher = StatePublisher(
+                vehicle,
+                self._lease_status,
+                max_rate_hz=self.max_rate_hz,
+                on_listing_change=self._publish_vehicle_list,
+            )
+            self._publishers[vehicle.sysid] = publisher
+            publisher.start()
+            for watch, rate_hz in self._watches.items():
+                publisher.add(watch, rate_hz)
+        return publisher
+
+    def watch_states(self, rate_hz: float) -> FleetWatch:
+        """Every vehicle's state, now and discovered later, at most rate_hz each."""
+        watch = FleetWatch(self._unwatch)
+        self._watches[watch] = rate_hz
+        for publisher in self._publishers.values():
+            publisher.add(watch, rate_hz)
+        return watch
+
+    def vehicle_list_message(self) -> str:
+        summaries = [summary_dict(vehicle.snapshot()) for vehicle in self._vehicles()]
+        return json.dumps({"type": "vehicles", "vehicles": summaries}, separators=(",", ":"))
+
+    def publish_click(self, click: dict[str, object]) -> None:
+        self.scene_clicks.publish(
+            json.dumps({"type": "scene_click", **click}, separators=(",", ":"))
+        )
+
+    def _unwatch(self, watch: FleetWatch) -> None:
+        self._watches.pop(watch, None)
+        for publisher in self._publishers.values():
+            publisher.remove(watch)
+
+    async def _discover(self, link: Link) -> None:
+        queue = link.subscribe_vehicles()
+        try:
+            while True:
+                await queue.get()
+                self._refresh()
+                self._publish_vehicle_list()
+        finally:
+            link.unsubscribe_vehicles(queue)
+
+    def _refresh(self) -> None:
+        for vehicle in self._vehicles():
+            self.for_vehicle(vehicle)
+
+    def _publish_vehicle_list(self) -> None:
+        self.vehicle_list.publish(self.vehicle_list_message())

@@ -1,0 +1,115 @@
+"""What both WebSockets share: admission (token, Origin, role), serialised sends with a
+timeout, close codes, and running a socket's jobs until the client goes away.
+
+Slow-client policy for sends (state itself is latest-wins, see publisher.py): statustext and
+events wait in the vehicle's per-client queue of EVENT_BACKLOG entries, which drops its
+oldest entry when full; a single send that does not complete within SEND_TIMEOUT_S closes
+the client (code 1008): a client that stops reading cannot hold server memory or the event
+loop.
+
+Close codes: 4401 no/wrong token, 4403 observer token on the control socket, a read-only
+replay, or a foreign Origin, 4404 unknown vehicle, 4409 control held by another pilot,
+4408 lease lost.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+from collections.abc import Awaitable
+from typing import Any
+from urllib.parse import urlsplit
+
+from fastapi import WebSocket, WebSocketDisconnect
+from starlette.websockets import WebSocketState
+
+from server.api.auth import Role, token_from
+from server.api.deps import READ_ONLY_REASON, ApiContext
+
+EVENT_BACKLOG = 256
+SEND_TIMEOUT_S = 5.0
+CLOSE_UNAUTHORIZED = 4401
+CLOSE_FORBIDDEN = 4403
+CLOSE_NOT_FOUND = 4404
+CLOSE_LEASE_LOST = 4408
+CLOSE_LEASE_HELD = 4409
+
+
+class Sender:
+    """Serialises sends on one socket, with the send timeout of the policy above."""
+
+    def __init__(self, websocket: WebSocket) -> None:
+        self._websocket = websocket
+        self._lock = asyncio.Lock()
+
+    async def send_text(self, text: str) -> None:
+        async with self._lock:
+            try:
+                # asyncio.timeout, unlike wait_for, adds no task per message
+                async with asyncio.timeout(SEND_TIMEOUT_S):
+                    await self._websocket.send_text(text)
+            except TimeoutError:
+                await close_socket(self._websocket, 1008, "client too slow")
+                raise WebSocketDisconnect(1008) from None
+
+    async def send_json(self, message: dict[str, Any]) -> None:
+        await self.send_text(json.dumps(message, allow_nan=False))
+
+
+def _origin_allowed(websocket: WebSocket, allowed: list[str]) -> bool:
+    """Browsers always send Origin; scripts usually do not. Same host, or a configured one."""
+    origin = websocket.headers.get("origin")
+    if origin is None or origin in allowed:
+        return True
+    return urlsplit(origin).netloc == websocket.headers.get("host")
+
+
+async def close_socket(websocket: WebSocket, code: int, reason: str = "") -> None:
+    if websocket.application_state == WebSocketState.CONNECTED:
+        with contextlib.suppress(RuntimeError, WebSocketDisconnect):
+            await websocket.close(code, reason)
+
+
+async def admit(websocket: WebSocket, need: Role) -> ApiContext | None:
+    """Accept the socket, then close it with the right code if it may not stay."""
+    context: ApiContext = websocket.app.state.api
+    await websocket.accept()
+    role = context.tokens.role_of(
+        token_from(websocket.headers, websocket.query_params, websocket.cookies)
+    )
+    if role is None:
+        await close_socket(websocket, CLOSE_UNAUTHORIZED, "missing or wrong token")
+        return None
+    if not _origin_allowed(websocket, context.settings.cors_origins):
+        await close_socket(websocket, CLOSE_FORBIDDEN, "origin not allowed")
+        return None
+    if need is Role.PILOT and context.read_only:
+        await close_socket(websocket, CLOSE_FORBIDDEN, READ_ONLY_REASON)
+        return None
+    if need is Role.PILOT and role is not Role.PILOT:
+        await close_socket(websocket, CLOSE_FORBIDDEN, "the control socket needs the pilot token")
+        return None
+    return context
+
+
+async def run_until_disconnect(websocket: WebSocket, *jobs: Awaitable[None]) -> None:
+    """Run the jobs until the client goes away or one of them ends; then cancel the rest."""
+    tasks = [asyncio.ensure_future(job) for job in (_drain_until_disconnect(websocket), *jobs)]
+    try:
+        done, _ = await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
+        for task in done:
+            exc = None if task.cancelled() else task.exception()
+            if exc is not None and not isinstance(exc, WebSocketDisconnect):
+                raise exc
+    finally:
+        for task in tasks:
+            task.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+
+
+async def _drain_until_disconnect(websocket: WebSocket) -> None:
+    while True:
+        message = await websocket.receive()
+        if message["type"] == "websocket.disconnect":
+            return
