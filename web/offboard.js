@@ -1,5 +1,7 @@
-// The offboard panel: setpoint types with a slider and a number per field, their API
-// bodies, and keyboard velocity control.
+// The offboard panel: a slider and a number per setpoint field, their API bodies, and
+// keyboard velocity control. The setpoint kinds, their field names, units and limits are read
+// from the API's /openapi.json (built from the link's one definition); this module only says
+// which kind each panel type sends, how a field is shown, and the sliders' display ranges.
 
 // POSITION_TARGET_TYPEMASK bits (MAVLink): ignore x, y, vz, the accelerations and yaw rate,
 // leaving velocity x/y with position z: velocity in the horizontal plane at a held altitude.
@@ -7,59 +9,118 @@ const IGNORE_PX = 1, IGNORE_PY = 2, IGNORE_VZ = 32, IGNORE_ACCEL = 64 | 128 | 25
 const IGNORE_YAW_RATE = 2048;
 const ALT_HOLD_VELOCITY_MASK = IGNORE_PX | IGNORE_PY | IGNORE_VZ | IGNORE_ACCEL | IGNORE_YAW_RATE;
 const MAV_FRAME_LOCAL_NED = 1;
+const SETPOINT_PATH = "/api/v1/vehicles/{vehicle_id}/setpoint";
 
-const f = (key, label, unit, min, max, step, value = 0) => ({ key, label, unit, min, max, step, value });
+// How a panel shows an API field: under another key and label, as api = scale·value (+ the
+// home's down_m when fromHome: altitudes above home), in another unit.
+const ALTITUDE = { key: "alt_m", label: "Altitude", scale: -1, fromHome: true };
+const UP = { key: "up_m_s", label: "Up", scale: -1 };
+const YAW_FROM_RAD = { key: "yaw_deg", label: "Yaw", scale: Math.PI / 180, unit: "deg" };
 
-export const SETPOINT_TYPES = {
-  position: [
-    f("north_m", "North", "m", -100, 100, 0.5), f("east_m", "East", "m", -100, 100, 0.5),
-    f("alt_m", "Altitude", "m", 0, 60, 0.1, 5), f("yaw_deg", "Yaw", "deg", -180, 180, 1),
-  ],
-  velocity: [
-    f("north_m_s", "North", "m/s", -5, 5, 0.1), f("east_m_s", "East", "m/s", -5, 5, 0.1),
-    f("up_m_s", "Up", "m/s", -3, 3, 0.1), f("yaw_rate_deg_s", "Yaw rate", "deg/s", -90, 90, 1),
-  ],
-  velocity_body: [
-    f("forward_m_s", "Forward", "m/s", -5, 5, 0.1), f("right_m_s", "Right", "m/s", -5, 5, 0.1),
-    f("up_m_s", "Up", "m/s", -3, 3, 0.1), f("yaw_rate_deg_s", "Yaw rate", "deg/s", -90, 90, 1),
-  ],
-  alt_hold_velocity: [
-    f("north_m_s", "North", "m/s", -5, 5, 0.1), f("east_m_s", "East", "m/s", -5, 5, 0.1),
-    f("alt_m", "Altitude", "m", 0, 60, 0.1, 5), f("yaw_deg", "Yaw", "deg", -180, 180, 1),
-  ],
-  attitude: [
-    f("roll_deg", "Roll", "deg", -30, 30, 0.5), f("pitch_deg", "Pitch", "deg", -30, 30, 0.5),
-    f("yaw_deg", "Yaw", "deg", -180, 180, 1), f("thrust", "Thrust", "0..1", 0, 1, 0.01, 0.5),
-  ],
+// Panel types: the API kind each sends; `show` picks and orders the kind's fields (default:
+// all), `views` changes how one shows, `fixed` values are sent as they are.
+const PANELS = {
+  position: { kind: "position_ned", views: { down_m: ALTITUDE } },
+  velocity: {
+    kind: "velocity_ned", show: ["north_m_s", "east_m_s", "down_m_s", "yaw_rate_deg_s"],
+    views: { down_m_s: UP },
+  },
+  velocity_body: { kind: "velocity_body", views: { down_m_s: UP } },
+  alt_hold_velocity: {
+    kind: "raw_local", show: ["vx", "vy", "z", "yaw"],
+    fixed: { frame: MAV_FRAME_LOCAL_NED, type_mask: ALT_HOLD_VELOCITY_MASK },
+    views: {
+      vx: { key: "north_m_s", label: "North" }, vy: { key: "east_m_s", label: "East" },
+      z: ALTITUDE, yaw: YAW_FROM_RAD,
+    },
+  },
+  attitude: { kind: "attitude" },
 };
+
+// The sliders' display ranges [min, max, step] by panel key, else by unit; the first value
+// of a field is 0 unless INITIAL says otherwise.
+const DISPLAY_BY_KEY = {
+  alt_m: [0, 60, 0.1], up_m_s: [-3, 3, 0.1], roll_deg: [-30, 30, 0.5], pitch_deg: [-30, 30, 0.5],
+};
+const DISPLAY_BY_UNIT = {
+  m: [-100, 100, 0.5], "m/s": [-5, 5, 0.1], "m/s^2": [-5, 5, 0.1], deg: [-180, 180, 1],
+  "deg/s": [-90, 90, 1], 1: [0, 1, 0.01],
+};
+const INITIAL = { alt_m: 5, thrust: 0.5 };
+
+/** Panel type -> its fields ({key, label, unit, min, max, step, value, api, scale, fromHome}),
+ * filled from the API schema by loadSetpointKinds(). */
+export const SETPOINT_TYPES = {};
+
+let kindsLoaded = null;
+
+/** Reads the setpoint kinds from /openapi.json into SETPOINT_TYPES (once). */
+export function loadSetpointKinds() {
+  kindsLoaded ??= fetch("/openapi.json")
+    .then((answer) => answer.json())
+    .then((schema) => {
+      const kinds = setpointKinds(schema);
+      for (const [type, panel] of Object.entries(PANELS)) SETPOINT_TYPES[type] = panelFields(panel, kinds);
+    });
+  return kindsLoaded;
+}
+
+/** kind -> {field name -> {unit, min, max}} from the PUT setpoint body's discriminator. */
+export function setpointKinds(schema) {
+  const body = schema.paths[SETPOINT_PATH].put.requestBody.content["application/json"].schema;
+  const kinds = {};
+  for (const [kind, ref] of Object.entries(body.discriminator.mapping)) {
+    const component = schema.components.schemas[ref.split("/").pop()];
+    kinds[kind] = {};
+    for (const [name, property] of Object.entries(component.properties)) {
+      if (name === "type") continue;
+      const number = (property.anyOf || [property]).find((branch) => branch.type !== "null");
+      kinds[kind][name] = { unit: number["x-unit"], min: number.minimum, max: number.maximum };
+    }
+  }
+  return kinds;
+}
+
+function panelFields(panel, kinds) {
+  const fields = kinds[panel.kind];
+  if (!fields) throw new Error(`the API has no setpoint kind ${panel.kind}`);
+  return (panel.show || Object.keys(fields).filter((name) => !(name in (panel.fixed || {})))).map((api) => {
+    if (!fields[api]) throw new Error(`setpoint kind ${panel.kind} has no field ${api}`);
+    const view = { key: api, label: labelOf(api), scale: 1, ...panel.views?.[api] };
+    const { unit, min, max } = fields[api];
+    const limits = [min / view.scale, max / view.scale].sort((a, b) => a - b);
+    const shownUnit = view.unit ?? unit;
+    const [low, high, step] = DISPLAY_BY_KEY[view.key] ?? DISPLAY_BY_UNIT[shownUnit] ?? [...limits, 0.01];
+    return {
+      key: view.key, label: view.label, unit: shownUnit === "1" ? `${min}..${max}` : shownUnit,
+      valid: limits, min: Math.max(low, limits[0]), max: Math.min(high, limits[1]), step,
+      value: INITIAL[view.key] ?? 0, api, scale: view.scale, fromHome: Boolean(view.fromHome),
+    };
+  });
+}
+
+/** "yaw_rate_deg_s" -> "Yaw rate": the name without its unit. */
+function labelOf(name) {
+  const words = name.replace(/(_(m|s|s2|deg|rad))+$/, "").split("_");
+  const text = words.join(" ");
+  return text.charAt(0).toUpperCase() + text.slice(1);
+}
 
 /** The API setpoint body for a panel type and its values; altitudes are above home. */
 export function setpointBody(type, v, homeDownM = 0) {
-  const down = (altM) => homeDownM - altM;
-  switch (type) {
-    case "position":
-      return { type: "position_ned", north_m: v.north_m, east_m: v.east_m, down_m: down(v.alt_m), yaw_deg: v.yaw_deg };
-    case "velocity":
-      return { type: "velocity_ned", north_m_s: v.north_m_s, east_m_s: v.east_m_s, down_m_s: -v.up_m_s, yaw_rate_deg_s: v.yaw_rate_deg_s };
-    case "velocity_body":
-      return { type: "velocity_body", forward_m_s: v.forward_m_s, right_m_s: v.right_m_s, down_m_s: -v.up_m_s, yaw_rate_deg_s: v.yaw_rate_deg_s };
-    case "alt_hold_velocity":
-      return {
-        type: "raw_local", frame: MAV_FRAME_LOCAL_NED, type_mask: ALT_HOLD_VELOCITY_MASK,
-        x: 0, y: 0, z: down(v.alt_m), vx: v.north_m_s, vy: v.east_m_s, vz: 0,
-        yaw: (v.yaw_deg * Math.PI) / 180,
-      };
-    case "attitude":
-      return { type: "attitude", roll_deg: v.roll_deg, pitch_deg: v.pitch_deg, yaw_deg: v.yaw_deg, thrust: v.thrust };
-    default:
-      throw new Error(`unknown setpoint type ${type}`);
+  const panel = PANELS[type];
+  if (!panel) throw new Error(`unknown setpoint type ${type}`);
+  const body = { type: panel.kind, ...panel.fixed };
+  for (const field of SETPOINT_TYPES[type] || []) {
+    body[field.api] = field.scale * v[field.key] + (field.fromHome ? homeDownM : 0);
   }
+  return body;
 }
 
 /** Panel values that hold the vehicle where it is (for "Here" and for switching types). */
 export function valuesFromState(type, state) {
   const values = {};
-  for (const field of SETPOINT_TYPES[type]) values[field.key] = field.value;
+  for (const field of SETPOINT_TYPES[type] || []) values[field.key] = field.value;
   const p = state && state.position_ned;
   const homeDown = state && state.home ? state.home.down_m : 0;
   const yaw = state && state.attitude ? state.attitude.yaw_deg : 0;
@@ -82,20 +143,28 @@ export class SetpointPanel {
     this.type = "position";
     this.values = {};
     this.inputs = {};
+    this.loaded = false;
+    loadSetpointKinds().then(() => {
+      this.loaded = true;
+      this.show(this.type, this.values);
+    });
   }
 
+  /** Shows a panel type's fields; until the kinds are read, the type and values wait. */
   show(type, values) {
     this.type = type;
     this.values = { ...values };
     this.inputs = {};
     this.container.replaceChildren();
+    if (!this.loaded) return;
     for (const field of SETPOINT_TYPES[type]) {
+      this.values[field.key] ??= field.value;
       const row = document.createElement("div");
       row.className = "sp-field";
       const label = document.createElement("label");
       label.textContent = field.label;
-      const slider = this.input("range", field, `sp-${field.key}-slider`);
-      const number = this.input("number", field, `sp-${field.key}`);
+      const slider = this.input("range", field, `sp-${field.key}-slider`, [field.min, field.max]);
+      const number = this.input("number", field, `sp-${field.key}`, field.valid);
       number.classList.add("num");
       const unit = document.createElement("span");
       unit.className = "unit";
@@ -115,15 +184,15 @@ export class SetpointPanel {
     }
   }
 
-  input(kind, field, id) {
+  input(kind, field, id, [min, max]) {
     const el = document.createElement("input");
     el.type = kind;
     el.id = id;
     el.className = "ctl";
-    el.min = field.min;
-    el.max = field.max;
+    el.min = min;
+    el.max = max;
     el.step = field.step;
-    el.value = this.values[field.key] ?? field.value;
+    el.value = this.values[field.key];
     return el;
   }
 
