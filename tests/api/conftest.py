@@ -3,21 +3,19 @@ an httpx client through ASGI, and a real uvicorn on an ephemeral port for WebSoc
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
-import time
-from collections.abc import AsyncIterator, Awaitable, Callable
+from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 import httpx
 import pytest
-import uvicorn
 from fastapi import FastAPI
 
 from server.app import create_app
 from server.settings import Settings, load_settings
 from sim.runner import SimCluster, SimInstance
+from tests.waiting import eventually
 
 PILOT = "pilot-token-for-tests"
 OBSERVER = "observer-token-for-tests"
@@ -41,20 +39,6 @@ def make_settings(url: str | None, **overrides: Any) -> Settings:
 
 def auth(token: str = PILOT) -> dict[str, str]:
     return {"Authorization": f"Bearer {token}"}
-
-
-async def eventually(
-    probe: Callable[[], Awaitable[Any]], timeout_s: float, what: str, poll_s: float = 0.05
-) -> Any:
-    """Poll until probe() returns something truthy; fail with `what` at the deadline."""
-    deadline = time.monotonic() + timeout_s
-    last: Any = None
-    while time.monotonic() < deadline:
-        last = await probe()
-        if last:
-            return last
-        await asyncio.sleep(poll_s)
-    raise AssertionError(f"timed out after {timeout_s} s waiting for {what} (last: {last!r})")
 
 
 @dataclass
@@ -158,36 +142,3 @@ async def quad_api() -> AsyncIterator[Api]:
     async with sim_cluster("quad") as sim, api_for(sim) as api:
         await api.wait_ready()
         yield api
-
-
-@contextlib.asynccontextmanager
-async def uvicorn_serving(app: FastAPI) -> AsyncIterator[str]:
-    """Serve an app (whose lifespan already runs) on 127.0.0.1:<ephemeral>; yield base URL."""
-    config = uvicorn.Config(
-        app,
-        host="127.0.0.1",
-        port=0,
-        log_config=None,
-        access_log=False,
-        lifespan="off",
-        ws="websockets-sansio",
-    )
-    server = uvicorn.Server(config)
-    task = asyncio.create_task(server.serve())
-    try:
-        await eventually(_started(server, task), 10.0, "uvicorn to listen")
-        port = server.servers[0].sockets[0].getsockname()[1]
-        yield f"127.0.0.1:{port}"
-    finally:
-        server.should_exit = True
-        await asyncio.wait_for(task, 10.0)
-
-
-def _started(server: uvicorn.Server, task: asyncio.Task[None]) -> Callable[[], Awaitable[bool]]:
-    async def probe() -> bool:
-        if task.done():
-            task.result()
-            raise AssertionError("uvicorn stopped before it listened")
-        return server.started
-
-    return probe

@@ -22,8 +22,9 @@ from tests.api.conftest import (
     Api,
     api_for,
     sim_cluster,
-    uvicorn_serving,
 )
+from tests.serving import uvicorn_serving
+from tests.waiting import eventually
 
 TTL_S = 1.0
 
@@ -186,20 +187,24 @@ async def fly_offboard_at_2_m_s(served: Served) -> ClientConnection:
     ):
         await ws.send(json.dumps({"type": "command", "id": request_id, "name": name, "args": args}))
         assert (await receive_until(ws, {"id": request_id}))["status"] == 200
-    deadline = time.monotonic() + 20.0
-    while (await served.api.state())["position_ned"]["down_m"] > -3.0:
-        assert time.monotonic() < deadline, "takeoff"
+
+    async def heartbeat_then_state() -> dict[str, Any]:
         await ws.send(json.dumps({"type": "heartbeat"}))
-        await asyncio.sleep(0.1)
+        return await served.api.state()
+
+    async def climbed() -> bool:
+        return bool((await heartbeat_then_state())["position_ned"]["down_m"] <= -3.0)
+
+    async def at_2_m_s() -> bool:
+        return _speed(await heartbeat_then_state()) >= 1.8
+
+    await eventually(climbed, 20.0, "takeoff", poll_s=0.1)
     start = {
         "setpoint": {"type": "velocity_ned", "north_m_s": 2.0, "east_m_s": 0.0, "down_m_s": 0.0}
     }
     await ws.send(json.dumps({"type": "command", "id": 3, "name": "offboard_start", "args": start}))
     assert (await receive_until(ws, {"id": 3}))["status"] == 200
-    while _speed(await served.api.state()) < 1.8:
-        assert time.monotonic() < deadline + 10.0, "reach 2 m/s"
-        await ws.send(json.dumps({"type": "heartbeat"}))
-        await asyncio.sleep(0.1)
+    await eventually(at_2_m_s, 20.0, "reach 2 m/s", poll_s=0.1)
     return ws
 
 
@@ -229,23 +234,14 @@ async def test_deadman_holds_position_when_the_pilot_socket_closes(quad: Served)
 
 async def test_deadman_holds_when_rest_renewals_stop(quad: Served) -> None:
     api = quad.api
-    headers = await api.take_control()
-
-    async def renew_forever() -> None:
-        while True:
-            await api.client.put("/api/v1/vehicles/1/control", headers=headers)
-            await asyncio.sleep(TTL_S / 4)
-
-    renewing = asyncio.create_task(renew_forever())
-    try:
-        assert (await api.control("arm")).status_code == 200
-        assert (await api.control("takeoff", {"altitude_m": 4.0})).status_code == 200
-        await api.wait_state(lambda s: s["position_ned"]["down_m"] < -3.0, 20.0, "climb")
-        north = {"type": "velocity_ned", "north_m_s": 2.0, "east_m_s": 0.0, "down_m_s": 0.0}
-        assert (await api.control("offboard/start", {"setpoint": north})).status_code == 200
-        await api.wait_state(lambda s: _speed(s) > 1.8, 10.0, "2 m/s")
-    finally:
-        renewing.cancel()
+    await api.take_control()
+    # every step renews the lease: control calls hold it, wait_state renews on each poll
+    assert (await api.control("arm")).status_code == 200
+    assert (await api.control("takeoff", {"altitude_m": 4.0})).status_code == 200
+    await api.wait_state(lambda s: s["position_ned"]["down_m"] < -3.0, 20.0, "climb")
+    north = {"type": "velocity_ned", "north_m_s": 2.0, "east_m_s": 0.0, "down_m_s": 0.0}
+    assert (await api.control("offboard/start", {"setpoint": north})).status_code == 200
+    await api.wait_state(lambda s: _speed(s) > 1.8, 10.0, "2 m/s")
     last_renewal = time.monotonic()
     stopped = await api.wait_state(lambda s: _speed(s) < 0.3, TTL_S + 0.5, "hold", renew=False)
     assert time.monotonic() - last_renewal <= TTL_S + 0.5

@@ -16,19 +16,9 @@ from pymavlink.dialects.v20 import development as mavlink
 from server.link.events import VehicleEvent
 from server.link.link import Link
 from server.link.vehicle import Vehicle
+from tests.waiting import wait_for
 
 HEARTBEAT_PERIOD_S = 0.5
-
-
-async def wait_for(
-    condition: Callable[[], bool], timeout_s: float = 5.0, what: str = "condition"
-) -> None:
-    """Poll ``condition`` until it holds; fail the test after ``timeout_s``."""
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"{what} not met within {timeout_s} s")
-        await asyncio.sleep(0.005)
 
 
 def drain(queue: asyncio.Queue[VehicleEvent]) -> list[VehicleEvent]:
@@ -55,6 +45,8 @@ class ScriptedPeer(asyncio.DatagramProtocol):
         self.mav_type = mavlink.MAV_TYPE_QUADROTOR
         self.base_mode = 1
         self.custom_mode = 0x3040000  # HOLD
+        # every frame sent or scheduled so far, so a test can wait until the link has them
+        self.frames_promised = 0
         self._seq: dict[tuple[int, int], int] = {}
 
     def datagram_received(self, data: bytes, addr: Any) -> None:
@@ -66,15 +58,20 @@ class ScriptedPeer(asyncio.DatagramProtocol):
                 self.on_message(msg)
 
     def send(self, msg: mavlink.MAVLink_message, *, sysid: int = 1, compid: int = 1) -> None:
+        self.frames_promised += 1
+        self._write(msg, sysid=sysid, compid=compid)
+
+    def send_later(self, delay_s: float, msg: mavlink.MAVLink_message, **ids: int) -> None:
+        self.frames_promised += 1
+        asyncio.get_running_loop().call_later(delay_s, functools.partial(self._write, msg, **ids))
+
+    def _write(self, msg: mavlink.MAVLink_message, *, sysid: int = 1, compid: int = 1) -> None:
         mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
         mav.seq = self._seq.get((sysid, compid), 0)
         self._seq[(sysid, compid)] = (mav.seq + 1) % 256
         assert self.endpoint is not None
         assert self.link_address is not None
         self.endpoint.sendto(bytes(msg.pack(mav)), self.link_address)
-
-    def send_later(self, delay_s: float, msg: mavlink.MAVLink_message, **ids: int) -> None:
-        asyncio.get_running_loop().call_later(delay_s, functools.partial(self.send, msg, **ids))
 
     def heartbeat(self, *, sysid: int = 1) -> None:
         self.send(mavlink.MAVLink_heartbeat_message(
@@ -139,6 +136,19 @@ class ScriptedSession:
         self.link = link
         self.vehicle = vehicle
 
+    async def vehicle_heard_all(self, timeout_s: float = 2.0) -> None:
+        """Until the link has taken in every frame the peer has sent or scheduled so far,
+        and so the vehicle has handled them (127.0.0.1 UDP keeps their order)."""
+        promised = self.peer.frames_promised
+        await wait_for(
+            lambda: self.link.stats().frames_in >= promised, timeout_s, "the peer's frames in"
+        )
+
+    async def peer_heard_all(self, timeout_s: float = 2.0) -> None:
+        """Until the peer has every frame the link has sent so far."""
+        sent = self.link.stats().frames_out
+        await wait_for(lambda: len(self.peer.received) >= sent, timeout_s, "the link's frames")
+
 
 def fast_vehicle(**kwargs: Any) -> Callable[..., Vehicle]:
     """A Vehicle factory with short protocol timeouts, so timeout cases run quickly."""
@@ -159,6 +169,7 @@ def fast_vehicle(**kwargs: Any) -> Callable[..., Vehicle]:
 async def _keep_beating(peer: ScriptedPeer) -> None:
     while True:
         peer.heartbeat()
+        # not a wait: PX4's own heartbeat period, which the link's connection timeout expects
         await asyncio.sleep(HEARTBEAT_PERIOD_S)
 
 

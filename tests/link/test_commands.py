@@ -10,6 +10,7 @@ from pymavlink.dialects.v20 import development as mavlink
 
 from server.link.commands import CommandOutcome
 from tests.link.conftest import ScriptedSession, drain, wait_for
+from tests.waiting import holds_for
 
 ARM = mavlink.MAV_CMD_COMPONENT_ARM_DISARM
 SET_MODE = mavlink.MAV_CMD_DO_SET_MODE
@@ -22,7 +23,8 @@ async def test_unanswered_command_times_out_after_exactly_four_sends(
     scripted: ScriptedSession,
 ) -> None:
     result = await scripted.vehicle.arm()
-    await asyncio.sleep(0.15)  # nothing more may follow the timeout
+    # nothing more may follow the timeout (longer than the 0.1 s retry interval)
+    await holds_for(lambda: len(scripted.peer.commands(ARM)) == 4, 0.15, "no send after it")
 
     sent = scripted.peer.commands(ARM)
     assert result.outcome is CommandOutcome.TIMEOUT
@@ -96,7 +98,7 @@ async def test_late_ack_after_timeout_is_ignored(scripted: ScriptedSession) -> N
     peer = scripted.peer
     first = await scripted.vehicle.arm()
     peer.ack(ARM, ACCEPTED)  # the answer to the timed-out command arrives now
-    await asyncio.sleep(0.05)
+    await scripted.vehicle_heard_all()
     second = await scripted.vehicle.arm()
 
     assert first.outcome is CommandOutcome.TIMEOUT

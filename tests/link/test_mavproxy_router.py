@@ -9,8 +9,7 @@ import contextlib
 import math
 import shutil
 import sys
-import time
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator
 from pathlib import Path
 
 import pytest
@@ -18,20 +17,13 @@ from pymavlink import mavutil
 
 from server.link import Link, PositionNed, Vehicle
 from sim.runner import SimCluster, SimInstance
+from tests.waiting import wait_for as _until
 
 pytestmark = pytest.mark.peers
 
 SIM_SPEED = 3.0
 MAVPROXY = Path(sys.executable).parent / "mavproxy.py"
 OFFBOARD_TOLERANCE_M = 0.5
-
-
-async def _until(condition: Callable[[], bool], timeout_s: float, what: str) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"{what}: not within {timeout_s} s")
-        await asyncio.sleep(0.02)
 
 
 def _distance_m(vehicle: Vehicle, target: PositionNed) -> float:

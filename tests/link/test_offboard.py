@@ -3,7 +3,6 @@ after a failsafe blip, stopping when the user picks another mode, setpoint refus
 
 from __future__ import annotations
 
-import asyncio
 import time
 
 import pytest
@@ -12,6 +11,7 @@ from pymavlink.dialects.v20 import development as mavlink
 from server.link.setpoint_checks import SetpointRejected
 from server.link.setpoints import OffsetBody, PositionGlobal, PositionNed, VelocityNed
 from tests.link.conftest import ScriptedSession, wait_for
+from tests.waiting import holds_for
 
 OFFBOARD = 0x60000
 POSCTL = 0x30000
@@ -68,8 +68,8 @@ async def test_stream_survives_a_failsafe_blip_and_stops_when_the_user_picks_a_m
     assert (await scripted.vehicle.start_offboard()).ok
 
     scripted.peer.report_mode(POSCTL, OFFBOARD)  # PX4's offboard-loss fallback
-    await asyncio.sleep(0.2)
-    assert scripted.vehicle.streamer_active
+    await scripted.vehicle_heard_all()
+    await holds_for(lambda: scripted.vehicle.streamer_active, 0.2, "the stream in the failsafe")
 
     scripted.peer.report_mode(HOLD, HOLD)  # the user switched, e.g. from an RC
     await wait_for(lambda: not scripted.vehicle.streamer_active, 1.0, "stream stopped")
@@ -126,7 +126,7 @@ async def test_setpoint_outside_the_envelope_is_refused_and_not_sent(
 
     with pytest.raises(SetpointRejected) as info:
         await scripted.vehicle.set_setpoint(PositionNed(0, 0, -60))
-    await asyncio.sleep(0.05)
+    await scripted.peer_heard_all()
 
     assert info.value.limit == 50.0
     assert not _setpoints(scripted)
@@ -153,7 +153,7 @@ async def test_every_offboard_start_after_a_stop_streams_first_again(
     scripted.vehicle.offboard_prestream_s = 0.3
     await scripted.vehicle.start_offboard()
     await scripted.vehicle.stop_offboard()
-    await asyncio.sleep(0.05)  # let the last frames of the first stream land
+    await scripted.peer_heard_all()  # the last frames of the first stream have landed
     stopped_at = time.monotonic()
 
     assert (await scripted.vehicle.start_offboard()).ok

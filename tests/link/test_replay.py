@@ -17,6 +17,7 @@ from server.link.tlog import TlogWriter, iter_tlog
 from server.link.transports.replay import vehicle_frames
 from server.link.vehicle import Vehicle
 from tests.link.conftest import wait_for
+from tests.waiting import holds_for
 
 SIM_SPEED = 10.0
 REPLAY_SPEED = 5.0
@@ -56,12 +57,11 @@ async def _record_flight(log_dir: Path) -> Recording:
 
             async def watch() -> None:
                 nonlocal max_alt_rel_m
-                while True:
-                    modes.add(vehicle.snapshot().mode)
+                async for state in vehicle.subscribe():  # every change of the vehicle's state
+                    modes.add(state.mode)
                     alt_rel_m = _alt_rel_m(vehicle)
                     if not math.isnan(alt_rel_m):
                         max_alt_rel_m = max(max_alt_rel_m, alt_rel_m)
-                    await asyncio.sleep(0.01)
 
             watcher = asyncio.create_task(watch())
             try:
@@ -71,6 +71,8 @@ async def _record_flight(log_dir: Path) -> Recording:
                                "takeoff")  # fmt: skip
                 # PX4 switches to Hold once the takeoff altitude is reached
                 await wait_for(lambda: vehicle.snapshot().mode == "HOLD", 8.0, "takeoff done")
+                # not a wait: the recorded flight hovers this long (the replay plays the
+                # recording's wall-clock timestamps back, so the hover has to last in wall time)
                 await asyncio.sleep(HOVER_S)
                 assert (await vehicle.land()).ok
                 await wait_for(lambda: not vehicle.snapshot().armed, 10.0, "landed, disarmed")
@@ -126,8 +128,8 @@ async def test_our_own_recorded_gcs_frames_are_not_replayed(recording: Recording
     async with await Link.open(_tlog_url(recording, "speed=50"), log_dir=None) as link:
         await wait_for(lambda: link.stats().frames_in == len(replayed.frames), 10.0,
                        "the whole vehicle side")  # fmt: skip
-        await asyncio.sleep(0.1)
-        assert link.stats().frames_in == len(replayed.frames)
+        await holds_for(lambda: link.stats().frames_in == len(replayed.frames), 0.1,
+                        "nothing replayed beyond the vehicle side")  # fmt: skip
 
 
 def _frame(msg: mavlink.MAVLink_message, sysid: int, compid: int) -> bytes:

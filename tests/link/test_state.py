@@ -83,7 +83,7 @@ async def test_current_mode_gives_mode_and_user_intended_mode_before_heartbeat(
     scripted.peer.send(mavlink.MAVLink_current_mode_message(0, 0x30000, OFFBOARD))
     await wait_for(lambda: scripted.vehicle.snapshot().user_mode == "OFFBOARD")
     scripted.peer.heartbeat()
-    await asyncio.sleep(0.05)
+    await scripted.vehicle_heard_all()
 
     state = scripted.vehicle.snapshot()
     assert (state.mode, state.user_mode) == ("POSCTL", "OFFBOARD")

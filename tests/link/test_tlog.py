@@ -1,5 +1,3 @@
-import asyncio
-import time
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -7,6 +5,7 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import development as mavlink
 
 from server.link.tlog import TlogWriter, iter_tlog, tlog_path
+from tests.waiting import wait_for
 
 
 def _frame(src_system: int, seq: int, mav_type: int = mavlink.MAV_TYPE_QUADROTOR) -> bytes:
@@ -32,9 +31,8 @@ async def test_frames_reach_the_file_on_the_flush_timer_without_close(tmp_path: 
     try:
         writer.record(_frame(1, 0))
         assert writer.path.stat().st_size == 0  # buffered, not written per frame
-        deadline = time.monotonic() + 3.0
-        while writer.path.stat().st_size == 0 and time.monotonic() < deadline:  # noqa: ASYNC110
-            await asyncio.sleep(0.05)  # polling the file is the point: nothing signals a write
+        # polling the file is the point: nothing signals a write
+        await wait_for(lambda: writer.path.stat().st_size > 0, 3.0, "the flush", poll_s=0.05)
         assert writer.path.stat().st_size == 8 + len(_frame(1, 0))
     finally:
         await writer.close()

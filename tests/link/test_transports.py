@@ -1,8 +1,7 @@
 import asyncio
 import contextlib
 import os
-import time
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator
 from typing import Any
 
 import pytest
@@ -19,6 +18,7 @@ from server.link.transports import (
     UdpOutTransport,
 )
 from server.link.urls import parse_link_url
+from tests.waiting import wait_for as _until
 
 
 def _frame(src_system: int, seq: int = 0, *, mavlink1: bool = False) -> bytes:
@@ -26,14 +26,6 @@ def _frame(src_system: int, seq: int = 0, *, mavlink1: bool = False) -> bytes:
     mav.seq = seq
     msg = mav.heartbeat_encode(mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_AUTOPILOT_PX4, 0, 0, 0)
     return bytes(msg.pack(mav, force_mavlink1=mavlink1))
-
-
-async def _until(condition: Callable[[], bool], timeout_s: float = 5.0) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        if time.monotonic() > deadline:
-            raise AssertionError("condition not met in time")
-        await asyncio.sleep(0.01)
 
 
 class _Sink:

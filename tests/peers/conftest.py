@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import asyncio
 import socket
-import time
 from collections.abc import AsyncIterator, Awaitable, Callable
 from pathlib import Path
 from typing import Any
@@ -23,16 +22,6 @@ def free_port(kind: int) -> int:
         s.bind(("127.0.0.1", 0))
         port: int = s.getsockname()[1]
         return port
-
-
-async def wait_for(condition: Callable[[], bool], timeout_s: float, what: str) -> float:
-    """Poll until condition holds; the wall time it took. Fails after timeout_s."""
-    start = time.monotonic()
-    while not condition():
-        if time.monotonic() - start > timeout_s:
-            raise AssertionError(f"{what} not within {timeout_s} s")
-        await asyncio.sleep(0.02)
-    return time.monotonic() - start
 
 
 async def first(stream: Any, predicate: Callable[[Any], bool], timeout_s: float) -> Any:

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from sim.runner import SimCluster
-from tests.peers.conftest import wait_for
+from tests.waiting import wait_for
 
 pytestmark = pytest.mark.peers
 

@@ -6,7 +6,8 @@ import math
 
 import pytest
 
-from tests.peers.conftest import MavsdkFactory, first, wait_for
+from tests.peers.conftest import MavsdkFactory, first
+from tests.waiting import wait_for
 
 pytestmark = pytest.mark.peers
 
