@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 import viser
@@ -32,6 +32,22 @@ def _finite(*values: float | None) -> bool:
 
 def _shift(point: Vec3, offset: Vec3) -> Vec3:
     return (point[0] + offset[0], point[1] + offset[1], point[2] + offset[2])
+
+
+class _NedPoint(Protocol):
+    @property
+    def north_m(self) -> float: ...
+    @property
+    def east_m(self) -> float: ...
+    @property
+    def down_m(self) -> float: ...
+
+
+def _ned(point: _NedPoint | None) -> Vec3 | None:
+    """(north, east, down) of a reported point, None when absent or not finite."""
+    if point is None or not _finite(point.north_m, point.east_m, point.down_m):
+        return None
+    return (point.north_m, point.east_m, point.down_m)
 
 
 def setpoint_point_ned(
@@ -189,41 +205,33 @@ class VehicleView:
         self._trail_handle.colors = colours
         self._trail_handle.visible = True
 
+    def _place(self, marker: object, point_ned: Vec3 | None, offset_enu: Vec3) -> Vec3 | None:
+        """Show ``marker`` at a NED point (hide it without one); the point in the scene."""
+        if point_ned is None:
+            self._set(marker, "visible", False)
+            return None
+        point_enu = _shift(ned_to_enu(*point_ned), offset_enu)
+        self._set(marker, "position", _rounded(point_enu))
+        self._set(marker, "visible", True)
+        return point_enu
+
     def _update_setpoint(self, state: VehicleState, position_ned: Vec3 | None,
                          offset_enu: Vec3) -> None:
         point_ned = setpoint_point_ned(state.setpoint, position_ned)
-        if point_ned is None and state.mode == "OFFBOARD" and state.target_ned is not None:
-            t = state.target_ned
-            if _finite(t.north_m, t.east_m, t.down_m):
-                point_ned = (t.north_m, t.east_m, t.down_m)
-        if point_ned is None or self.position_enu is None:
-            self._set(self.setpoint_marker, "visible", False)
+        if point_ned is None and state.mode == "OFFBOARD":
+            point_ned = _ned(state.target_ned)
+        if self.position_enu is None:
+            point_ned = None
+        point_enu = self._place(self.setpoint_marker, point_ned, offset_enu)
+        if point_enu is None or self.position_enu is None:
             self.setpoint_line.hide()
-            return
-        point_enu = _shift(ned_to_enu(*point_ned), offset_enu)
-        self._set(self.setpoint_marker, "position", _rounded(point_enu))
-        self._set(self.setpoint_marker, "visible", True)
-        self.setpoint_line.show([self.position_enu, point_enu])
+        else:
+            self.setpoint_line.show([self.position_enu, point_enu])
 
     def _update_home(self, state: VehicleState, offset_enu: Vec3) -> Vec3 | None:
-        home = state.home
-        if home is None or not _finite(home.north_m, home.east_m, home.down_m):
-            self._set(self.home_marker, "visible", False)
-            return None
-        home_enu = _shift(ned_to_enu(home.north_m, home.east_m, home.down_m), offset_enu)
-        self._set(self.home_marker, "position", _rounded(home_enu))
-        self._set(self.home_marker, "visible", True)
-        return home_enu
+        return self._place(self.home_marker, _ned(state.home), offset_enu)
 
     def _update_target(self, state: VehicleState, offset_enu: Vec3) -> None:
         """In Hold (where DO_REPOSITION flies) PX4's own position target is the goal."""
-        target: Vec3 | None = None
-        if state.mode == "HOLD" and state.target_ned is not None:
-            t = state.target_ned
-            if _finite(t.north_m, t.east_m, t.down_m):
-                target = _shift(ned_to_enu(t.north_m, t.east_m, t.down_m), offset_enu)
-        if target is None:
-            self._set(self.target_marker, "visible", False)
-            return
-        self._set(self.target_marker, "position", _rounded(target))
-        self._set(self.target_marker, "visible", True)
+        target_ned = _ned(state.target_ned) if state.mode == "HOLD" else None
+        self._place(self.target_marker, target_ned, offset_enu)
