@@ -169,67 +169,68 @@ def _yaw_bits(yaw_deg: float | None, yaw_rate_deg_s: float | None) -> int:
 # A raw setpoint is exactly the wire fields, so one type serves both.
 LocalFields = RawLocal
 
+Axes = tuple[str, str, str]
+_NED_M: Axes = ("north_m", "east_m", "down_m")
+_NED_M_S: Axes = ("north_m_s", "east_m_s", "down_m_s")
+_NED_M_S2: Axes = ("north_m_s2", "east_m_s2", "down_m_s2")
+
+
+@dataclass(frozen=True)
+class _LocalForm:
+    """How a kind fills SET_POSITION_TARGET_LOCAL_NED: its frame and which of its fields are
+    the x/y/z of position, velocity and acceleration (a group without fields, or with a None,
+    is ignored in the type mask). ``yaw_deg`` and ``yaw_rate_deg_s`` are taken by name."""
+
+    frame: int
+    position: Axes | None = None
+    velocity: Axes | None = None
+    acceleration: Axes | None = None
+    # a yaw rate of None still means "do not turn", which PX4 only honours as rate 0
+    yaw_rate_none_is_zero: bool = False
+
+
+_LOCAL_FORMS: dict[type[Setpoint], _LocalForm] = {
+    PositionNed: _LocalForm(MAV_FRAME_LOCAL_NED, position=_NED_M),
+    VelocityNed: _LocalForm(MAV_FRAME_LOCAL_NED, velocity=_NED_M_S),
+    VelocityBody: _LocalForm(
+        MAV_FRAME_BODY_NED,
+        velocity=("forward_m_s", "right_m_s", "down_m_s"),
+        yaw_rate_none_is_zero=True,
+    ),
+    AccelerationNed: _LocalForm(MAV_FRAME_LOCAL_NED, acceleration=_NED_M_S2),
+    PositionVelocityNed: _LocalForm(MAV_FRAME_LOCAL_NED, _NED_M, _NED_M_S, _NED_M_S2),
+}
+
 
 def local_fields(sp: Setpoint) -> LocalFields | None:
     """The LOCAL_NED/BODY_NED form of a setpoint, or None if it is not a local one."""
-    if isinstance(sp, PositionNed):
-        return LocalFields(
-            MAV_FRAME_LOCAL_NED,
-            IGNORE_VELOCITY | IGNORE_ACCELERATION | _yaw_bits(sp.yaw_deg, None),
-            x=sp.north_m,
-            y=sp.east_m,
-            z=sp.down_m,
-            yaw=_rad(sp.yaw_deg),
-        )
-    if isinstance(sp, VelocityNed):
-        return LocalFields(
-            MAV_FRAME_LOCAL_NED,
-            IGNORE_POSITION | IGNORE_ACCELERATION | _yaw_bits(sp.yaw_deg, sp.yaw_rate_deg_s),
-            vx=sp.north_m_s,
-            vy=sp.east_m_s,
-            vz=sp.down_m_s,
-            yaw=_rad(sp.yaw_deg),
-            yaw_rate=_rad(sp.yaw_rate_deg_s),
-        )
-    if isinstance(sp, VelocityBody):
-        # yaw rate None still means "do not turn", which PX4 only honours as rate 0
-        return LocalFields(
-            MAV_FRAME_BODY_NED,
-            IGNORE_POSITION | IGNORE_ACCELERATION | POSITION_TARGET_TYPEMASK_YAW_IGNORE,
-            vx=sp.forward_m_s,
-            vy=sp.right_m_s,
-            vz=sp.down_m_s,
-            yaw_rate=_rad(sp.yaw_rate_deg_s),
-        )
-    if isinstance(sp, AccelerationNed):
-        return LocalFields(
-            MAV_FRAME_LOCAL_NED,
-            IGNORE_POSITION | IGNORE_VELOCITY | _yaw_bits(sp.yaw_deg, None),
-            afx=sp.north_m_s2,
-            afy=sp.east_m_s2,
-            afz=sp.down_m_s2,
-            yaw=_rad(sp.yaw_deg),
-        )
-    if isinstance(sp, PositionVelocityNed):
-        accel = (sp.north_m_s2, sp.east_m_s2, sp.down_m_s2)
-        has_accel = all(a is not None for a in accel)
-        return LocalFields(
-            MAV_FRAME_LOCAL_NED,
-            (0 if has_accel else IGNORE_ACCELERATION) | _yaw_bits(sp.yaw_deg, None),
-            x=sp.north_m,
-            y=sp.east_m,
-            z=sp.down_m,
-            vx=sp.north_m_s,
-            vy=sp.east_m_s,
-            vz=sp.down_m_s,
-            afx=sp.north_m_s2 or 0.0,
-            afy=sp.east_m_s2 or 0.0,
-            afz=sp.down_m_s2 or 0.0,
-            yaw=_rad(sp.yaw_deg),
-        )
     if isinstance(sp, RawLocal):
         return sp
-    return None
+    form = _LOCAL_FORMS.get(type(sp))
+    if form is None:
+        return None
+    mask = 0
+    vectors: list[tuple[float, float, float]] = []
+    groups = (
+        (form.position, IGNORE_POSITION),
+        (form.velocity, IGNORE_VELOCITY),
+        (form.acceleration, IGNORE_ACCELERATION),
+    )
+    for axes, ignore in groups:
+        values = tuple(getattr(sp, name) for name in axes) if axes else (None,)
+        if any(value is None for value in values):
+            mask |= ignore
+            values = (0.0, 0.0, 0.0)
+        vectors.append(values)
+    yaw_deg: float | None = getattr(sp, "yaw_deg", None)
+    yaw_rate_deg_s: float | None = getattr(sp, "yaw_rate_deg_s", None)
+    if form.yaw_rate_none_is_zero and yaw_rate_deg_s is None:
+        yaw_rate_deg_s = 0.0
+    mask |= _yaw_bits(yaw_deg, yaw_rate_deg_s)
+    (x, y, z), (vx, vy, vz), (afx, afy, afz) = vectors
+    return LocalFields(
+        form.frame, mask, x, y, z, vx, vy, vz, afx, afy, afz, _rad(yaw_deg), _rad(yaw_rate_deg_s)
+    )
 
 
 def _quaternion(roll_deg: float, pitch_deg: float, yaw_deg: float) -> list[float]:
