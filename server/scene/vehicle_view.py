@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING
 
 import numpy as np
 import viser
@@ -15,7 +15,7 @@ from .styling import Rgb, state_colour
 from .trail import Trail
 
 if TYPE_CHECKING:
-    from server.link import VehicleState
+    from server.link import HomeState, PositionNedState, VehicleState
 
 SCENE_BACKGROUND: Rgb = (30, 33, 40)
 _TRAIL_REDRAW_S = 0.5
@@ -34,16 +34,7 @@ def _shift(point: Vec3, offset: Vec3) -> Vec3:
     return (point[0] + offset[0], point[1] + offset[1], point[2] + offset[2])
 
 
-class _NedPoint(Protocol):
-    @property
-    def north_m(self) -> float: ...
-    @property
-    def east_m(self) -> float: ...
-    @property
-    def down_m(self) -> float: ...
-
-
-def _ned(point: _NedPoint | None) -> Vec3 | None:
+def _ned(point: PositionNedState | HomeState | None) -> Vec3 | None:
     """(north, east, down) of a reported point, None when absent or not finite."""
     if point is None or not _finite(point.north_m, point.east_m, point.down_m):
         return None
