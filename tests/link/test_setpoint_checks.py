@@ -111,20 +111,15 @@ def test_thrust_outside_zero_to_one_is_refused() -> None:
     assert _refusal(sp.Attitude(0, 0, 0, 1.2)).field == "thrust"
 
 
-@pytest.mark.parametrize(
-    ("setpoint", "field", "limit"),
-    [
-        (sp.PositionNed(0, 0, -5, yaw_deg=400), "yaw_deg", 360.0),
-        (sp.VelocityNed(-2e3, 0, 0), "north_m_s", -1e3),
-        (sp.RawLocal(frame=1, type_mask=2552, x=1e39), "x", 1e6),
-    ],
-)  # fmt: skip
-def test_numbers_outside_their_kinds_limits_are_refused_naming_the_field(
-    setpoint: sp.Setpoint, field: str, limit: float
-) -> None:
-    refusal = _refusal(setpoint)
+def test_numbers_outside_their_kinds_limits_are_refused_naming_the_field() -> None:
+    def limit_hit(setpoint: sp.Setpoint) -> tuple[str | None, float | None]:
+        refusal = _refusal(setpoint)
+        assert "must be within" in refusal.reason
+        return refusal.field, refusal.limit
 
-    assert (refusal.field, refusal.limit) == (field, limit)
+    assert limit_hit(sp.PositionNed(0, 0, -5, yaw_deg=400)) == ("yaw_deg", 360.0)
+    assert limit_hit(sp.VelocityNed(-2e3, 0, 0)) == ("north_m_s", -1e3)
+    assert limit_hit(sp.RawLocal(frame=1, type_mask=2552, x=1e39)) == ("x", 1e6)
 
 
 @pytest.mark.parametrize(
