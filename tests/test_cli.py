@@ -8,7 +8,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import httpx
@@ -18,6 +17,7 @@ from websockets.sync.client import connect
 
 from server.cli import RedactTokens, build_parser, settings_from_args
 from server.settings import SettingsError
+from tests.waiting import wait_for_blocking
 
 SKYHELM = Path(sys.executable).with_name("skyhelm")
 READY_PREFIX = "SkyHelm ready: "
@@ -69,10 +69,9 @@ def test_serve_prints_url_answers_and_stops_sim_on_sigint(tmp_path: Path) -> Non
             assert sims, "the simulated vehicle runs as a child process"
             server.send_signal(signal.SIGINT)
             assert server.wait(timeout=20) == 0
-            deadline = time.monotonic() + 10
-            while not all(_gone(pid) for pid in sims):
-                assert time.monotonic() < deadline, "sim child still running after SIGINT"
-                time.sleep(0.1)
+            wait_for_blocking(
+                "the sim child to end after SIGINT", lambda: all(_gone(pid) for pid in sims), 10.0
+            )
             assert server.stdout.read() == "", "exactly one line on stdout"
         finally:
             if server.poll() is None:
@@ -217,10 +216,12 @@ def test_replay_serves_the_recorded_vehicle_read_only_and_stops_on_sigint(tmp_pa
         base, _, token = line.removeprefix(READY_PREFIX).strip().partition("/?token=")
         auth = {"Authorization": f"Bearer {token}"}
 
-        deadline = time.monotonic() + 10
-        while not (vehicles := httpx.get(f"{base}/api/v1/vehicles", headers=auth).json()):
-            assert time.monotonic() < deadline, "the recorded vehicle never appeared"
-            time.sleep(0.05)
+        vehicles = wait_for_blocking(
+            "the recorded vehicle",
+            lambda: httpx.get(f"{base}/api/v1/vehicles", headers=auth).json(),
+            10.0,
+            every_s=0.05,
+        )
         assert [v["id"] for v in vehicles] == [1]
         assert httpx.get(f"{base}/api/v1/health").json()["read_only"] is True
         assert not _children(server.pid), "a replay starts no simulated vehicle"

@@ -10,7 +10,6 @@ from typing import cast
 
 import httpx
 import pytest
-import uvicorn
 import viser
 import websockets
 from fastapi import FastAPI
@@ -21,6 +20,8 @@ from server.api.publisher import StatePublishers
 from server.link import Vehicle
 from server.link.state import StateSubscription, SubscriptionHub
 from server.scene import ClickPoint, SceneHub
+from tests.serving import uvicorn_serving
+from tests.waiting import wait_for
 
 from .conftest import FakeVehicle
 
@@ -55,7 +56,7 @@ async def _change_at_50_hz(vehicles: list[_PushingVehicle]) -> None:
     while True:
         for vehicle in vehicles:
             vehicle.hub.notify()
-        await asyncio.sleep(0.02)
+        await asyncio.sleep(0.02)  # not a wait: the fakes' telemetry rate, 50 Hz
 
 
 @pytest.fixture
@@ -70,19 +71,10 @@ async def served() -> AsyncIterator[Served]:
     await publishers.start([])
     changing = asyncio.create_task(_change_at_50_hz(vehicles))
     await hub.start(publishers)
-    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=0, log_level="warning",
-                                           lifespan="off"))
-    task = asyncio.create_task(server.serve())
-    deadline = time.monotonic() + 10.0
-    while not server.started:
-        assert time.monotonic() < deadline, "uvicorn did not start"
-        await asyncio.sleep(0.02)
-    port = server.servers[0].sockets[0].getsockname()[1]
     try:
-        yield Served(hub, f"127.0.0.1:{port}", vehicles)
+        async with uvicorn_serving(app) as host:
+            yield Served(hub, host, vehicles)
     finally:
-        server.should_exit = True
-        await task
         await hub.stop()
         changing.cancel()
         await publishers.close()
@@ -174,10 +166,7 @@ async def test_scene_updates_stay_under_the_rate_limit_per_vehicle(served: Serve
 async def test_click_endpoint_reports_the_ground_point_with_lat_lon(served: Served) -> None:
     async with httpx.AsyncClient(base_url=f"http://{served.base}") as client:
         assert (await client.get("/scene/api/click", params={"token": TOKEN})).json() == {"seq": 0}
-        deadline = time.monotonic() + 5.0
-        while served.hub.status()["vehicles"] != [1, 2]:
-            assert time.monotonic() < deadline
-            await asyncio.sleep(0.05)
+        await wait_for(lambda: served.hub.status()["vehicles"] == [1, 2], 5.0, "both vehicles")
         pushed: list[ClickPoint] = []
         served.hub.on_click = pushed.append
         served.hub.record_click((0.0, -20.0, 10.0), (0.0, 1.0, -0.5))
