@@ -13,72 +13,104 @@ import statistics
 import time
 from typing import Any, cast
 
-import uvicorn
 import viser
 from fastapi import FastAPI
 from websockets.asyncio.client import connect
 from websockets.typing import Subprotocol
 
 from bench._results import machine_info, write_results
-from server.link import Vehicle
+from server.api.publisher import StatePublishers
+from server.link import Vehicle, VehicleState
+from server.link.state import StateSubscription, SubscriptionHub
+from server.link.tasks import cancel_and_wait
 from server.scene import SceneHub
 from tests.scene.conftest import FakeVehicle
+from tests.serving import uvicorn_serving
 
 TOKEN = "bench-scene-token"
 MEASURE_S = 5.0
+# How often each fake vehicle reports a change, as PX4's telemetry streams would.
+TELEMETRY_RATE_HZ = 50.0
+
+
+class _ReportingVehicle(FakeVehicle):
+    """A fake vehicle that announces each change to its subscribers, as a link vehicle does."""
+
+    connected = True
+
+    def __init__(self, sysid: int) -> None:
+        super().__init__(sysid)
+        self.changes = SubscriptionHub(self.snapshot)
+
+    @property
+    def state_version(self) -> int:
+        return self.changes.version
+
+    def subscribe(self, min_interval_s: float = 0.0) -> StateSubscription:
+        return self.changes.subscribe(min_interval_s)
+
+
+async def _report(vehicles: list[_ReportingVehicle]) -> None:
+    while True:
+        for vehicle in vehicles:
+            vehicle.changes.notify()
+        await asyncio.sleep(1.0 / TELEMETRY_RATE_HZ)
 
 
 class _TimedHub(SceneHub):
-    """The hub with each batched tick timed."""
+    """The hub with each batched update timed."""
 
     def __init__(self) -> None:
         super().__init__(max_rate_hz=30.0)
         self.tick_s: list[float] = []
 
-    def _tick(self, vehicles: list[Vehicle], now_s: float) -> None:
+    def _apply_states(self, states: list[VehicleState], now_s: float) -> None:
         started = time.perf_counter()
-        super()._tick(vehicles, now_s)
+        super()._apply_states(states, now_s)
         self.tick_s.append(time.perf_counter() - started)
 
 
+async def _watch(hub: _TimedHub, host: str) -> tuple[int, float, float, int]:
+    """Watch the scene like a browser for MEASURE_S: (updates applied, wall s, CPU s, bytes)."""
+    received_bytes = 0
+    async with connect(f"ws://{host}/scene",
+                       subprotocols=[Subprotocol(f"viser-v{viser.__version__}")],
+                       additional_headers={"Cookie": f"skyhelm_token={TOKEN}"},
+                       max_size=None) as ws:
+        await asyncio.wait_for(ws.recv(), 10.0)
+        await asyncio.sleep(1.0)  # not a wait for an event: let the first full scene go out
+        hub.tick_s.clear()
+        applied0 = hub.updates_applied
+        cpu0, wall0 = time.process_time(), time.perf_counter()
+        while time.perf_counter() - wall0 < MEASURE_S:
+            try:
+                message = await asyncio.wait_for(ws.recv(), 0.2)
+                received_bytes += len(message)
+            except TimeoutError:
+                pass
+        wall = time.perf_counter() - wall0
+        cpu = time.process_time() - cpu0
+    return hub.updates_applied - applied0, wall, cpu, received_bytes
+
+
 async def measure(vehicle_count: int) -> dict[str, Any]:
-    vehicles = [FakeVehicle(i + 1) for i in range(vehicle_count)]
+    vehicles = [_ReportingVehicle(i + 1) for i in range(vehicle_count)]
     hub = _TimedHub()
     app = FastAPI()
     hub.mount(app, check_token=lambda t: t == TOKEN)
-    await hub.start(lambda: cast("list[Vehicle]", vehicles))
-    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=0, log_level="warning",
-                                           lifespan="off"))
-    task = asyncio.create_task(server.serve())
-    for _ in range(500):
-        if server.started:
-            break
-        await asyncio.sleep(0.02)
-    port = server.servers[0].sockets[0].getsockname()[1]
-    received_bytes = 0
+    publishers = StatePublishers(
+        lambda: cast("list[Vehicle]", vehicles), lambda _sysid: (None, None)
+    )
+    await publishers.start([])
+    reporting = asyncio.create_task(_report(vehicles))
+    await hub.start(publishers)
     try:
-        async with connect(f"ws://127.0.0.1:{port}/scene",
-                           subprotocols=[Subprotocol(f"viser-v{viser.__version__}")],
-                           additional_headers={"Cookie": f"skyhelm_token={TOKEN}"},
-                           max_size=None) as ws:
-            await asyncio.wait_for(ws.recv(), 10.0)
-            await asyncio.sleep(1.0)
-            hub.tick_s.clear()
-            applied0 = hub.updates_applied
-            cpu0, wall0 = time.process_time(), time.perf_counter()
-            while time.perf_counter() - wall0 < MEASURE_S:
-                try:
-                    message = await asyncio.wait_for(ws.recv(), 0.2)
-                    received_bytes += len(message)
-                except TimeoutError:
-                    pass
-            wall = time.perf_counter() - wall0
-            cpu = time.process_time() - cpu0
-            applied = hub.updates_applied - applied0
+        async with uvicorn_serving(app) as host:
+            applied, wall, cpu, received_bytes = await _watch(hub, host)
     finally:
-        server.should_exit = True
-        await task
         await hub.stop()
+        await cancel_and_wait(reporting)
+        await publishers.close()
     ticks_ms = sorted(t * 1000 for t in hub.tick_s)
     return {
         "vehicles": vehicle_count,
