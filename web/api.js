@@ -48,7 +48,10 @@ function retryDelayMs(attempt) {
   return Math.min(3000, 250 * 2 ** attempt);
 }
 
-/** Telemetry of one vehicle; calls onMessage for every message and onStatus on changes. */
+/**
+ * Telemetry of one vehicle (or, with vehicleId null, of all): states, events, the vehicle
+ * list and scene clicks; calls onMessage for every message and onStatus on changes.
+ */
 export class TelemetrySocket {
   constructor(vehicleId, { onMessage, onStatus, rateHz = 10 }) {
     this.vehicleId = vehicleId;
@@ -63,7 +66,9 @@ export class TelemetrySocket {
 
   open() {
     if (this.closed) return;
-    const ws = new WebSocket(socketUrl("/ws/telemetry", { vehicle: this.vehicleId, rate_hz: this.rateHz }));
+    const params = { rate_hz: this.rateHz };
+    if (this.vehicleId !== null) params.vehicle = this.vehicleId;
+    const ws = new WebSocket(socketUrl("/ws/telemetry", params));
     this.ws = ws;
     ws.onopen = () => {
       const again = this.everConnected;

@@ -1,0 +1,115 @@
+// Drawing one state message: the top bar, the telemetry table, the setpoint stream, the
+// VTOL progress and the strip charts.
+
+import { page, plots } from "./page.js";
+import { $, nowS, num, setText } from "./ui.js";
+
+export function altitudeAboveHome(state) {
+  if (state.global && Number.isFinite(state.global.alt_rel_m)) return state.global.alt_rel_m;
+  if (state.position_ned) return (state.home?.down_m ?? 0) - state.position_ned.down_m;
+  return null;
+}
+
+function setpointAltitude(state) {
+  const sp = state.setpoint;
+  const homeDown = state.home?.down_m ?? 0;
+  if (sp && Number.isFinite(sp.down_m)) return homeDown - sp.down_m;
+  if (sp && Number.isFinite(sp.z)) return homeDown - sp.z;
+  if (state.target_ned && Number.isFinite(state.target_ned.down_m)) return homeDown - state.target_ned.down_m;
+  return null;
+}
+
+function setpointSpeed(state) {
+  const sp = state.setpoint;
+  if (!sp) return null;
+  if (Number.isFinite(sp.north_m_s) && Number.isFinite(sp.east_m_s)) return Math.hypot(sp.north_m_s, sp.east_m_s);
+  if (Number.isFinite(sp.forward_m_s) && Number.isFinite(sp.right_m_s)) return Math.hypot(sp.forward_m_s, sp.right_m_s);
+  if (Number.isFinite(sp.vx) && Number.isFinite(sp.vy)) return Math.hypot(sp.vx, sp.vy);
+  if (Number.isFinite(sp.north_m)) return 0;
+  return null;
+}
+
+export function render(state) {
+  page.state = state;
+  if (state.vehicle_type) page.vehicleType = state.vehicle_type;
+  const link = state.link || {};
+  const age = state.last_heartbeat_age_s;
+  const loss = link.frames_in ? (100 * (link.lost_frames || 0)) / (link.frames_in + (link.lost_frames || 0)) : 0;
+  setText("link-health", `${state.connected ? "" : "LOST · "}hb ${num(age, 1)} s · loss ${num(loss, 1)}%`);
+  $("link-health").style.color = state.connected && age < 2 ? "" : "var(--bad)";
+
+  const failsafe = state.user_mode && state.user_mode !== state.mode && state.armed;
+  setText("mode", state.mode || "–");
+  $("mode").style.color = failsafe ? "var(--bad)" : state.mode === "OFFBOARD" ? "var(--offboard)" : "";
+  setText("user-mode", state.user_mode || "–");
+  setText("armed", state.armed ? "ARMED" : "DISARMED", state.armed ? "ok" : "");
+  const landedCls = { IN_AIR: "info", TAKEOFF: "warn", LANDING: "warn" }[state.landed_state] || "";
+  setText("landed", (state.landed_state || "–").replace("_", " "), landedCls);
+  const vtol = state.vtol_state && state.vtol_state !== "UNDEFINED";
+  $("vtol-state").classList.toggle("hidden", !vtol);
+  if (vtol) setText("vtol-state", state.vtol_state.replaceAll("_", " "), state.vtol_state.startsWith("TRANSITION") ? "warn" : "info");
+
+  renderTelemetry(state);
+  renderStream(state.stream || {});
+  renderVtol(state);
+  const t = nowS();
+  plots.alt.add(t, altitudeAboveHome(state), setpointAltitude(state));
+  plots.speed.add(t, state.ground_speed_m_s, setpointSpeed(state));
+}
+
+function renderTelemetry(state) {
+  const b = state.battery;
+  setText("t-battery", b ? `${num(b.voltage_v, 2)} V · ${num(b.current_a, 1)} A · ${num(b.remaining_pct, 0)}%` : "–");
+  if (b && Number.isFinite(b.remaining_pct)) $("t-battery").style.color = b.remaining_pct < 20 ? "var(--bad)" : b.remaining_pct < 40 ? "var(--warn)" : "";
+  const g = state.gps;
+  setText("t-gps", g ? `${g.fix_type} · ${g.satellites} sats · hdop ${num(g.hdop, 1)}` : "–");
+  const p = state.position_ned;
+  setText("t-pos", p ? `${num(p.north_m)} / ${num(p.east_m)} / ${num(p.down_m)} m` : "–");
+  const v = state.velocity_ned;
+  setText("t-vel", v ? `${num(v.north_m_s)} / ${num(v.east_m_s)} / ${num(v.down_m_s)} m/s` : "–");
+  const gl = state.global;
+  setText("t-alt", gl ? `${num(gl.alt_rel_m)} / ${num(gl.alt_amsl_m)} m` : "–");
+  setText("t-latlon", gl ? `${num(gl.lat_deg, 6)}, ${num(gl.lon_deg, 6)}` : "–");
+  const a = state.attitude;
+  setText("t-att", a ? `${num(a.roll_deg)}° / ${num(a.pitch_deg)}° / ${num(a.yaw_deg, 0)}°` : "–");
+  setText("t-speed", `${num(state.ground_speed_m_s)} / ${num(state.air_speed_m_s)} m/s`);
+  const h = state.home;
+  setText("t-home", h ? `${num(h.north_m)} / ${num(h.east_m)} / ${num(h.down_m)} m` : "–");
+  setText("t-rtl", state.rtl_phase || "–");
+  const out = state.actuator_outputs || [];
+  setText("t-motors", out.length ? out.map((x) => num(x * 100, 0)).join(" ") + " %" : "–");
+}
+
+function renderStream(s) {
+  setText("stream-active", s.active ? "streaming" : "off");
+  $("stream-active").style.color = s.active ? "var(--ok)" : "var(--dim)";
+  setText("stream-rate", s.rate_hz ? `${num(s.rate_hz, 1)} Hz` : "–");
+  setText("stream-p99", Number.isFinite(s.interval_p99_ms) ? `${num(s.interval_p99_ms, 1)} ms` : "–");
+  setText("stream-gap", Number.isFinite(s.max_gap_ms) ? `${num(s.max_gap_ms, 0)} ms` : "–");
+  setText("stream-since", Number.isFinite(s.since_last_ms) ? `${num(s.since_last_ms, 0)} ms` : "–");
+  setText("stream-sent", `${s.sent ?? "–"}`);
+  $("stream-gap").style.color = s.max_gap_ms > 500 ? "var(--bad)" : s.max_gap_ms > 100 ? "var(--warn)" : "";
+}
+
+const TRANSITION_GUESS_S = { TRANSITION_TO_FW: 3.5, TRANSITION_TO_MC: 1.5 };
+
+function renderVtol(state) {
+  const isVtol = /VTOL/.test(page.vehicleType) || (state.vtol_state && state.vtol_state !== "UNDEFINED");
+  $("vtol-panel").classList.toggle("hidden", !isVtol);
+  if (!isVtol) return;
+  const vs = state.vtol_state;
+  if (vs !== page.vtol.state) page.vtol = { state: vs, since: nowS() };
+  const elapsed = nowS() - page.vtol.since;
+  let pct = 0;
+  let text = vs;
+  if (vs === "FW") pct = 100;
+  else if (vs === "TRANSITION_TO_FW") {
+    pct = Math.min(95, (100 * elapsed) / TRANSITION_GUESS_S[vs]);
+    text = `→ FW ${num(elapsed, 1)} s · airspeed ${num(state.air_speed_m_s)} m/s`;
+  } else if (vs === "TRANSITION_TO_MC") {
+    pct = Math.max(5, 100 - (100 * elapsed) / TRANSITION_GUESS_S[vs]);
+    text = `→ MC ${num(elapsed, 1)} s`;
+  }
+  $("vtol-progress-bar").style.width = `${pct}%`;
+  setText("vtol-progress", text || "–");
+}
