@@ -21,8 +21,8 @@ from websockets.typing import Subprotocol
 from bench._results import machine_info, write_results
 from server.api.publisher import StatePublishers
 from server.link import Vehicle, VehicleState
+from server.link.aio import cancel_and_wait
 from server.link.state import StateSubscription, SubscriptionHub
-from server.link.tasks import cancel_and_wait
 from server.scene import SceneHub
 from tests.scene.conftest import FakeVehicle
 from tests.serving import uvicorn_serving

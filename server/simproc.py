@@ -12,7 +12,7 @@ import signal
 import sys
 from dataclasses import dataclass
 
-from server.link.tasks import cancel_and_wait
+from server.link.aio import cancel_and_wait
 
 log = logging.getLogger(__name__)
 

@@ -17,7 +17,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import BinaryIO
 
-from .tasks import cancel_and_wait
+from .aio import cancel_and_wait
 
 _TIMESTAMP = struct.Struct(">Q")
 _UNSAFE_NAME_CHARS = re.compile(r"[^A-Za-z0-9._-]+")

@@ -3,13 +3,13 @@ and the routing of frames to the peers that spoke from each system."""
 
 from __future__ import annotations
 
-import asyncio
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Hashable
 from typing import Any, Protocol
 
 from pymavlink.dialects.v20 import development as mavlink
 
+from ..aio import loop_time_s
 from ..urls import LinkUrl
 
 Peer = Hashable  # a UDP (host, port) address, a TCP client, or None for point-to-point links
@@ -78,11 +78,6 @@ def deliver(
         if before_each is not None:
             before_each(msg, peer)
         sink.frame_received(msg, peer)
-
-
-def loop_time_s() -> float:
-    """The running event loop's clock (time.monotonic on Linux; virtual in tests)."""
-    return asyncio.get_running_loop().time()
 
 
 def host_port(address: Any) -> tuple[str, int]:

@@ -21,7 +21,7 @@ from pathlib import Path
 
 from pymavlink.dialects.v20 import development as mavlink
 
-from ..tasks import cancel_and_wait
+from ..aio import cancel_and_wait
 from ..tlog import iter_tlog
 from ..urls import LinkUrl
 from .base import FrameDecoder, FrameSink, Transport, deliver

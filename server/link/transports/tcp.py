@@ -10,7 +10,7 @@ import logging
 
 from pymavlink.dialects.v20 import development as mavlink
 
-from ..tasks import cancel_and_wait
+from ..aio import cancel_and_wait
 from ..urls import LinkUrl
 from .base import FrameDecoder, FrameSink, Peer, PeerRouter, Transport, deliver, host_port
 
