@@ -1,30 +1,19 @@
 """MAVLink link layer: connections, vehicles, commands, setpoints and telemetry state.
 
-Nothing of HTTP, pydantic or viser is imported here.
+The public surface: ``Link`` and ``Vehicle``, the setpoint kinds and their encoding, the
+state a vehicle reports, and what its operations return. Nothing of HTTP, pydantic or
+viser is imported here.
 """
 
+from . import setpoints as _setpoints
 from .commands import CommandOutcome, CommandResult
 from .events import VehicleEvent
 from .link import Link
 from .link_stats import LinkStats
 from .modes import PX4_MODE_NAMES
 from .params import ParamError
-from .setpoint_checks import Envelope, SetpointRejected
-from .setpoints import (
-    AccelerationNed,
-    Attitude,
-    BodyRates,
-    OffsetBody,
-    OffsetNed,
-    PositionGlobal,
-    PositionNed,
-    PositionVelocityNed,
-    RawLocal,
-    SentSetpoint,
-    Setpoint,
-    VelocityBody,
-    VelocityNed,
-)
+from .setpoint_checks import Envelope, SetpointRejected, check
+from .setpoints import *  # noqa: F403  (the setpoint kinds, encode, resolve, describe)
 from .state import (
     AttitudeState,
     BatteryState,
@@ -43,11 +32,8 @@ from .vehicle import Vehicle
 
 __all__ = [
     "PX4_MODE_NAMES",
-    "AccelerationNed",
-    "Attitude",
     "AttitudeState",
     "BatteryState",
-    "BodyRates",
     "CommandOutcome",
     "CommandResult",
     "Envelope",
@@ -56,17 +42,9 @@ __all__ = [
     "HomeState",
     "Link",
     "LinkStats",
-    "OffsetBody",
-    "OffsetNed",
     "OriginState",
     "ParamError",
-    "PositionGlobal",
-    "PositionNed",
     "PositionNedState",
-    "PositionVelocityNed",
-    "RawLocal",
-    "SentSetpoint",
-    "Setpoint",
     "SetpointRejected",
     "StateSubscription",
     "StatusText",
@@ -74,7 +52,7 @@ __all__ = [
     "Vehicle",
     "VehicleEvent",
     "VehicleState",
-    "VelocityBody",
-    "VelocityNed",
     "VelocityNedState",
+    "check",
+    *_setpoints.__all__,
 ]

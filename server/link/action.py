@@ -43,11 +43,12 @@ def _deg_e7(deg: float) -> int:
 class Action:
     """Commands and mode changes for one vehicle."""
 
+    mode_confirm_timeout_s = 3.0
+    origin_timeout_s = 0.5  # per try of SET_GPS_GLOBAL_ORIGIN
+
     def __init__(self, core: VehicleCore, telemetry: Telemetry) -> None:
         self._core = core
         self._telemetry = telemetry
-        self.mode_confirm_timeout_s = 3.0
-        self.origin_timeout_s = 0.5  # per try of SET_GPS_GLOBAL_ORIGIN
 
     async def command_long(
         self, command: int, *params: float, confirm_timeout_s: float | None = None

@@ -23,13 +23,14 @@ from server.link.setpoints import (
     encode,
     resolve,
 )
-from server.link.state import StreamStats
 from server.link.streamer import DEFAULT_RATE_HZ, SetpointStreamer
 from server.link.telemetry import Telemetry
 
 
 class Offboard:
     """The setpoint stream of one vehicle and its OFFBOARD mode."""
+
+    prestream_s = 1.0  # of setpoints before switching to OFFBOARD
 
     def __init__(
         self,
@@ -43,28 +44,12 @@ class Offboard:
         self._telemetry = telemetry
         self._action = action
         self.envelope = Envelope()
-        self.prestream_s = 1.0
         self.setpoint: Setpoint | None = None  # what is streamed now, offsets resolved
-        self._streamer = SetpointStreamer(core.send, rate_hz=stream_rate_hz)
+        self.streamer = SetpointStreamer(core.send, rate_hz=stream_rate_hz)  # its rate, stats
         self._engaged = False
         telemetry.on_mode(self._apply_stream_policy)
 
-    # -- the stream ---------------------------------------------------------------------
-    @property
-    def streaming(self) -> bool:
-        return self._streamer.active
-
-    @property
-    def rate_hz(self) -> float:
-        return self._streamer.rate_hz
-
-    @rate_hz.setter
-    def rate_hz(self, rate_hz: float) -> None:
-        self._streamer.rate_hz = rate_hz
-
-    def stats(self) -> StreamStats:
-        return self._streamer.stats()
-
+    # -- setpoints ------------------------------------------------------------------------
     def check(self, sp: Setpoint) -> Setpoint:
         """The setpoint with offsets resolved, or SetpointRejected."""
         return self._checked(sp, self.envelope)
@@ -77,14 +62,15 @@ class Offboard:
         """Stream "stay here": current position and yaw. Skips the envelope, since a
         vehicle already outside it must still be able to stop."""
         t = self._telemetry
-        if t.position is None:
+        here = t.position_ned
+        if here is None:
             raise SetpointRejected("no local position yet")
         yaw = t.attitude.yaw_deg if t.attitude is not None else None
-        hold = PositionNed(t.position.north_m, t.position.east_m, t.position.down_m, yaw)
+        hold = PositionNed(here.north_m, here.east_m, here.down_m, yaw)
         return self._stream(self._checked(hold, Envelope(None, None, None, None)))
 
     def close(self) -> None:
-        self._streamer.stop()
+        self.streamer.stop()
 
     # -- OFFBOARD mode --------------------------------------------------------------------
     async def start(self, sp: Setpoint | None = None) -> CommandResult:
@@ -92,10 +78,10 @@ class Offboard:
         OFFBOARD and wait until the vehicle reports it."""
         if sp is not None:
             await self.set_setpoint(sp)
-        elif not self._streamer.active:
+        elif not self.streamer.active:
             await self.hold_position()
         # PX4 docs ask for > 1 s of stream first; the code needs less, so this satisfies both
-        await asyncio.sleep(max(0.0, self.prestream_s - self._streamer.streaming_for_s()))
+        await asyncio.sleep(max(0.0, self.prestream_s - self.streamer.streaming_for_s()))
         result = await self._action.set_mode("OFFBOARD")
         if not result.ok and not self._engaged:
             self._stop_stream("offboard refused")
@@ -111,8 +97,8 @@ class Offboard:
     # -- inside ---------------------------------------------------------------------------
     def _checked(self, sp: Setpoint, envelope: Envelope) -> Setpoint:
         t = self._telemetry
-        here = None if t.position is None else (t.position.north_m, t.position.east_m,
-                                                t.position.down_m)  # fmt: skip
+        p = t.position_ned
+        here = None if p is None else (p.north_m, p.east_m, p.down_m)
         try:
             resolved = resolve(sp, here, t.attitude.yaw_deg if t.attitude is not None else None)
         except LookupError as exc:
@@ -137,13 +123,13 @@ class Offboard:
         time_boot_ms = int((core.now() - core.created_s) * 1000) & 0xFFFFFFFF
         msg, sent = encode(resolved, core.mav, core.sysid, core.compid, time_boot_ms)
         self.setpoint = resolved
-        self._streamer.stream(msg)
+        self.streamer.stream(msg)
         core.hub.notify()
         return sent
 
     def _stop_stream(self, why: str) -> None:
-        if self._streamer.active:
-            self._streamer.stop()
+        if self.streamer.active:
+            self.streamer.stop()
             self._core.publish_event("stream", {"active": False, "reason": why})
         self.setpoint = None
         self._engaged = False

@@ -80,18 +80,12 @@ class ParamEntry:
 class ParamClient:
     """get / get many / get all / set, for one component, with a cache of what it said."""
 
-    def __init__(
-        self,
-        requests: Requester,
-        *,
-        timeout_s: float = 0.5,
-        list_quiet_s: float = 0.5,
-        list_rounds: int = 5,
-    ) -> None:
+    timeout_s = 0.5  # per try; the number of retries is the requester's
+    list_quiet_s = 0.5  # a list is complete, or has gaps, once it has been quiet this long
+    list_rounds = 5  # of asking for the gaps by index
+
+    def __init__(self, requests: Requester) -> None:
         self._requests = requests
-        self.timeout_s = timeout_s  # per try; the number of retries is the requester's
-        self.list_quiet_s = list_quiet_s
-        self.list_rounds = list_rounds
         self.cache: dict[str, ParamEntry] = {}
         self._by_index: dict[int, str] = {}
         self._count: int | None = None

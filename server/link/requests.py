@@ -18,7 +18,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import math
-from collections.abc import Callable, Collection
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import development as mavlink
@@ -78,6 +78,13 @@ class Requester:
     Waiting is on ``changed()``, which the vehicle calls after every message it took in.
     """
 
+    timeout_s = 0.5  # per try
+    retries = 3
+    in_progress_timeout_s = 10.0  # after each IN_PROGRESS
+    double_ack_window_s = 0.2
+    double_ack_commands = frozenset({MAV_CMD_DO_SET_MODE})
+    reason_wait_s = 0.1  # for the STATUSTEXT that says why a command was refused
+
     def __init__(
         self,
         *,
@@ -86,24 +93,12 @@ class Requester:
         target: tuple[int, int],
         texts: RecentTexts,
         publish: Publish,
-        timeout_s: float = 0.5,
-        retries: int = 3,
-        in_progress_timeout_s: float = 10.0,
-        double_ack_window_s: float = 0.2,
-        double_ack_commands: Collection[int] = (MAV_CMD_DO_SET_MODE,),
-        reason_wait_s: float = 0.1,
     ) -> None:
         self.send = send
         self.mav = mav
-        self.target = target
+        self.target = target  # (system, component)
         self._texts = texts
         self._publish = publish
-        self.timeout_s = timeout_s
-        self.retries = retries
-        self.in_progress_timeout_s = in_progress_timeout_s
-        self.double_ack_window_s = double_ack_window_s
-        self.double_ack_commands = frozenset(double_ack_commands)
-        self.reason_wait_s = reason_wait_s
         self._changed = asyncio.Event()
         self._locks: dict[int, asyncio.Lock] = {}
         self._awaiting_ack: dict[int, _Pending] = {}

@@ -3,6 +3,7 @@ names), STATUSTEXTs reassembled, events published when mode, arming or VTOL stat
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable
@@ -10,20 +11,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import development as mavlink
 
-from server.link import modes
-from server.link.state import (
-    LANDED_STATE_NAMES,
-    VTOL_STATE_NAMES,
-    AttitudeState,
-    BatteryState,
-    GlobalState,
-    GpsState,
-    HomeState,
-    OriginState,
-    PositionNedState,
-    StatusText,
-    VelocityNedState,
-)
+from server.link import modes, state
 from server.link.statustext import RecentTexts, StatusTextAssembler, severity_name
 
 STATUSTEXT_KEEP = 20
@@ -71,7 +59,37 @@ def _pwm_to_unit(pwm: float) -> float:
 
 
 class Telemetry:
-    """The latest reported value of each state part, kept by one handler per message type."""
+    """The latest reported value of each state part, kept by one handler per message type.
+
+    The values are named as in VehicleState, whose telemetry part ``reported()`` gives."""
+
+    # HEARTBEAT and CURRENT_MODE
+    mode: str = "UNKNOWN"
+    user_mode: str | None = None  # what the user chose (CURRENT_MODE.intended_custom_mode)
+    armed: bool = False
+    system_status: str = "UNINIT"
+    # LOCAL_POSITION_NED, GLOBAL_POSITION_INT, ATTITUDE, POSITION_TARGET_LOCAL_NED
+    position_ned: state.PositionNedState | None = None
+    velocity_ned: state.VelocityNedState | None = None
+    global_position: state.GlobalState | None = None
+    attitude: state.AttitudeState | None = None
+    target_ned: state.PositionNedState | None = None
+    # EXTENDED_SYS_STATE's numbers (the *_name properties name them)
+    landed_state: int = 0
+    vtol_state: int = 0
+    # VFR_HUD
+    ground_speed_m_s: float | None = None
+    air_speed_m_s: float | None = None
+    climb_rate_m_s: float | None = None
+    heading_deg: float | None = None
+    # SERVO_OUTPUT_RAW or ACTUATOR_OUTPUT_STATUS, as 0..1
+    actuator_outputs: tuple[float, ...] = ()
+    # SYS_STATUS or BATTERY_STATUS, GPS_RAW_INT, HOME_POSITION, GPS_GLOBAL_ORIGIN, STATUSTEXT
+    battery: state.BatteryState | None = None
+    gps: state.GpsState | None = None
+    home: state.HomeState | None = None
+    origin: state.OriginState | None = None
+    rtl_phase: str | None = None
 
     def __init__(
         self,
@@ -86,28 +104,7 @@ class Telemetry:
         self._mode_listeners: list[Callable[[], None]] = []
         self._assembler = StatusTextAssembler(clock)
         self._current_mode_s: float | None = None
-        self.mode = "UNKNOWN"
-        self.user_mode: str | None = None
-        self.armed = False
-        self.system_status = "UNINIT"
-        self.landed_state = 0
-        self.vtol_state = 0
-        self.position: PositionNedState | None = None
-        self.velocity: VelocityNedState | None = None
-        self.global_position: GlobalState | None = None
-        self.attitude: AttitudeState | None = None
-        self.ground_speed_m_s: float | None = None
-        self.air_speed_m_s: float | None = None
-        self.climb_rate_m_s: float | None = None
-        self.heading_deg: float | None = None
-        self.battery: BatteryState | None = None
-        self.gps: GpsState | None = None
-        self.home: HomeState | None = None
-        self.origin: OriginState | None = None
-        self.target_ned: PositionNedState | None = None
-        self.actuators: tuple[float, ...] = ()
-        self.statustext: list[StatusText] = []
-        self.rtl_phase: str | None = None
+        self.statustext: list[state.StatusText] = []
         self.handlers: dict[str, Callable[[Any], None]] = {
             "HEARTBEAT": self._on_heartbeat,
             "CURRENT_MODE": self._on_current_mode,
@@ -127,6 +124,16 @@ class Telemetry:
             "STATUSTEXT": self._on_statustext,
         }
 
+    def reported(self) -> dict[str, Any]:
+        """The telemetry part of a VehicleState, by field name."""
+        values = {name: getattr(self, name) for name in _REPORTED}
+        values.update(
+            landed_state=self.landed_state_name,
+            vtol_state=self.vtol_state_name,
+            statustext=tuple(self.statustext),
+        )
+        return values
+
     def on_mode(self, listener: Callable[[], None]) -> None:
         """Call ``listener()`` whenever a HEARTBEAT or CURRENT_MODE told the mode."""
         self._mode_listeners.append(listener)
@@ -137,11 +144,11 @@ class Telemetry:
 
     @property
     def landed_state_name(self) -> str:
-        return LANDED_STATE_NAMES[self.landed_state]
+        return state.LANDED_STATE_NAMES[self.landed_state]
 
     @property
     def vtol_state_name(self) -> str:
-        return VTOL_STATE_NAMES[self.vtol_state]
+        return state.VTOL_STATE_NAMES[self.vtol_state]
 
     def _set_mode(self, mode: str) -> None:
         if mode != self.mode:
@@ -172,18 +179,18 @@ class Telemetry:
         self._mode_reported()
 
     def _on_extended_sys_state(self, msg: mavlink.MAVLink_extended_sys_state_message) -> None:
-        if 0 <= msg.landed_state < len(LANDED_STATE_NAMES):
+        if 0 <= msg.landed_state < len(state.LANDED_STATE_NAMES):
             self.landed_state = msg.landed_state
-        if 0 <= msg.vtol_state < len(VTOL_STATE_NAMES) and msg.vtol_state != self.vtol_state:
+        if 0 <= msg.vtol_state < len(state.VTOL_STATE_NAMES) and msg.vtol_state != self.vtol_state:
             self.vtol_state = msg.vtol_state
-            self._publish("vtol", {"vtol_state": VTOL_STATE_NAMES[msg.vtol_state]})
+            self._publish("vtol", {"vtol_state": state.VTOL_STATE_NAMES[msg.vtol_state]})
 
     def _on_local_position(self, msg: mavlink.MAVLink_local_position_ned_message) -> None:
-        self.position = PositionNedState(msg.x, msg.y, msg.z)
-        self.velocity = VelocityNedState(msg.vx, msg.vy, msg.vz)
+        self.position_ned = state.PositionNedState(msg.x, msg.y, msg.z)
+        self.velocity_ned = state.VelocityNedState(msg.vx, msg.vy, msg.vz)
 
     def _on_global_position(self, msg: mavlink.MAVLink_global_position_int_message) -> None:
-        self.global_position = GlobalState(
+        self.global_position = state.GlobalState(
             msg.lat / 1e7, msg.lon / 1e7, msg.alt / 1e3, msg.relative_alt / 1e3
         )
         if msg.hdg != 0xFFFF:
@@ -191,7 +198,7 @@ class Telemetry:
 
     def _on_attitude(self, msg: mavlink.MAVLink_attitude_message) -> None:
         d = math.degrees
-        self.attitude = AttitudeState(
+        self.attitude = state.AttitudeState(
             d(msg.roll), d(msg.pitch), d(msg.yaw),
             d(msg.rollspeed), d(msg.pitchspeed), d(msg.yawspeed),
         )  # fmt: skip
@@ -212,31 +219,31 @@ class Telemetry:
         self.battery = _battery(voltage_v, msg.current_battery, msg.battery_remaining)
 
     def _on_gps_raw(self, msg: mavlink.MAVLink_gps_raw_int_message) -> None:
-        self.gps = GpsState(
+        self.gps = state.GpsState(
             enum_name("GPS_FIX_TYPE", msg.fix_type, "GPS_FIX_TYPE_"),
             msg.satellites_visible,
             None if msg.eph == 0xFFFF else msg.eph / 100.0,
         )
 
     def _on_home(self, msg: mavlink.MAVLink_home_position_message) -> None:
-        self.home = HomeState(
+        self.home = state.HomeState(
             msg.latitude / 1e7, msg.longitude / 1e7, msg.altitude / 1e3, msg.x, msg.y, msg.z
         )
 
     def _on_origin(self, msg: mavlink.MAVLink_gps_global_origin_message) -> None:
-        self.origin = OriginState(msg.latitude / 1e7, msg.longitude / 1e7, msg.altitude / 1e3)
+        self.origin = state.OriginState(msg.latitude / 1e7, msg.longitude / 1e7, msg.altitude / 1e3)
 
     def _on_position_target(self, msg: mavlink.MAVLink_position_target_local_ned_message) -> None:
-        self.target_ned = PositionNedState(msg.x, msg.y, msg.z)
+        self.target_ned = state.PositionNedState(msg.x, msg.y, msg.z)
 
     def _on_servo_output(self, msg: mavlink.MAVLink_servo_output_raw_message) -> None:
         raw = [getattr(msg, f"servo{i}_raw", 0) for i in range(1, 17)]
-        self.actuators = tuple(_pwm_to_unit(v) for v in raw if v)
+        self.actuator_outputs = tuple(_pwm_to_unit(v) for v in raw if v)
 
     def _on_actuator_output(self, msg: mavlink.MAVLink_actuator_output_status_message) -> None:
         # PWM in microseconds, or already normalised: either way 0..1 for the dashboard
         values = msg.actuator[: msg.active]
-        self.actuators = tuple(
+        self.actuator_outputs = tuple(
             _pwm_to_unit(v) if v > 2.0 else min(max(v, 0.0), 1.0) for v in values
         )
 
@@ -248,7 +255,7 @@ class Telemetry:
             self._add_statustext(severity, whole)
 
     def _add_statustext(self, severity: int, text: str) -> None:
-        entry = StatusText(time.time(), severity_name(severity), text)
+        entry = state.StatusText(time.time(), severity_name(severity), text)
         self.statustext.append(entry)
         del self.statustext[:-STATUSTEXT_KEEP]
         self._texts.add(severity, text)
@@ -261,9 +268,17 @@ class Telemetry:
                 self._publish("rtl", {"phase": phase})
 
 
-def _battery(voltage_v: float | None, current_ca: int, remaining_pct: int) -> BatteryState:
+# what reported() copies as it is (the others it names or freezes)
+_REPORTED = tuple(
+    f.name
+    for f in dataclasses.fields(state.VehicleState)
+    if f.name in vars(Telemetry) and f.name not in ("landed_state", "vtol_state")
+)
+
+
+def _battery(voltage_v: float | None, current_ca: int, remaining_pct: int) -> state.BatteryState:
     """MAVLink marks unknown current and remaining charge with -1."""
-    return BatteryState(
+    return state.BatteryState(
         voltage_v,
         None if current_ca < 0 else current_ca / 100.0,
         None if remaining_pct < 0 else float(remaining_pct),

@@ -30,11 +30,7 @@ from server.link.params import ParamClient
 from server.link.requests import Requester
 from server.link.setpoint_checks import Envelope
 from server.link.setpoints import Setpoint, describe
-from server.link.state import (
-    LANDED_STATE_NAMES,
-    VTOL_STATE_NAMES,
-    VehicleState,
-)
+from server.link.state import VehicleState
 from server.link.streamer import DEFAULT_RATE_HZ
 from server.link.telemetry import Telemetry, enum_name
 from server.link.telemetry_requests import TelemetryRequests
@@ -46,7 +42,13 @@ class _OnPlugin(Generic[T]):
     """A vehicle attribute that lives on one of its plugins ("plugin.attribute")."""
 
     def __init__(self, path: str) -> None:
-        self._plugin, self._name = path.split(".")
+        *self._owner_path, self._name = path.split(".")
+
+    def _owner(self, vehicle: Vehicle) -> object:
+        owner: object = vehicle
+        for name in self._owner_path:
+            owner = getattr(owner, name)
+        return owner
 
     @overload
     def __get__(self, vehicle: None, owner: type) -> Self: ...
@@ -55,11 +57,11 @@ class _OnPlugin(Generic[T]):
     def __get__(self, vehicle: Vehicle | None, owner: type) -> Self | T:
         if vehicle is None:
             return self
-        value: T = getattr(getattr(vehicle, self._plugin), self._name)
+        value: T = getattr(self._owner(vehicle), self._name)
         return value
 
     def __set__(self, vehicle: Vehicle, value: T) -> None:
-        setattr(getattr(vehicle, self._plugin), self._name, value)
+        setattr(self._owner(vehicle), self._name, value)
 
 
 class Vehicle:
@@ -67,8 +69,8 @@ class Vehicle:
 
     envelope = _OnPlugin[Envelope]("offboard.envelope")
     offboard_prestream_s = _OnPlugin[float]("offboard.prestream_s")
-    stream_rate_hz = _OnPlugin[float]("offboard.rate_hz")
-    streamer_active = _OnPlugin[bool]("offboard.streaming")
+    stream_rate_hz = _OnPlugin[float]("offboard.streamer.rate_hz")
+    streamer_active = _OnPlugin[bool]("offboard.streamer.active")
     mode_confirm_timeout_s = _OnPlugin[float]("action.mode_confirm_timeout_s")
     origin_timeout_s = _OnPlugin[float]("action.origin_timeout_s")
     connected = _OnPlugin[bool]("core.connected")
@@ -119,7 +121,7 @@ class Vehicle:
         self.set_setpoint = self.offboard.set_setpoint
         self.hold_position_setpoint = self.offboard.hold_position
         self.start_offboard, self.stop_offboard = self.offboard.start, self.offboard.stop
-        self.stream_stats = self.offboard.stats
+        self.stream_stats = self.offboard.streamer.stats
         self.get_param, self.set_param = self.params.get, self.params.set
 
     @property
@@ -155,36 +157,15 @@ class Vehicle:
         core, t = self.core, self.telemetry
         setpoint = self.offboard.setpoint
         return VehicleState(
+            **t.reported(),
             sysid=self.sysid,
             compid=self.compid,
             mav_type=enum_name("MAV_TYPE", core.mav_type, "MAV_TYPE_"),
             autopilot=enum_name("MAV_AUTOPILOT", core.autopilot, "MAV_AUTOPILOT_"),
             connected=core.connected,
             last_heartbeat_age_s=core.now() - core.last_heartbeat_s,
-            mode=t.mode,
-            user_mode=t.user_mode,
-            armed=t.armed,
-            system_status=t.system_status,
-            landed_state=LANDED_STATE_NAMES[t.landed_state],
-            vtol_state=VTOL_STATE_NAMES[t.vtol_state],
-            position_ned=t.position,
-            velocity_ned=t.velocity,
-            global_position=t.global_position,
-            attitude=t.attitude,
-            ground_speed_m_s=t.ground_speed_m_s,
-            air_speed_m_s=t.air_speed_m_s,
-            climb_rate_m_s=t.climb_rate_m_s,
-            heading_deg=t.heading_deg,
-            battery=t.battery,
-            gps=t.gps,
-            home=t.home,
-            origin=t.origin,
             setpoint=describe(setpoint) if setpoint is not None else None,
-            target_ned=t.target_ned,
-            stream=self.offboard.stats(),
-            actuator_outputs=t.actuators,
-            statustext=tuple(t.statustext),
-            rtl_phase=t.rtl_phase,
+            stream=self.offboard.streamer.stats(),
             link=self.link.stats(),
             updated_s=core.updated_s,
             telemetry_refused=tuple(sorted(self.telemetry_requests.refused)),

@@ -55,6 +55,15 @@ class _FakeVehicle:
 
         asyncio.get_running_loop().call_later(after_s, report)
 
+    def accept_then(self, command: int, after_s: float, change: Callable[[], None]) -> None:
+        """ACK every try ACCEPTED at once; the reported state changes after_s later."""
+
+        def answer(_msg: mavlink.MAVLink_message) -> None:
+            self.ack(command, ACCEPTED)
+            self.later(after_s, change)
+
+        self.on_send = answer
+
 
 async def test_unanswered_command_is_sent_four_times_then_times_out() -> None:
     fake = _FakeVehicle()
@@ -109,35 +118,26 @@ async def test_in_progress_without_a_final_answer_times_out_after_the_progress_t
     assert result.elapsed_ms == pytest.approx(4100.0)
 
 
-async def test_second_ack_of_set_mode_within_the_window_replaces_the_first() -> None:
+@pytest.mark.parametrize(
+    ("second_after_s", "outcome"),
+    [(0.03, CommandOutcome.TEMPORARILY_REJECTED), (0.3, CommandOutcome.ACCEPTED)],
+)
+async def test_second_ack_of_set_mode_replaces_the_first_only_within_the_window(
+    second_after_s: float, outcome: CommandOutcome
+) -> None:
     fake = _FakeVehicle()
 
     def px4_double_ack(_msg: mavlink.MAVLink_message) -> None:
         fake.ack(SET_MODE, ACCEPTED)
-        fake.ack(SET_MODE, TEMPORARILY_REJECTED, after_s=0.03)
+        fake.ack(SET_MODE, TEMPORARILY_REJECTED, after_s=second_after_s)
 
     fake.on_send = px4_double_ack
 
     result = await fake.requests.command_long(SET_MODE, 1, 4, 3)
 
-    assert result.outcome is CommandOutcome.TEMPORARILY_REJECTED
-    assert result.result_code == TEMPORARILY_REJECTED
-    # the whole double-ACK window, then 0.1 s for a STATUSTEXT saying why
-    assert result.elapsed_ms == pytest.approx(300.0)
-
-
-async def test_ack_after_the_double_ack_window_is_ignored() -> None:
-    fake = _FakeVehicle()
-
-    def late_second_ack(_msg: mavlink.MAVLink_message) -> None:
-        fake.ack(SET_MODE, ACCEPTED)
-        fake.ack(SET_MODE, TEMPORARILY_REJECTED, after_s=0.3)
-
-    fake.on_send = late_second_ack
-
-    result = await fake.requests.command_long(SET_MODE, 1, 4, 3)
-
-    assert result.ok
+    assert result.outcome is outcome
+    # the whole double-ACK window, then for a refusal 0.1 s for a STATUSTEXT saying why
+    assert result.elapsed_ms == pytest.approx(200.0 if result.ok else 300.0)
 
 
 async def test_other_commands_take_the_first_final_ack_at_once() -> None:
@@ -171,12 +171,7 @@ async def test_accepted_but_never_reported_is_not_confirmed_with_the_explanation
 async def test_confirmation_by_the_reported_state_resolves_when_it_shows() -> None:
     fake = _FakeVehicle()
     reported = {"mode": "HOLD"}
-
-    def accept_then_report(_msg: mavlink.MAVLink_message) -> None:
-        fake.ack(SET_MODE, ACCEPTED)
-        fake.later(0.7, lambda: reported.update(mode="LAND"))
-
-    fake.on_send = accept_then_report
+    fake.accept_then(SET_MODE, 0.7, lambda: reported.update(mode="LAND"))
     confirm = Confirmation(lambda: reported["mode"] == "LAND", 3.0, lambda _s: "never")
 
     result = await fake.requests.command_long(SET_MODE, 1, 4, 6, confirm=confirm)
@@ -188,12 +183,7 @@ async def test_confirmation_by_the_reported_state_resolves_when_it_shows() -> No
 async def test_reported_state_that_shows_an_abort_fails_at_once() -> None:
     fake = _FakeVehicle()
     reported = {"vtol": "MC"}
-
-    def accept_then_fall_back(_msg: mavlink.MAVLink_message) -> None:
-        fake.ack(ARM, ACCEPTED)
-        fake.later(0.4, lambda: reported.update(vtol="MC_AGAIN"))
-
-    fake.on_send = accept_then_fall_back
+    fake.accept_then(ARM, 0.4, lambda: reported.update(vtol="MC_AGAIN"))
     confirm = Confirmation(
         reached=lambda: reported["vtol"] == "FW",
         timeout_s=30.0,

@@ -10,6 +10,7 @@ import pytest
 
 from server.link.commands import CommandOutcome
 from server.link.setpoints import PositionNed, VelocityBody, VelocityNed
+from server.link.state import HomeState
 from server.link.vehicle import Vehicle
 from tests.link.conftest import SimSession, drain, open_sim, wait_for
 
@@ -25,11 +26,15 @@ def _distance_m(a: tuple[float, float, float], b: tuple[float, float, float]) ->
     return math.dist(a, b)
 
 
-async def _take_off(session: SimSession, altitude_rel_m: float) -> None:
+async def _take_off(session: SimSession, altitude_rel_m: float) -> HomeState:
+    """Arm, climb to altitude_rel_m; the home it took off from."""
     vehicle = session.vehicle
     assert (await vehicle.arm()).ok
     assert (await vehicle.takeoff(altitude_rel_m)).ok
     await wait_for(lambda: _alt_rel_m(vehicle) > altitude_rel_m - 0.6, 40 / SPEED, "takeoff")
+    home = vehicle.snapshot().home
+    assert home is not None
+    return home
 
 
 async def test_vehicle_is_discovered_with_type_home_and_both_modes() -> None:
@@ -70,9 +75,7 @@ async def test_early_refusals_of_home_and_origin_are_cleared_once_they_come() ->
 async def test_offboard_position_setpoint_is_reached_within_half_a_metre() -> None:
     async with open_sim(speed=SPEED) as session:
         vehicle = session.vehicle
-        await _take_off(session, 5.0)
-        home = vehicle.snapshot().home
-        assert home is not None
+        home = await _take_off(session, 5.0)
         target = (5.0, 3.0, home.down_m - 6.0)
 
         result = await vehicle.start_offboard(PositionNed(*target, yaw_deg=0))
@@ -108,9 +111,7 @@ async def test_velocity_and_body_velocity_setpoints_move_the_vehicle() -> None:
 async def test_reposition_flies_to_the_target_and_holds() -> None:
     async with open_sim(speed=SPEED) as session:
         vehicle = session.vehicle
-        await _take_off(session, 5.0)
-        home = vehicle.snapshot().home
-        assert home is not None
+        home = await _take_off(session, 5.0)
         lat_deg = home.lat_deg + 15.0 / 111_195.0  # 15 m north
 
         result = await vehicle.reposition(lat_deg, home.lon_deg, alt_rel_m=8.0)
