@@ -52,16 +52,6 @@ class ObLossAction(IntEnum):
     DISARM = 7
 
 
-_OBL_ACTION_MODES: dict[int, Px4Mode] = {
-    ObLossAction.POSITION: modes.POSCTL,
-    ObLossAction.ALTITUDE: modes.ALTCTL,
-    ObLossAction.STABILIZED: modes.STABILIZED,
-    ObLossAction.RETURN: modes.AUTO_RTL,
-    ObLossAction.LAND: modes.AUTO_LAND,
-    ObLossAction.HOLD: modes.AUTO_LOITER,
-    ObLossAction.TERMINATE: modes.TERMINATION,
-}
-
 class DllAction(IntEnum):
     """NAV_DLL_ACT values (GCS datalink loss)."""
 
@@ -73,12 +63,27 @@ class DllAction(IntEnum):
     DISARM = 6
 
 
-_DLL_ACTION_MODES: dict[int, Px4Mode] = {
-    DllAction.HOLD: modes.AUTO_LOITER,
-    DllAction.RETURN: modes.AUTO_RTL,
-    DllAction.LAND: modes.AUTO_LAND,
-    DllAction.TERMINATE: modes.TERMINATION,
+# The mode a failsafe action flies, by the action's name in COM_OBL_RC_ACT and NAV_DLL_ACT
+# (the two parameters name the same actions with different numbers).
+_FAILSAFE_ACTION_MODES: dict[str, Px4Mode] = {
+    "POSITION": modes.POSCTL,
+    "ALTITUDE": modes.ALTCTL,
+    "STABILIZED": modes.STABILIZED,
+    "RETURN": modes.AUTO_RTL,
+    "LAND": modes.AUTO_LAND,
+    "HOLD": modes.AUTO_LOITER,
+    "TERMINATE": modes.TERMINATION,
 }
+
+
+def _failsafe_mode(actions: type[IntEnum], value: int) -> Px4Mode | None:
+    """The mode of a parameter's action value; None for a value the parameter lacks."""
+    try:
+        name = actions(value).name
+    except ValueError:
+        return None
+    return _FAILSAFE_ACTION_MODES.get(name)
+
 
 # Known modes the simulated vehicle cannot run at all (nothing to follow, no beacon).
 _UNSUPPORTED_MODES = frozenset(
@@ -240,8 +245,8 @@ class Commander:
         self.failsafe = True
         if action == DllAction.DISARM:
             self._disarm("Failsafe: disarming")
-        elif action in _DLL_ACTION_MODES:
-            self._set_nav_mode(_DLL_ACTION_MODES[action])
+        elif (mode := _failsafe_mode(DllAction, action)) is not None:
+            self._set_nav_mode(mode)
 
     def _track_landing(self, now_s: float, landed: bool) -> None:
         if not landed and self.armed:
@@ -279,7 +284,8 @@ class Commander:
         if action == ObLossAction.DISARM:
             self._disarm("Failsafe: disarming")
             return
-        self._set_nav_mode(_OBL_ACTION_MODES.get(action, modes.POSCTL))
+        mode = _failsafe_mode(ObLossAction, action)
+        self._set_nav_mode(modes.POSCTL if mode is None else mode)
 
     def _check_auto_disarm(self, now_s: float) -> None:
         if not self.armed or not self.landed or self._landed_since_s is None:

@@ -65,28 +65,28 @@ class OffboardSetpoints:
     def _accept(self, setpoint: ControlSetpoint) -> None:
         self._v.commander.on_offboard_setpoint(setpoint, self._v.now_s)
 
+    def _frame_supported(self, msg: Message, frames: tuple[int, ...]) -> bool:
+        if msg.coordinate_frame in frames:
+            return True
+        self._refuse(msg.get_type(), f"coordinate frame {msg.coordinate_frame} unsupported")
+        return False
+
     def handle_local_ned(self, link: Link, msg: Message) -> None:
-        name = "SET_POSITION_TARGET_LOCAL_NED"
-        frame = msg.coordinate_frame
-        if frame not in _LOCAL_FRAMES:
-            self._refuse(name, f"coordinate frame {frame} unsupported")
+        if not self._frame_supported(msg, _LOCAL_FRAMES):
             return
-        mask = msg.type_mask
-        position = _vector(mask, (IGNORE_PX, IGNORE_PY, IGNORE_PZ), (msg.x, msg.y, msg.z))
+        position = _vector(msg.type_mask, (IGNORE_PX, IGNORE_PY, IGNORE_PZ), (msg.x, msg.y, msg.z))
         velocity, accel = _velocity_and_accel(msg)
-        if frame == mavlink.MAV_FRAME_BODY_NED:
+        if msg.coordinate_frame == mavlink.MAV_FRAME_BODY_NED:
             q = self._v.truth.q_wxyz
             position = [math.nan] * 3
             velocity = list(rotate_body_to_ned(quat_from_yaw(yaw_from_quat(q)), velocity))
             accel = list(rotate_body_to_ned(q, accel))
-        self._publish_trajectory(name, mask, position, velocity, accel, msg.yaw, msg.yaw_rate)
+        self._publish_trajectory(msg, position, velocity, accel)
 
     def handle_global_int(self, link: Link, msg: Message) -> None:
-        name = "SET_POSITION_TARGET_GLOBAL_INT"
-        frame = msg.coordinate_frame
-        if frame not in _GLOBAL_FRAMES:
-            self._refuse(name, f"coordinate frame {frame} unsupported")
+        if not self._frame_supported(msg, _GLOBAL_FRAMES):
             return
+        frame = msg.coordinate_frame
         v = self._v
         if not v.ready:
             return  # no global position yet: PX4 drops these silently
@@ -102,11 +102,11 @@ class OffboardSetpoints:
                 down = -msg.alt  # flat terrain at local down 0
             position = [north, east, down]
         velocity, accel = _velocity_and_accel(msg)
-        self._publish_trajectory(name, mask, position, velocity, accel, msg.yaw, msg.yaw_rate)
+        self._publish_trajectory(msg, position, velocity, accel)
 
-    def _publish_trajectory(self, name: str, mask: int, position: list[float],
-                            velocity: list[float], accel: list[float],
-                            yaw: float, yaw_rate: float) -> None:
+    def _publish_trajectory(self, msg: Message, position: list[float],
+                            velocity: list[float], accel: list[float]) -> None:
+        name, mask = msg.get_type(), msg.type_mask
         if not _all_nan(accel) and mask & FORCE_SET:
             self._refuse(name, "force not supported")
             return
@@ -117,8 +117,8 @@ class OffboardSetpoints:
             position_ned_m=position,
             velocity_ned_m_s=velocity,
             acceleration_ned_m_s2=accel,
-            yaw_rad=_nan_if(bool(mask & IGNORE_YAW), yaw),
-            yawspeed_rad_s=_nan_if(bool(mask & IGNORE_YAW_RATE), yaw_rate),
+            yaw_rad=_nan_if(bool(mask & IGNORE_YAW), msg.yaw),
+            yawspeed_rad_s=_nan_if(bool(mask & IGNORE_YAW_RATE), msg.yaw_rate),
         ))
 
     def handle_attitude_target(self, link: Link, msg: Message) -> None:

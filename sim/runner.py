@@ -8,7 +8,6 @@ all vehicles on absolute deadlines.
 from __future__ import annotations
 
 import asyncio
-import contextlib
 from dataclasses import dataclass
 from types import TracebackType
 
@@ -38,18 +37,22 @@ class SimInstance:
         return self.gcs_link.local_port
 
     @property
+    def links(self) -> tuple[UdpLink, UdpLink]:
+        return (self.api_link, self.gcs_link)
+
+    @property
     def rx_dropped(self) -> int:
         """Garbage, truncated and bad-CRC datagram pieces dropped on both links."""
-        return self.api_link.counters.rx_dropped + self.gcs_link.counters.rx_dropped
+        return sum(link.counters.rx_dropped for link in self.links)
 
     @property
     def tx_unpackable(self) -> int:
         """Outgoing messages that could not be encoded and were skipped, on both links."""
-        return self.api_link.counters.tx_unpackable + self.gcs_link.counters.tx_unpackable
+        return sum(link.counters.tx_unpackable for link in self.links)
 
     def close(self) -> None:
-        self.api_link.close()
-        self.gcs_link.close()
+        for link in self.links:
+            link.close()
 
 
 class SimCluster:
@@ -143,12 +146,16 @@ class SimCluster:
         await asyncio.wait_for(asyncio.gather(*waits), timeout_s)
 
     async def stop(self) -> None:
-        if self._task is not None:
-            self._task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._task
-            self._task = None
-        self.close()
+        task, self._task = self._task, None
+        try:
+            if task is not None:
+                task.cancel()
+                # its end, without taking on its cancellation; a crash of the loop still shows
+                await asyncio.wait([task])
+                if not task.cancelled() and (error := task.exception()) is not None:
+                    raise error
+        finally:
+            self.close()
 
     def close(self) -> None:
         for inst in self.instances:

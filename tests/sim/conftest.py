@@ -16,29 +16,15 @@ import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
 from sim.endpoint import MavlinkCodec
+from sim.numeric import clamp, finite_or
 from sim.params import ParamReader
-from sim.topics import (
-    AttitudeSetpoint,
-    ControlSetpoint,
-    RatesSetpoint,
-    TrajectorySetpoint,
-    VehicleStateTruth,
-    VtolState,
-)
+from sim.topics import ControlSetpoint, TrajectorySetpoint, VehicleStateTruth, VtolState
 from sim.vehicle import PHYSICS_DT_S, READY_TIME_S, SimVehicle
 
 GCS_SYSID = 255
 GCS_COMPID = 190
 
 MAV_TYPES = {"quad": 2, "hexa": 13, "octo": 14, "plane": 1, "vtol": 22, "rover": 10}
-
-
-def _clamp(value: float, limit: float) -> float:
-    return max(-limit, min(limit, value))
-
-
-def _finite_or(value: float, default: float) -> float:
-    return value if math.isfinite(value) else default
 
 
 class PointMassAirframe:
@@ -77,13 +63,13 @@ class PointMassAirframe:
     def _wanted_velocity(self, sp: TrajectorySetpoint) -> list[float]:
         p = self._params
         limits = [
-            _finite_or(sp.max_speed_xy_m_s, p.get("MPC_XY_VEL_MAX")),
-            _finite_or(sp.max_speed_xy_m_s, p.get("MPC_XY_VEL_MAX")),
+            finite_or(sp.max_speed_xy_m_s, p.get("MPC_XY_VEL_MAX")),
+            finite_or(sp.max_speed_xy_m_s, p.get("MPC_XY_VEL_MAX")),
         ]
         wanted = []
         for axis in range(3):
             target = sp.position_ned_m[axis]
-            ff = _finite_or(sp.velocity_ned_m_s[axis], 0.0)
+            ff = finite_or(sp.velocity_ned_m_s[axis], 0.0)
             v = ff + (self.GAIN * (target - self.truth.position_ned_m[axis])
                       if math.isfinite(target) else 0.0)
             if not math.isfinite(target) and not math.isfinite(sp.velocity_ned_m_s[axis]):
@@ -91,10 +77,10 @@ class PointMassAirframe:
                 acc = sp.acceleration_ned_m_s2[axis]
                 v = v + (acc * PHYSICS_DT_S if math.isfinite(acc) else -v)
             if axis < 2:
-                v = _clamp(v, limits[axis])
+                v = clamp(v, -limits[axis], limits[axis])
             else:
-                up = _finite_or(sp.max_speed_up_m_s, p.get("MPC_Z_VEL_MAX_UP"))
-                down = _finite_or(sp.max_speed_down_m_s, p.get("MPC_Z_VEL_MAX_DN"))
+                up = finite_or(sp.max_speed_up_m_s, p.get("MPC_Z_VEL_MAX_UP"))
+                down = finite_or(sp.max_speed_down_m_s, p.get("MPC_Z_VEL_MAX_DN"))
                 v = max(-up, min(down, v))
             wanted.append(v)
         return wanted
@@ -110,8 +96,7 @@ class PointMassAirframe:
             if math.isfinite(setpoint.yaw_rad):
                 self._set_yaw(setpoint.yaw_rad)
             self.power_fraction = 0.3
-        else:
-            assert isinstance(setpoint, AttitudeSetpoint | RatesSetpoint)
+        else:  # an attitude or rates setpoint: the point mass holds still
             wanted = [0.0, 0.0, 0.0]
             self.power_fraction = 0.3
         alpha = min(dt_s / self.TAU_S, 1.0)

@@ -30,29 +30,28 @@ def fly_offboard(h: Harness) -> None:
     assert h.vehicle.mode_name == "OFFBOARD"
 
 
+def offboard_ack_after_one_setpoint(h: Harness, setpoint_age_s: float) -> int:
+    """Armed, one setpoint sent setpoint_age_s ago: the result of asking for OFFBOARD."""
+    h.arm()
+    h.local_ned(POSITION_AND_YAW, position=(0, 0, -2))
+    h.run(setpoint_age_s)
+    h.set_mode(modes.OFFBOARD)
+    return h.last_ack(SET_MODE)
+
+
 def test_one_setpoint_makes_offboard_available(harness: Harness) -> None:
-    harness.arm()
-    harness.local_ned(POSITION_AND_YAW, position=(0, 0, -2))
-    harness.run(0.5)  # a setpoint 0.5 s old still counts
-    harness.set_mode(modes.OFFBOARD)
-    assert harness.last_ack(SET_MODE) == mavlink.MAV_RESULT_ACCEPTED
+    # a setpoint 0.5 s old still counts
+    assert offboard_ack_after_one_setpoint(harness, 0.5) == mavlink.MAV_RESULT_ACCEPTED
 
 
 def test_offboard_refused_when_setpoints_older_than_loss_timeout(harness: Harness) -> None:
-    harness.arm()
-    harness.local_ned(POSITION_AND_YAW, position=(0, 0, -2))
-    harness.run(1.5)
-    harness.set_mode(modes.OFFBOARD)
-    assert harness.last_ack(SET_MODE) == mavlink.MAV_RESULT_TEMPORARILY_REJECTED
+    result = offboard_ack_after_one_setpoint(harness, 1.5)
+    assert result == mavlink.MAV_RESULT_TEMPORARILY_REJECTED
 
 
 def test_loss_timeout_parameter_takes_effect_at_once(harness: Harness) -> None:
     harness.vehicle.params.set("COM_OF_LOSS_T", 3.0)
-    harness.arm()
-    harness.local_ned(POSITION_AND_YAW, position=(0, 0, -2))
-    harness.run(1.5)
-    harness.set_mode(modes.OFFBOARD)
-    assert harness.last_ack(SET_MODE) == mavlink.MAV_RESULT_ACCEPTED
+    assert offboard_ack_after_one_setpoint(harness, 1.5) == mavlink.MAV_RESULT_ACCEPTED
 
 
 def test_stream_then_arm_in_offboard_works(harness: Harness) -> None:

@@ -7,26 +7,20 @@ import struct
 
 from pymavlink.dialects.v20 import development as mavlink
 
-from sim.params import (
-    MAV_PARAM_TYPE_INT32,
-    MAV_PARAM_TYPE_REAL32,
-    ParamStore,
-    decode_param_value,
-    encode_param_value,
-)
+from sim.params import ParamStore, decode_param_value, encode_param_value
 from tests.sim.conftest import Harness
 
 
 def test_int32_parameter_bits_travel_inside_the_float_field() -> None:
-    wire = encode_param_value(1, MAV_PARAM_TYPE_INT32)
+    wire = encode_param_value(1, mavlink.MAV_PARAM_TYPE_INT32)
     assert struct.pack("<f", wire) == struct.pack("<i", 1)
     assert 0 < wire < 1e-44  # what a client that reads it as a float sees (1.4e-45)
-    assert decode_param_value(wire, MAV_PARAM_TYPE_INT32) == 1
-    assert decode_param_value(encode_param_value(-7, MAV_PARAM_TYPE_INT32), 6) == -7
+    assert decode_param_value(wire, mavlink.MAV_PARAM_TYPE_INT32) == 1
+    assert decode_param_value(encode_param_value(-7, mavlink.MAV_PARAM_TYPE_INT32), 6) == -7
 
 
 def test_real32_parameter_is_sent_as_its_value() -> None:
-    assert encode_param_value(2.5, MAV_PARAM_TYPE_REAL32) == 2.5
+    assert encode_param_value(2.5, mavlink.MAV_PARAM_TYPE_REAL32) == 2.5
 
 
 def test_airframe_specific_defaults_override_px4_defaults() -> None:
@@ -35,8 +29,8 @@ def test_airframe_specific_defaults_override_px4_defaults() -> None:
     assert (quad.get("MIS_TAKEOFF_ALT"), quad.get("RTL_RETURN_ALT")) == (2.5, 30.0)
     assert (vtol.get("MIS_TAKEOFF_ALT"), vtol.get("RTL_RETURN_ALT")) == (20.0, 60.0)
     assert quad.get("COM_OF_LOSS_T") == 1.0
-    assert quad.param_type("COM_OBL_RC_ACT") == MAV_PARAM_TYPE_INT32
-    assert quad.param_type("COM_OF_LOSS_T") == MAV_PARAM_TYPE_REAL32
+    assert quad.param_type("COM_OBL_RC_ACT") == mavlink.MAV_PARAM_TYPE_INT32
+    assert quad.param_type("COM_OF_LOSS_T") == mavlink.MAV_PARAM_TYPE_REAL32
 
 
 def test_airframe_param_defaults_are_merged_into_the_store() -> None:
@@ -57,7 +51,7 @@ def test_param_request_list_sends_every_parameter_with_index_and_count(harness: 
 def test_param_read_by_name_and_by_index(harness: Harness) -> None:
     harness.deliver(mavlink.MAVLink_param_request_read_message(1, 1, b"COM_RC_IN_MODE", -1))
     (value,) = harness.api.of_type("PARAM_VALUE")
-    assert value.param_type == MAV_PARAM_TYPE_INT32
+    assert value.param_type == mavlink.MAV_PARAM_TYPE_INT32
     assert decode_param_value(value.param_value, value.param_type) == 3
     harness.api.clear()
     harness.deliver(mavlink.MAVLink_param_request_read_message(1, 1, b"", value.param_index))
@@ -71,7 +65,7 @@ def test_reading_an_unknown_parameter_gets_no_answer(harness: Harness) -> None:
 
 
 def test_param_set_stores_decodes_bytewise_and_echoes(harness: Harness) -> None:
-    wire = encode_param_value(4, MAV_PARAM_TYPE_INT32)
+    wire = encode_param_value(4, mavlink.MAV_PARAM_TYPE_INT32)
     harness.deliver(mavlink.MAVLink_param_set_message(1, 1, b"COM_OBL_RC_ACT", wire, 6))
     assert harness.vehicle.params.value("COM_OBL_RC_ACT") == 4
     echoes = [m for m in harness.api.of_type("PARAM_VALUE") if m.param_id == "COM_OBL_RC_ACT"]
