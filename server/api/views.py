@@ -8,8 +8,10 @@ the few fields that differ between the REST body and the WebSocket message (`typ
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import math
+from collections.abc import Callable
 from typing import Any
 
 from pydantic import ConfigDict, TypeAdapter
@@ -43,30 +45,44 @@ def encode_state(state: VehicleState) -> bytes:
 
 
 LeaseStatus = tuple[str | None, float | None]
+_json_string: Callable[[str], str] = json.encoder.encode_basestring_ascii
+
+
+def _json_or_null(value: str | float | None) -> str:
+    # what json.dumps writes, without its per-call overhead (a state message is built per tick)
+    if isinstance(value, str):
+        return _json_string(value)
+    if value is None or not math.isfinite(value):
+        return "null"
+    return repr(float(value))
 
 
 def _lease_json(lease: LeaseStatus) -> str:
     holder, expires_in_s = lease
-    lease_out = {"holder": holder, "expires_in_s": finite(expires_in_s)}
-    return json.dumps(lease_out, separators=(",", ":"))
+    return f'{{"holder":{_json_or_null(holder)},"expires_in_s":{_json_or_null(expires_in_s)}}}'
+
+
+@functools.lru_cache(maxsize=256)
+def _message_head(sysid: int, mav_type: str, telemetry_refused: tuple[str, ...]) -> str:
+    # the same for every snapshot of a vehicle until its type or refusals change
+    return (
+        f'{{"type":"state","vehicle":{sysid},"id":{sysid},"vehicle_type":{json.dumps(mav_type)},'
+        f'"telemetry_refused":{json.dumps(list(telemetry_refused))},'
+    )
 
 
 def state_json(state: VehicleState, body: bytes, lease: LeaseStatus) -> bytes:
     """GET /vehicles/{id}: the encoded body with the vehicle's `id`, `type` and `lease`."""
-    head = f'{{"id":{state.sysid},"type":{json.dumps(state.mav_type)},"lease":{_lease_json(lease)},'
+    vehicle_type = _json_string(state.mav_type)
+    head = f'{{"id":{state.sysid},"type":{vehicle_type},"lease":{_lease_json(lease)},'
     return head.encode() + body[1:]
 
 
 def state_message(state: VehicleState, body: bytes, lease: LeaseStatus) -> str:
     """The telemetry socket's `{type: "state"}` message: `type` names the message, so the
     vehicle's type travels as `vehicle_type`."""
-    head = (
-        f'{{"type":"state","vehicle":{state.sysid},"id":{state.sysid},'
-        f'"vehicle_type":{json.dumps(state.mav_type)},'
-        f'"telemetry_refused":{json.dumps(list(state.telemetry_refused))},'
-        f'"lease":{_lease_json(lease)},'
-    )
-    return head + body[1:].decode()
+    head = _message_head(state.sysid, state.mav_type, state.telemetry_refused)
+    return f'{head}"lease":{_lease_json(lease)},{body[1:].decode()}'
 
 
 def finite(value: Any) -> Any:
