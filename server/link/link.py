@@ -18,6 +18,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import development as mavlink
 
+from .aio import cancel_and_wait
 from .link_stats import LinkStats, SequenceGapCounter
 from .tlog import TlogWriter
 from .transports import Peer, Transport, create_transport
@@ -129,10 +130,7 @@ class Link:
             return
         self._closed = True
         for task in self._tasks:
-            task.cancel()
-        for task in self._tasks:
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
+            await cancel_and_wait(task)
         for vehicle in list(self._vehicles.values()):
             await _close_vehicle(vehicle)
         await self._transport.close()

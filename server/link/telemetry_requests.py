@@ -4,11 +4,11 @@ noting which requests it refused."""
 from __future__ import annotations
 
 import asyncio
-import contextlib
 from collections.abc import Mapping
 
 from pymavlink.dialects.v20 import development as mavlink
 
+from server.link.aio import cancel_and_wait
 from server.link.commands import CommandResult
 from server.link.core import VehicleCore
 from server.link.telemetry import Telemetry
@@ -64,10 +64,7 @@ class TelemetryRequests:
         )
 
     async def close(self) -> None:
-        if self._task is not None:
-            self._task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._task
+        await cancel_and_wait(self._task)
 
     def _connection_changed(self, connected: bool) -> None:
         if connected:
