@@ -25,9 +25,10 @@ from server.link.setpoints import (
 )
 
 VehicleClass = Literal["multicopter", "fixed_wing", "vtol_transition", "rover"]
-Kind = Literal["position", "velocity", "acceleration", "position_velocity", "attitude", "rates"]
+# What PX4 controls for a setpoint (its offboard control mode), which it accepts per vehicle type
+Control = Literal["position", "velocity", "acceleration", "position_velocity", "attitude", "rates"]
 
-_ALLOWED: dict[VehicleClass, frozenset[Kind]] = {
+_ALLOWED: dict[VehicleClass, frozenset[Control]] = {
     "multicopter": frozenset(
         {"position", "velocity", "acceleration", "position_velocity", "attitude", "rates"}
     ),
@@ -99,10 +100,10 @@ def check(sp: Setpoint, vclass: VehicleClass, envelope: Envelope, ref: Reference
     local = local_fields(sp)
     if isinstance(sp, RawLocal) and local is not None:
         _check_raw(local)
-    kind = _kind(sp, local)
-    if kind not in _ALLOWED[vclass]:
+    control = _control(sp, local)
+    if control not in _ALLOWED[vclass]:
         raise SetpointRejected(
-            f"PX4 ignores {kind.replace('_', '+')} setpoints on {_CLASS_LABEL[vclass]}",
+            f"PX4 ignores {control.replace('_', '+')} setpoints on {_CLASS_LABEL[vclass]}",
             field="type",
         )
     _check_envelope(sp, local, envelope, ref)
@@ -146,7 +147,7 @@ def _present(type_mask: int) -> tuple[bool, bool, bool]:
     )
 
 
-def _kind(sp: Setpoint, local: LocalFields | None) -> Kind:
+def _control(sp: Setpoint, local: LocalFields | None) -> Control:
     """What PX4 makes of a setpoint: for a local one, whatever its type_mask leaves in, as
     PX4's mavlink_receiver reads it, so a new local kind needs nothing here."""
     if isinstance(sp, BodyRates):
