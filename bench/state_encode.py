@@ -19,21 +19,9 @@ from typing import Any
 from bench._results import machine_info, write_results
 from server.api.publisher import Published, Slot, StatePublisher
 from server.api.views import encode_state, state_json, state_message
+from server.link import state as link
 from server.link.link_stats import LinkStats
-from server.link.state import (
-    AttitudeState,
-    BatteryState,
-    GlobalState,
-    GpsState,
-    HomeState,
-    OriginState,
-    PositionNedState,
-    StatusText,
-    StreamStats,
-    SubscriptionHub,
-    VehicleState,
-    VelocityNedState,
-)
+from tests.api.state_fakes import PushingVehicle
 
 GOAL_US = 40.0
 ENCODES_PER_ROUND = 2000
@@ -44,26 +32,27 @@ FAN_OUT_S = 2.0
 LEASE = ("dashboard", 1.5)
 
 
-def full_state(north_m: float = 12.5) -> VehicleState:
+def full_state(north_m: float = 12.5) -> link.VehicleState:
     """A snapshot with every optional part present, as a flying vehicle reports it."""
-    return VehicleState(
+    return link.VehicleState(
         sysid=1, compid=1, mav_type="QUADROTOR", autopilot="PX4", connected=True,
         last_heartbeat_age_s=0.21, mode="OFFBOARD", user_mode="OFFBOARD", armed=True,
         system_status="ACTIVE", landed_state="IN_AIR", vtol_state="UNDEFINED",
-        position_ned=PositionNedState(north_m, -3.25, -10.0),
-        velocity_ned=VelocityNedState(1.5, -0.25, 0.05),
-        global_position=GlobalState(47.3978541, 8.5455923, 498.2, 10.0),
-        attitude=AttitudeState(1.2, -0.8, 87.5, 0.1, -0.2, 0.5),
+        position_ned=link.PositionNedState(north_m, -3.25, -10.0),
+        velocity_ned=link.VelocityNedState(1.5, -0.25, 0.05),
+        global_position=link.GlobalState(47.3978541, 8.5455923, 498.2, 10.0),
+        attitude=link.AttitudeState(1.2, -0.8, 87.5, 0.1, -0.2, 0.5),
         ground_speed_m_s=1.52, air_speed_m_s=float("nan"), climb_rate_m_s=-0.05,
-        heading_deg=87.0, battery=BatteryState(16.1, 12.4, 81.0), gps=GpsState("3D_FIX", 14, 0.8),
-        home=HomeState(47.397742, 8.545594, 488.0, 0.0, 0.0, 0.0),
-        origin=OriginState(47.397742, 8.545594, 488.0),
+        heading_deg=87.0, battery=link.BatteryState(16.1, 12.4, 81.0),
+        gps=link.GpsState("3D_FIX", 14, 0.8),
+        home=link.HomeState(47.397742, 8.545594, 488.0, 0.0, 0.0, 0.0),
+        origin=link.OriginState(47.397742, 8.545594, 488.0),
         setpoint={"type": "position_ned", "north_m": 15.0, "east_m": -3.0, "down_m": -10.0,
                   "yaw_deg": float("nan")},
-        target_ned=PositionNedState(15.0, -3.0, -10.0),
-        stream=StreamStats(True, 20.0, 50.0, 51.2, 55.0, 0, 4312, 12.0),
+        target_ned=link.PositionNedState(15.0, -3.0, -10.0),
+        stream=link.StreamStats(True, 20.0, 50.0, 51.2, 55.0, 0, 4312, 12.0),
         actuator_outputs=(0.52, 0.55, 0.51, 0.56),
-        statustext=tuple(StatusText(100.0 + i, "INFO", f"message {i}") for i in range(5)),
+        statustext=tuple(link.StatusText(100.0 + i, "INFO", f"message {i}") for i in range(5)),
         rtl_phase=None,
         link=LinkStats("udpin:0.0.0.0:14540", True, 123456, 23456, 4567890, 345678, 3, 0, 0.21, 0),
         updated_s=1234.5,
@@ -99,30 +88,6 @@ def measure_encode() -> dict[str, Any]:
     }
 
 
-class _Vehicle:
-    """Changes on move(), telling its hub as a link vehicle does."""
-
-    def __init__(self) -> None:
-        self.sysid = 1
-        self.connected = True
-        self.north_m = 0.0
-        self._hub = SubscriptionHub(self.snapshot)
-
-    def snapshot(self) -> VehicleState:
-        return full_state(self.north_m)
-
-    @property
-    def state_version(self) -> int:
-        return self._hub.version
-
-    def subscribe(self, min_interval_s: float = 0.0) -> Any:
-        return self._hub.subscribe(min_interval_s)
-
-    def move(self) -> None:
-        self.north_m += 0.1
-        self._hub.notify()
-
-
 async def _read(slot: Slot[Published], counts: list[int]) -> None:
     async for published in slot:
         _ = published.message  # what a telemetry socket sends
@@ -130,7 +95,7 @@ async def _read(slot: Slot[Published], counts: list[int]) -> None:
 
 
 async def measure_fan_out(subscribers: int) -> dict[str, Any]:
-    vehicle = _Vehicle()
+    vehicle = PushingVehicle(lambda v: full_state(0.1 * v.moves))
     publisher = StatePublisher(vehicle, lambda _: LEASE, max_rate_hz=PUBLISHER_RATE_HZ)
     publisher.start()
     await asyncio.sleep(0.05)

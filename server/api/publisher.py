@@ -20,7 +20,6 @@ slot on the grid comes, so what a consumer receives is never older than one tick
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import json
 from collections import deque
 from collections.abc import AsyncIterator, Callable, Iterable
@@ -28,7 +27,8 @@ from typing import Generic, Protocol, TypeVar
 
 from server.api.views import LeaseStatus, encode_state, state_json, state_message, summary_dict
 from server.link import Link, Vehicle, VehicleState
-from server.link.state import WAKE_BATCH, RateGrid, StateSubscription, loop_time_s
+from server.link.aio import cancel_and_wait, loop_time_s
+from server.link.state import WAKE_BATCH, RateGrid, StateSubscription
 
 T = TypeVar("T")
 
@@ -186,11 +186,8 @@ class StatePublisher:
             self._task = asyncio.create_task(self._run(), name=f"state-{self.vehicle.sysid}")
 
     async def close(self) -> None:
-        if self._task is not None:
-            self._task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._task
-            self._task = None
+        await cancel_and_wait(self._task)
+        self._task = None
         self._close_sinks()
 
     def subscribe(self, rate_hz: float) -> Slot[Published]:

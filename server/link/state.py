@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import asyncio
 import math
-import time
 import weakref
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Literal
 
+from server.link.aio import loop_time_s
 from server.link.link_stats import LinkStats
 
 LandedState = Literal["UNDEFINED", "ON_GROUND", "IN_AIR", "TAKEOFF", "LANDING"]
@@ -32,15 +32,6 @@ LATE_CHANGE_WAIT_S = 0.2
 # clients due at once, and their sends in one iteration would hold back the setpoint
 # streamer's timer for milliseconds; in batches, timers run between them.
 WAKE_BATCH = 8
-
-
-def loop_time_s() -> float:
-    """The running event loop's clock (time.monotonic on Linux), which a test can make
-    virtual; time.monotonic itself outside a loop."""
-    try:
-        return asyncio.get_running_loop().time()
-    except RuntimeError:
-        return time.monotonic()
 
 
 class RateGrid:

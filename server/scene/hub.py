@@ -17,6 +17,8 @@ import numpy as np
 import viser
 from fastapi import FastAPI
 
+from server.link.aio import cancel_and_wait
+
 from .frames import Vec3, enu_to_geodetic, geodetic_offset_enu, ray_hits_plane_z
 from .proxy import SceneProxy
 from .vehicle_view import VehicleView
@@ -125,11 +127,8 @@ class SceneHub:
             self._task = asyncio.create_task(self._follow_states(states), name="scene-hub")
 
     async def stop(self) -> None:
-        if self._task is not None:
-            self._task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._task
-            self._task = None
+        await cancel_and_wait(self._task)
+        self._task = None
         if self._server is not None:
             server, self._server = self._server, None
             with contextlib.redirect_stdout(io.StringIO()):

@@ -13,7 +13,8 @@ import pytest
 from server.api.publisher import Published, Slot, StatePublisher, StatePublishers
 from server.api.schemas import VehicleStateOut
 from server.api.views import encode_state, state_json, state_message
-from server.link.state import GlobalState, PositionNedState, SubscriptionHub, VehicleState
+from server.link.state import GlobalState, PositionNedState, VehicleState
+from tests.api.state_fakes import PushingVehicle
 from tests.scene.conftest import make_state
 
 pytestmark = pytest.mark.looptime
@@ -21,31 +22,14 @@ pytestmark = pytest.mark.looptime
 CHANGE_RATE_HZ = 100.0
 
 
-class _Vehicle:
-    """Changes its north position on move(), telling its hub as a link vehicle does."""
-
-    def __init__(self, sysid: int = 1) -> None:
-        self.sysid = sysid
-        self.connected = True
-        self.north_m = 0.0
-        self._hub = SubscriptionHub(self.snapshot)
-
-    def snapshot(self) -> VehicleState:
-        return make_state(sysid=self.sysid, position_ned=PositionNedState(self.north_m, 0, 0))
-
-    @property
-    def state_version(self) -> int:
-        return self._hub.version
-
-    def subscribe(self, min_interval_s: float = 0.0) -> object:
-        return self._hub.subscribe(min_interval_s)
-
-    def move(self) -> None:
-        self.north_m += 1.0
-        self._hub.notify()
+def _vehicle(sysid: int = 1) -> PushingVehicle:
+    """A vehicle one metre further north at every move."""
+    return PushingVehicle(
+        lambda v: make_state(sysid=v.sysid, position_ned=PositionNedState(v.moves, 0, 0)), sysid
+    )
 
 
-def _publisher(vehicle: _Vehicle, encode: Callable[[VehicleState], bytes] = encode_state,
+def _publisher(vehicle: PushingVehicle, encode: Callable[[VehicleState], bytes] = encode_state,
                ) -> StatePublisher:
     publisher = StatePublisher(
         vehicle,  # type: ignore[arg-type]
@@ -57,7 +41,7 @@ def _publisher(vehicle: _Vehicle, encode: Callable[[VehicleState], bytes] = enco
     return publisher
 
 
-async def _fly(vehicle: _Vehicle, seconds: float) -> None:
+async def _fly(vehicle: PushingVehicle, seconds: float) -> None:
     for _ in range(round(seconds * CHANGE_RATE_HZ)):
         vehicle.move()
         await asyncio.sleep(1.0 / CHANGE_RATE_HZ)
@@ -70,7 +54,7 @@ async def _read_messages(slot: Slot[Published], into: list[str]) -> None:
 
 
 async def _encodes_for(clients: int) -> tuple[int, int, list[list[str]]]:
-    vehicle = _Vehicle()
+    vehicle = _vehicle()
     calls: list[VehicleState] = []
 
     def counting(state: VehicleState) -> bytes:
@@ -105,7 +89,7 @@ async def test_many_clients_of_one_vehicle_cause_one_encode_per_tick() -> None:
 
 
 async def test_a_slow_consumer_gets_the_newest_state_never_a_backlog() -> None:
-    vehicle = _Vehicle()
+    vehicle = _vehicle()
     publisher = _publisher(vehicle)
     slot = publisher.subscribe(50.0)
     await anext(slot)  # the state at subscription
@@ -113,7 +97,7 @@ async def test_a_slow_consumer_gets_the_newest_state_never_a_backlog() -> None:
     await _fly(vehicle, 1.0)  # 100 changes, ~50 ticks, none read
 
     newest = await asyncio.wait_for(anext(slot), 1.0)
-    assert newest.state.position_ned == PositionNedState(vehicle.north_m, 0, 0)
+    assert newest.state.position_ned == PositionNedState(vehicle.moves, 0, 0)
     assert slot.replaced >= 40
     with pytest.raises(TimeoutError):  # nothing queued behind it
         await asyncio.wait_for(anext(slot), 5.0)
@@ -122,7 +106,7 @@ async def test_a_slow_consumer_gets_the_newest_state_never_a_backlog() -> None:
 
 @pytest.mark.parametrize("rate_hz", [1.0, 2.0, 5.0, 10.0, 20.0, 30.0, 50.0])
 async def test_rate_tiers_are_honoured(rate_hz: float) -> None:
-    vehicle = _Vehicle()
+    vehicle = _vehicle()
     publisher = _publisher(vehicle)
     fast: list[str] = []
     asked: list[str] = []
@@ -140,7 +124,7 @@ async def test_rate_tiers_are_honoured(rate_hz: float) -> None:
 
 
 async def test_rates_above_the_maximum_are_capped() -> None:
-    vehicle = _Vehicle()
+    vehicle = _vehicle()
     publisher = _publisher(vehicle)
     received: list[str] = []
     reader = asyncio.create_task(_read_messages(publisher.subscribe(1000.0), received))
@@ -151,7 +135,7 @@ async def test_rates_above_the_maximum_are_capped() -> None:
 
 
 async def test_the_scene_watch_gets_each_vehicle_at_its_rate_without_encoding() -> None:
-    vehicles = [_Vehicle(1), _Vehicle(2)]
+    vehicles = [_vehicle(1), _vehicle(2)]
     publishers = StatePublishers(
         lambda: vehicles,  # type: ignore[arg-type, return-value]
         lambda _sysid: (None, None),

@@ -18,8 +18,8 @@ from websockets.typing import Subprotocol
 
 from server.api.publisher import StatePublishers
 from server.link import Vehicle
-from server.link.state import StateSubscription, SubscriptionHub
 from server.scene import ClickPoint, SceneHub
+from tests.api.state_fakes import PushingVehicle
 from tests.serving import uvicorn_serving
 from tests.waiting import wait_for
 
@@ -33,35 +33,23 @@ SUBPROTOCOL = Subprotocol(f"viser-v{viser.__version__}")
 class Served:
     hub: SceneHub
     base: str
-    vehicles: list[_PushingVehicle]
+    vehicles: list[PushingVehicle]
 
 
-class _PushingVehicle(FakeVehicle):
-    """A fake that tells its subscribers of a change, as a link vehicle does."""
-
-    def __init__(self, sysid: int, mav_type: str = "QUADROTOR") -> None:
-        super().__init__(sysid, mav_type)
-        self.connected = True
-        self.hub = SubscriptionHub(self.snapshot)
-
-    @property
-    def state_version(self) -> int:
-        return self.hub.version
-
-    def subscribe(self, min_interval_s: float = 0.0) -> StateSubscription:
-        return self.hub.subscribe(min_interval_s)
+def _pushing(fake: FakeVehicle) -> PushingVehicle:
+    return PushingVehicle(lambda _: fake.snapshot(), fake.sysid)
 
 
-async def _change_at_50_hz(vehicles: list[_PushingVehicle]) -> None:
+async def _change_at_50_hz(vehicles: list[PushingVehicle]) -> None:
     while True:
         for vehicle in vehicles:
-            vehicle.hub.notify()
+            vehicle.move()
         await asyncio.sleep(0.02)  # not a wait: the fakes' telemetry rate, 50 Hz
 
 
 @pytest.fixture
 async def served() -> AsyncIterator[Served]:
-    vehicles = [_PushingVehicle(1), _PushingVehicle(2, "VTOL_FIXEDROTOR")]
+    vehicles = [_pushing(FakeVehicle(1)), _pushing(FakeVehicle(2, "VTOL_FIXEDROTOR"))]
     hub = SceneHub(max_rate_hz=20.0)
     app = FastAPI()
     hub.mount(app, check_token=lambda token: token == TOKEN)
