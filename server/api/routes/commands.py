@@ -98,10 +98,12 @@ def _endpoint(name: str, route_name: str, doc: str | None) -> _Endpoint:
     return endpoint
 
 
-for _name, _path, _route_name, _doc in _ROUTES:
-    router.add_api_route(
-        _path,
-        _endpoint(_name, _route_name, _doc),
-        methods=["POST"],
-        response_model=CommandResultOut,
-    )
+def _add_routes() -> None:
+    for name, path, route_name, doc in _ROUTES:
+        router.add_api_route(
+            path, _endpoint(name, route_name, doc), methods=["POST"],
+            response_model=CommandResultOut,
+        )
+
+
+_add_routes()
