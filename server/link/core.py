@@ -134,6 +134,9 @@ class VehicleCore:
     def subscribe_events(self, maxsize: int = 256) -> asyncio.Queue[VehicleEvent]:
         return self.events.subscribe(maxsize)
 
+    def unsubscribe_events(self, queue: asyncio.Queue[VehicleEvent]) -> None:
+        self.events.unsubscribe(queue)
+
     async def wait_until(self, predicate: Callable[[], bool], timeout_s: float) -> bool:
         """Wait until ``predicate()`` holds after some message; False on timeout."""
         return await self.requests.wait_until(predicate, timeout_s)

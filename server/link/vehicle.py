@@ -16,7 +16,6 @@ Every operation of a plugin is also callable on the vehicle itself (``vehicle.ar
 
 from __future__ import annotations
 
-import asyncio
 from collections.abc import Mapping, Sequence
 from typing import Generic, Self, TypeVar, overload
 
@@ -24,7 +23,6 @@ from pymavlink.dialects.v20 import development as mavlink
 
 from server.link.action import Action
 from server.link.core import Sender, VehicleCore
-from server.link.events import VehicleEvent
 from server.link.offboard import Offboard
 from server.link.params import ParamClient
 from server.link.requests import Requester
@@ -41,8 +39,9 @@ T = TypeVar("T")
 class _OnPlugin(Generic[T]):
     """A vehicle attribute that lives on one of its plugins ("plugin.attribute")."""
 
-    def __init__(self, path: str) -> None:
+    def __init__(self, path: str, *, writable: bool = True) -> None:
         *self._owner_path, self._name = path.split(".")
+        self._writable = writable
 
     def _owner(self, vehicle: Vehicle) -> object:
         owner: object = vehicle
@@ -61,6 +60,8 @@ class _OnPlugin(Generic[T]):
         return value
 
     def __set__(self, vehicle: Vehicle, value: T) -> None:
+        if not self._writable:
+            raise AttributeError(f"{self._name} is reported by the vehicle, not set")
         setattr(self._owner(vehicle), self._name, value)
 
 
@@ -70,12 +71,12 @@ class Vehicle:
     envelope = _OnPlugin[Envelope]("offboard.envelope")
     offboard_prestream_s = _OnPlugin[float]("offboard.prestream_s")
     stream_rate_hz = _OnPlugin[float]("offboard.streamer.rate_hz")
-    streamer_active = _OnPlugin[bool]("offboard.streamer.active")
+    streamer_active = _OnPlugin[bool]("offboard.streamer.active", writable=False)
     mode_confirm_timeout_s = _OnPlugin[float]("action.mode_confirm_timeout_s")
     origin_timeout_s = _OnPlugin[float]("action.origin_timeout_s")
-    connected = _OnPlugin[bool]("core.connected")
-    mav_type = _OnPlugin[int]("core.mav_type")
-    autopilot = _OnPlugin[int]("core.autopilot")
+    connected = _OnPlugin[bool]("core.connected", writable=False)  # see set_connected
+    mav_type = _OnPlugin[int]("core.mav_type", writable=False)
+    autopilot = _OnPlugin[int]("core.autopilot", writable=False)
 
     def __init__(
         self,
@@ -107,6 +108,7 @@ class Vehicle:
         self.set_connected = core.set_connected
         self.subscribe = core.subscribe
         self.subscribe_events = core.subscribe_events
+        self.unsubscribe_events = core.unsubscribe_events
         self.publish_event = core.publish_event
         self.wait_until = core.wait_until
         action = self.action
@@ -149,9 +151,6 @@ class Vehicle:
         """Changes with every state change: equal versions mean an equal snapshot (apart
         from the ages and the stream figures, which move with the clock)."""
         return self.core.hub.version
-
-    def unsubscribe_events(self, queue: asyncio.Queue[VehicleEvent]) -> None:
-        self.core.events.unsubscribe(queue)
 
     def snapshot(self) -> VehicleState:
         core, t = self.core, self.telemetry
