@@ -27,10 +27,14 @@ log = logging.getLogger(__name__)
 
 @dataclass
 class LinkCounters:
+    """What one link has seen since it opened (for logs, benches and tests)."""
+
     rx_datagrams: int = 0
     rx_messages: int = 0
+    # garbage, truncated frames and bad CRCs: pieces of datagrams that were thrown away
     rx_dropped: int = 0
     tx_messages: int = 0
+    # ICMP "port unreachable" while nobody listens on the remote port
     tx_errors: int = 0
     # frames that could not be encoded: skipped so the telemetry loop keeps running
     tx_unpackable: int = 0

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import pymap3d
 
@@ -87,19 +87,14 @@ class _Anchor:
         )
 
 
+@dataclass(eq=False)
 class LocalOrigin:
     """The local position's reference point (PX4's `vehicle_local_position.ref_*`)."""
 
-    def __init__(
-        self,
-        lat_deg: float = SIH_LOC_LAT0_DEG,
-        lon_deg: float = SIH_LOC_LON0_DEG,
-        alt_m: float = SIH_LOC_H0_M,
-    ) -> None:
-        self.lat_deg = lat_deg
-        self.lon_deg = lon_deg
-        self.alt_m = alt_m
-        self._anchor: _Anchor | None = None
+    lat_deg: float = SIH_LOC_LAT0_DEG
+    lon_deg: float = SIH_LOC_LON0_DEG
+    alt_m: float = SIH_LOC_H0_M
+    _anchor: _Anchor | None = field(default=None, init=False, repr=False)
 
     def to_geodetic(self, north_m: float, east_m: float, down_m: float) -> GeoPoint:
         """Fast conversion for telemetry (see LINEAR_RANGE_M)."""

@@ -9,7 +9,7 @@ at their own level.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from typing import NamedTuple
 
 from sim.mc_att_control import AttitudeControl
 from sim.mc_pos_control import POSITION_LOOP_PERIOD_S, PositionControl
@@ -22,14 +22,13 @@ __all__ = ["AttitudeControl", "MulticopterControl", "PositionControl", "RateCont
            "TorqueThrust"]
 
 
-@dataclass
-class TorqueThrust:
+class TorqueThrust(NamedTuple):
     """Normalised commands for the mixer: roll/pitch/yaw in [-1, 1], thrust in [0, 1]."""
 
-    roll: float = 0.0
-    pitch: float = 0.0
-    yaw: float = 0.0
-    thrust: float = 0.0
+    roll: float
+    pitch: float
+    yaw: float
+    thrust: float
 
 
 class MulticopterControl:

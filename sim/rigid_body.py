@@ -10,6 +10,7 @@ than spreading NaN into telemetry.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 
 from sim.quat import Vec3, quat_from_yaw, quat_integrate, yaw_from_quat
 from sim.topics import VehicleStateTruth
@@ -20,23 +21,16 @@ MAX_SPEED_M_S = 200.0
 MAX_RATE_RAD_S = 50.0
 
 
+@dataclass(eq=False)
 class RigidBody:
     """Mass, diagonal inertia and linear drag (SIH_KDV, SIH_KDW), integrated in place."""
 
-    def __init__(
-        self,
-        truth: VehicleStateTruth,
-        mass_kg: float,
-        inertia_kg_m2: Vec3,
-        drag_velocity_n_s_m: float,
-        drag_rate_n_m_s_rad: float,
-    ) -> None:
-        self.truth = truth
-        self.mass_kg = mass_kg
-        self.inertia_kg_m2 = inertia_kg_m2
-        self.drag_velocity_n_s_m = drag_velocity_n_s_m
-        self.drag_rate_n_m_s_rad = drag_rate_n_m_s_rad
-        self.ground_friction = True
+    truth: VehicleStateTruth
+    mass_kg: float
+    inertia_kg_m2: Vec3
+    drag_velocity_n_s_m: float
+    drag_rate_n_m_s_rad: float
+    ground_friction: bool = field(default=True, init=False)
 
     def step(self, dt_s: float, force_ned_n: Vec3, moment_body_n_m: Vec3) -> None:
         t = self.truth

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Protocol
 
 from sim.clock import Clock, MonotonicClock
@@ -25,19 +25,18 @@ class LoopStats:
     """How late the stepping loop wakes up against its intended times (wall clock)."""
 
     steps: int = 0
+    wakeups: int = 0
+    # wall time by which wake-ups came after their intended times: the worst and the sum
     max_lag_s: float = 0.0
     lag_sum_s: float = 0.0
-    wakeups: int = 0
 
     @property
     def mean_lag_s(self) -> float:
         return self.lag_sum_s / self.wakeups if self.wakeups else 0.0
 
     def reset(self) -> None:
-        self.steps = 0
-        self.max_lag_s = 0.0
-        self.lag_sum_s = 0.0
-        self.wakeups = 0
+        for counter in fields(self):
+            setattr(self, counter.name, counter.default)
 
 
 class Steppable(Protocol):
