@@ -8,8 +8,7 @@ from fastapi import APIRouter, Body
 
 from server.api.deps import ControlledVehicle
 from server.api.errors import CONTROL_RESPONSES
-from server.api.schemas import SentSetpointOut, SetpointBody, setpoint_as_dict
-from server.api.views import finite
+from server.api.schemas import SentSetpointOut, SetpointBody, setpoint_body
 from server.link import SentSetpoint
 
 router = APIRouter(prefix="/vehicles/{vehicle_id}", tags=["setpoint"])
@@ -17,7 +16,7 @@ router = APIRouter(prefix="/vehicles/{vehicle_id}", tags=["setpoint"])
 
 def sent_out(sent: SentSetpoint) -> SentSetpointOut:
     return SentSetpointOut(
-        setpoint=finite(setpoint_as_dict(sent.setpoint)),
+        setpoint=setpoint_body(sent.setpoint),
         message=sent.message,
         frame=sent.frame,
         type_mask=sent.type_mask,

@@ -35,6 +35,7 @@ from server.api.schemas.setpoints import (
     SetpointBody,
     SetpointBodyBase,
     setpoint_as_dict,
+    setpoint_body,
 )
 from server.api.schemas.state import (
     AttitudeOut,
@@ -98,4 +99,5 @@ __all__ = [
     "VtolTransitionBody",
     "YawDeg",
     "setpoint_as_dict",
+    "setpoint_body",
 ]

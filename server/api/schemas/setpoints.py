@@ -83,8 +83,13 @@ def setpoint_as_dict(setpoint: Setpoint) -> dict[str, Any]:
     return describe(setpoint)
 
 
+def setpoint_body(setpoint: Setpoint) -> SetpointBodyBase:
+    """The API model of a link setpoint (one the link has checked, so within its limits)."""
+    return SETPOINT_BODIES[setpoint.kind].model_validate(describe(setpoint))
+
+
 class SentSetpointOut(BaseModel):
-    setpoint: dict[str, Any] = Field(description="as sent: the request's shape, offsets resolved")
+    setpoint: SetpointBody = Field(description="as sent: the request's shape, offsets resolved")
     message: str = Field(examples=["SET_POSITION_TARGET_LOCAL_NED"])
     frame: int
     type_mask: int
