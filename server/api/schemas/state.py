@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
 from server.api.schemas.control import LeaseStatusOut
+from server.api.schemas.setpoints import SetpointBody
 
 
 class _Out(BaseModel):
@@ -137,7 +138,7 @@ class VehicleStateOut(_Out):
     gps: GpsOut | None
     home: HomeOut | None
     origin: OriginOut | None
-    setpoint: dict[str, Any] | None
+    setpoint: SetpointBody | None = Field(description="the streamed setpoint, offsets resolved")
     target_ned: PositionNedOut | None
     stream: StreamOut
     lease: LeaseStatusOut
