@@ -39,12 +39,22 @@ def openapi() -> dict[str, Any]:
     return create_app(make_settings(None, connect=["udpin:127.0.0.1:0"])).openapi()
 
 
+def _mapping(openapi: dict[str, Any]) -> dict[str, str]:
+    """The PUT /setpoint body's discriminator: kind -> schema reference (what the page reads)."""
+    body = openapi["paths"][SETPOINT_PATH]["put"]["requestBody"]["content"]["application/json"]
+    mapping: dict[str, str] = body["schema"]["discriminator"]["mapping"]
+    return mapping
+
+
 def _component(openapi: dict[str, Any], kind: str) -> dict[str, Any]:
     """The schema the PUT /setpoint discriminator names for a kind."""
-    body = openapi["paths"][SETPOINT_PATH]["put"]["requestBody"]["content"]["application/json"]
-    ref = body["schema"]["discriminator"]["mapping"][kind]
+    ref = _mapping(openapi)[kind]
     component: dict[str, Any] = openapi["components"]["schemas"][ref.rsplit("/", 1)[-1]]
     return component
+
+
+def test_the_setpoint_body_takes_exactly_the_registered_kinds(openapi: dict[str, Any]) -> None:
+    assert list(_mapping(openapi)) == KINDS
 
 
 def _number_schema(prop: dict[str, Any]) -> dict[str, Any]:
