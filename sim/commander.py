@@ -122,8 +122,8 @@ class Commander:
     ) -> None:
         self._params = params
         self._announce = announce
-        self._is_vtol = is_vtol
-        self._has_mission = has_mission
+        # modes that need something this vehicle may lack, and whether it has it
+        self._mode_available = {modes.AUTO_MISSION: has_mission, modes.AUTO_VTOL_TAKEOFF: is_vtol}
         self.armed = False
         self.nav_mode: Px4Mode = modes.AUTO_LOITER
         self.user_mode: Px4Mode = modes.AUTO_LOITER
@@ -154,10 +154,8 @@ class Commander:
     def mode_can_run(self, mode: Px4Mode) -> bool:
         if mode == modes.OFFBOARD:
             return self.offboard_signal_fresh()
-        if mode == modes.AUTO_MISSION:
-            return self._has_mission
-        if mode == modes.AUTO_VTOL_TAKEOFF:
-            return self._is_vtol
+        if mode in self._mode_available:
+            return self._mode_available[mode]
         if mode in (modes.AUTO_RTL, modes.AUTO_TAKEOFF):
             return self.ready
         return mode not in _UNSUPPORTED_MODES
@@ -306,7 +304,7 @@ class Commander:
             return "system not ready (no valid position)"
         if self.nav_mode == modes.OFFBOARD and not self.offboard_signal_fresh():
             return "no offboard signal"
-        if self.nav_mode == modes.AUTO_MISSION and not self._has_mission:
+        if self.nav_mode == modes.AUTO_MISSION and not self._mode_available[modes.AUTO_MISSION]:
             return "no valid mission"
         if self.nav_mode == modes.TERMINATION:
             return "flight termination active"

@@ -17,9 +17,10 @@ from pymavlink.dialects.v20 import development as mavlink
 from sim import modes
 from sim.commander import MAV_RESULT_ACCEPTED, MAV_RESULT_FAILED, MAV_RESULT_UNSUPPORTED
 from sim.geo import is_valid_lat_lon
+from sim.mavlink_messages import MAVLINK_MSG_ID_PROTOCOL_VERSION, MessageFactory
 from sim.mavlink_parameters import MavlinkParameters
 from sim.offboard_setpoints import OffboardSetpoints
-from sim.streams import MAVLINK_MSG_ID_PROTOCOL_VERSION, MessageFactory, StreamSet
+from sim.streams import StreamSet
 from sim.vehicle_command import Command, CommandHandler, VehicleCommands, as_int, command_ack
 from sim.vehicle_interface import Link, Message, VehicleInterface
 

@@ -13,21 +13,20 @@ from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
-from pymavlink.dialects.v20 import development as mavlink
-
 from sim import modes
 from sim.airframes import AirframeModel
 from sim.battery import Battery
 from sim.commander import Commander
 from sim.geo import GeoPoint, LocalOrigin
 from sim.land_detector import LandDetector, MavLandedState
+from sim.mavlink_messages import MessageFactory
 from sim.navigator import Navigator
 from sim.params import ParamReader, ParamStore
 from sim.quat import yaw_from_quat
 from sim.receiver import Receiver
 from sim.rtl_direct import RtlPhase
 from sim.sim_run import PHYSICS_DT_S
-from sim.streams import NORMAL_RATES_HZ, ONBOARD_RATES_HZ, MessageFactory, StreamSet
+from sim.streams import NORMAL_RATES_HZ, ONBOARD_RATES_HZ, StreamSet
 from sim.topics import ControlSetpoint, TrajectorySetpoint, VehicleStateTruth, VtolState
 from sim.vehicle_interface import Link, Message
 
@@ -47,12 +46,7 @@ BOOT_TIME_S = 1.5
 READY_TIME_S = 3.0
 # While disarmed on the ground home follows the vehicle; refresh it this often.
 HOME_FOLLOW_PERIOD_S = 1.0
-STATUSTEXT_MAX_LEN = 50
 STATUSTEXT_HISTORY = 200
-
-
-AirframeFactory = Callable[[str, ParamReader], AirframeModel]
-DefaultsFactory = Callable[[str], dict[str, float | int]]
 
 
 @dataclass
@@ -60,6 +54,10 @@ class StatusText:
     time_s: float
     severity: int
     text: str
+
+
+AirframeFactory = Callable[[str, ParamReader], AirframeModel]
+DefaultsFactory = Callable[[str], dict[str, float | int]]
 
 
 def _physics() -> tuple[AirframeFactory, DefaultsFactory]:
@@ -110,7 +108,6 @@ class SimVehicle:
         self._links: list[tuple[Link, StreamSet]] = []
         self._geo_cache: tuple[float, GeoPoint] | None = None
         self._home_refreshed_s = -math.inf
-        self._statustext_id = 0
 
     # -- composition -------------------------------------------------------------------
 
@@ -137,16 +134,8 @@ class SimVehicle:
         self.statustexts.append(StatusText(self.now_s, severity, text))
         if not self.booted:
             return
-        data = text.encode()
-        if len(data) <= STATUSTEXT_MAX_LEN:
-            self.broadcast(mavlink.MAVLink_statustext_message(severity, data))
-            return
-        # Longer texts go out in 50-byte chunks sharing an id, as MAVLink 2 allows.
-        self._statustext_id = self._statustext_id % 65535 + 1
-        for seq, start in enumerate(range(0, len(data), STATUSTEXT_MAX_LEN)):
-            chunk = data[start:start + STATUSTEXT_MAX_LEN]
-            self.broadcast(mavlink.MAVLink_statustext_message(
-                severity, chunk, self._statustext_id, seq))
+        for msg in self.messages.statustexts(severity, text):
+            self.broadcast(msg)
 
     # -- state views -------------------------------------------------------------------
 

@@ -1,0 +1,298 @@
+"""The telemetry messages of the simulated vehicle, each built from its current state,
+after PX4's mavlink_messages: heartbeat, attitude, positions, status, home, versions."""
+
+from __future__ import annotations
+
+import math
+import struct
+from collections.abc import Callable
+from typing import Any
+
+from pymavlink.dialects.v20 import development as mavlink
+
+from sim.quat import euler_from_quat, yaw_from_quat
+from sim.vehicle_interface import Message, VehicleInterface
+
+# MAV_SYS_STATUS_SENSOR bits of a healthy SIH vehicle; MAVSDK's health_all_ok needs
+# gyro, accel, mag, GPS (present and healthy) and the pre-arm bit.
+_SENSORS = (
+    mavlink.MAV_SYS_STATUS_SENSOR_3D_GYRO
+    | mavlink.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+    | mavlink.MAV_SYS_STATUS_SENSOR_3D_MAG
+    | mavlink.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
+    | mavlink.MAV_SYS_STATUS_SENSOR_GPS
+    | mavlink.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
+    | mavlink.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
+    | mavlink.MAV_SYS_STATUS_SENSOR_YAW_POSITION
+    | mavlink.MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL
+    | mavlink.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
+    | mavlink.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
+    | mavlink.MAV_SYS_STATUS_SENSOR_BATTERY
+    | mavlink.MAV_SYS_STATUS_AHRS
+    | mavlink.MAV_SYS_STATUS_PREARM_CHECK
+)
+_SENSORS_BEFORE_GPS_FIX = _SENSORS & ~(
+    mavlink.MAV_SYS_STATUS_SENSOR_GPS | mavlink.MAV_SYS_STATUS_PREARM_CHECK
+)
+
+_CAPABILITIES = (
+    mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT
+    | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+    | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT
+    | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+    | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
+    | mavlink.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET
+    | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+    | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
+    | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+    | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE
+    | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY
+)
+# PX4 v1.16.0, FIRMWARE_VERSION_TYPE_OFFICIAL.
+PX4_FLIGHT_SW_VERSION = (1 << 24) | (16 << 16) | (0 << 8) | 255
+MAV_AUTOPILOT_PX4 = 12
+MAV_STATE_STANDBY = 3
+MAV_STATE_ACTIVE = 4
+MAV_STATE_CRITICAL = 5
+# STATUSTEXT.text is 50 bytes; a longer text goes out in chunks (MAVLink 2's id and seq)
+STATUSTEXT_MAX_LEN = 50
+
+
+MAVLINK_MSG_ID_PROTOCOL_VERSION = 300
+# MAVLink 2 spoken, MAVLink 1 and 2 understood (PROTOCOL_VERSION.version = 100 * major).
+MAVLINK_VERSION_2 = 200
+MAVLINK_VERSION_1 = 100
+
+
+class ProtocolVersionMessage(mavlink.MAVLink_message):  # type: ignore[misc]
+    """PROTOCOL_VERSION (300) from common.xml, which pymavlink's generated dialect lacks."""
+
+    id = MAVLINK_MSG_ID_PROTOCOL_VERSION
+    msgname = "PROTOCOL_VERSION"
+    crc_extra = 217
+    _wire = struct.Struct("<HHH8s8s")
+
+    def __init__(self, version: int, min_version: int, max_version: int) -> None:
+        super().__init__(self.id, self.msgname)
+        self._fieldnames = ["version", "min_version", "max_version", "spec_version_hash",
+                            "library_version_hash"]
+        self.version = version
+        self.min_version = min_version
+        self.max_version = max_version
+        self.spec_version_hash = bytes(8)
+        self.library_version_hash = bytes(8)
+
+    def pack(self, mav: Any, force_mavlink1: bool = False) -> bytes:
+        payload = self._wire.pack(self.version, self.min_version, self.max_version,
+                                  self.spec_version_hash, self.library_version_hash)
+        packed: bytes = self._pack(mav, self.crc_extra, payload, force_mavlink1=force_mavlink1)
+        return packed
+
+
+def _pwm(output: float) -> int:
+    return round(1000.0 + 1000.0 * min(max(output, 0.0), 1.0))
+
+
+class MessageFactory:
+    """Builds each telemetry message from the vehicle's current state."""
+
+    def __init__(self, vehicle: VehicleInterface) -> None:
+        self._v = vehicle
+        self._statustext_id = 0
+        self.builders: dict[int, Callable[[], Message | None]] = {
+            mavlink.MAVLINK_MSG_ID_HEARTBEAT: self.heartbeat,
+            mavlink.MAVLINK_MSG_ID_SYS_STATUS: self.sys_status,
+            mavlink.MAVLINK_MSG_ID_ATTITUDE: self.attitude,
+            mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: self.attitude_quaternion,
+            mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: self.local_position_ned,
+            mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: self.global_position_int,
+            mavlink.MAVLINK_MSG_ID_VFR_HUD: self.vfr_hud,
+            mavlink.MAVLINK_MSG_ID_GPS_RAW_INT: self.gps_raw_int,
+            mavlink.MAVLINK_MSG_ID_BATTERY_STATUS: self.battery_status,
+            mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: self.extended_sys_state,
+            mavlink.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED: self.position_target_local_ned,
+            mavlink.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: self.servo_output_raw,
+            mavlink.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS: self.actuator_output_status,
+            mavlink.MAVLINK_MSG_ID_HOME_POSITION: self.home_position,
+            mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN: self.gps_global_origin,
+            mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION: self.autopilot_version,
+            mavlink.MAVLINK_MSG_ID_CURRENT_MODE: self.current_mode,
+            MAVLINK_MSG_ID_PROTOCOL_VERSION: self.protocol_version,
+        }
+
+    def build(self, msg_id: int) -> Message | None:
+        builder = self.builders.get(msg_id)
+        return builder() if builder is not None else None
+
+    def statustexts(self, severity: int, text: str) -> list[Message]:
+        data = text.encode()
+        if len(data) <= STATUSTEXT_MAX_LEN:
+            return [mavlink.MAVLink_statustext_message(severity, data)]
+        self._statustext_id = self._statustext_id % 65535 + 1
+        return [
+            mavlink.MAVLink_statustext_message(
+                severity, data[start:start + STATUSTEXT_MAX_LEN], self._statustext_id, seq)
+            for seq, start in enumerate(range(0, len(data), STATUSTEXT_MAX_LEN))
+        ]
+
+    @property
+    def _boot_ms(self) -> int:
+        return int(self._v.now_s * 1000.0)
+
+    def heartbeat(self) -> Message:
+        v = self._v
+        commander = v.commander
+        if not commander.armed:
+            status = MAV_STATE_STANDBY
+        elif commander.failsafe:
+            status = MAV_STATE_CRITICAL
+        else:
+            status = MAV_STATE_ACTIVE
+        mode = commander.nav_mode
+        return mavlink.MAVLink_heartbeat_message(
+            v.mav_type, MAV_AUTOPILOT_PX4, mode.base_mode(commander.armed), mode.custom_mode,
+            status, 3,
+        )
+
+    def sys_status(self) -> Message:
+        v = self._v
+        sensors = _SENSORS if v.ready else _SENSORS_BEFORE_GPS_FIX
+        battery = v.battery
+        return mavlink.MAVLink_sys_status_message(
+            sensors, sensors, sensors, 250, round(battery.voltage_v * 1000.0),
+            round(battery.current_a * 100.0), battery.remaining_percent, 0, 0, 0, 0, 0, 0,
+        )
+
+    def attitude(self) -> Message:
+        truth = self._v.truth
+        roll, pitch, yaw = euler_from_quat(truth.q_wxyz)
+        p, q, r = truth.rates_body_rad_s
+        return mavlink.MAVLink_attitude_message(self._boot_ms, roll, pitch, yaw, p, q, r)
+
+    def attitude_quaternion(self) -> Message:
+        truth = self._v.truth
+        w, x, y, z = truth.q_wxyz
+        p, q, r = truth.rates_body_rad_s
+        return mavlink.MAVLink_attitude_quaternion_message(self._boot_ms, w, x, y, z, p, q, r)
+
+    def local_position_ned(self) -> Message | None:
+        if not self._v.ready:
+            return None
+        north, east, down = self._v.truth.position_ned_m
+        vn, ve, vd = self._v.truth.velocity_ned_m_s
+        return mavlink.MAVLink_local_position_ned_message(
+            self._boot_ms, north, east, down, vn, ve, vd
+        )
+
+    def global_position_int(self) -> Message | None:
+        v = self._v
+        if not v.ready:
+            return None
+        geo = v.geodetic()
+        vn, ve, vd = v.truth.velocity_ned_m_s
+        relative_alt_m = v.commander.home.position_ned_m[2] - v.truth.position_ned_m[2]
+        heading_cdeg = round(math.degrees(yaw_from_quat(v.truth.q_wxyz)) % 360.0 * 100.0) % 36000
+        return mavlink.MAVLink_global_position_int_message(
+            self._boot_ms, round(geo.lat_deg * 1e7), round(geo.lon_deg * 1e7),
+            round(geo.alt_m * 1000.0), round(relative_alt_m * 1000.0),
+            round(vn * 100.0), round(ve * 100.0), round(vd * 100.0), heading_cdeg,
+        )
+
+    def vfr_hud(self) -> Message:
+        v = self._v
+        vn, ve, vd = v.truth.velocity_ned_m_s
+        heading_deg = round(math.degrees(yaw_from_quat(v.truth.q_wxyz)) % 360.0) % 360
+        throttle = round(100.0 * v.model.power_fraction) if v.commander.armed else 0
+        return mavlink.MAVLink_vfr_hud_message(
+            v.truth.airspeed_m_s, math.hypot(vn, ve), heading_deg, throttle,
+            v.geodetic().alt_m, -vd,
+        )
+
+    def gps_raw_int(self) -> Message:
+        v = self._v
+        if not v.ready:
+            return mavlink.MAVLink_gps_raw_int_message(
+                int(v.now_s * 1e6), 1, 0, 0, 0, 9999, 9999, 0, 0, 0
+            )
+        geo = v.geodetic()
+        vn, ve, _ = v.truth.velocity_ned_m_s
+        cog_cdeg = round(math.degrees(math.atan2(ve, vn)) % 360.0 * 100.0) % 36000
+        return mavlink.MAVLink_gps_raw_int_message(
+            int(v.now_s * 1e6), 3, round(geo.lat_deg * 1e7), round(geo.lon_deg * 1e7),
+            round(geo.alt_m * 1000.0), 70, 100, round(math.hypot(vn, ve) * 100.0), cog_cdeg, 16,
+        )
+
+    def battery_status(self) -> Message:
+        battery = self._v.battery
+        cell_mv = round(battery.cell_voltage_v * 1000.0)
+        voltages = [cell_mv] * battery.cell_count + [65535] * (10 - battery.cell_count)
+        return mavlink.MAVLink_battery_status_message(
+            0, mavlink.MAV_BATTERY_FUNCTION_ALL, mavlink.MAV_BATTERY_TYPE_LIPO, 32767,
+            voltages[:10], round(battery.current_a * 100.0), round(battery.consumed_mah),
+            -1, battery.remaining_percent,
+        )
+
+    def extended_sys_state(self) -> Message:
+        v = self._v
+        return mavlink.MAVLink_extended_sys_state_message(int(v.vtol_state), v.landed_state)
+
+    def position_target_local_ned(self) -> Message:
+        sp = self._v.last_trajectory_setpoint
+        position = sp.position_ned_m if sp is not None else [math.nan] * 3
+        velocity = sp.velocity_ned_m_s if sp is not None else [math.nan] * 3
+        accel = sp.acceleration_ned_m_s2 if sp is not None else [math.nan] * 3
+        yaw = sp.yaw_rad if sp is not None else math.nan
+        yaw_rate = sp.yawspeed_rad_s if sp is not None else math.nan
+        return mavlink.MAVLink_position_target_local_ned_message(
+            self._boot_ms, mavlink.MAV_FRAME_LOCAL_NED, 0, *position, *velocity, *accel,
+            yaw, yaw_rate,
+        )
+
+    def servo_output_raw(self) -> Message:
+        outputs = self._v.model.actuator_outputs if self._v.commander.armed else []
+        pwm = [_pwm(u) for u in outputs[:16]] + [0] * (16 - min(len(outputs), 16))
+        return mavlink.MAVLink_servo_output_raw_message(int(self._v.now_s * 1e6), 0, *pwm)
+
+    def actuator_output_status(self) -> Message:
+        outputs = list(self._v.model.actuator_outputs[:32])
+        active = (1 << len(outputs)) - 1
+        return mavlink.MAVLink_actuator_output_status_message(
+            int(self._v.now_s * 1e6), active, outputs + [0.0] * (32 - len(outputs))
+        )
+
+    def home_position(self) -> Message | None:
+        home = self._v.commander.home
+        if not home.valid:
+            return None
+        half_yaw = home.yaw_rad / 2.0
+        return mavlink.MAVLink_home_position_message(
+            round(home.lat_deg * 1e7), round(home.lon_deg * 1e7), round(home.alt_m * 1000.0),
+            *home.position_ned_m, [math.cos(half_yaw), 0.0, 0.0, math.sin(half_yaw)],
+            0.0, 0.0, 0.0, int(self._v.now_s * 1e6),
+        )
+
+    def gps_global_origin(self) -> Message | None:
+        if not self._v.ready:
+            return None
+        origin = self._v.origin
+        return mavlink.MAVLink_gps_global_origin_message(
+            round(origin.lat_deg * 1e7), round(origin.lon_deg * 1e7),
+            round(origin.alt_m * 1000.0), int(self._v.now_s * 1e6),
+        )
+
+    def autopilot_version(self) -> Message:
+        sysid = self._v.sysid
+        return mavlink.MAVLink_autopilot_version_message(
+            _CAPABILITIES, PX4_FLIGHT_SW_VERSION, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8,
+            0, 0, 0x5348_0000 + sysid, [0] * 18,
+        )
+
+    def protocol_version(self) -> Message:
+        return ProtocolVersionMessage(MAVLINK_VERSION_2, MAVLINK_VERSION_1, MAVLINK_VERSION_2)
+
+    def current_mode(self) -> Message:
+        commander = self._v.commander
+        return mavlink.MAVLink_current_mode_message(
+            int(commander.nav_mode.standard_mode), commander.nav_mode.custom_mode,
+            commander.user_mode.custom_mode,
+        )
