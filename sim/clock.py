@@ -1,8 +1,9 @@
 """The wall clock the stepping loop paces itself by, injectable so tests control time.
 
 Everything inside a simulated vehicle runs on sim time (the sum of its physics steps);
-only the loop that decides *when* to step looks at a wall clock. `MonotonicClock` is the
-real one; `ManualClock` moves only when a test advances it, so the loop's pacing,
+only the loop that decides *when* to step looks at a wall clock. `EventLoopClock` is the
+real one (the running event loop's monotonic time, which the `looptime` pytest plugin
+makes virtual); `ManualClock` moves only when a test advances it, so the loop's pacing,
 speed-up and catch-up can be checked exactly and without waiting.
 """
 
@@ -11,7 +12,6 @@ from __future__ import annotations
 import asyncio
 import heapq
 import itertools
-import time
 from typing import Protocol
 
 # Yields to the event loop before time moves, so a task started or woken runs up to its
@@ -29,14 +29,14 @@ class Clock(Protocol):
         ...
 
 
-class MonotonicClock:
-    """Real time: time.perf_counter and the event loop's timers."""
+class EventLoopClock:
+    """The running event loop's time (time.monotonic on Linux) and its timers."""
 
     def now_s(self) -> float:
-        return time.perf_counter()
+        return asyncio.get_running_loop().time()
 
     async def sleep_until(self, deadline_s: float) -> None:
-        await asyncio.sleep(max(deadline_s - time.perf_counter(), 0.0))
+        await asyncio.sleep(max(deadline_s - self.now_s(), 0.0))
 
 
 class ManualClock:

@@ -8,7 +8,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, fields
 from typing import Protocol
 
-from sim.clock import Clock, MonotonicClock
+from sim.clock import Clock, EventLoopClock
 from sim.sim_run import PHYSICS_DT_S
 
 # The loop runs STEPS_PER_WAKE steps (20 ms of sim time) per wake-up, and wakes no more
@@ -59,7 +59,7 @@ async def run_vehicles(
     worth, if more) at once and then drops the remainder, so sim time slows down rather
     than jumping.
     """
-    clock = clock if clock is not None else MonotonicClock()
+    clock = clock if clock is not None else EventLoopClock()
     stats = stats if stats is not None else LoopStats()
     wall_dt = dt_s / speed
     wake_period_s = max(STEPS_PER_WAKE * wall_dt, MIN_WAKE_PERIOD_S)

@@ -96,3 +96,17 @@ async def test_after_a_stall_catches_up_a_bounded_number_of_steps_then_slows_dow
     await loop.clock.advance(1.0)
     resumed = loop.vehicle.steps - before - 50
     assert round(1.0 / PHYSICS_DT_S) - STEPS_PER_WAKE <= resumed <= round(1.0 / PHYSICS_DT_S)
+
+
+@pytest.mark.looptime
+async def test_on_the_event_loop_clock_virtual_time_paces_it_exactly() -> None:
+    # the default clock is the event loop's: under looptime ten seconds pass at once
+    vehicle, stats = CountingVehicle(), LoopStats()
+    task = asyncio.create_task(run_vehicles([vehicle], 2.0, stats))
+    await asyncio.sleep(10.0)
+    task.cancel()
+    with contextlib.suppress(asyncio.CancelledError):
+        await task
+    due = round(2.0 * 10.0 / PHYSICS_DT_S)
+    assert due - STEPS_PER_WAKE <= vehicle.steps <= due
+    assert stats.max_lag_s == pytest.approx(0.0, abs=1e-9)
