@@ -54,13 +54,18 @@ export const SETPOINT_TYPES = {};
 
 let kindsLoaded = null;
 
-/** Reads the setpoint kinds from /openapi.json into SETPOINT_TYPES (once). */
+/** Reads the setpoint kinds from /openapi.json into SETPOINT_TYPES (once; again after a
+ * failure). */
 export function loadSetpointKinds() {
   kindsLoaded ??= fetch("/openapi.json")
     .then((answer) => answer.json())
     .then((schema) => {
       const kinds = setpointKinds(schema);
       for (const [type, panel] of Object.entries(PANELS)) SETPOINT_TYPES[type] = panelFields(panel, kinds);
+    })
+    .catch((err) => {
+      kindsLoaded = null;
+      throw err;
     });
   return kindsLoaded;
 }
@@ -144,9 +149,19 @@ export class SetpointPanel {
     this.values = {};
     this.inputs = {};
     this.loaded = false;
-    loadSetpointKinds().then(() => {
+    this.loading = null;
+    this.load();
+  }
+
+  /** Reads the kinds (unless already under way), then shows the current type. */
+  load() {
+    this.loading ??= loadSetpointKinds().then(() => {
       this.loaded = true;
       this.show(this.type, this.values);
+    }, (err) => {
+      this.container.textContent = `setpoint kinds not read from /openapi.json: ${err.message}`;
+    }).finally(() => {
+      this.loading = null;
     });
   }
 
@@ -156,7 +171,10 @@ export class SetpointPanel {
     this.values = { ...values };
     this.inputs = {};
     this.container.replaceChildren();
-    if (!this.loaded) return;
+    if (!this.loaded) {
+      this.load();
+      return;
+    }
     for (const field of SETPOINT_TYPES[type]) {
       this.values[field.key] ??= field.value;
       const row = document.createElement("div");
