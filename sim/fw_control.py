@@ -11,7 +11,7 @@ yaw rate; rates: PX4's FF + PI, scaled by airspeed.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from typing import NamedTuple
 
 from sim.numeric import clamp, finite_or, is_finite
 from sim.params import ParamReader
@@ -37,8 +37,7 @@ SPEED_I_THROTTLE_PER_M = 0.04
 STALL_PITCH_LIMIT_RAD = math.radians(10.0)
 
 
-@dataclass
-class SurfacesThrottle:
+class SurfacesThrottle(NamedTuple):
     """Normalised outputs: aileron/elevator/rudder in [-1, 1], throttle in [0, 1]."""
 
     aileron: float = 0.0
@@ -99,8 +98,7 @@ class FixedWingControl:
         roll, pitch, yaw = euler_from_quat(truth.q_wxyz)
         if isinstance(setpoint, RatesSetpoint):
             surfaces = self.rate_control(dt_s, truth, setpoint.rates_rad_s)
-            surfaces.throttle = clamp(setpoint.thrust_body[0], 0.0, 1.0)
-            return surfaces
+            return surfaces._replace(throttle=clamp(setpoint.thrust_body[0], 0.0, 1.0))
         if isinstance(setpoint, AttitudeSetpoint):
             roll_sp, pitch_sp, _ = euler_from_quat(setpoint.q_wxyz)
             throttle = setpoint.thrust_body[0]
@@ -108,8 +106,7 @@ class FixedWingControl:
             roll_sp, pitch_sp, throttle = self._guidance(dt_s, truth, setpoint, yaw)
         rates_sp = self.attitude_rates(truth, roll, pitch, roll_sp, pitch_sp)
         surfaces = self.rate_control(dt_s, truth, rates_sp)
-        surfaces.throttle = clamp(throttle, 0.0, 1.0)
-        return surfaces
+        return surfaces._replace(throttle=clamp(throttle, 0.0, 1.0))
 
     # -- guidance ------------------------------------------------------------------------
 

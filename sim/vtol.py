@@ -140,7 +140,7 @@ class VtolModel:
                 else:
                     # hovering or braking: the rotors fly, the surfaces stay neutral
                     self.fw.reset()
-                surfaces.throttle = self.transition.pusher_throttle
+                surfaces = surfaces._replace(throttle=self.transition.pusher_throttle)
         else:
             self.mc.reset()
             self.fw.reset()
