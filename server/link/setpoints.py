@@ -11,6 +11,7 @@ import math
 from dataclasses import dataclass, replace
 
 from pymavlink.dialects.v20 import development as mavlink
+from pymavlink.quaternion import QuaternionBase
 
 from server.link.setpoint_kinds import (
     SETPOINT_KINDS,
@@ -234,16 +235,10 @@ def local_fields(sp: Setpoint) -> LocalFields | None:
 
 
 def _quaternion(roll_deg: float, pitch_deg: float, yaw_deg: float) -> list[float]:
-    """Hamilton quaternion (w, x, y, z) of ZYX Euler angles, as SET_ATTITUDE_TARGET wants."""
-    cr, sr = math.cos(math.radians(roll_deg) / 2), math.sin(math.radians(roll_deg) / 2)
-    cp, sp_ = math.cos(math.radians(pitch_deg) / 2), math.sin(math.radians(pitch_deg) / 2)
-    cy, sy = math.cos(math.radians(yaw_deg) / 2), math.sin(math.radians(yaw_deg) / 2)
-    return [
-        cr * cp * cy + sr * sp_ * sy,
-        sr * cp * cy - cr * sp_ * sy,
-        cr * sp_ * cy + sr * cp * sy,
-        cr * cp * sy - sr * sp_ * cy,
-    ]
+    """Hamilton quaternion (w, x, y, z) of ZYX Euler angles, as SET_ATTITUDE_TARGET wants:
+    pymavlink's own conversion, the one its receivers use to read it back."""
+    euler_rad = [math.radians(roll_deg), math.radians(pitch_deg), math.radians(yaw_deg)]
+    return [float(c) for c in QuaternionBase(euler_rad).q]
 
 
 def encode(
