@@ -17,7 +17,8 @@ import time
 from typing import Any
 
 from bench._results import machine_info, write_results
-from server.api.publisher import Published, Slot, StatePublisher
+from server.api.publisher import Published, StatePublisher
+from server.api.slots import Slot
 from server.api.views import encode_state, state_json, state_message
 from server.link import state as link
 from server.link.link_stats import LinkStats

@@ -7,10 +7,8 @@ object to the consumers whose rate tier is due. Its JSON is made on first use an
 the object, so a tick is encoded at most once however many sockets send it, and not at all
 when only the scene (which wants the snapshot itself) is watching.
 
-Slow-consumer policy, the one place it is decided: every consumer reads through a slot of
-size one (`Slot`, or the scene's `FleetWatch`, one slot per vehicle): a newer value replaces
-one not yet read, so a consumer that falls behind gets the newest state, never a backlog.
-What a telemetry socket does with a send that stalls is in ws_common.py.
+Slow consumers: every consumer reads through a latest-wins slot (slots.py, where the policy
+is written down): a `Slot`, or the scene's `FleetWatch`, one slot per vehicle.
 
 Rate tiers: consumers that ask for the same rate share one tier: one RateGrid, one decision
 per tick. A due tier delivers at once; a tier not yet due delivers the newest tick when its
@@ -22,15 +20,14 @@ from __future__ import annotations
 import asyncio
 import json
 from collections import deque
-from collections.abc import AsyncIterator, Callable, Iterable
-from typing import Generic, Protocol, TypeVar
+from collections.abc import Callable, Iterable
+from typing import Protocol
 
+from server.api.slots import Broadcast, Slot
 from server.api.views import LeaseStatus, encode_state, state_json, state_message, summary_dict
 from server.link import Link, Vehicle, VehicleState
 from server.link.aio import cancel_and_wait, loop_time_s
 from server.link.state import WAKE_BATCH, RateGrid, StateSubscription
-
-T = TypeVar("T")
 
 DEFAULT_MAX_RATE_HZ = 50.0
 
@@ -84,40 +81,6 @@ class Published:
 
 class Sink(Protocol):
     def put(self, published: Published) -> None: ...
-
-
-class Slot(Generic[T]):
-    """Latest wins: holds at most one value; put() replaces a value not yet read. Read it
-    with `async for`, which ends once the slot is closed."""
-
-    def __init__(self) -> None:
-        self._value: T | None = None
-        self._full = False
-        self._ready = asyncio.Event()
-        self.closed = False
-        self.replaced = 0  # values overwritten before they were read
-
-    def put(self, value: T) -> None:
-        if self._full:
-            self.replaced += 1
-        self._value = value
-        self._full = True
-        self._ready.set()
-
-    def close(self) -> None:
-        self.closed = True
-        self._ready.set()
-
-    def __aiter__(self) -> AsyncIterator[T]:
-        return self
-
-    async def __anext__(self) -> T:
-        await self._ready.wait()
-        if self.closed or self._value is None:
-            raise StopAsyncIteration
-        value, self._value, self._full = self._value, None, False
-        self._ready.clear()
-        return value
 
 
 class _Tier:
@@ -324,28 +287,6 @@ class FleetWatch:
 
     def close(self) -> None:
         self._on_close(self)
-
-
-class Broadcast:
-    """One topic for every telemetry socket (the vehicle list, scene clicks), latest wins."""
-
-    def __init__(self) -> None:
-        self._slots: set[Slot[str]] = set()
-
-    def subscribe(self, current: str | None = None) -> Slot[str]:
-        slot: Slot[str] = Slot()
-        if current is not None:
-            slot.put(current)
-        self._slots.add(slot)
-        return slot
-
-    def unsubscribe(self, slot: Slot[str]) -> None:
-        self._slots.discard(slot)
-        slot.close()
-
-    def publish(self, text: str) -> None:
-        for slot in self._slots:
-            slot.put(text)
 
 
 class StatePublishers:

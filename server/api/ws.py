@@ -1,7 +1,7 @@
 """WebSockets: telemetry for anyone with a token (ws_telemetry.py), the control session for
 one pilot (ws_control.py); admission, sends and close codes are shared (ws_common.py).
 
-Slow-client policy: state is latest-wins (publisher.py); statustext, events and send
+Slow-client policy: state is latest-wins (slots.py); statustext, events and send
 timeouts as ws_common.py says."""
 
 from __future__ import annotations

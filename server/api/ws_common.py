@@ -1,7 +1,7 @@
 """What both WebSockets share: admission (token, Origin, role), serialised sends with a
 timeout, close codes, and running a socket's jobs until the client goes away.
 
-Slow-client policy for sends (state itself is latest-wins, see publisher.py): statustext and
+Slow-client policy for sends (state itself is latest-wins, see slots.py): statustext and
 events wait in the vehicle's per-client queue of EVENT_BACKLOG entries, which drops its
 oldest entry when full; a single send that does not complete within SEND_TIMEOUT_S closes
 the client (code 1008): a client that stops reading cannot hold server memory or the event

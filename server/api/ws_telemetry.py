@@ -1,5 +1,5 @@
 """The telemetry socket: anyone with a token watches one vehicle (or all) and the page-wide
-topics. State is latest-wins at the asked rate (publisher.py); events are queued."""
+topics. State is latest-wins at the asked rate (slots.py); events are queued."""
 
 from __future__ import annotations
 
@@ -9,7 +9,8 @@ from typing import Any
 from fastapi import APIRouter, WebSocket
 
 from server.api.auth import Role
-from server.api.publisher import Broadcast, StatePublisher, StatePublishers
+from server.api.publisher import StatePublisher, StatePublishers
+from server.api.slots import Broadcast
 from server.api.views import finite
 from server.api.ws_common import (
     CLOSE_NOT_FOUND,
