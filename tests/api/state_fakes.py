@@ -1,11 +1,20 @@
-"""A vehicle as the state publisher sees it, for tests and benchmarks: its snapshot comes
-from a function, and move() tells its subscribers of a change, as a link vehicle does."""
+"""Vehicles as the state publisher sees them, for tests and benchmarks: a snapshot from a
+function, and move() telling subscribers of a change, as a link vehicle does; and the scene
+hub fed by such vehicles the way the app feeds it."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import asyncio
+import contextlib
+from collections.abc import AsyncIterator, Callable
+from typing import cast
 
+from server.api.publisher import StatePublishers
+from server.link import Vehicle
+from server.link.aio import cancel_and_wait
 from server.link.state import StateSubscription, SubscriptionHub, VehicleState
+from server.scene import SceneHub
+from tests.scene.conftest import FakeVehicle
 
 
 class PushingVehicle:
@@ -31,3 +40,35 @@ class PushingVehicle:
     def move(self) -> None:
         self.moves += 1
         self._hub.notify()
+
+
+def pushing(fake: FakeVehicle) -> PushingVehicle:
+    """A scene-test fake (a new state at every snapshot) that also tells of its changes."""
+    return PushingVehicle(lambda _: fake.snapshot(), fake.sysid)
+
+
+async def _change(vehicles: list[PushingVehicle], rate_hz: float) -> None:
+    while True:
+        for vehicle in vehicles:
+            vehicle.move()
+        await asyncio.sleep(1.0 / rate_hz)  # not a wait: the vehicles' telemetry rate
+
+
+@contextlib.asynccontextmanager
+async def scene_fed_by(
+    hub: SceneHub, vehicles: list[PushingVehicle], change_rate_hz: float = 50.0
+) -> AsyncIterator[StatePublishers]:
+    """The scene hub started and fed as the app feeds it, through the state publishers,
+    with every vehicle changing change_rate_hz times a second."""
+    publishers = StatePublishers(
+        lambda: cast("list[Vehicle]", vehicles), lambda _sysid: (None, None)
+    )
+    await publishers.start([])
+    changing = asyncio.create_task(_change(vehicles, change_rate_hz))
+    await hub.start(publishers)
+    try:
+        yield publishers
+    finally:
+        await hub.stop()
+        await cancel_and_wait(changing)
+        await publishers.close()

@@ -6,7 +6,6 @@ import asyncio
 import time
 from collections.abc import AsyncIterator
 from dataclasses import dataclass
-from typing import cast
 
 import httpx
 import pytest
@@ -16,10 +15,8 @@ from fastapi import FastAPI
 from websockets.asyncio.client import connect
 from websockets.typing import Subprotocol
 
-from server.api.publisher import StatePublishers
-from server.link import Vehicle
 from server.scene import ClickPoint, SceneHub
-from tests.api.state_fakes import PushingVehicle
+from tests.api.state_fakes import PushingVehicle, pushing, scene_fed_by
 from tests.serving import uvicorn_serving
 from tests.waiting import wait_for
 
@@ -36,36 +33,14 @@ class Served:
     vehicles: list[PushingVehicle]
 
 
-def _pushing(fake: FakeVehicle) -> PushingVehicle:
-    return PushingVehicle(lambda _: fake.snapshot(), fake.sysid)
-
-
-async def _change_at_50_hz(vehicles: list[PushingVehicle]) -> None:
-    while True:
-        for vehicle in vehicles:
-            vehicle.move()
-        await asyncio.sleep(0.02)  # not a wait: the fakes' telemetry rate, 50 Hz
-
-
 @pytest.fixture
 async def served() -> AsyncIterator[Served]:
-    vehicles = [_pushing(FakeVehicle(1)), _pushing(FakeVehicle(2, "VTOL_FIXEDROTOR"))]
+    vehicles = [pushing(FakeVehicle(1)), pushing(FakeVehicle(2, "VTOL_FIXEDROTOR"))]
     hub = SceneHub(max_rate_hz=20.0)
     app = FastAPI()
     hub.mount(app, check_token=lambda token: token == TOKEN)
-    publishers = StatePublishers(
-        lambda: cast("list[Vehicle]", vehicles), lambda _sysid: (None, None)
-    )
-    await publishers.start([])
-    changing = asyncio.create_task(_change_at_50_hz(vehicles))
-    await hub.start(publishers)
-    try:
-        async with uvicorn_serving(app) as host:
-            yield Served(hub, host, vehicles)
-    finally:
-        await hub.stop()
-        changing.cancel()
-        await publishers.close()
+    async with scene_fed_by(hub, vehicles), uvicorn_serving(app) as host:
+        yield Served(hub, host, vehicles)
 
 
 async def test_scene_page_is_served_with_token_and_sets_scene_cookie(served: Served) -> None:
@@ -108,26 +83,25 @@ async def test_viser_socket_works_through_the_app_port_with_the_cookie(served: S
         assert status["vehicles"] == [1, 2]
 
 
-@pytest.mark.parametrize("cookie", [None, "skyhelm_token=wrong"])
-async def test_viser_socket_refused_with_4401_without_the_token(served: Served,
-                                                                cookie: str | None) -> None:
+@pytest.mark.parametrize(
+    ("cookie", "origin", "code"),
+    [
+        (None, None, 4401),
+        ("skyhelm_token=wrong", None, 4401),
+        (f"skyhelm_token={TOKEN}", "http://evil.example", 4403),
+    ],
+)
+async def test_viser_socket_refused_without_the_token_or_from_another_origin(
+    served: Served, cookie: str | None, origin: str | None, code: int
+) -> None:
     headers = {"Cookie": cookie} if cookie else {}
     async with connect(f"ws://{served.base}/scene", subprotocols=[SUBPROTOCOL],
-                       additional_headers=headers) as ws:
+                       additional_headers=headers,
+                       origin=websockets.typing.Origin(origin) if origin else None) as ws:
         with pytest.raises(websockets.exceptions.ConnectionClosed) as closed:
             await asyncio.wait_for(ws.recv(), 10.0)
     assert closed.value.rcvd is not None
-    assert closed.value.rcvd.code == 4401
-
-
-async def test_viser_socket_refused_from_another_origin(served: Served) -> None:
-    async with connect(f"ws://{served.base}/scene", subprotocols=[SUBPROTOCOL],
-                       additional_headers={"Cookie": f"skyhelm_token={TOKEN}"},
-                       origin=websockets.typing.Origin("http://evil.example")) as ws:
-        with pytest.raises(websockets.exceptions.ConnectionClosed) as closed:
-            await asyncio.wait_for(ws.recv(), 10.0)
-    assert closed.value.rcvd is not None
-    assert closed.value.rcvd.code == 4403
+    assert closed.value.rcvd.code == code
 
 
 async def test_scene_updates_stay_under_the_rate_limit_per_vehicle(served: Served) -> None:
