@@ -35,10 +35,9 @@ DEFAULT_MAX_RATE_HZ = 50.0
 class PublishedVehicle(Protocol):
     """What a publisher reads of a vehicle."""
 
-    @property
-    def sysid(self) -> int: ...
-    @property
-    def connected(self) -> bool: ...
+    sysid: int
+    connected: bool
+
     @property
     def state_version(self) -> int: ...
     def snapshot(self) -> VehicleState: ...

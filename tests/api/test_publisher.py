@@ -30,10 +30,11 @@ def _vehicle(sysid: int = 1) -> PushingVehicle:
     )
 
 
-def _publisher(vehicle: PushingVehicle, encode: Callable[[VehicleState], bytes] = encode_state,
-               ) -> StatePublisher:
+def _publisher(
+    vehicle: PushingVehicle, encode: Callable[[VehicleState], bytes] = encode_state
+) -> StatePublisher:
     publisher = StatePublisher(
-        vehicle,  # type: ignore[arg-type]
+        vehicle,
         lambda _sysid: ("pilot", 1.0),
         max_rate_hz=50.0,
         encode=encode,
