@@ -79,3 +79,16 @@ def wait_for_blocking(
             return last
         time.sleep(every_s)
     raise AssertionError(f"timed out after {timeout_s} s waiting for {what}; last: {last!r}")
+
+
+def holds_for_blocking(
+    what: str, check: Callable[[], object], duration_s: float, every_s: float = 0.1
+) -> None:
+    """``holds_for`` for code with no event loop: ``check()`` stays true for
+    ``duration_s``; fails the moment it is false."""
+    end = time.monotonic() + duration_s
+    while True:
+        assert check(), f"{what} stopped holding"
+        if time.monotonic() >= end:
+            return
+        time.sleep(min(every_s, max(0.0, end - time.monotonic())))

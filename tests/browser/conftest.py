@@ -6,9 +6,11 @@ import tempfile
 from collections.abc import Iterator
 from typing import Any
 
+import httpx
 import pytest
 
-from .harness import CHROMIUM, CHROMIUM_ARGS
+from .flows import open_dashboard
+from .harness import CHROMIUM, CHROMIUM_ARGS, Serve
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
@@ -22,13 +24,48 @@ def browser() -> Iterator[Any]:
     if not CHROMIUM.exists():
         pytest.skip("/usr/bin/chromium is not installed (make chromium, as root)")
     sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
-    with tempfile.TemporaryDirectory(prefix="skyhelm-chromium-") as profile, \
-            sync_api.sync_playwright() as playwright:
+    with (
+        tempfile.TemporaryDirectory(prefix="skyhelm-chromium-") as profile,
+        sync_api.sync_playwright() as playwright,
+    ):
         context = playwright.chromium.launch_persistent_context(
-            profile, executable_path=str(CHROMIUM), args=CHROMIUM_ARGS, headless=True,
+            profile,
+            executable_path=str(CHROMIUM),
+            args=CHROMIUM_ARGS,
+            headless=True,
             viewport={"width": 1600, "height": 1000},
         )
         try:
             yield context
         finally:
             context.close()
+
+
+@pytest.fixture(scope="module")
+def serve(request: pytest.FixtureRequest) -> Iterator[Serve]:
+    """One `skyhelm serve` per test module, with the module's SERVE_ARGS."""
+    server = Serve(extra_args=list(getattr(request.module, "SERVE_ARGS", [])))
+    server.start()
+    try:
+        yield server
+    finally:
+        server.stop()
+        server.discard_log()
+
+
+@pytest.fixture(scope="module")
+def api(serve: Serve) -> Iterator[httpx.Client]:
+    with serve.client() as client:
+        yield client
+
+
+@pytest.fixture
+def page(browser: Any, serve: Serve) -> Iterator[Any]:
+    """A fresh dashboard page for one test (without the scene, which software WebGL makes
+    slow), closed after it."""
+    page = open_dashboard(browser, serve.url, scene=False)
+    try:
+        yield page
+    finally:
+        if not page.is_closed():
+            page.close()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import httpx
@@ -15,9 +16,7 @@ def open_dashboard(context: Any, url: str, scene: bool = True) -> Any:
     """Opens the page; without the scene, software WebGL leaves the CPU to the vehicle."""
     page = context.new_page()
     page.goto(url if scene else f"{url}&scene=off")
-    page.wait_for_function(
-        "document.getElementById('mode').textContent !== '–'", timeout=30_000
-    )
+    page.wait_for_function("document.getElementById('mode').textContent !== '–'", timeout=30_000)
     return page
 
 
@@ -25,12 +24,14 @@ def take_control(page: Any) -> None:
     page.click("#take-control")
     page.wait_for_selector("#release:not(.hidden)", timeout=10_000)
     page.wait_for_selector("#btn-arm:not([disabled])", timeout=10_000)
-    page.wait_for_function("document.getElementById('holder').textContent.startsWith('you')",
-                           timeout=10_000)
+    page.wait_for_function(
+        "document.getElementById('holder').textContent.startsWith('you')", timeout=10_000
+    )
 
 
-def click_and_wait_result(page: Any, selector: str, expect: str = "ACCEPTED",
-                          confirm: bool = False) -> str:
+def click_and_wait_result(
+    page: Any, selector: str, expect: str = "ACCEPTED", confirm: bool = False
+) -> str:
     """Clicks a command button and waits for the vehicle's answer to show in #result."""
     previous = page.text_content("#result")
     page.click(selector)
@@ -39,7 +40,8 @@ def click_and_wait_result(page: Any, selector: str, expect: str = "ACCEPTED",
     page.wait_for_function(
         "([prev]) => { const r = document.getElementById('result');"
         " return !r.classList.contains('pending') && r.textContent !== prev; }",
-        arg=[previous], timeout=RESULT_TIMEOUT_S * 1000,
+        arg=[previous],
+        timeout=RESULT_TIMEOUT_S * 1000,
     )
     text: str = page.text_content("#result") or ""
     assert expect in text, text
@@ -50,8 +52,11 @@ def arm_and_take_off(page: Any, api: httpx.Client, altitude: float) -> None:
     click_and_wait_result(page, "#btn-arm", confirm=True)
     page.fill("#takeoff-alt", str(altitude))
     click_and_wait_result(page, "#btn-takeoff")
-    wait_for(f"altitude above {altitude - 0.8} m",
-             lambda: altitude_m(vehicle_state(api)) > altitude - 0.8, 60.0)
+    wait_for(
+        f"altitude above {altitude - 0.8} m",
+        lambda: altitude_m(vehicle_state(api)) > altitude - 0.8,
+        60.0,
+    )
 
 
 def drag_slider_to(page: Any, selector: str, value: float) -> float:
@@ -76,3 +81,77 @@ def drag_slider_to(page: Any, selector: str, value: float) -> float:
         page.wait_for_timeout(30)
     page.mouse.up()
     return float(slider.input_value())
+
+
+def start_offboard_here(page: Any, api: httpx.Client) -> None:
+    """OFFBOARD from the page, holding the current position."""
+    page.select_option("#sp-type", "position")
+    page.click("#sp-from-here")
+    click_and_wait_result(page, "#btn-offboard-start")
+    wait_for("OFFBOARD", lambda: vehicle_state(api)["mode"] == "OFFBOARD", 10.0)
+
+
+class _RestPilot:
+    """Takes the lease over REST (from whoever holds it) to put the vehicle in a known state,
+    renewing it on every poll, and gives it back afterwards."""
+
+    def __init__(self, api: httpx.Client) -> None:
+        self.api = api
+        taken = api.post("/vehicles/1/control", json={"takeover": True})
+        taken.raise_for_status()
+        self.headers = {"X-Lease-Id": taken.json()["lease_id"]}
+
+    def command(self, path: str, body: dict[str, Any] | None = None) -> None:
+        answer = self.api.post(f"/vehicles/1/{path}", json=body or {}, headers=self.headers)
+        assert answer.status_code == 200, f"{path}: {answer.text}"
+
+    def wait(self, what: str, check: Callable[[dict[str, Any]], bool], timeout_s: float) -> None:
+        def renewed_state() -> bool:
+            self.api.put("/vehicles/1/control", headers=self.headers)
+            return check(vehicle_state(self.api))
+
+        wait_for(what, renewed_state, timeout_s, every_s=0.1)
+
+    def release(self) -> None:
+        self.api.delete("/vehicles/1/control", headers=self.headers)
+
+
+def _landed(state: dict[str, Any]) -> bool:
+    return state["landed_state"] == "ON_GROUND" and not state["armed"]
+
+
+def _hovering(state: dict[str, Any], altitude: float) -> bool:
+    return (
+        state["armed"] and state["landed_state"] == "IN_AIR" and altitude_m(state) > altitude - 0.8
+    )
+
+
+def settle_vehicle(api: httpx.Client, *, flying: bool, altitude: float = 5.0) -> None:
+    """Put the vehicle in a known state whatever earlier tests left: nobody in control, no
+    setpoint stream, and either disarmed on the ground or hovering in HOLD at least
+    ``altitude`` - 0.8 m up. A vehicle already in that state is left where it is."""
+    wait_for("the vehicle", lambda: api.get("/vehicles").json(), 30.0)
+    state = vehicle_state(api)
+    settled = _hovering(state, altitude) and state["mode"] == "HOLD" if flying else _landed(state)
+    if settled and not state["stream"]["active"] and state["lease"]["holder"] is None:
+        return
+    pilot = _RestPilot(api)
+    try:
+        if state["stream"]["active"] or state["mode"] == "OFFBOARD":
+            pilot.command("offboard/stop", {"then_mode": "HOLD"})
+        if flying and _hovering(vehicle_state(api), altitude):
+            pilot.command("mode", {"mode": "HOLD"})
+            return
+        if not _landed(vehicle_state(api)):
+            pilot.command("land")
+            pilot.wait("landed and disarmed", _landed, 60.0)
+        if flying:
+            pilot.command("arm")
+            pilot.command("takeoff", {"altitude_m": altitude})
+            pilot.wait(
+                f"hovering at {altitude} m",
+                lambda s: _hovering(s, altitude) and s["mode"] == "HOLD",
+                60.0,
+            )
+    finally:
+        pilot.release()

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import os
 import re
 import secrets
@@ -13,14 +14,15 @@ import subprocess
 import sys
 import tempfile
 import threading
-import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit
 
 import httpx
+
+from tests.waiting import wait_for_blocking as wait_for
 
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMIUM_ARGS = [
@@ -76,12 +78,13 @@ class Serve:
                     found.append(match.group(1))
 
         threading.Thread(target=read_stdout, daemon=True).start()
-        deadline = time.monotonic() + timeout_s
-        while not found:
-            if self._process.poll() is not None or time.monotonic() > deadline:
-                self.stop()
-                raise RuntimeError(f"skyhelm serve did not start:\n{self.log_tail()}")
-            time.sleep(0.05)
+        process = self._process
+        with contextlib.suppress(AssertionError):  # a timeout is reported below, with the log
+            wait_for("the ready line", lambda: found or process.poll() is not None, timeout_s,
+                     every_s=0.05)  # fmt: skip
+        if not found:
+            self.stop()
+            raise RuntimeError(f"skyhelm serve did not start:\n{self.log_tail()}")
         self.url = found[0]
         self.port = urlsplit(self.url).port or 0
         return self.url
@@ -108,14 +111,15 @@ class Serve:
     def restart(self) -> str:
         """Same port and token, so an open page can find the server again."""
         self.stop()
-        deadline = time.monotonic() + 30.0
-        while True:
+
+        def started() -> str | None:
             try:
                 return self.start()
-            except RuntimeError:
-                if time.monotonic() > deadline:
-                    raise
-                time.sleep(0.5)
+            except RuntimeError:  # the old process's port may not be free yet
+                return None
+
+        url: str = wait_for("skyhelm serve on its old port", started, 30.0, every_s=0.5)
+        return url
 
     def log_tail(self, lines: int = 40) -> str:
         if self._log is None:
@@ -127,18 +131,6 @@ class Serve:
     def client(self) -> httpx.Client:
         return httpx.Client(base_url=f"{self.base}/api/v1", timeout=10.0,
                             headers={"Authorization": f"Bearer {self.token}"})
-
-
-def wait_for(what: str, check: Callable[[], Any], timeout_s: float, every_s: float = 0.1) -> Any:
-    """Polls until check() returns something truthy; fails with the last value seen."""
-    deadline = time.monotonic() + timeout_s
-    last: Any = None
-    while time.monotonic() < deadline:
-        last = check()
-        if last:
-            return last
-        time.sleep(every_s)
-    raise AssertionError(f"timed out after {timeout_s} s waiting for {what}; last: {last!r}")
 
 
 def vehicle_state(api: httpx.Client, vehicle_id: int = 1) -> dict[str, Any]:
@@ -164,10 +156,10 @@ def speed_m_s(state: dict[str, Any]) -> float:
 @contextlib.contextmanager
 def empty_scene() -> Iterator[tuple[str, str]]:
     """A scene hub with no vehicle behind its own tiny app: the reference 'empty' picture."""
-    import uvicorn
     from fastapi import FastAPI
 
     from server.scene import SceneHub
+    from tests.serving import uvicorn_serving
 
     token = secrets.token_urlsafe(12)
     ready = threading.Event()
@@ -178,25 +170,23 @@ def empty_scene() -> Iterator[tuple[str, str]]:
         app = FastAPI()
         hub.mount(app, check_token=lambda t: t == token)
         await hub.start()
-        server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=0,
-                                               log_level="warning", lifespan="off"))
-        holder["server"] = server
-        task = asyncio.create_task(server.serve())
-        for _ in range(1000):
-            if server.started:
-                break
-            await asyncio.sleep(0.02)
-        holder["port"] = server.servers[0].sockets[0].getsockname()[1]
-        ready.set()
-        await task
-        await hub.stop()
+        stop = asyncio.Event()
+        holder["stop"] = functools.partial(asyncio.get_running_loop().call_soon_threadsafe,
+                                           stop.set)  # fmt: skip
+        try:
+            async with uvicorn_serving(app) as host:
+                holder["host"] = host
+                ready.set()
+                await stop.wait()
+        finally:
+            await hub.stop()
 
     thread = threading.Thread(target=lambda: asyncio.run(run()), daemon=True)
     thread.start()
     if not ready.wait(20.0):
         raise RuntimeError("empty scene server did not start")
     try:
-        yield f"http://127.0.0.1:{holder['port']}", token
+        yield f"http://{holder['host']}", token
     finally:
-        holder["server"].should_exit = True
+        holder["stop"]()
         thread.join(10.0)

@@ -1,11 +1,11 @@
 """The dashboard in Chromium against `skyhelm serve` with the simulated quad: one server for
-the module; the tests run in order as one flight."""
+the module, a fresh page for every test, and every test first puts the vehicle in the state
+it needs (on the ground or hovering, nobody in control), so they run in any order."""
 
 from __future__ import annotations
 
 import io
 import math
-import time
 from collections.abc import Iterator
 from typing import Any
 
@@ -13,104 +13,152 @@ import httpx
 import numpy as np
 import pytest
 
+from tests.waiting import holds_for_blocking
+
 from .flows import (
     arm_and_take_off,
     click_and_wait_result,
     drag_slider_to,
     open_dashboard,
+    settle_vehicle,
+    start_offboard_here,
     take_control,
 )
 from .harness import Serve, altitude_m, empty_scene, speed_m_s, vehicle_state, wait_for
 
-SIM_SPEED = "3"
+SERVE_ARGS = ["--sim-speed", "3"]
+# Pixels that differ by more than the threshold in _changed_pixels between two screenshots
+# of a drawing that has stopped changing (anti-aliasing noise).
+SETTLED_PIXELS = 20
 
 
-@pytest.fixture(scope="module")
-def serve() -> Iterator[Serve]:
-    server = Serve(extra_args=["--sim-speed", SIM_SPEED])
-    server.start()
-    try:
-        yield server
-    finally:
-        server.stop()
-        server.discard_log()
+@pytest.fixture
+def on_ground(api: httpx.Client) -> None:
+    settle_vehicle(api, flying=False)
 
 
-@pytest.fixture(scope="module")
-def api(serve: Serve) -> Iterator[httpx.Client]:
-    with serve.client() as client:
-        yield client
+@pytest.fixture
+def flying(api: httpx.Client, page: Any) -> None:
+    """Hovering in HOLD about 5 m up, with this test's page in control."""
+    settle_vehicle(api, flying=True)
+    take_control(page)
 
 
-@pytest.fixture(scope="module")
-def page(browser: Any, serve: Serve) -> Iterator[Any]:
+@pytest.fixture
+def scene_page(browser: Any, serve: Serve) -> Iterator[Any]:
     page = open_dashboard(browser, serve.url)
-    yield page
-    if not page.is_closed():
+    try:
+        yield page
+    finally:
         page.close()
 
 
-def _scene_frame(page: Any) -> Any:
-    frame = page.frame_locator("#scene")
-    frame.locator("canvas").first.wait_for(timeout=30_000)
-    return frame
+def _scene_canvas(page: Any, frame_selector: str = "#scene") -> Any:
+    canvas = page.frame_locator(frame_selector).locator("canvas").first
+    canvas.wait_for(timeout=30_000)
+    return canvas
+
+
+def _image(png: bytes, size: tuple[int, int] | None = None) -> Any:
+    from PIL import Image
+
+    image = Image.open(io.BytesIO(png)).convert("RGB")
+    return np.asarray(image.resize(size) if size else image, dtype=np.int16)
 
 
 def _changed_pixels(a: bytes, b: bytes) -> int:
-    from PIL import Image
-
-    first = np.asarray(Image.open(io.BytesIO(a)).convert("RGB"), dtype=np.int16)
-    second_image = Image.open(io.BytesIO(b)).convert("RGB").resize((first.shape[1], first.shape[0]))
-    second = np.asarray(second_image, dtype=np.int16)
+    first = _image(a)
+    second = _image(b, (first.shape[1], first.shape[0]))
     return int((np.abs(first - second).max(axis=2) > 40).sum())
 
 
-def test_page_shows_the_vehicle_and_observes_until_control_is_taken(page: Any) -> None:
+def _drawn_screenshot(canvas: Any) -> bytes:
+    """A screenshot of a canvas once something is drawn on it and the drawing has stopped
+    changing (two screenshots in a row alike)."""
+    shots = [canvas.screenshot()]
+
+    def settled() -> bytes | None:
+        shots.append(canvas.screenshot())
+        drawn = float(_image(shots[-1]).std()) > 1.0
+        alike = _changed_pixels(shots[-2], shots[-1]) <= SETTLED_PIXELS
+        return shots[-1] if drawn and alike else None
+
+    shot: bytes = wait_for("the scene drawn and still", settled, 30.0, every_s=0.25)
+    return shot
+
+
+def test_page_shows_the_vehicle_and_observes_until_control_is_taken(
+    on_ground: None, page: Any
+) -> None:
     assert page.text_content("#conn-status") == "connected"
-    assert page.text_content("#armed") == "DISARMED"
+    page.wait_for_function(
+        "document.getElementById('armed').textContent === 'DISARMED'", timeout=10_000
+    )
     assert "QUADROTOR" in (page.text_content("#vehicle-select") or "")
     assert page.is_disabled("#btn-arm")
     assert page.is_disabled("#btn-takeoff")
     assert page.is_visible("#take-control")
     modes = page.eval_on_selector_all("#mode-select option", "os => os.map(o => o.value)")
-    for mode in ("MANUAL", "ALTCTL", "POSCTL", "OFFBOARD", "HOLD", "TAKEOFF", "LAND", "RTL",
-                 "MISSION", "STABILIZED", "ACRO"):
+    for mode in (
+        "MANUAL",
+        "ALTCTL",
+        "POSCTL",
+        "OFFBOARD",
+        "HOLD",
+        "TAKEOFF",
+        "LAND",
+        "RTL",
+        "MISSION",
+        "STABILIZED",
+        "ACRO",
+    ):
         assert mode in modes
 
 
-def test_scene_draws_the_vehicle_through_the_proxied_socket(page: Any, serve: Serve,
-                                                            browser: Any) -> None:
-    frame = _scene_frame(page)
+def test_scene_draws_the_vehicle_through_the_proxied_socket(
+    scene_page: Any, serve: Serve, browser: Any
+) -> None:
+    canvas = _scene_canvas(scene_page)
     status = wait_for(
         "the viser client connected through the proxy",
-        lambda: (s := httpx.get(f"{serve.base}/scene/api/status",
-                                params={"token": serve.token}).json())["proxied_sockets"] >= 1
-        and s["viser_clients"] >= 1 and s,
+        lambda: (
+            (
+                s := httpx.get(
+                    f"{serve.base}/scene/api/status", params={"token": serve.token}
+                ).json()
+            )["proxied_sockets"]
+            >= 1
+            and s["viser_clients"] >= 1
+            and s
+        ),
         20.0,
     )
     assert status["vehicles"] == [1]
-    page.wait_for_timeout(1500)
-    with_vehicle = frame.locator("canvas").first.screenshot()
     with empty_scene() as (base, token):
         other = browser.new_page()
-        other.set_viewport_size(page.viewport_size)
+        other.set_viewport_size(scene_page.viewport_size)
         other.set_content(
             f'<iframe src="{base}/scene/?token={token}&darkMode" '
             'style="border:0;width:100%;height:100%;position:fixed;inset:0"></iframe>'
         )
-        box = page.locator("#scene").bounding_box()
+        box = scene_page.locator("#scene").bounding_box()
         other.locator("iframe").evaluate(
             f"(f) => {{ f.style.width='{box['width']}px'; f.style.height='{box['height']}px'; }}"
         )
-        empty_canvas = other.frame_locator("iframe").locator("canvas").first
-        empty_canvas.wait_for(timeout=30_000)
-        other.wait_for_timeout(2000)
-        empty = empty_canvas.screenshot()
+        empty = _drawn_screenshot(_scene_canvas(other, "iframe"))
         other.close()
-    assert _changed_pixels(with_vehicle, empty) > 200
+    # the scene with the vehicle comes to differ from the empty one
+    wait_for(
+        "the vehicle drawn",
+        lambda: _changed_pixels(canvas.screenshot(), empty) > 200,
+        30.0,
+        every_s=0.25,
+    )
 
 
-def test_click_in_the_scene_fills_the_reposition_target(page: Any) -> None:
+def test_click_in_the_scene_fills_the_reposition_target(scene_page: Any) -> None:
+    page = scene_page
+    _scene_canvas(page)
     box = page.locator("#scene").bounding_box()
     # Below the centre, where the camera looks down at the ground grid. Mouse events go
     # straight to the canvas: software WebGL is too slow for Playwright's stability checks.
@@ -122,11 +170,13 @@ def test_click_in_the_scene_fills_the_reposition_target(page: Any) -> None:
     state_global = page.evaluate("window.skyhelm.page.state.global")
     assert abs(lat - state_global["lat_deg"]) < 0.001
     assert abs(lon - state_global["lon_deg"]) < 0.001
-    page.uncheck("#scene-enable")  # the rest of the flight needs no WebGL
+    page.uncheck("#scene-enable")
     assert page.is_hidden("#scene")
 
 
-def test_take_control_arm_and_take_off_by_clicking(page: Any, api: httpx.Client) -> None:
+def test_take_control_arm_and_take_off_by_clicking(
+    on_ground: None, page: Any, api: httpx.Client
+) -> None:
     take_control(page)
     assert api.get("/vehicles/1").json()["lease"]["holder"]
     arm_and_take_off(page, api, 5.0)
@@ -134,65 +184,88 @@ def test_take_control_arm_and_take_off_by_clicking(page: Any, api: httpx.Client)
     log = page.text_content("#log") or ""
     assert "Arm: ACCEPTED" in log
     assert "Takeoff: ACCEPTED" in log
-    assert page.text_content("#armed") == "ARMED"
+    page.wait_for_function(
+        "document.getElementById('armed').textContent === 'ARMED'", timeout=10_000
+    )
 
 
-def test_parameter_panel_writes_and_shows_the_vehicles_echo(page: Any,
-                                                              api: httpx.Client) -> None:
-    page.fill("#param-input-RTL_LAND_DELAY", "1")
-    click_and_wait_result(page, "#param-set-RTL_LAND_DELAY", expect="= 1")
-    assert page.text_content("#param-RTL_LAND_DELAY") == "1"
-    assert api.get("/vehicles/1/params/RTL_LAND_DELAY").json()["value"] == 1
-    page.fill("#param-input-RTL_LAND_DELAY", "0")
-    click_and_wait_result(page, "#param-set-RTL_LAND_DELAY", expect="= 0")
+def test_parameter_panel_writes_and_shows_the_vehicles_echo(page: Any, api: httpx.Client) -> None:
+    take_control(page)
+    before = api.get("/vehicles/1/params/RTL_LAND_DELAY").json()["value"]
+    new = 1 if before != 1 else 2
+    page.fill("#param-input-RTL_LAND_DELAY", str(new))
+    click_and_wait_result(page, "#param-set-RTL_LAND_DELAY", expect=f"= {new}")
+    assert page.text_content("#param-RTL_LAND_DELAY") == str(new)
+    assert api.get("/vehicles/1/params/RTL_LAND_DELAY").json()["value"] == new
+    page.fill("#param-input-RTL_LAND_DELAY", f"{before:g}")
+    click_and_wait_result(page, "#param-set-RTL_LAND_DELAY", expect=f"= {before:g}")
 
 
-def test_refused_command_shows_the_vehicles_reason(page: Any) -> None:
+def test_refused_command_shows_the_vehicles_reason(flying: None, page: Any) -> None:
     text = click_and_wait_result(page, "#btn-disarm", expect="Disarm", confirm=True)
     assert "ACCEPTED" not in text
     assert "not landed" in text.lower() or "denied" in text.lower(), text
     assert "bad" in (page.get_attribute("#result", "class") or "")
 
 
-def test_start_offboard_then_altitude_slider_moves_the_vehicle(page: Any,
-                                                               api: httpx.Client) -> None:
-    page.select_option("#sp-type", "position")
-    page.click("#sp-from-here")
-    click_and_wait_result(page, "#btn-offboard-start")
-    wait_for("OFFBOARD", lambda: vehicle_state(api)["mode"] == "OFFBOARD", 10.0)
+def test_start_offboard_then_altitude_slider_moves_the_vehicle(
+    flying: None, page: Any, api: httpx.Client
+) -> None:
+    start_offboard_here(page, api)
     target = drag_slider_to(page, "#sp-alt_m-slider", 9.0)
     assert 8.0 <= target <= 10.0
     assert float(page.input_value("#sp-alt_m")) == pytest.approx(target)
-    wait_for(f"altitude within 0.5 m of the slider's {target} m",
-             lambda: abs(altitude_m(vehicle_state(api)) - target) < 0.5, 30.0)
+    wait_for(
+        f"altitude within 0.5 m of the slider's {target} m",
+        lambda: abs(altitude_m(vehicle_state(api)) - target) < 0.5,
+        30.0,
+    )
     assert page.text_content("#stream-active") == "streaming"
     assert "Hz" in (page.text_content("#stream-rate") or "")
     assert "ms" in (page.text_content("#stream-p99") or "")
 
 
-def test_keyboard_velocity_moves_the_vehicle_and_space_holds_it(page: Any,
-                                                                api: httpx.Client) -> None:
+def test_keyboard_velocity_moves_the_vehicle_and_space_holds_it(
+    flying: None, page: Any, api: httpx.Client
+) -> None:
+    start_offboard_here(page, api)
     start = vehicle_state(api)["position_ned"]
+
+    def moved_m() -> float:
+        now = vehicle_state(api)["position_ned"]
+        return math.hypot(now["north_m"] - start["north_m"], now["east_m"] - start["east_m"])
+
     page.click("#kbd-state")  # focus off the form fields, as a pilot would
     page.keyboard.down("w")
     wait_for("forward speed above 1 m/s", lambda: speed_m_s(vehicle_state(api)) > 1.0, 15.0)
-    page.wait_for_timeout(500)
+    wait_for("1 m flown", lambda: moved_m() > 1.0, 15.0)
     page.keyboard.press("Space")
     page.keyboard.up("w")
-    moved = vehicle_state(api)["position_ned"]
-    assert math.hypot(moved["north_m"] - start["north_m"], moved["east_m"] - start["east_m"]) > 1.0
     held = wait_for(
         "a position hold with the vehicle stopped",
-        lambda: (s := vehicle_state(api))["setpoint"]["type"] == "position_ned"
-        and speed_m_s(s) < 0.3 and s, 15.0)
+        lambda: (
+            (s := vehicle_state(api))["setpoint"]["type"] == "position_ned"
+            and speed_m_s(s) < 0.3
+            and s
+        ),
+        15.0,
+    )
     assert held["mode"] == "OFFBOARD"
-    time.sleep(1.0)
-    later = vehicle_state(api)["position_ned"]
-    assert math.hypot(later["north_m"] - held["position_ned"]["north_m"],
-                      later["east_m"] - held["position_ned"]["east_m"]) < 0.5
+
+    def near_the_hold() -> bool:
+        p = vehicle_state(api)["position_ned"]
+        return (
+            math.hypot(
+                p["north_m"] - held["position_ned"]["north_m"],
+                p["east_m"] - held["position_ned"]["east_m"],
+            )
+            < 0.5
+        )
+
+    holds_for_blocking("the vehicle within 0.5 m of where it stopped", near_the_hold, 1.0)
 
 
-def test_reposition_by_offset_from_the_form(page: Any, api: httpx.Client) -> None:
+def test_reposition_by_offset_from_the_form(flying: None, page: Any, api: httpx.Client) -> None:
     before = vehicle_state(api)["position_ned"]
     page.fill("#repo-north", "8")
     page.fill("#repo-east", "-4")
@@ -203,50 +276,55 @@ def test_reposition_by_offset_from_the_form(page: Any, api: httpx.Client) -> Non
     def arrived() -> bool:
         s = vehicle_state(api)
         p = s["position_ned"]
-        return (math.hypot(p["north_m"] - before["north_m"] - 8, p["east_m"] - before["east_m"] + 4)
-                < 1.0 and abs(altitude_m(s) - 7.0) < 0.7)
+        return (
+            math.hypot(p["north_m"] - before["north_m"] - 8, p["east_m"] - before["east_m"] + 4)
+            < 1.0
+            and abs(altitude_m(s) - 7.0) < 0.7
+        )
 
     wait_for("arrival 8 m north, 4 m west, at 7 m", arrived, 30.0)
 
 
-def test_return_lands_and_disarms(page: Any, api: httpx.Client) -> None:
+def test_return_lands_and_disarms(flying: None, page: Any, api: httpx.Client) -> None:
     click_and_wait_result(page, "#btn-rtl")
-    wait_for("landed and disarmed",
-             lambda: (s := vehicle_state(api))["landed_state"] == "ON_GROUND" and not s["armed"],
-             60.0, every_s=0.25)
-    page.wait_for_function("document.getElementById('armed').textContent === 'DISARMED'",
-                           timeout=10_000)
+    wait_for(
+        "landed and disarmed",
+        lambda: (s := vehicle_state(api))["landed_state"] == "ON_GROUND" and not s["armed"],
+        60.0,
+        every_s=0.25,
+    )
+    page.wait_for_function(
+        "document.getElementById('armed').textContent === 'DISARMED'", timeout=10_000
+    )
     home = vehicle_state(api)["home"]
     p = vehicle_state(api)["position_ned"]
     assert math.hypot(p["north_m"] - home["north_m"], p["east_m"] - home["east_m"]) < 1.5
 
 
-def test_closing_the_page_triggers_the_deadman_hold(browser: Any, serve: Serve, page: Any,
-                                                    api: httpx.Client) -> None:
-    if page.is_visible("#release"):
-        page.click("#release")
-    page.wait_for_selector("#take-control:not(.hidden)")
-    pilot = open_dashboard(browser, serve.url, scene=False)
-    take_control(pilot)
-    arm_and_take_off(pilot, api, 4.0)
-    pilot.select_option("#sp-type", "velocity")
-    click_and_wait_result(pilot, "#btn-offboard-start")
-    pilot.fill("#sp-north_m_s", "2")
-    pilot.dispatch_event("#sp-north_m_s", "input")
+def test_closing_the_page_triggers_the_deadman_hold(
+    flying: None, page: Any, api: httpx.Client
+) -> None:
+    page.select_option("#sp-type", "velocity")
+    click_and_wait_result(page, "#btn-offboard-start")
+    page.fill("#sp-north_m_s", "2")
+    page.dispatch_event("#sp-north_m_s", "input")
     wait_for("flying north at > 1.5 m/s", lambda: speed_m_s(vehicle_state(api)) > 1.5, 15.0)
-    pilot.close()
-    closed_at = time.monotonic()
-    wait_for("the deadman's hold (speed < 0.3 m/s)",
-             lambda: speed_m_s(vehicle_state(api)) < 0.3, 10.0, every_s=0.05)
+    page.close()
     # TTL (2 s) + 0.5 s, in wall time, plus the sim's braking and this machine's noise.
-    assert time.monotonic() - closed_at < 6.0
+    wait_for(
+        "the deadman's hold (speed < 0.3 m/s)",
+        lambda: speed_m_s(vehicle_state(api)) < 0.3,
+        6.0,
+        every_s=0.05,
+    )
     state = vehicle_state(api)
     assert state["mode"] == "OFFBOARD"
     assert state["lease"]["holder"] is None
 
 
 def test_page_reconnects_after_a_server_restart_and_takes_control_again(
-        page: Any, serve: Serve) -> None:
+    page: Any, serve: Serve
+) -> None:
     take_control(page)
     serve.restart()
     page.wait_for_function(
@@ -254,10 +332,12 @@ def test_page_reconnects_after_a_server_restart_and_takes_control_again(
         " && document.getElementById('log').textContent.includes('reconnected')",
         timeout=60_000,
     )
-    page.wait_for_function("document.getElementById('mode').textContent !== '–'",
-                           timeout=30_000)
+    page.wait_for_function("document.getElementById('mode').textContent !== '–'", timeout=30_000)
     assert "connected" in (page.text_content("#conn-status") or "")
     page.wait_for_selector("#release:not(.hidden)", timeout=30_000)
     with serve.client() as api:
-        assert wait_for("the lease held again",
-                        lambda: api.get("/vehicles/1/control").json().get("holder"), 15.0)
+        assert wait_for(
+            "the lease held again",
+            lambda: api.get("/vehicles/1/control").json().get("holder"),
+            15.0,
+        )
