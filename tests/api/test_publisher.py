@@ -194,3 +194,22 @@ def test_state_json_has_the_api_names_and_null_for_non_finite_numbers() -> None:
     assert {key: message[key] for key in rest if key not in ("type", "lease")} == {
         key: value for key, value in rest.items() if key not in ("type", "lease")
     }
+
+
+async def test_rest_reads_share_the_latest_encoding_with_the_lease_as_it_is_now() -> None:
+    vehicle = _vehicle()
+    lease = [("first", 1.0)]
+    publisher = StatePublisher(vehicle, lambda _sysid: lease[0], max_rate_hz=50.0)
+
+    before = json.loads(publisher.rest_json())
+    lease[0] = ("second", 2.0)
+    after = json.loads(publisher.rest_json())
+    assert publisher.encodes == 1
+    assert (before["lease"]["holder"], after["lease"]["holder"]) == ("first", "second")
+
+    vehicle.move()
+    assert json.loads(publisher.rest_json())["position_ned"]["north_m"] == 1.0
+    assert publisher.encodes == 2
+    await asyncio.sleep(0.1)  # older than a tick: the heartbeat age in it has moved on
+    publisher.rest_json()
+    assert publisher.encodes == 3

@@ -110,6 +110,22 @@ async def test_telemetry_carries_events_for_commands_and_lease(quad: Served) -> 
         assert mode["vehicle"] == 1
 
 
+async def test_telemetry_pushes_the_vehicle_list_and_scene_clicks(quad: Served) -> None:
+    async with connect(quad.url("telemetry", token=OBSERVER, vehicle=1, rate_hz=1)) as ws:
+        listing = await receive_until(ws, {"type": "vehicles"})
+        assert [(v["id"], v["type"], v["connected"]) for v in listing["vehicles"]] == [
+            (1, "QUADROTOR", True)
+        ]
+        publishers = quad.api.app.state.publishers
+        publishers.publish_click({"seq": 3, "north_m": 1.0, "east_m": 2.0, "lat_deg": 47.4})
+        click = await receive_until(ws, {"type": "scene_click"})
+        assert (click["seq"], click["east_m"], click["lat_deg"]) == (3, 2.0, 47.4)
+        vehicle = quad.api.app.state.api.registry.get(1)
+        vehicle.set_connected(False)  # as the link does when HEARTBEATs stop
+        lost = await receive_until(ws, {"type": "vehicles"})
+        assert lost["vehicles"][0]["connected"] is False
+
+
 async def test_telemetry_refuses_bad_token_foreign_origin_and_unknown_vehicle(
     quad: Served,
 ) -> None:
