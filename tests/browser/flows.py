@@ -78,7 +78,7 @@ def drag_slider_to(page: Any, selector: str, value: float) -> float:
     steps = 12
     for i in range(1, steps + 1):
         page.mouse.move(x_of(current + (value - current) * i / steps), y)
-        page.wait_for_timeout(30)
+        page.wait_for_timeout(30)  # not a wait: the pace of a hand's drag, step by step
     page.mouse.up()
     return float(slider.input_value())
 

@@ -30,6 +30,13 @@ async def _at(
     await wait_for(lambda: session.vehicle.snapshot().attitude is not None)
 
 
+async def _ready_for_offboard(session: ScriptedSession, prestream_s: float = 0.1) -> None:
+    """5 m up facing north, a peer that accepts every command, a short pre-stream."""
+    await _at(session, 0.0, 0.0, -5.0, 0.0)
+    session.peer.accept_commands()
+    session.vehicle.offboard_prestream_s = prestream_s
+
+
 def _setpoints(session: ScriptedSession) -> list[tuple[float, mavlink.MAVLink_message]]:
     return [
         (t, m) for t, m in session.peer.received if m.get_type() == "SET_POSITION_TARGET_LOCAL_NED"
@@ -62,9 +69,7 @@ async def test_start_offboard_streams_a_second_then_switches_and_holds_here(
 async def test_stream_survives_a_failsafe_blip_and_stops_when_the_user_picks_a_mode(
     scripted: ScriptedSession,
 ) -> None:
-    await _at(scripted, 0.0, 0.0, -5.0, 0.0)
-    scripted.peer.accept_commands()
-    scripted.vehicle.offboard_prestream_s = 0.1
+    await _ready_for_offboard(scripted)
     assert (await scripted.vehicle.start_offboard()).ok
 
     scripted.peer.report_mode(POSCTL, OFFBOARD)  # PX4's offboard-loss fallback
@@ -77,9 +82,7 @@ async def test_stream_survives_a_failsafe_blip_and_stops_when_the_user_picks_a_m
 
 
 async def test_stop_offboard_switches_mode_then_stops_streaming(scripted: ScriptedSession) -> None:
-    await _at(scripted, 0.0, 0.0, -5.0, 0.0)
-    scripted.peer.accept_commands()
-    scripted.vehicle.offboard_prestream_s = 0.1
+    await _ready_for_offboard(scripted)
     await scripted.vehicle.start_offboard(VelocityNed(1, 0, 0, yaw_deg=0))
 
     result = await scripted.vehicle.stop_offboard()
@@ -148,9 +151,7 @@ async def test_hold_position_setpoint_works_even_outside_the_envelope(
 async def test_every_offboard_start_after_a_stop_streams_first_again(
     scripted: ScriptedSession,
 ) -> None:
-    await _at(scripted, 0.0, 0.0, -5.0, 0.0)
-    scripted.peer.accept_commands()
-    scripted.vehicle.offboard_prestream_s = 0.3
+    await _ready_for_offboard(scripted, prestream_s=0.3)
     await scripted.vehicle.start_offboard()
     await scripted.vehicle.stop_offboard()
     await scripted.peer_heard_all()  # the last frames of the first stream have landed

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import pytest
 
@@ -39,19 +40,27 @@ async def test_connect_health_and_telemetry(mavsdk_drone: MavsdkFactory) -> None
     assert sim.instances[0].vehicle.params.get("MIS_TAKEOFF_ALT") == pytest.approx(4.0)
 
 
+async def _flying(
+    mavsdk_drone: MavsdkFactory, altitude_m: float, timeout_s: float, **sim: Any
+) -> tuple[Any, Any]:
+    """A MAVSDK drone on a new sim, armed, taken off and holding at altitude_m (PX4 holds
+    once there); the drone and the sim's vehicle."""
+    drone, cluster = await mavsdk_drone(**sim)
+    await first(drone.telemetry.health_all_ok(), bool, 20.0)
+    await drone.action.set_takeoff_altitude(altitude_m)
+    await drone.action.arm()
+    await drone.action.takeoff()
+    await first(drone.telemetry.flight_mode(), lambda m: str(m) == "HOLD", timeout_s)
+    return drone, cluster.instances[0].vehicle
+
+
 async def test_arm_takeoff_offboard_position_velocity_and_stop(
     mavsdk_drone: MavsdkFactory,
 ) -> None:
     from mavsdk_grpc.offboard import PositionNedYaw, VelocityNedYaw
 
-    drone, sim = await mavsdk_drone()
-    vehicle = sim.instances[0].vehicle
-    await first(drone.telemetry.health_all_ok(), bool, 20.0)
-    await drone.action.set_takeoff_altitude(5.0)
-    await drone.action.arm()
+    drone, vehicle = await _flying(mavsdk_drone, 5.0, 30.0)
     assert vehicle.armed
-    await drone.action.takeoff()
-    await first(drone.telemetry.flight_mode(), lambda m: str(m) == "HOLD", 30.0)
     assert -vehicle.truth.position_ned_m[2] > 4.0
 
     target = [5.0, -3.0, -6.0]
@@ -74,14 +83,8 @@ async def test_arm_takeoff_offboard_position_velocity_and_stop(
 async def test_goto_location_then_return_to_launch_lands_at_home(
     mavsdk_drone: MavsdkFactory,
 ) -> None:
-    drone, sim = await mavsdk_drone()
-    vehicle = sim.instances[0].vehicle
-    await first(drone.telemetry.health_all_ok(), bool, 20.0)
+    drone, vehicle = await _flying(mavsdk_drone, 10.0, 40.0)
     home = await first(drone.telemetry.home(), lambda h: True, 10.0)
-    await drone.action.set_takeoff_altitude(10.0)
-    await drone.action.arm()
-    await drone.action.takeoff()
-    await first(drone.telemetry.flight_mode(), lambda m: str(m) == "HOLD", 40.0)
 
     goal = vehicle.origin.to_geodetic(15.0, 0.0, 0.0)
     await drone.action.goto_location(goal.lat_deg, goal.lon_deg, home.absolute_altitude_m + 10,
@@ -102,12 +105,7 @@ async def test_vtol_transitions_to_fixed_wing_and_back(mavsdk_drone: MavsdkFacto
         airframes.make_airframe("vtol", airframes.default_params("vtol"))
     except (ValueError, KeyError):
         pytest.skip("the vtol airframe model is not available yet")
-    drone, _sim = await mavsdk_drone(airframe="vtol")
-    await first(drone.telemetry.health_all_ok(), bool, 20.0)
-    await drone.action.set_takeoff_altitude(30.0)
-    await drone.action.arm()
-    await drone.action.takeoff()
-    await first(drone.telemetry.flight_mode(), lambda m: str(m) == "HOLD", 60.0)
+    drone, _vehicle = await _flying(mavsdk_drone, 30.0, 60.0, airframe="vtol")
     await drone.action.transition_to_fixedwing()
     await first(drone.telemetry.vtol_state(), lambda s: str(s) == "FW", 30.0)
     await drone.action.transition_to_multicopter()
