@@ -11,7 +11,7 @@ from __future__ import annotations
 import asyncio
 import statistics
 import time
-from typing import Any, cast
+from typing import Any
 
 import viser
 from fastapi import FastAPI
@@ -19,11 +19,9 @@ from websockets.asyncio.client import connect
 from websockets.typing import Subprotocol
 
 from bench._results import machine_info, write_results
-from server.api.publisher import StatePublishers
-from server.link import Vehicle, VehicleState
-from server.link.aio import cancel_and_wait
-from server.link.state import StateSubscription, SubscriptionHub
+from server.link import VehicleState
 from server.scene import SceneHub
+from tests.api.state_fakes import pushing, scene_fed_by
 from tests.scene.conftest import FakeVehicle
 from tests.serving import uvicorn_serving
 
@@ -31,30 +29,6 @@ TOKEN = "bench-scene-token"
 MEASURE_S = 5.0
 # How often each fake vehicle reports a change, as PX4's telemetry streams would.
 TELEMETRY_RATE_HZ = 50.0
-
-
-class _ReportingVehicle(FakeVehicle):
-    """A fake vehicle that announces each change to its subscribers, as a link vehicle does."""
-
-    connected = True
-
-    def __init__(self, sysid: int) -> None:
-        super().__init__(sysid)
-        self.changes = SubscriptionHub(self.snapshot)
-
-    @property
-    def state_version(self) -> int:
-        return self.changes.version
-
-    def subscribe(self, min_interval_s: float = 0.0) -> StateSubscription:
-        return self.changes.subscribe(min_interval_s)
-
-
-async def _report(vehicles: list[_ReportingVehicle]) -> None:
-    while True:
-        for vehicle in vehicles:
-            vehicle.changes.notify()
-        await asyncio.sleep(1.0 / TELEMETRY_RATE_HZ)
 
 
 class _TimedHub(SceneHub):
@@ -94,23 +68,15 @@ async def _watch(hub: _TimedHub, host: str) -> tuple[int, float, float, int]:
 
 
 async def measure(vehicle_count: int) -> dict[str, Any]:
-    vehicles = [_ReportingVehicle(i + 1) for i in range(vehicle_count)]
+    vehicles = [pushing(FakeVehicle(i + 1)) for i in range(vehicle_count)]
     hub = _TimedHub()
     app = FastAPI()
     hub.mount(app, check_token=lambda t: t == TOKEN)
-    publishers = StatePublishers(
-        lambda: cast("list[Vehicle]", vehicles), lambda _sysid: (None, None)
-    )
-    await publishers.start([])
-    reporting = asyncio.create_task(_report(vehicles))
-    await hub.start(publishers)
-    try:
-        async with uvicorn_serving(app) as host:
-            applied, wall, cpu, received_bytes = await _watch(hub, host)
-    finally:
-        await hub.stop()
-        await cancel_and_wait(reporting)
-        await publishers.close()
+    async with (
+        scene_fed_by(hub, vehicles, TELEMETRY_RATE_HZ),
+        uvicorn_serving(app) as host,
+    ):
+        applied, wall, cpu, received_bytes = await _watch(hub, host)
     ticks_ms = sorted(t * 1000 for t in hub.tick_s)
     return {
         "vehicles": vehicle_count,
