@@ -44,7 +44,17 @@ class Settings(BaseSettings):
     sim_count: int = Field(1, ge=1, le=32)
     sim_speed: float = Field(1.0, gt=0.0, le=50.0)
     rate_hz: float = Field(20.0, ge=2.0, le=200.0, description="offboard setpoint rate")
-    lease_ttl_s: float = Field(2.0, ge=0.2, le=60.0)
+    lease_ttl_s: float = Field(
+        120.0, ge=0.2, le=86400.0, description="control lease TTL when the client asks none"
+    )
+    lease_ttl_min_s: float = Field(1.0, ge=0.2, le=86400.0)
+    lease_ttl_max_s: float = Field(600.0, ge=0.2, le=86400.0)
+    deadman_timeout_s: float = Field(
+        1.0, ge=0.2, le=10.0, description="live setpoints: brake and hold after this silence"
+    )
+    takeover_ask_s: float = Field(10.0, ge=0.5, le=120.0, description="holder's time to answer")
+    token_name: str = Field("pilot", min_length=1, max_length=32)
+    observer_token_name: str = Field("observer", min_length=1, max_length=32)
     on_operator_loss: OperatorLossAction = "hold"
     max_alt_rel_m: float | None = Field(120.0, gt=0.0)
     max_distance_m: float | None = Field(500.0, gt=0.0)
@@ -83,6 +93,15 @@ class Settings(BaseSettings):
         if token is not None and len(token.get_secret_value()) < 8:
             raise ValueError("tokens must be at least 8 characters")
         return token
+
+    @model_validator(mode="after")
+    def _lease_ttl_in_bounds(self) -> Settings:
+        if not self.lease_ttl_min_s <= self.lease_ttl_s <= self.lease_ttl_max_s:
+            raise ValueError(
+                f"lease_ttl_s ({self.lease_ttl_s}) must lie within lease_ttl_min_s "
+                f"({self.lease_ttl_min_s}) and lease_ttl_max_s ({self.lease_ttl_max_s})"
+            )
+        return self
 
     @model_validator(mode="after")
     def _tokens_differ(self) -> Settings:
