@@ -10,6 +10,10 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
+# Envelope and SetpointRejected live with the envelope checks; re-exported for callers here
+from server.link.envelope import Envelope as Envelope
+from server.link.envelope import SetpointRejected as SetpointRejected
+from server.link.envelope import check_limit
 from server.link.geo import ground_distance_m
 from server.link.setpoint_kinds import Attitude, BodyRates, PositionGlobal, RawLocal, kind_fields
 from server.link.setpoints import (
@@ -19,6 +23,9 @@ from server.link.setpoints import (
     MAV_FRAME_BODY_NED,
     MAV_FRAME_LOCAL_NED,
     POSITION_TARGET_TYPEMASK_FORCE_SET,
+    POSITION_TARGET_TYPEMASK_X_IGNORE,
+    POSITION_TARGET_TYPEMASK_Y_IGNORE,
+    POSITION_TARGET_TYPEMASK_Z_IGNORE,
     LocalFields,
     Setpoint,
     local_fields,
@@ -47,26 +54,6 @@ _CLASS_LABEL: dict[VehicleClass, str] = {
 _FIXED_WING = {1}
 _VTOL = {19, 20, 21, 22, 23, 24, 25}
 _ROVER = {10, 11}
-
-
-class SetpointRejected(ValueError):
-    """A setpoint that PX4 would drop or that leaves the envelope."""
-
-    def __init__(self, reason: str, field: str | None = None, limit: float | None = None):
-        super().__init__(reason)
-        self.reason = reason
-        self.field = field
-        self.limit = limit
-
-
-@dataclass
-class Envelope:
-    """Operator limits; None switches a limit off. Altitude and distance are from home."""
-
-    max_alt_rel_m: float | None = 120.0
-    max_distance_m: float | None = 500.0
-    max_speed_xy_m_s: float | None = 12.0
-    max_speed_z_m_s: float | None = 5.0
 
 
 @dataclass(frozen=True)
@@ -178,10 +165,13 @@ def _target_from_home(
         return ground_distance_m(lat0, lon0, sp.lat_deg, sp.lon_deg), alt
     if local is None or local.frame != MAV_FRAME_LOCAL_NED:
         return None, None
-    if local.type_mask & IGNORE_POSITION == IGNORE_POSITION:
-        return None, None
+    # PX4 reads each position axis on its own (velocity x/y with an altitude, for one)
+    mask = local.type_mask
     hn, he, hd = ref.home_ned
-    return math.hypot(local.x - hn, local.y - he), -(local.z - hd)
+    horizontal = POSITION_TARGET_TYPEMASK_X_IGNORE | POSITION_TARGET_TYPEMASK_Y_IGNORE
+    distance = None if mask & horizontal else math.hypot(local.x - hn, local.y - he)
+    alt = None if mask & POSITION_TARGET_TYPEMASK_Z_IGNORE else -(local.z - hd)
+    return distance, alt
 
 
 def _velocity(sp: Setpoint, local: LocalFields | None) -> tuple[float, float] | None:
@@ -206,9 +196,4 @@ def _check_envelope(
             ("max_speed_z_m_s", speeds[1], envelope.max_speed_z_m_s),
         ]
     for name, value, limit in limits:
-        if value is not None and limit is not None and value > limit:
-            raise SetpointRejected(
-                f"outside the envelope: {name.removeprefix('max_')} {value:.1f} > {limit:g}",
-                field=name,
-                limit=limit,
-            )
+        check_limit(name, value, limit, field=name)
