@@ -1,0 +1,134 @@
+"""The asyncio client: every call is awaited; telemetry is an async iterator."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from collections.abc import AsyncIterator, Callable, Coroutine
+from types import TracebackType
+from typing import Any
+
+import httpx
+from websockets.asyncio.client import connect
+
+from server.client.calls import DEFAULT_TIMEOUT_S, Call, Calls, timed_out, ws_url
+from server.client.errors import SkyHelmError
+from server.client.models import CommandResult, Lease, Message, State
+
+_Co = Coroutine[Any, Any, Any]
+
+
+class AsyncSkyHelm(
+    Calls[
+        Coroutine[Any, Any, CommandResult],
+        Coroutine[Any, Any, Lease],
+        Coroutine[Any, Any, State],
+        _Co,
+        Coroutine[Any, Any, float],
+        Coroutine[Any, Any, None],
+    ]
+):
+    """One vehicle of a SkyHelm server, for asyncio::
+
+        async with AsyncSkyHelm("http://127.0.0.1:8000/?token=...") as sky:
+            await sky.acquire(ttl_s=120)
+            await sky.arm()
+            async for message in sky.telemetry():
+                ...
+
+    The same calls as :class:`~server.client.SkyHelm`, awaited."""
+
+    def __init__(
+        self,
+        url: str,
+        token: str | None = None,
+        *,
+        vehicle: int = 1,
+        timeout_s: float = DEFAULT_TIMEOUT_S,
+    ) -> None:
+        super().__init__(url, token, vehicle=vehicle)
+        self._http = httpx.AsyncClient(timeout=timeout_s)
+
+    async def __aenter__(self) -> AsyncSkyHelm:
+        return self
+
+    async def __aexit__(
+        self,
+        kind: type[BaseException] | None,
+        error: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        await self.aclose()
+
+    async def aclose(self) -> None:
+        await self._http.aclose()
+
+    async def _send(self, call: Call) -> tuple[int, Any]:
+        try:
+            response = await self._http.request(**self._request(call))
+        except httpx.HTTPError as exc:
+            raise SkyHelmError(0, f"{call.method} {call.path}: {exc}") from exc
+        body = response.json() if response.content else None
+        return response.status_code, self._answer(call, response.status_code, body)
+
+    async def _command(self, call: Call) -> CommandResult:
+        status, body = await self._send(call)
+        return CommandResult.from_json(body, status)
+
+    async def _lease(self, call: Call) -> Lease:
+        return Lease.from_json((await self._send(call))[1])
+
+    async def _state(self, call: Call) -> State:
+        return State((await self._send(call))[1])
+
+    async def _json(self, call: Call) -> Any:
+        return (await self._send(call))[1]
+
+    async def _value(self, call: Call) -> float:
+        return float((await self._send(call))[1])
+
+    async def _none(self, call: Call) -> None:
+        await self._send(call)
+
+    def _now(self) -> float:
+        return asyncio.get_running_loop().time()
+
+    async def wait_until(
+        self,
+        predicate: Callable[[State], bool],
+        timeout_s: float,
+        *,
+        what: str = "the condition",
+        poll_s: float = 0.1,
+    ) -> State:
+        """Read the state until ``predicate(state)`` holds and return that state; a held
+        lease is renewed meanwhile. Raises ``WaitTimedOut`` (a TimeoutError) after
+        ``timeout_s``."""
+        deadline = self._now() + timeout_s
+        while True:
+            if self._renew_due():
+                await self.renew()
+            state = await self.state()
+            if predicate(state):
+                return state
+            if self._now() >= deadline:
+                raise timed_out(what, timeout_s, state)
+            await asyncio.sleep(poll_s)
+
+    async def telemetry(
+        self, *, rate_hz: float = 10.0, all_vehicles: bool = False
+    ) -> AsyncIterator[Message]:
+        """The telemetry socket's messages as they come (states latest-wins at ``rate_hz``,
+        events, statustexts); the socket closes when the iteration stops (use
+        ``contextlib.aclosing`` to close it at once after a ``break``)."""
+        url = ws_url(self.base_url, self.token, None if all_vehicles else self.vehicle_id, rate_hz)
+        async with connect(url) as ws:
+            async for text in ws:
+                data = json.loads(text)
+                yield Message(str(data.get("type")), data)
+
+    async def states(self, *, rate_hz: float = 10.0) -> AsyncIterator[State]:
+        """Only the state snapshots of the telemetry socket."""
+        async for message in self.telemetry(rate_hz=rate_hz):
+            if message.state is not None:
+                yield message.state

@@ -1,0 +1,114 @@
+"""What a refused call raises: one exception type per HTTP status the API answers with, each
+carrying the status, the reason, and whatever else the answer names (the MAV_RESULT of a
+refused command, the field and limit of bad input, the lease holder)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+
+class SkyHelmError(Exception):
+    """A call the server refused or could not carry out.
+
+    ``status`` is the HTTP status (0 when the server could not be reached), ``reason`` the
+    server's explanation; ``result`` and ``result_code`` are the command's outcome and
+    MAV_RESULT when a vehicle answered, ``field``/``limit`` name bad input, ``holder`` who
+    holds the control lease. ``body`` is the answer as received."""
+
+    def __init__(
+        self,
+        status: int,
+        reason: str,
+        *,
+        result: str | None = None,
+        result_code: int | None = None,
+        field: str | None = None,
+        limit: float | None = None,
+        holder: str | None = None,
+        body: Any = None,
+    ) -> None:
+        super().__init__(f"{status}: {reason}" if status else reason)
+        self.status = status
+        self.reason = reason
+        self.result = result
+        self.result_code = result_code
+        self.field = field
+        self.limit = limit
+        self.holder = holder
+        self.body = body
+
+
+class Unauthorized(SkyHelmError):
+    """401: no token, or a wrong one."""
+
+
+class Forbidden(SkyHelmError):
+    """403: an observer token on a control call, or a read-only replay."""
+
+
+class NotFound(SkyHelmError):
+    """404: no such vehicle (or request)."""
+
+
+class Refused(SkyHelmError):
+    """409: the vehicle refused (``result``, ``result_code``, its ``reason``), another pilot
+    holds the lease (``holder``), or a takeover was denied or not answered."""
+
+
+class InvalidInput(SkyHelmError):
+    """422: a body the server will not take; ``field`` names it, ``limit`` the bound broken."""
+
+
+class NoLease(SkyHelmError):
+    """423: a control call without the lease, or with one that lapsed or was taken over."""
+
+
+class Unavailable(SkyHelmError):
+    """503: the vehicle is not connected or its link was lost."""
+
+
+class NoAnswer(SkyHelmError):
+    """504: the vehicle did not answer (a command's retries ran out), or a wait timed out."""
+
+
+_BY_STATUS: dict[int, type[SkyHelmError]] = {
+    401: Unauthorized,
+    403: Forbidden,
+    404: NotFound,
+    409: Refused,
+    422: InvalidInput,
+    423: NoLease,
+    503: Unavailable,
+    504: NoAnswer,
+}
+
+
+def error_for(status: int, body: Any) -> SkyHelmError:
+    """The exception for an answer that is not a success: a command result (409/503/504
+    with ``result``), ``{"detail": {reason, field, limit, holder}}``, or pydantic's list of
+    field errors."""
+    cls = _BY_STATUS.get(status, SkyHelmError)
+    if isinstance(body, dict) and "result" in body:
+        return cls(
+            status,
+            body.get("reason") or body["result"],
+            result=body["result"],
+            result_code=body.get("result_code"),
+            body=body,
+        )
+    detail = body.get("detail") if isinstance(body, dict) else None
+    if isinstance(detail, dict):
+        return cls(
+            status,
+            str(detail.get("reason", detail)),
+            field=detail.get("field"),
+            limit=detail.get("limit"),
+            holder=detail.get("holder"),
+            body=body,
+        )
+    if isinstance(detail, list) and detail and isinstance(detail[0], dict):
+        # pydantic's errors: the first one's location, without the leading "body"
+        location = [str(part) for part in detail[0].get("loc", ()) if part != "body"]
+        reasons = "; ".join(str(error.get("msg", error)) for error in detail)
+        return cls(status, reasons, field=".".join(location) or None, body=body)
+    return cls(status, str(detail if detail is not None else body), body=body)

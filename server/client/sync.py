@@ -1,0 +1,123 @@
+"""The blocking client: each call returns when the server answered."""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable, Iterator
+from types import TracebackType
+from typing import Any
+
+import httpx
+from websockets.sync.client import connect
+
+from server.client.calls import DEFAULT_TIMEOUT_S, Call, Calls, timed_out, ws_url
+from server.client.errors import SkyHelmError
+from server.client.models import CommandResult, Lease, Message, State
+
+
+class SkyHelm(Calls[CommandResult, Lease, State, Any, float, None]):
+    """One vehicle of a SkyHelm server, over REST (and the telemetry WebSocket)::
+
+        with SkyHelm("http://127.0.0.1:8000/?token=...") as sky:
+            sky.acquire(ttl_s=120)
+            sky.arm()
+            sky.takeoff(altitude_m=5)
+            sky.wait_until(lambda s: s.altitude_m > 4.5, timeout_s=60)
+
+    Refusals raise :class:`~server.client.errors.SkyHelmError` subclasses. ``clock`` is what
+    waits measure time with."""
+
+    def __init__(
+        self,
+        url: str,
+        token: str | None = None,
+        *,
+        vehicle: int = 1,
+        timeout_s: float = DEFAULT_TIMEOUT_S,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        super().__init__(url, token, vehicle=vehicle)
+        self._clock = clock
+        self._http = httpx.Client(timeout=timeout_s)
+
+    def __enter__(self) -> SkyHelm:
+        return self
+
+    def __exit__(
+        self,
+        kind: type[BaseException] | None,
+        error: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self._http.close()
+
+    def _send(self, call: Call) -> tuple[int, Any]:
+        try:
+            response = self._http.request(**self._request(call))
+        except httpx.HTTPError as exc:
+            raise SkyHelmError(0, f"{call.method} {call.path}: {exc}") from exc
+        body = response.json() if response.content else None
+        return response.status_code, self._answer(call, response.status_code, body)
+
+    def _command(self, call: Call) -> CommandResult:
+        status, body = self._send(call)
+        return CommandResult.from_json(body, status)
+
+    def _lease(self, call: Call) -> Lease:
+        return Lease.from_json(self._send(call)[1])
+
+    def _state(self, call: Call) -> State:
+        return State(self._send(call)[1])
+
+    def _json(self, call: Call) -> Any:
+        return self._send(call)[1]
+
+    def _value(self, call: Call) -> float:
+        return float(self._send(call)[1])
+
+    def _none(self, call: Call) -> None:
+        self._send(call)
+
+    def _now(self) -> float:
+        return self._clock()
+
+    def wait_until(
+        self,
+        predicate: Callable[[State], bool],
+        timeout_s: float,
+        *,
+        what: str = "the condition",
+        poll_s: float = 0.1,
+    ) -> State:
+        """Read the state until ``predicate(state)`` holds and return that state; a held
+        lease is renewed meanwhile. Raises ``WaitTimedOut`` (a TimeoutError) after
+        ``timeout_s``."""
+        deadline = self._now() + timeout_s
+        while True:
+            if self._renew_due():
+                self.renew()
+            state = self.state()
+            if predicate(state):
+                return state
+            if self._now() >= deadline:
+                raise timed_out(what, timeout_s, state)
+            time.sleep(poll_s)
+
+    def telemetry(self, *, rate_hz: float = 10.0, all_vehicles: bool = False) -> Iterator[Message]:
+        """The telemetry socket's messages as they come (states latest-wins at ``rate_hz``,
+        events, statustexts); the socket closes when the iteration stops."""
+        url = ws_url(self.base_url, self.token, None if all_vehicles else self.vehicle_id, rate_hz)
+        with connect(url) as ws:
+            for text in ws:
+                data = json.loads(text)
+                yield Message(str(data.get("type")), data)
+
+    def states(self, *, rate_hz: float = 10.0) -> Iterator[State]:
+        """Only the state snapshots of the telemetry socket."""
+        for message in self.telemetry(rate_hz=rate_hz):
+            if message.state is not None:
+                yield message.state
