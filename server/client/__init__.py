@@ -15,7 +15,6 @@ websockets).
 """
 
 from server.client.aio import AsyncSkyHelm
-from server.client.calls import WaitTimedOut
 from server.client.errors import (
     Forbidden,
     InvalidInput,
@@ -26,6 +25,7 @@ from server.client.errors import (
     SkyHelmError,
     Unauthorized,
     Unavailable,
+    WaitTimedOut,
 )
 from server.client.models import CommandResult, Lease, Message, Ned, State
 from server.client.sync import SkyHelm

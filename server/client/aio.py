@@ -4,16 +4,17 @@ from __future__ import annotations
 
 import asyncio
 import json
-from collections.abc import AsyncIterator, Callable, Coroutine
+from collections.abc import AsyncGenerator, Callable, Coroutine
 from types import TracebackType
 from typing import Any
 
 import httpx
 from websockets.asyncio.client import connect
 
-from server.client.calls import DEFAULT_TIMEOUT_S, Call, Calls, timed_out, ws_url
-from server.client.errors import SkyHelmError
+from server.client.calls import DEFAULT_TIMEOUT_S, Call, Calls
+from server.client.errors import SkyHelmError, timed_out
 from server.client.models import CommandResult, Lease, Message, State
+from server.client.urls import ws_url
 
 _Co = Coroutine[Any, Any, Any]
 
@@ -117,7 +118,7 @@ class AsyncSkyHelm(
 
     async def telemetry(
         self, *, rate_hz: float = 10.0, all_vehicles: bool = False
-    ) -> AsyncIterator[Message]:
+    ) -> AsyncGenerator[Message, None]:
         """The telemetry socket's messages as they come (states latest-wins at ``rate_hz``,
         events, statustexts); the socket closes when the iteration stops (use
         ``contextlib.aclosing`` to close it at once after a ``break``)."""
@@ -127,7 +128,7 @@ class AsyncSkyHelm(
                 data = json.loads(text)
                 yield Message(str(data.get("type")), data)
 
-    async def states(self, *, rate_hz: float = 10.0) -> AsyncIterator[State]:
+    async def states(self, *, rate_hz: float = 10.0) -> AsyncGenerator[State, None]:
         """Only the state snapshots of the telemetry socket."""
         async for message in self.telemetry(rate_hz=rate_hz):
             if message.state is not None:

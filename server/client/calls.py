@@ -14,10 +14,10 @@ from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Generic, Literal, TypeVar
-from urllib.parse import parse_qs, urlsplit
 
-from server.client.errors import NoLease, SkyHelmError, error_for
+from server.client.errors import NoLease, error_for
 from server.client.models import Lease
+from server.client.urls import API_PREFIX, split_url
 from server.link.setpoint_kinds import SetpointKind, describe
 
 _Cmd = TypeVar("_Cmd")
@@ -27,7 +27,6 @@ _Json = TypeVar("_Json")
 _Value = TypeVar("_Value")
 _None = TypeVar("_None")
 
-API_PREFIX = "/api/v1"
 # Long enough for a takeover the holder is asked about (takeover_ask_s, 10 s by default)
 # and for a mode switch the vehicle confirms.
 DEFAULT_TIMEOUT_S = 30.0
@@ -47,19 +46,6 @@ class Call:
     control: bool = False
     lease: LeaseEffect = "keep"
     pick: str | None = None
-
-
-def split_url(url: str, token: str | None) -> tuple[str, str]:
-    """``http://host:port/?token=T`` (what ``skyhelm serve`` prints) or a base URL and a
-    token: the base URL and the token."""
-    parts = urlsplit(url)
-    if parts.scheme not in ("http", "https") or not parts.netloc:
-        raise ValueError(f"not an http(s) URL: {url!r}")
-    found = parse_qs(parts.query).get("token")
-    token = token or (found[0] if found else None)
-    if not token:
-        raise ValueError("no token: pass token= or the URL with ?token=")
-    return f"{parts.scheme}://{parts.netloc}", token
 
 
 def setpoint_json(setpoint: SetpointKind | Mapping[str, Any]) -> dict[str, Any]:
@@ -184,14 +170,17 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
             Call("POST", self._vehicle("/control"), body, control=True, lease="grant")
         )
 
-    def renew(self, *, ttl_s: float | None = None) -> _Lease:
-        body = _given(ttl_s=ttl_s) or None
+    def renew(self, *, ttl_s: float | None = None, client_name: str | None = None) -> _Lease:
+        """Renew the lease (any control call also does), optionally with a new TTL or
+        label."""
+        body = _given(ttl_s=ttl_s, client_name=client_name) or None
         return self._lease(
             Call("PUT", self._vehicle("/control"), body, control=True, lease="grant")
         )
 
     def control_status(self) -> _Json:
-        """Who holds control: holder, session, since_s, expires_in_s, ttl_s."""
+        """Who holds control: ``{holder, session, since_s, expires_in_s, ttl_s, request}``;
+        ``request`` is a pending takeover (``request_id``, ``by``) the holder may answer."""
         return self._json(Call("GET", self._vehicle("/control")))
 
     def release(self) -> _None:
@@ -300,22 +289,61 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
         return self._json(call)
 
     def brake(self) -> _Json:
-        """Brake, then hold where the vehicle stops."""
+        """Brake, then hold where the vehicle stops (HOLD mode when not streaming). Answers
+        ``{intent, via, setpoint, command, target, live}``, as every intent does."""
         return self._json(self._op("/intents/brake"))
 
-    def velocity(self, *, live: bool = True, **velocity: float | str) -> _Json:
-        """Fly at a velocity (``frame="body"`` with forward_m_s/right_m_s, or ``"ned"`` with
-        north_m_s/east_m_s; up_m_s, yaw_rate_deg_s); live (deadman) unless ``live=False``."""
-        return self._json(self._op("/intents/velocity", {**velocity, "live": live}, "PUT"))
+    def velocity(
+        self,
+        *,
+        frame: Literal["body", "ned"] = "body",
+        forward_m_s: float | None = None,
+        right_m_s: float | None = None,
+        north_m_s: float | None = None,
+        east_m_s: float | None = None,
+        up_m_s: float | None = None,
+        yaw_rate_deg_s: float | None = None,
+        hold_altitude: bool = False,
+        live: bool = True,
+    ) -> _Json:
+        """Fly at a velocity: forward/right in the body frame or north/east, ``up_m_s``
+        positive up, ``yaw_rate_deg_s`` clockwise seen from above (``hold_altitude``: keep
+        the altitude instead). Live input by default: without a new call within the
+        server's deadman timeout the vehicle brakes and holds; ``live=False`` flies it until
+        replaced. Needs OFFBOARD (``offboard_start``) to fly."""
+        body = _given(
+            forward_m_s=forward_m_s,
+            right_m_s=right_m_s,
+            north_m_s=north_m_s,
+            east_m_s=east_m_s,
+            up_m_s=up_m_s,
+            yaw_rate_deg_s=yaw_rate_deg_s,
+        )
+        body.update(frame=frame, hold_altitude=hold_altitude, live=live)
+        return self._json(self._op("/intents/velocity", body, "PUT"))
 
-    def offset(self, *, north_m: float, east_m: float, up_m: float | None = None) -> _Json:
+    def offset(
+        self,
+        *,
+        north_m: float = 0.0,
+        east_m: float = 0.0,
+        up_m: float = 0.0,
+        yaw_deg: float | None = None,
+    ) -> _Json:
         """Go by an offset from where the vehicle is (checked against the envelope)."""
-        body = _given(north_m=north_m, east_m=east_m, up_m=up_m)
+        body = _given(north_m=north_m, east_m=east_m, up_m=up_m, yaw_deg=yaw_deg)
         return self._json(self._op("/intents/offset", body))
 
-    def goto(self, *, lat_deg: float, lon_deg: float, alt_m: float | None = None) -> _Json:
-        """Go to a point (altitude above home; default: the current one)."""
-        body = _given(lat_deg=lat_deg, lon_deg=lon_deg, alt_m=alt_m)
+    def goto(
+        self,
+        *,
+        lat_deg: float,
+        lon_deg: float,
+        alt_rel_m: float | None = None,
+        yaw_deg: float | None = None,
+    ) -> _Json:
+        """Go to a point, ``alt_rel_m`` above home (default: the current altitude)."""
+        body = _given(lat_deg=lat_deg, lon_deg=lon_deg, alt_rel_m=alt_rel_m, yaw_deg=yaw_deg)
         return self._json(self._op("/intents/goto", body))
 
     # -- parameters -------------------------------------------------------------------
@@ -334,19 +362,3 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
             "PUT", self._vehicle(f"/params/{name}"), {"value": value}, control=True, pick="value"
         )
         return self._value(call)
-
-
-def ws_url(base_url: str, token: str, vehicle: int | None, rate_hz: float) -> str:
-    scheme = "wss" if base_url.startswith("https") else "ws"
-    query = f"rate_hz={rate_hz}&token={token}"
-    if vehicle is not None:
-        query += f"&vehicle={vehicle}"
-    return f"{scheme}://{base_url.split('://', 1)[1]}{API_PREFIX}/ws/telemetry?{query}"
-
-
-def timed_out(what: str, timeout_s: float, last: Any) -> SkyHelmError:
-    return WaitTimedOut(0, f"timed out after {timeout_s} s waiting for {what}", body=last)
-
-
-class WaitTimedOut(SkyHelmError, TimeoutError):
-    """``wait_until`` ran out of time; ``body`` is the last state seen."""

@@ -112,3 +112,11 @@ def error_for(status: int, body: Any) -> SkyHelmError:
         reasons = "; ".join(str(error.get("msg", error)) for error in detail)
         return cls(status, reasons, field=".".join(location) or None, body=body)
     return cls(status, str(detail if detail is not None else body), body=body)
+
+
+class WaitTimedOut(SkyHelmError, TimeoutError):
+    """``wait_until`` ran out of time; ``body`` is the last state seen."""
+
+
+def timed_out(what: str, timeout_s: float, last: Any) -> WaitTimedOut:
+    return WaitTimedOut(0, f"timed out after {timeout_s} s waiting for {what}", body=last)

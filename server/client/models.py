@@ -39,13 +39,16 @@ class CommandResult:
 @dataclass(frozen=True)
 class Lease:
     """The control lease as the server granted or renewed it. ``setpoint`` is the setpoint
-    the vehicle is flying when control was taken (a new holder starts from it), if any."""
+    the vehicle is flying when control was taken (a new holder starts from it), if any;
+    ``taken_from`` the previous holder after a takeover."""
 
     lease_id: str
     ttl_s: float
     holder: str
     expires_in_s: float
+    session: str = "rest"
     setpoint: dict[str, Any] | None = None
+    taken_from: str | None = None
     raw: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
     @classmethod
@@ -55,7 +58,9 @@ class Lease:
             ttl_s=float(body["ttl_s"]),
             holder=str(body.get("holder", "")),
             expires_in_s=float(body.get("expires_in_s") or 0.0),
+            session=str(body.get("session", "rest")),
             setpoint=body.get("setpoint"),
+            taken_from=body.get("taken_from"),
             raw=dict(body),
         )
 

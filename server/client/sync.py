@@ -4,16 +4,17 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Generator
 from types import TracebackType
 from typing import Any
 
 import httpx
 from websockets.sync.client import connect
 
-from server.client.calls import DEFAULT_TIMEOUT_S, Call, Calls, timed_out, ws_url
-from server.client.errors import SkyHelmError
+from server.client.calls import DEFAULT_TIMEOUT_S, Call, Calls
+from server.client.errors import SkyHelmError, timed_out
 from server.client.models import CommandResult, Lease, Message, State
+from server.client.urls import ws_url
 
 
 class SkyHelm(Calls[CommandResult, Lease, State, Any, float, None]):
@@ -107,7 +108,9 @@ class SkyHelm(Calls[CommandResult, Lease, State, Any, float, None]):
                 raise timed_out(what, timeout_s, state)
             time.sleep(poll_s)
 
-    def telemetry(self, *, rate_hz: float = 10.0, all_vehicles: bool = False) -> Iterator[Message]:
+    def telemetry(
+        self, *, rate_hz: float = 10.0, all_vehicles: bool = False
+    ) -> Generator[Message, None, None]:
         """The telemetry socket's messages as they come (states latest-wins at ``rate_hz``,
         events, statustexts); the socket closes when the iteration stops."""
         url = ws_url(self.base_url, self.token, None if all_vehicles else self.vehicle_id, rate_hz)
@@ -116,7 +119,7 @@ class SkyHelm(Calls[CommandResult, Lease, State, Any, float, None]):
                 data = json.loads(text)
                 yield Message(str(data.get("type")), data)
 
-    def states(self, *, rate_hz: float = 10.0) -> Iterator[State]:
+    def states(self, *, rate_hz: float = 10.0) -> Generator[State, None, None]:
         """Only the state snapshots of the telemetry socket."""
         for message in self.telemetry(rate_hz=rate_hz):
             if message.state is not None:

@@ -1,0 +1,28 @@
+"""Where the server is: the URL ``skyhelm serve`` prints, and the telemetry socket's."""
+
+from __future__ import annotations
+
+from urllib.parse import parse_qs, urlencode, urlsplit
+
+API_PREFIX = "/api/v1"
+
+
+def split_url(url: str, token: str | None) -> tuple[str, str]:
+    """``http://host:port/?token=T`` (what ``skyhelm serve`` prints) or a base URL and a
+    token: the base URL and the token."""
+    parts = urlsplit(url)
+    if parts.scheme not in ("http", "https") or not parts.netloc:
+        raise ValueError(f"not an http(s) URL: {url!r}")
+    found = parse_qs(parts.query).get("token")
+    token = token or (found[0] if found else None)
+    if not token:
+        raise ValueError("no token: pass token= or the URL with ?token=")
+    return f"{parts.scheme}://{parts.netloc}", token
+
+
+def ws_url(base_url: str, token: str, vehicle: int | None, rate_hz: float) -> str:
+    scheme = "wss" if base_url.startswith("https") else "ws"
+    query: dict[str, object] = {"rate_hz": rate_hz, "token": token}
+    if vehicle is not None:
+        query["vehicle"] = vehicle
+    return f"{scheme}://{base_url.split('://', 1)[1]}{API_PREFIX}/ws/telemetry?{urlencode(query)}"
