@@ -53,7 +53,7 @@ def check_limit(
     quantity = limit_name.removeprefix("max_")
     prefix = f"{what} " if what else ""
     raise SetpointRejected(
-        f"{prefix}outside the envelope: {quantity} {value:.1f} > {limit:g}",
+        f"{prefix}outside the envelope: {quantity} {value:.1f} > {limit_name} {limit:g}",
         field=field,
         limit=limit,
     )
