@@ -142,6 +142,9 @@ class Commander:
         self.onboard_heartbeat_s: float | None = None
         self.datalink_lost = False
         self.mode_changes = 0
+        # OFFBOARD requests still to be lost as in a race seen on PX4 v1.16: asked for just
+        # as AUTO.TAKEOFF completes, OFFBOARD is acked ACCEPTED, yet the vehicle ends in Hold
+        self.offboard_requests_lost = 0
         self._arm_listeners: list[Callable[[bool], None]] = []
 
     # -- queries -----------------------------------------------------------------------
@@ -168,6 +171,10 @@ class Commander:
             return MAV_RESULT_TEMPORARILY_REJECTED
         if self.armed and not self.mode_can_run(mode):
             return MAV_RESULT_TEMPORARILY_REJECTED
+        if mode == modes.OFFBOARD and self.offboard_requests_lost > 0:
+            self.offboard_requests_lost -= 1
+            self.switch_mode(modes.AUTO_LOITER)
+            return MAV_RESULT_ACCEPTED
         self.user_mode = mode
         self._set_nav_mode(mode)
         self._clear_failsafe()

@@ -5,17 +5,18 @@ through the core's requester; where PX4 acks before it acts, the reported state 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 
 from pymavlink.dialects.v20 import development as mavlink
 
 from server.link import modes
-from server.link.commands import CommandInt, CommandResult, not_sent
+from server.link.commands import CommandInt, CommandOutcome, CommandResult, not_sent
 from server.link.core import VehicleCore
 from server.link.requests import Confirmation
 from server.link.state import VTOL_STATE_NAMES
-from server.link.telemetry import Telemetry
+from server.link.telemetry import Telemetry, enum_name
 
 MAV_CMD_NAV_RETURN_TO_LAUNCH = 20
 MAV_CMD_NAV_LAND = 21
@@ -34,6 +35,16 @@ MAV_VTOL_STATE_FW = 4
 MAVLINK_MSG_ID_SET_GPS_GLOBAL_ORIGIN = 48
 PX4_ARM_DISARM_FORCE = 21196
 NAN = math.nan
+# MAV_TYPE_VTOL_*: the vehicle types that can take a DO_VTOL_TRANSITION
+_VTOL_TYPES = frozenset(
+    value for value, entry in mavlink.enums["MAV_TYPE"].items()
+    if entry.name.startswith("MAV_TYPE_VTOL")
+)  # fmt: skip
+# PX4 reports the armed state in its 1 Hz HEARTBEAT: an arm accepted less than this long ago
+# may not show in the reports yet
+ARMED_REPORT_PERIOD_S = 1.5
+_TAKING_OFF_MODES = frozenset({"TAKEOFF", "VTOL_TAKEOFF"})
+_IN_AIR_STATES = frozenset({2, 3})  # MAV_LANDED_STATE_IN_AIR, MAV_LANDED_STATE_TAKEOFF
 
 
 def _deg_e7(deg: float) -> int:
@@ -49,6 +60,9 @@ class Action:
     def __init__(self, core: VehicleCore, telemetry: Telemetry) -> None:
         self._core = core
         self._telemetry = telemetry
+        # when this client's own arm / disarm was last accepted, on the loop's clock
+        self._arm_accepted_s: float | None = None
+        self._disarm_accepted_s: float | None = None
 
     async def command_long(
         self, command: int, *params: float, confirm_timeout_s: float | None = None
@@ -56,14 +70,20 @@ class Action:
         return await self._core.requests.command_long(command, *params, timeout_s=confirm_timeout_s)
 
     async def arm(self, force: bool = False) -> CommandResult:
-        return await self.command_long(
+        result = await self.command_long(
             MAV_CMD_COMPONENT_ARM_DISARM, 1, PX4_ARM_DISARM_FORCE if force else 0
         )
+        if result.ok:
+            self._arm_accepted_s = self._core.now()
+        return result
 
     async def disarm(self, force: bool = False) -> CommandResult:
-        return await self.command_long(
+        result = await self.command_long(
             MAV_CMD_COMPONENT_ARM_DISARM, 0, PX4_ARM_DISARM_FORCE if force else 0
         )
+        if result.ok:
+            self._disarm_accepted_s = self._core.now()
+        return result
 
     async def takeoff(self, altitude_rel_m: float | None = None) -> CommandResult:
         """Climb to altitude_rel_m above home (None: PX4's MIS_TAKEOFF_ALT)."""
@@ -73,7 +93,22 @@ class Action:
             if home_alt is None:
                 return not_sent(MAV_CMD_NAV_TAKEOFF, "no home position yet")
             alt_amsl = home_alt + altitude_rel_m
-        return await self.command_long(MAV_CMD_NAV_TAKEOFF, NAN, NAN, NAN, NAN, NAN, NAN, alt_amsl)
+        # PX4 accepts a takeoff while disarmed (it only switches to TAKEOFF), e.g. after it
+        # disarmed itself on the ground (COM_DISARM_PRFLT): only a climb, armed, confirms it
+        t = self._telemetry
+        started_s = self._core.now()
+        known_disarmed = self._known_disarmed(started_s)
+        confirm = Confirmation(
+            reached=lambda: t.armed and (t.mode in _TAKING_OFF_MODES
+                                         or t.landed_state in _IN_AIR_STATES),
+            timeout_s=self.mode_confirm_timeout_s,
+            explain=lambda _s: self._why_not_taking_off(),
+            aborted=lambda: known_disarmed or self._disarmed_since(started_s),
+            aborted_outcome=CommandOutcome.NOT_CONFIRMED,
+        )  # fmt: skip
+        return await self._core.requests.command_long(
+            MAV_CMD_NAV_TAKEOFF, NAN, NAN, NAN, NAN, NAN, NAN, alt_amsl, confirm=confirm
+        )
 
     async def land(self) -> CommandResult:
         return await self.command_long(MAV_CMD_NAV_LAND)
@@ -85,8 +120,22 @@ class Action:
         return await self.set_mode("HOLD")
 
     async def set_mode(self, mode: str) -> CommandResult:
-        """DO_SET_MODE, ACCEPTED only once the vehicle reports the mode."""
-        target = mode.upper()
+        """DO_SET_MODE, ACCEPTED only once the vehicle reports the mode. Accepted but not
+        entered (PX4: OFFBOARD asked for just as AUTO.TAKEOFF ends, the vehicle ends in
+        HOLD) is asked once more before it is NOT_CONFIRMED with the mode observed."""
+        first = await self._set_mode_once(mode.upper())
+        if first.outcome is not CommandOutcome.NOT_CONFIRMED:
+            return first
+        second = await self._set_mode_once(mode.upper())
+        if second.outcome is not CommandOutcome.NOT_CONFIRMED:
+            return second
+        return dataclasses.replace(
+            second,
+            elapsed_ms=first.elapsed_ms + second.elapsed_ms,
+            reason=f"accepted twice, but the vehicle still reports {self._telemetry.mode}",
+        )
+
+    async def _set_mode_once(self, target: str) -> CommandResult:
         main, sub = modes.main_sub_from_name(target)
         t = self._telemetry
         confirm = Confirmation(
@@ -136,10 +185,17 @@ class Action:
         timeout_s: float = 30.0,
     ) -> CommandResult:
         """PX4 acks at once; with wait, resolve when EXTENDED_SYS_STATE shows the end state.
-        Back where it started after a transition means PX4 aborted it (quadchute, timeout)."""
+        Back where it started after a transition means PX4 aborted it (quadchute, timeout).
+        A vehicle that is not a VTOL never answers, so it is refused without asking."""
+        t = self._telemetry
+        if self._core.mav_type not in _VTOL_TYPES and t.vtol_state == 0:
+            name = enum_name("MAV_TYPE", self._core.mav_type, "MAV_TYPE_")
+            return not_sent(
+                MAV_CMD_DO_VTOL_TRANSITION,
+                f"not a VTOL ({name}): PX4 does not answer a transition on it",
+            )
         target = MAV_VTOL_STATE_FW if to_fixed_wing else MAV_VTOL_STATE_MC
         opposite = MAV_VTOL_STATE_MC if to_fixed_wing else MAV_VTOL_STATE_FW
-        t = self._telemetry
         in_transition = False
 
         def aborted() -> bool:
@@ -201,6 +257,36 @@ class Action:
             alt_amsl_m = here.alt_amsl_m if here is not None else NAN
         where = CommandInt(MAV_FRAME_GLOBAL, _deg_e7(lat_deg), _deg_e7(lon_deg), alt_amsl_m)
         return await self._core.requests.command_int(MAV_CMD_DO_SET_HOME, where, 0)
+
+    def _known_disarmed(self, now_s: float) -> bool:
+        """Reported disarmed, with no arm of ours since that the reports may not show yet."""
+        t = self._telemetry
+        if t.armed or t.armed_changed_s is None:
+            return False
+        armed_s = self._arm_accepted_s
+        unreported_arm = (armed_s is not None and armed_s >= t.armed_changed_s
+                          and now_s - armed_s < ARMED_REPORT_PERIOD_S)  # fmt: skip
+        return not unreported_arm
+
+    def _disarmed_since(self, since_s: float) -> bool:
+        t = self._telemetry
+        return not t.armed and t.armed_changed_s is not None and t.armed_changed_s >= since_s
+
+    def _why_not_taking_off(self) -> str:
+        t = self._telemetry
+        if t.armed:
+            return f"accepted, but the vehicle reports {t.mode}, {t.landed_state_name}"
+        disarmed_s = t.disarmed_s
+        ours = self._disarm_accepted_s is not None and (
+            disarmed_s is None or self._disarm_accepted_s >= disarmed_s - ARMED_REPORT_PERIOD_S
+        )
+        if disarmed_s is None or ours:
+            return "accepted, but the vehicle is disarmed: arm it, then take off"
+        ago_s = self._core.now() - disarmed_s
+        return (
+            f"accepted, but the vehicle disarmed itself {ago_s:.0f} s ago (PX4 disarms a "
+            "vehicle left on the ground armed, COM_DISARM_PRFLT): arm again, then take off"
+        )
 
     def _home_alt_amsl(self) -> float | None:
         home = self._telemetry.home

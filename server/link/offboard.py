@@ -55,7 +55,8 @@ class Offboard:
         return self._checked(sp, self.envelope)
 
     async def set_setpoint(self, sp: Setpoint) -> SentSetpoint:
-        """Check, resolve offsets, send now and keep streaming it."""
+        """Check, resolve offsets, send now and keep streaming it. The setpoint already
+        being streamed only renews it: the stream keeps its schedule."""
         return self._stream(self._checked(sp, self.envelope))
 
     async def hold_position(self) -> SentSetpoint:
@@ -122,6 +123,9 @@ class Offboard:
         core = self._core
         time_boot_ms = int((core.now() - core.created_s) * 1000) & 0xFFFFFFFF
         msg, sent = encode(resolved, core.mav, core.sysid, core.compid, time_boot_ms)
+        if self.streamer.active and resolved == self.setpoint:
+            # a client repeating its setpoint (a renewal) must not add sends between ticks
+            return sent
         self.setpoint = resolved
         self.streamer.stream(msg)
         core.hub.notify()

@@ -55,7 +55,8 @@ class Confirmation:
     reached: Callable[[], bool]
     timeout_s: float
     explain: Callable[[float], str]  # why not, given the seconds since the request
-    aborted: Callable[[], bool] = _never  # the vehicle gave up: FAILED without waiting on
+    aborted: Callable[[], bool] = _never  # the vehicle gave up: no waiting on
+    aborted_outcome: CommandOutcome = CommandOutcome.FAILED
 
 
 class _Pending:
@@ -308,7 +309,7 @@ class Requester:
         if confirm.reached():
             return CommandOutcome.ACCEPTED, None
         elapsed_s = asyncio.get_running_loop().time() - started
-        outcome = CommandOutcome.FAILED if confirm.aborted() else CommandOutcome.NOT_CONFIRMED
+        outcome = confirm.aborted_outcome if confirm.aborted() else CommandOutcome.NOT_CONFIRMED
         return outcome, confirm.explain(elapsed_s)
 
     def _finish(

@@ -3,6 +3,7 @@ names), STATUSTEXTs reassembled, events published when mode, arming or VTOL stat
 
 from __future__ import annotations
 
+import asyncio
 import dataclasses
 import math
 import time
@@ -103,7 +104,11 @@ class Telemetry:
         self._publish = publish
         self._mode_listeners: list[Callable[[], None]] = []
         self._assembler = StatusTextAssembler(clock)
+        self._expiry: asyncio.TimerHandle | None = None
         self._current_mode_s: float | None = None
+        # when the reported armed state last changed (None: never reported yet)
+        self.armed_changed_s: float | None = None
+        self.disarmed_s: float | None = None  # when a reported arm last ended
         self.statustext: list[state.StatusText] = []
         self.handlers: dict[str, Callable[[Any], None]] = {
             "HEARTBEAT": self._on_heartbeat,
@@ -160,8 +165,12 @@ class Telemetry:
     def _on_heartbeat(self, msg: mavlink.MAVLink_heartbeat_message) -> None:
         self.system_status = enum_name("MAV_STATE", msg.system_status, "MAV_STATE_")
         armed = bool(msg.base_mode & modes.MAV_MODE_FLAG_SAFETY_ARMED)
+        if armed != self.armed or self.armed_changed_s is None:
+            self.armed_changed_s = self._clock()
         if armed != self.armed:
             self.armed = armed
+            if not armed:
+                self.disarmed_s = self._clock()
             self._publish("armed", {"armed": armed})
         current_mode_fresh = (
             self._current_mode_s is not None
@@ -253,6 +262,23 @@ class Telemetry:
             msg.severity, text.rstrip("\0"), getattr(msg, "id", 0), getattr(msg, "chunk_seq", 0)
         ):
             self._add_statustext(severity, whole)
+        self._expire_later()
+
+    def _expire_later(self) -> None:
+        """A text whose last chunk got lost must still come out when no other text follows."""
+        if not self._assembler.pending or self._expiry is not None:
+            return
+        try:
+            loop = asyncio.get_running_loop()
+        except RuntimeError:  # fed outside a loop (a replay index, a unit test)
+            return
+        self._expiry = loop.call_later(self._assembler.timeout_s * 1.05, self._expire_texts)
+
+    def _expire_texts(self) -> None:
+        self._expiry = None
+        for severity, whole in self._assembler.expire():
+            self._add_statustext(severity, whole)
+        self._expire_later()
 
     def _add_statustext(self, severity: int, text: str) -> None:
         entry = state.StatusText(time.time(), severity_name(severity), text)

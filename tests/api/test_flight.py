@@ -150,14 +150,16 @@ async def test_disarm_in_the_air_is_refused(quad_api: Api) -> None:
     assert disarm.json()["result"] in ("TEMPORARILY_REJECTED", "DENIED")
 
 
-async def test_vtol_transition_on_a_quad_gets_no_answer_504(quad_api: Api) -> None:
-    # PX4 sends no ack for DO_VTOL_TRANSITION on a non-VTOL: the client times out.
+async def test_vtol_transition_on_a_quad_is_refused_at_once_409(quad_api: Api) -> None:
+    # PX4 sends no ack for DO_VTOL_TRANSITION on a non-VTOL: it is refused without asking.
     api = quad_api
     await api.take_control()
     response = await api.control("vtol/transition", {"to": "fixed_wing", "wait": False})
-    assert response.status_code == 504, response.text
-    assert response.json()["result"] == "TIMEOUT"
+    assert response.status_code == 409, response.text
+    assert response.json()["result"] == "FAILED"
     assert response.json()["result_code"] is None
+    assert response.json()["reason"].startswith("not a VTOL (QUADROTOR)")
+    assert response.json()["elapsed_ms"] < 100
 
 
 async def test_origin_and_home_are_set_and_reported(quad_api: Api) -> None:

@@ -100,6 +100,8 @@ async def test_vtol_transition_resolves_on_vtol_state_not_on_the_ack(
     scripted: ScriptedSession,
 ) -> None:
     peer = scripted.peer
+    peer.send(mavlink.MAVLink_extended_sys_state_message(3, 2))  # a VTOL, in MC
+    await wait_for(lambda: scripted.vehicle.snapshot().vtol_state == "MC")
 
     def transition(msg: mavlink.MAVLink_message) -> None:
         peer.ack(msg.command, 0)
@@ -119,6 +121,8 @@ async def test_vtol_transition_resolves_on_vtol_state_not_on_the_ack(
 async def test_vtol_transition_that_never_completes_is_not_confirmed(
     scripted: ScriptedSession,
 ) -> None:
+    scripted.peer.send(mavlink.MAVLink_extended_sys_state_message(4, 2))  # a VTOL, in FW
+    await wait_for(lambda: scripted.vehicle.snapshot().vtol_state == "FW")
     scripted.peer.on_command = lambda m: scripted.peer.ack(m.command, 0)
 
     result = await scripted.vehicle.vtol_transition(to_fixed_wing=False, timeout_s=0.2)

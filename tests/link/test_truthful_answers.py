@@ -1,0 +1,145 @@
+"""Answers that say what the vehicle did: a repeated setpoint renews the stream without an
+extra send, a VTOL transition on a multicopter is refused at once, a mode PX4 accepts but
+does not enter is asked for again, and a take-off after PX4 disarmed itself says so."""
+
+from __future__ import annotations
+
+import math
+
+from pymavlink.dialects.v20 import development as mavlink
+
+from server.link.commands import CommandOutcome
+from server.link.setpoints import PositionNed
+from tests.link.conftest import ScriptedSession, open_sim, wait_for
+
+STREAM_RATE_HZ = 50.0
+RENEWALS = 40
+MAV_TYPE_VTOL_FIXEDROTOR = 22  # a standard VTOL (the dialect still calls it RESERVED2)
+
+
+def _setpoint_times(session: ScriptedSession) -> list[float]:
+    return [
+        t for t, m in session.peer.received if m.get_type() == "SET_POSITION_TARGET_LOCAL_NED"
+    ]
+
+
+async def test_a_repeated_setpoint_renews_the_stream_without_an_extra_send(
+    scripted: ScriptedSession,
+) -> None:
+    scripted.peer.send(mavlink.MAVLink_local_position_ned_message(0, 0, 0, -5, 0, 0, 0))
+    await wait_for(lambda: scripted.vehicle.snapshot().position_ned is not None)
+    vehicle = scripted.vehicle
+    vehicle.stream_rate_hz = STREAM_RATE_HZ
+    setpoint = PositionNed(1.0, 2.0, -5.0, 90.0)
+    await vehicle.set_setpoint(setpoint)
+    await wait_for(lambda: len(_setpoint_times(scripted)) == 1, 1.0, "the first send")
+
+    for _ in range(RENEWALS):
+        await vehicle.set_setpoint(setpoint)
+        # paced by the stream itself: the next PUT goes once the peer got one more send
+        # (with an extra send per PUT, this loop would run through without waiting)
+        received = len(_setpoint_times(scripted))
+        await wait_for(lambda n=received: len(_setpoint_times(scripted)) > n, 1.0, "a tick")
+
+    times = _setpoint_times(scripted)
+    period_s = 1.0 / STREAM_RATE_HZ
+    scheduled = 1 + math.floor((times[-1] - times[0]) / period_s + 0.5)
+    assert len(times) == RENEWALS + 1
+    # every send is a scheduled tick: as many as the time they span allows, and no more
+    assert len(times) <= scheduled + 1, (len(times), scheduled)
+    assert times[-1] - times[0] >= (RENEWALS - 2) * period_s
+    assert vehicle.stream_stats().sent == len(times)
+
+
+async def test_vtol_transition_on_a_multicopter_is_refused_at_once(
+    scripted: ScriptedSession,
+) -> None:
+    result = await scripted.vehicle.vtol_transition(to_fixed_wing=True)
+
+    assert result.outcome is CommandOutcome.FAILED
+    assert result.reason == "not a VTOL (QUADROTOR): PX4 does not answer a transition on it"
+    assert result.elapsed_ms < 50
+    assert scripted.peer.commands(mavlink.MAV_CMD_DO_VTOL_TRANSITION) == []
+
+
+async def test_vtol_transition_goes_out_once_the_vehicle_says_it_is_a_vtol(
+    scripted: ScriptedSession,
+) -> None:
+    scripted.peer.mav_type = MAV_TYPE_VTOL_FIXEDROTOR
+    scripted.peer.heartbeat()
+    await wait_for(lambda: scripted.vehicle.mav_type == MAV_TYPE_VTOL_FIXEDROTOR)
+
+    result = await scripted.vehicle.vtol_transition(to_fixed_wing=True, timeout_s=0.1)
+
+    assert result.outcome is CommandOutcome.TIMEOUT  # the scripted peer never answers
+    assert scripted.peer.commands(mavlink.MAV_CMD_DO_VTOL_TRANSITION)
+
+
+async def test_offboard_accepted_but_not_entered_is_asked_for_once_more() -> None:
+    async with open_sim(speed=5.0) as session:
+        vehicle = session.vehicle
+        vehicle.mode_confirm_timeout_s = 1.0
+        vehicle.offboard_prestream_s = 0.2
+        commander = session.sim.instances[0].vehicle.commander
+        commander.offboard_requests_lost = 1
+
+        result = await vehicle.start_offboard()
+
+        assert result.ok, result
+        assert commander.offboard_requests_lost == 0
+        assert vehicle.snapshot().mode == "OFFBOARD"
+
+
+async def test_offboard_lost_twice_is_not_confirmed_with_the_mode_observed() -> None:
+    async with open_sim(speed=5.0) as session:
+        vehicle = session.vehicle
+        vehicle.mode_confirm_timeout_s = 1.0
+        vehicle.offboard_prestream_s = 0.2
+        commander = session.sim.instances[0].vehicle.commander
+        commander.offboard_requests_lost = 2
+
+        result = await vehicle.start_offboard()
+
+        assert result.outcome is CommandOutcome.NOT_CONFIRMED
+        assert result.reason == "accepted twice, but the vehicle still reports HOLD"
+        assert result.result_code == mavlink.MAV_RESULT_ACCEPTED
+        assert result.elapsed_ms >= 2000
+        assert commander.offboard_requests_lost == 0
+        assert not vehicle.streamer_active
+
+
+async def test_takeoff_after_px4_disarmed_itself_is_not_confirmed_and_says_why() -> None:
+    async with open_sim(speed=5.0) as session:
+        vehicle = session.vehicle
+        assert (await vehicle.arm()).ok
+        # PX4 disarms a vehicle left armed on the ground (COM_DISARM_PRFLT, 10 sim s)
+        await wait_for(lambda: vehicle.snapshot().armed, 3.0, "armed")
+        await wait_for(lambda: not vehicle.snapshot().armed, 6.0, "PX4's own disarm")
+
+        result = await vehicle.takeoff(3.0)
+
+        assert result.outcome is CommandOutcome.NOT_CONFIRMED
+        assert result.result_code == mavlink.MAV_RESULT_ACCEPTED
+        assert result.reason is not None
+        assert result.reason.startswith("accepted, but the vehicle disarmed itself")
+        assert "COM_DISARM_PRFLT" in result.reason
+        assert result.elapsed_ms < 1000  # known at once, not after a confirmation timeout
+
+
+async def test_takeoff_right_after_arming_is_confirmed_by_the_climb() -> None:
+    async with open_sim(speed=5.0) as session:
+        vehicle = session.vehicle
+        assert (await vehicle.arm()).ok
+        result = await vehicle.takeoff(3.0)
+
+        assert result.ok, result
+        assert vehicle.snapshot().armed
+
+
+async def test_takeoff_while_disarmed_is_not_confirmed(scripted: ScriptedSession) -> None:
+    scripted.peer.accept_commands()
+
+    result = await scripted.vehicle.takeoff()
+
+    assert result.outcome is CommandOutcome.NOT_CONFIRMED
+    assert result.reason == "accepted, but the vehicle is disarmed: arm it, then take off"
