@@ -40,8 +40,7 @@ class StartupError(RuntimeError):
 
 
 def create_app(settings: Settings) -> FastAPI:
-    observer = settings.observer_token.get_secret_value() if settings.observer_token else None
-    tokens = TokenChecker(settings.pilot_token(), observer)
+    tokens = TokenChecker.from_settings(settings)
     envelope = Envelope(
         max_alt_rel_m=settings.max_alt_rel_m,
         max_distance_m=settings.max_distance_m,
@@ -49,8 +48,8 @@ def create_app(settings: Settings) -> FastAPI:
         max_speed_z_m_s=settings.max_speed_z_m_s,
     )
     registry = VehicleRegistry(envelope, settings.rate_hz)
-    leases = LeaseManager(settings.lease_ttl_s)
-    deadman = Deadman(leases, registry, settings.on_operator_loss)
+    leases = LeaseManager.from_settings(settings)
+    deadman = Deadman.from_settings(leases, registry, settings)
     context = ApiContext(
         settings, tokens, registry, leases, deadman, read_only=is_replay(settings.connect)
     )

@@ -1,11 +1,14 @@
 """Tokens and roles. A pilot token may do everything, an observer token only reads; tokens are
-compared in constant time and never logged."""
+compared in constant time and never logged. Each token has a name (settings `token_name`,
+`observer_token_name`) that session names start with."""
 
 from __future__ import annotations
 
 import enum
 import hmac
 from collections.abc import Mapping
+
+from server.settings import Settings
 
 TOKEN_COOKIE = "skyhelm_token"
 TOKEN_QUERY = "token"
@@ -17,9 +20,32 @@ class Role(enum.Enum):
 
 
 class TokenChecker:
-    def __init__(self, pilot_token: str, observer_token: str | None = None) -> None:
+    def __init__(
+        self,
+        pilot_token: str,
+        observer_token: str | None = None,
+        *,
+        pilot_name: str = Role.PILOT.value,
+        observer_name: str = Role.OBSERVER.value,
+    ) -> None:
         self._pilot = pilot_token.encode()
         self._observer = observer_token.encode() if observer_token else None
+        # shown in holder names ("pilot · Chrome tab 7f3a"); never the token itself
+        self._names = {Role.PILOT: pilot_name, Role.OBSERVER: observer_name}
+
+    @classmethod
+    def from_settings(cls, settings: Settings) -> TokenChecker:
+        observer = settings.observer_token
+        return cls(
+            settings.pilot_token(),
+            observer.get_secret_value() if observer is not None else None,
+            pilot_name=settings.token_name,
+            observer_name=settings.observer_token_name,
+        )
+
+    def name_of(self, role: Role) -> str:
+        """The name of the token that gives this role."""
+        return self._names[role]
 
     def role_of(self, token: str | None) -> Role | None:
         if not token:

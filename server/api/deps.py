@@ -11,8 +11,10 @@ from typing import Annotated
 
 from fastapi import Depends, Header, Path, Request, Security
 from fastapi.security import APIKeyQuery, HTTPAuthorizationCredentials, HTTPBearer
+from starlette.datastructures import Address
 from starlette.requests import HTTPConnection
 
+from server.api.audit import AuditLog
 from server.api.auth import Role, TokenChecker, token_from
 from server.api.deadman import Deadman
 from server.api.errors import ApiError
@@ -31,6 +33,19 @@ class ApiContext:
     deadman: Deadman
     # A replayed recording: nobody may control, whatever the token.
     read_only: bool = False
+
+    @property
+    def audit(self) -> AuditLog:
+        return self.deadman.audit
+
+    def holder_name(self, client_name: str | None, session: str, client: Address | None) -> str:
+        """A session's name: the token's name, then the client's label, or where it
+        connects from when it gave none ("pilot · Chrome tab 7f3a", "pilot · rest
+        10.0.0.2:5121")."""
+        label = (client_name or "").strip()[:64]
+        if not label:
+            label = f"{session} {client.host}:{client.port}" if client else session
+        return f"{self.tokens.name_of(Role.PILOT)} · {label}"
 
 
 async def get_context(connection: HTTPConnection) -> ApiContext:

@@ -8,8 +8,9 @@ the client (code 1008): a client that stops reading cannot hold server memory or
 loop.
 
 Close codes: 4401 no/wrong token, 4403 observer token on the control socket, a read-only
-replay, or a foreign Origin, 4404 unknown vehicle, 4409 control held by another pilot,
-4408 lease lost.
+replay, or a foreign Origin, 4404 unknown vehicle, 4409 control held by another pilot (or a
+takeover denied or unanswered), 4408 lease lost (expired, taken over), 4422 a bad query
+parameter (ttl_s outside the server's bounds).
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ CLOSE_FORBIDDEN = 4403
 CLOSE_NOT_FOUND = 4404
 CLOSE_LEASE_LOST = 4408
 CLOSE_LEASE_HELD = 4409
+CLOSE_BAD_REQUEST = 4422
 
 
 class Sender:

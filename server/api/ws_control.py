@@ -1,5 +1,6 @@
 """The control socket: the pilot session, which holds the control lease while open and
-heartbeating, and carries setpoints and commands, each answered with a result."""
+not silent for its TTL, and carries setpoints (live ones watched by the deadman), commands,
+and the holder's answers to takeover requests, each answered with a result."""
 
 from __future__ import annotations
 
@@ -14,11 +15,20 @@ from pydantic import TypeAdapter
 from server.api.auth import Role
 from server.api.deps import ApiContext
 from server.api.errors import COMMAND_STATUS, ApiError, command_out, error_status
-from server.api.lease import Lease, LeaseEnd, LeaseHeld
+from server.api.lease import (
+    Lease,
+    LeaseEnd,
+    LeaseHeld,
+    TakeoverRefused,
+    TtlOutOfBounds,
+    UnknownRequest,
+)
 from server.api.operations import OPERATIONS
+from server.api.routes.control import lease_out
 from server.api.routes.setpoint import sent_out
 from server.api.schemas import SetpointBody
 from server.api.ws_common import (
+    CLOSE_BAD_REQUEST,
     CLOSE_LEASE_HELD,
     CLOSE_LEASE_LOST,
     CLOSE_NOT_FOUND,
@@ -36,9 +46,15 @@ _setpoint_adapter: TypeAdapter[Any] = TypeAdapter(SetpointBody)
 
 @router.websocket("/ws/control")
 async def control(
-    websocket: WebSocket, vehicle: int, takeover: bool = False, client_name: str | None = None
+    websocket: WebSocket,
+    vehicle: int,
+    takeover: bool = False,
+    force: bool = False,
+    client_name: str | None = None,
+    ttl_s: float | None = None,
 ) -> None:
-    """The pilot session: holds the control lease while open and heartbeating."""
+    """The pilot session: holds the control lease while open and not silent for ttl_s.
+    With takeover the holder is asked first (unless force); the first message is the lease."""
     context = await admit(websocket, Role.PILOT)
     if context is None:
         return
@@ -46,23 +62,14 @@ async def control(
     if target is None:
         await close_socket(websocket, CLOSE_NOT_FOUND, f"no vehicle {vehicle}")
         return
-    client = websocket.client
-    holder = (client_name or "")[:64] or (
-        f"pilot@{client.host}:{client.port}" if client else "pilot"
-    )
-    try:
-        lease = context.leases.acquire(target.sysid, holder, session="ws", takeover=takeover)
-    except LeaseHeld as held:
-        await websocket.send_json(
-            {"type": "error", "reason": str(held), "holder": held.lease.holder}
-        )
-        await close_socket(websocket, CLOSE_LEASE_HELD, "control held by another pilot")
+    lease = await _acquire(websocket, context, target, takeover, force, client_name, ttl_s)
+    if lease is None:
         return
     sender = Sender(websocket)
     session = _ControlSession(context, target, lease, sender)
     try:
         await sender.send_json(
-            {"type": "lease", "lease_id": lease.lease_id, "ttl_s": lease.ttl_s, "holder": holder}
+            {"type": "lease", **lease_out(lease, context, target).model_dump(mode="json")}
         )
         await session.run(websocket)
     except WebSocketDisconnect:
@@ -74,13 +81,48 @@ async def control(
         await close_socket(websocket, 1000)
 
 
+async def _acquire(
+    websocket: WebSocket,
+    context: ApiContext,
+    vehicle: Vehicle,
+    takeover: bool,
+    force: bool,
+    client_name: str | None,
+    ttl_s: float | None,
+) -> Lease | None:
+    """The session's lease, or None after telling the client why not and closing."""
+    holder = context.holder_name(client_name, "ws", websocket.client)
+    try:
+        if takeover:
+            return await context.leases.take_over(
+                vehicle.sysid,
+                holder,
+                session="ws",
+                ask_s=context.settings.takeover_ask_s,
+                force=force,
+                ttl_s=ttl_s,
+            )
+        return context.leases.acquire(vehicle.sysid, holder, session="ws", ttl_s=ttl_s)
+    except TtlOutOfBounds as exc:
+        await websocket.send_json(
+            {"type": "error", "reason": str(exc), "field": "ttl_s", "limit": exc.limit}
+        )
+        await close_socket(websocket, CLOSE_BAD_REQUEST, "ttl_s out of bounds")
+    except (LeaseHeld, TakeoverRefused) as refused:
+        holder_now = refused.lease.holder if isinstance(refused, LeaseHeld) else refused.holder
+        await websocket.send_json({"type": "error", "reason": str(refused), "holder": holder_now})
+        await close_socket(websocket, CLOSE_LEASE_HELD, "control held by another pilot")
+    return None
+
+
 class _ControlSession:
     def __init__(self, context: ApiContext, vehicle: Vehicle, lease: Lease, sender: Sender) -> None:
         self._context = context
         self._vehicle = vehicle
         self._lease = lease
         self._sender = sender
-        self._commands: set[asyncio.Task[None]] = set()
+        self._commands: set[asyncio.Future[None]] = set()
+        context.leases.add_listener(self._on_lease)
 
     async def run(self, websocket: WebSocket) -> None:
         receiver = asyncio.ensure_future(self._receive(websocket))
@@ -89,7 +131,10 @@ class _ControlSession:
             await asyncio.wait({receiver, lost}, return_when=asyncio.FIRST_COMPLETED)
             if lost.done() and not receiver.done():
                 end = self._lease.end.value if self._lease.end else "ended"
-                await self._sender.send_json({"type": "lease", "state": end})
+                told: dict[str, Any] = {"type": "lease", "state": end}
+                if self._lease.end is LeaseEnd.TAKEN_OVER:
+                    told["by"] = self._lease.taken_by
+                await self._sender.send_json(told)
                 await close_socket(websocket, CLOSE_LEASE_LOST, f"control lease {end}")
         finally:
             for task in (receiver, lost):
@@ -97,9 +142,27 @@ class _ControlSession:
             await asyncio.gather(receiver, lost, return_exceptions=True)
 
     async def finish(self) -> None:
+        self._context.leases.remove_listener(self._on_lease)
         for task in self._commands:
             task.cancel()
         await asyncio.gather(*self._commands, return_exceptions=True)
+
+    def _on_lease(self, lease: Lease, what: str) -> None:
+        """The holder hears of a takeover request on its own socket, to grant or deny it."""
+        request = lease.request
+        if lease is not self._lease or what != "takeover_requested" or request is None:
+            return
+        message = {
+            "type": "takeover_requested",
+            "request_id": request.request_id,
+            "by": request.by,
+            "timeout_s": request.timeout_s,
+        }
+        self._track(asyncio.ensure_future(self._sender.send_json(message)))
+
+    def _track(self, task: asyncio.Future[None]) -> None:
+        self._commands.add(task)
+        task.add_done_callback(self._commands.discard)
 
     async def _receive(self, websocket: WebSocket) -> None:
         while True:
@@ -122,29 +185,52 @@ class _ControlSession:
             if kind == "heartbeat":
                 await self._reply(request_id, "heartbeat", 200, {"ttl_s": self._lease.ttl_s})
             elif kind == "setpoint":
-                await self._setpoint(request_id, message.get("setpoint"))
+                live = message.get("live", False)
+                if not isinstance(live, bool):
+                    raise ApiError(422, "live must be true or false", field="live")
+                await self._setpoint(request_id, message.get("setpoint"), live=live)
             elif kind == "command":
                 self._start_command(request_id, message.get("name"), message.get("args"))
+            elif kind == "takeover_answer":
+                await self._takeover_answer(request_id, message)
             else:
-                raise ApiError(422, "type must be heartbeat, setpoint or command", field="type")
+                raise ApiError(
+                    422,
+                    "type must be heartbeat, setpoint, command or takeover_answer",
+                    field="type",
+                )
         except (json.JSONDecodeError, UnicodeDecodeError):
             await self._reply(request_id, "error", 422, {"detail": {"reason": "not JSON"}})
         except Exception as exc:
             await self._reply_error(request_id, "error", exc)
 
-    async def _setpoint(self, request_id: Any, body: Any) -> None:
+    async def _setpoint(self, request_id: Any, body: Any, *, live: bool) -> None:
         try:
             setpoint = _setpoint_adapter.validate_python(body)
             sent = await self._vehicle.set_setpoint(setpoint.to_link())
         except Exception as exc:
             await self._reply_error(request_id, "setpoint", exc)
             return
+        self._context.deadman.watch_live(self._vehicle.sysid, live=live)
         await self._reply(request_id, "setpoint", 200, sent_out(sent).model_dump(mode="json"))
 
+    async def _takeover_answer(self, request_id: Any, message: dict[str, Any]) -> None:
+        asked_id, grant = message.get("request_id"), message.get("grant")
+        if not isinstance(asked_id, str):
+            raise ApiError(422, "request_id must be the request's id", field="request_id")
+        if not isinstance(grant, bool):
+            raise ApiError(422, "grant must be true or false", field="grant")
+        try:
+            asked = self._context.leases.answer(
+                self._vehicle.sysid, self._lease.lease_id, asked_id, grant
+            )
+        except UnknownRequest as exc:
+            raise ApiError(404, str(exc), field="request_id") from None
+        body = {"request_id": asked.request_id, "grant": grant, "by": asked.by}
+        await self._reply(request_id, "takeover_answer", 200, body)
+
     def _start_command(self, request_id: Any, name: Any, args: Any) -> None:
-        task = asyncio.create_task(self._command(request_id, name, args))
-        self._commands.add(task)
-        task.add_done_callback(self._commands.discard)
+        self._track(asyncio.create_task(self._command(request_id, name, args)))
 
     async def _command(self, request_id: Any, name: Any, args: Any) -> None:
         try:

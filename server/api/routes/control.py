@@ -1,41 +1,62 @@
-"""The control lease over REST: acquire (or take over), renew, inspect, release."""
+"""The control lease over REST: acquire (or take over, asking the holder first or forcing it),
+renew, inspect, answer a takeover request, release; and the audit log of control events."""
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Any
 
-from fastapi import APIRouter, Body, Request, Response
+from fastapi import APIRouter, Body, Query, Request, Response
 
 from server.api.deps import Context, KnownVehicle, LeaseIdHeader, Pilot, Reader
 from server.api.errors import CONTROL_RESPONSES, READ_RESPONSES, ApiError
-from server.api.lease import Lease, LeaseHeld
-from server.api.schemas import ControlBody, ErrorOut, LeaseOut, LeaseStatusOut
+from server.api.lease import Lease, LeaseHeld, TakeoverRefused, TtlOutOfBounds, UnknownRequest
+from server.api.schemas import ErrorOut, setpoint_body
+from server.api.schemas.control import (
+    AuditEntryOut,
+    ControlBody,
+    ControlStatusOut,
+    LeaseOut,
+    RenewBody,
+    TakeoverAnswerBody,
+    TakeoverAnswerOut,
+    TakeoverRequestOut,
+)
+from server.link import Vehicle
 
-router = APIRouter(prefix="/vehicles/{vehicle_id}/control", tags=["control"])
+router = APIRouter(tags=["control"])
+_lease_router = APIRouter(prefix="/vehicles/{vehicle_id}/control")
+
+AUDIT_LIMIT_MAX = 1000
+_REFUSED: dict[int | str, dict[str, Any]] = {
+    409: {"model": ErrorOut, "description": "held by another, or the takeover refused"}
+}
 
 
-def lease_out(lease: Lease, context: Context) -> LeaseOut:
-    _, expires_in_s = context.leases.status(lease.vehicle_id)
+def lease_out(lease: Lease, context: Context, vehicle: Vehicle | None) -> LeaseOut:
+    """The lease as its holder sees it, with the setpoint being flown so it starts from it."""
+    now = context.leases.now()
+    flying = vehicle.offboard.setpoint if vehicle is not None and vehicle.streamer_active else None
     return LeaseOut(
         lease_id=lease.lease_id,
-        ttl_s=lease.ttl_s,
         holder=lease.holder,
-        expires_in_s=expires_in_s if expires_in_s is not None else 0.0,
+        session="ws" if lease.session == "ws" else "rest",
+        ttl_s=lease.ttl_s,
+        expires_in_s=round(lease.expires_in_s(now), 3),
+        since_s=round(max(0.0, now - lease.since), 3),
+        setpoint=setpoint_body(flying) if flying is not None else None,
+        taken_from=lease.taken_from,
     )
 
 
-def holder_name(request: Request, client_name: str | None) -> str:
-    if client_name:
-        return client_name
-    client = request.client
-    return f"pilot@{client.host}:{client.port}" if client else "pilot"
+def ttl_checked(context: Context, ttl_s: float | None) -> float:
+    """The TTL to grant, or a 422 naming the bound it broke."""
+    try:
+        return context.leases.ttl_for(ttl_s)
+    except TtlOutOfBounds as exc:
+        raise ApiError(422, str(exc), field="ttl_s", limit=exc.limit) from None
 
 
-@router.post(
-    "",
-    response_model=LeaseOut,
-    responses={**CONTROL_RESPONSES, 409: {"model": ErrorOut, "description": "held by another"}},
-)
+@_lease_router.post("", response_model=LeaseOut, responses={**CONTROL_RESPONSES, **_REFUSED})
 async def acquire_control(
     request: Request,
     _: Pilot,
@@ -44,39 +65,120 @@ async def acquire_control(
     body: Annotated[ControlBody | None, Body()] = None,
     x_lease_id: LeaseIdHeader = None,
 ) -> LeaseOut:
-    """Take the control lease (409 while another pilot holds it, unless `takeover`).
-    Sending the current X-Lease-Id renews it instead."""
+    """Take the control lease (409 while another pilot holds it). With `takeover` the
+    holder is asked first and has takeover_ask_s to grant it (409 when denied or
+    unanswered); with `takeover` and `force` it is taken at once. Sending the current
+    X-Lease-Id renews it instead."""
     body = body or ControlBody()
-    try:
-        lease = context.leases.acquire(
-            vehicle.sysid,
-            holder_name(request, body.client_name),
-            session="rest",
-            takeover=body.takeover,
-            lease_id=x_lease_id,
+    ttl_s = ttl_checked(context, body.ttl_s)
+    held = context.leases.current(vehicle.sysid)
+    if held is not None and x_lease_id is not None and x_lease_id == held.lease_id:
+        return lease_out(
+            context.leases.renew(vehicle.sysid, x_lease_id, ttl_s=ttl_s), context, vehicle
         )
-    except LeaseHeld as held:
-        raise ApiError(409, str(held), holder=held.lease.holder) from None
-    return lease_out(lease, context)
+    holder = context.holder_name(body.client_name, "rest", request.client)
+    try:
+        if body.takeover:
+            lease = await context.leases.take_over(
+                vehicle.sysid,
+                holder,
+                session="rest",
+                ask_s=context.settings.takeover_ask_s,
+                force=body.force,
+                ttl_s=ttl_s,
+            )
+        else:
+            lease = context.leases.acquire(vehicle.sysid, holder, session="rest", ttl_s=ttl_s)
+    except LeaseHeld as held_by:
+        raise ApiError(409, str(held_by), holder=held_by.lease.holder) from None
+    except TakeoverRefused as refused:
+        raise ApiError(409, str(refused), holder=refused.holder) from None
+    return lease_out(lease, context, vehicle)
 
 
-@router.put("", response_model=LeaseOut, responses=CONTROL_RESPONSES)
+@_lease_router.put("", response_model=LeaseOut, responses=CONTROL_RESPONSES)
 async def renew_control(
-    _: Pilot, vehicle: KnownVehicle, context: Context, x_lease_id: LeaseIdHeader = None
+    _: Pilot,
+    vehicle: KnownVehicle,
+    context: Context,
+    body: Annotated[RenewBody | None, Body()] = None,
+    x_lease_id: LeaseIdHeader = None,
 ) -> LeaseOut:
-    return lease_out(context.leases.renew(vehicle.sysid, x_lease_id), context)
+    """Renew the lease; optionally change its TTL and the client's label."""
+    body = body or RenewBody()
+    ttl_s = ttl_checked(context, body.ttl_s) if body.ttl_s is not None else None
+    lease = context.leases.renew(vehicle.sysid, x_lease_id, ttl_s=ttl_s)
+    if body.client_name is not None:
+        name = context.holder_name(body.client_name, lease.session, None)
+        lease = context.leases.rename(vehicle.sysid, x_lease_id, name)
+    return lease_out(lease, context, vehicle)
 
 
-@router.get("", response_model=LeaseStatusOut, responses=READ_RESPONSES)
-async def control_status(vehicle: KnownVehicle, context: Context, _: Reader) -> LeaseStatusOut:
-    holder, expires_in_s = context.leases.status(vehicle.sysid)
-    return LeaseStatusOut(holder=holder, expires_in_s=expires_in_s)
+@_lease_router.get("", response_model=ControlStatusOut, responses=READ_RESPONSES)
+async def control_status(vehicle: KnownVehicle, context: Context, _: Reader) -> ControlStatusOut:
+    """Who holds control, since when, until when, and a pending takeover request."""
+    lease = context.leases.current(vehicle.sysid)
+    if lease is None:
+        return ControlStatusOut()
+    now = context.leases.now()
+    asked = lease.request
+    return ControlStatusOut(
+        holder=lease.holder,
+        session="ws" if lease.session == "ws" else "rest",
+        since_s=round(max(0.0, now - lease.since), 3),
+        expires_in_s=round(lease.expires_in_s(now), 3),
+        ttl_s=lease.ttl_s,
+        request=None
+        if asked is None
+        else TakeoverRequestOut(
+            request_id=asked.request_id,
+            by=asked.by,
+            timeout_s=asked.timeout_s,
+            expires_in_s=round(max(0.0, asked.asked_at + asked.timeout_s - now), 3),
+        ),
+    )
 
 
-@router.delete("", status_code=204, response_class=Response, responses=CONTROL_RESPONSES)
+@_lease_router.delete("", status_code=204, response_class=Response, responses=CONTROL_RESPONSES)
 async def release_control(
     _: Pilot, vehicle: KnownVehicle, context: Context, x_lease_id: LeaseIdHeader = None
 ) -> Response:
     """Give control back. While the streamer runs, this applies on_operator_loss."""
     context.leases.release(vehicle.sysid, x_lease_id)
     return Response(status_code=204)
+
+
+@_lease_router.post(
+    "/requests/{request_id}",
+    response_model=TakeoverAnswerOut,
+    responses={**CONTROL_RESPONSES, 404: {"model": ErrorOut, "description": "no such request"}},
+)
+async def answer_takeover(
+    request_id: str,
+    body: TakeoverAnswerBody,
+    _: Pilot,
+    vehicle: KnownVehicle,
+    context: Context,
+    x_lease_id: LeaseIdHeader = None,
+) -> TakeoverAnswerOut:
+    """The holder grants or denies a takeover request (its X-Lease-Id proves it holds it)."""
+    try:
+        asked = context.leases.answer(vehicle.sysid, x_lease_id, request_id, body.grant)
+    except UnknownRequest as exc:
+        raise ApiError(404, str(exc)) from None
+    return TakeoverAnswerOut(request_id=asked.request_id, grant=body.grant, by=asked.by)
+
+
+@router.get("/control/audit", response_model=list[AuditEntryOut], responses=READ_RESPONSES)
+async def control_audit(
+    context: Context,
+    _: Reader,
+    vehicle: Annotated[int | None, Query(ge=0, le=255, description="one vehicle's only")] = None,
+    limit: Annotated[int, Query(ge=1, le=AUDIT_LIMIT_MAX)] = 100,
+) -> list[dict[str, Any]]:
+    """The newest control and deadman events, oldest first; kept across restarts in
+    `<log_dir>/control-audit.jsonl`."""
+    return context.audit.entries(vehicle, limit)
+
+
+router.include_router(_lease_router)

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, Body
+from fastapi import APIRouter, Body, Query
 
-from server.api.deps import ControlledVehicle
+from server.api.deadman import LIVE_DESCRIPTION
+from server.api.deps import Context, ControlledVehicle
 from server.api.errors import CONTROL_RESPONSES
 from server.api.schemas import SentSetpointOut, SetpointBody, setpoint_body
 from server.link import SentSetpoint
@@ -25,8 +26,13 @@ def sent_out(sent: SentSetpoint) -> SentSetpointOut:
 
 @router.put("/setpoint", response_model=SentSetpointOut, responses=CONTROL_RESPONSES)
 async def put_setpoint(
-    vehicle: ControlledVehicle, body: Annotated[SetpointBody, Body()]
+    vehicle: ControlledVehicle,
+    context: Context,
+    body: Annotated[SetpointBody, Body()],
+    live: Annotated[bool, Query(description=LIVE_DESCRIPTION)] = False,
 ) -> SentSetpointOut:
     """Replace the streamed setpoint. Refused with 422 (field, reason, limit) when it breaks
     the envelope or is a combination PX4 would drop for this vehicle type."""
-    return sent_out(await vehicle.set_setpoint(body.to_link()))
+    sent = await vehicle.set_setpoint(body.to_link())
+    context.deadman.watch_live(vehicle.sysid, live=live)
+    return sent_out(sent)
