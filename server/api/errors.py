@@ -104,7 +104,10 @@ def error_status(exc: Exception) -> tuple[int, dict[str, Any]] | None:
     if isinstance(exc, ValidationError):
         return 422, {"reason": _validation_reason(exc), "field": _validation_field(exc)}
     if isinstance(exc, LeaseInvalid):
-        return 423, {"reason": str(exc)}
+        locked: dict[str, Any] = {"reason": str(exc)}
+        if exc.holder is not None:  # who holds control now, e.g. after a takeover
+            locked["holder"] = exc.holder
+        return 423, locked
     if isinstance(exc, ParamError):
         return 409, {"reason": str(exc)}
     if isinstance(exc, TimeoutError):
