@@ -1,4 +1,5 @@
-"""STATUSTEXT reassembly: MAVLink 2 splits long texts into 50-byte chunks sharing an id."""
+"""STATUSTEXT reassembly (MAVLink 2 splits long texts into 50-byte chunks sharing an id)
+and the recent texts that explain a refusal."""
 
 from __future__ import annotations
 
@@ -18,52 +19,71 @@ def severity_name(severity: int) -> str:
     return str(severity)
 
 
+# what stands in for a chunk that never arrived
+MISSING_CHUNK = "…"
+
+
 @dataclass
 class _Pending:
     severity: int
     chunks: dict[int, str]
     started_s: float
+    last_seq: int | None = None  # known once the short (NUL-terminated) chunk arrived
+
+
+def clean_text(text: str) -> str:
+    """PX4 ends its texts with a tab (and pads with NULs): neither is part of the text."""
+    return text.rstrip("\0").rstrip()
 
 
 class StatusTextAssembler:
     """Feeds chunks in, yields whole texts.
 
-    A chunk shorter than 50 bytes ends its text (the sender NUL-terminates the last one).
-    A text whose last chunk got lost is released after ``timeout_s`` or when another id
-    starts, so a dropped frame costs at most a truncated text, never a lost one.
+    MAVLink 2 splits a text longer than 50 bytes over STATUSTEXTs sharing a non-zero ``id``,
+    numbered by ``chunk_seq``; a chunk shorter than 50 bytes ends its text, and a text in
+    one chunk has id 0. Texts of different ids may interleave. A chunk lost in the middle
+    shows as "…" once the last one arrives; a text whose last chunk got lost is released
+    after ``timeout_s`` (``expire``), so a dropped frame costs part of a text, never all.
     """
 
     def __init__(self, clock: Callable[[], float], timeout_s: float = 1.0) -> None:
         self._clock = clock
-        self._timeout_s = timeout_s
+        self.timeout_s = timeout_s
         self._pending: dict[int, _Pending] = {}
 
+    @property
+    def pending(self) -> bool:
+        return bool(self._pending)
+
     def feed(self, severity: int, text: str, text_id: int, chunk_seq: int) -> list[tuple[int, str]]:
-        """Return the texts completed by this chunk, as (severity, text)."""
-        done = self._expire()
+        """Return the texts completed by this chunk (and any timed out), as (severity, text)."""
+        done = self.expire()
         if text_id == 0:
-            done.append((severity, text))
+            done.append((severity, clean_text(text)))
             return done
-        for other_id in [i for i in self._pending if i != text_id]:
-            done.append(self._release(other_id))
         pending = self._pending.setdefault(text_id, _Pending(severity, {}, self._clock()))
         pending.chunks[chunk_seq] = text
         if len(text.encode("utf-8", "replace")) < STATUSTEXT_CHUNK_LEN:
+            pending.last_seq = chunk_seq
+        if pending.last_seq is not None:
+            # chunks travel in order: one missing before the last is lost, not late
             done.append(self._release(text_id))
         return done
 
     def flush(self) -> list[tuple[int, str]]:
         return [self._release(i) for i in list(self._pending)]
 
-    def _expire(self) -> list[tuple[int, str]]:
+    def expire(self) -> list[tuple[int, str]]:
+        """Release the texts whose chunks stopped coming more than timeout_s ago."""
         now = self._clock()
-        stale = [i for i, p in self._pending.items() if now - p.started_s > self._timeout_s]
+        stale = [i for i, p in self._pending.items() if now - p.started_s > self.timeout_s]
         return [self._release(i) for i in stale]
 
     def _release(self, text_id: int) -> tuple[int, str]:
         pending = self._pending.pop(text_id)
-        text = "".join(pending.chunks[seq] for seq in sorted(pending.chunks))
-        return pending.severity, text
+        last = pending.last_seq if pending.last_seq is not None else max(pending.chunks)
+        text = "".join(pending.chunks.get(seq, MISSING_CHUNK) for seq in range(last + 1))
+        return pending.severity, clean_text(text)
 
 
 MAV_SEVERITY_WARNING = 4
