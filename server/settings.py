@@ -7,7 +7,14 @@ from contextvars import ContextVar
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import Field, SecretStr, ValidationError, field_validator, model_validator
+from pydantic import (
+    Field,
+    SecretStr,
+    ValidationError,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
 from pydantic_settings import (
     BaseSettings,
     NoDecode,
@@ -94,14 +101,17 @@ class Settings(BaseSettings):
             raise ValueError("tokens must be at least 8 characters")
         return token
 
-    @model_validator(mode="after")
-    def _lease_ttl_in_bounds(self) -> Settings:
-        if not self.lease_ttl_min_s <= self.lease_ttl_s <= self.lease_ttl_max_s:
+    @field_validator("lease_ttl_max_s")
+    @classmethod
+    def _lease_ttl_in_bounds(cls, max_s: float, info: ValidationInfo) -> float:
+        # checked on the last of the three fields, so the message shows no other setting
+        default_s, min_s = info.data.get("lease_ttl_s"), info.data.get("lease_ttl_min_s")
+        if default_s is not None and min_s is not None and not min_s <= default_s <= max_s:
             raise ValueError(
-                f"lease_ttl_s ({self.lease_ttl_s}) must lie within lease_ttl_min_s "
-                f"({self.lease_ttl_min_s}) and lease_ttl_max_s ({self.lease_ttl_max_s})"
+                f"lease_ttl_s ({default_s}) must lie within lease_ttl_min_s ({min_s}) "
+                f"and lease_ttl_max_s ({max_s})"
             )
-        return self
+        return max_s
 
     @model_validator(mode="after")
     def _tokens_differ(self) -> Settings:
@@ -164,7 +174,9 @@ def _describe(exc: ValidationError) -> str:
         field = ".".join(str(part) for part in error["loc"]) or "settings"
         if error["type"] == "extra_forbidden":
             lines.append(f"{field}: unknown setting")
-        elif field in _SECRET_FIELDS:
+        # never echoed: a secret's value, or a whole-model error's input (every setting,
+        # tokens included)
+        elif field in _SECRET_FIELDS or not error["loc"]:
             lines.append(f"{field}: {error['msg']}")
         else:
             lines.append(f"{field}: {error['msg']} (got {error.get('input')!r})")
