@@ -18,9 +18,7 @@ MAV_TYPE_VTOL_FIXEDROTOR = 22  # a standard VTOL (the dialect still calls it RES
 
 
 def _setpoint_times(session: ScriptedSession) -> list[float]:
-    return [
-        t for t, m in session.peer.received if m.get_type() == "SET_POSITION_TARGET_LOCAL_NED"
-    ]
+    return [t for t, m in session.peer.received if m.get_type() == "SET_POSITION_TARGET_LOCAL_NED"]
 
 
 async def test_a_repeated_setpoint_renews_the_stream_without_an_extra_send(
