@@ -1,5 +1,6 @@
-"""Vehicle commands by name, with their request bodies: the REST routes and the WebSocket
-control session run the same table, so both refuse and answer alike."""
+"""Vehicle commands and intents by name, with their request bodies: the REST routes and the
+WebSocket control session run the same tables, so both refuse and answer alike. The checks
+(the envelope for take-off, reposition and moves) are the link's own."""
 
 from __future__ import annotations
 
@@ -10,9 +11,18 @@ from typing import Any
 from pydantic import BaseModel
 
 from server.api import schemas
-from server.api.errors import ApiError
-from server.link import CommandResult, Vehicle
-from server.link.geo import ground_distance_m
+from server.api.errors import COMMAND_STATUS, ApiError, command_out
+from server.api.schemas.intents import (
+    BrakeBody,
+    GeoTargetOut,
+    GotoIntentBody,
+    IntentOut,
+    OffsetIntentBody,
+    VelocityIntentBody,
+)
+from server.link import CommandResult, SentSetpoint, Vehicle, intents
+from server.link.envelope import GeoTarget, check_takeoff_altitude, check_target
+from server.link.intents import IntentResult
 
 
 class NoBody(BaseModel):
@@ -34,9 +44,7 @@ async def disarm(vehicle: Vehicle, body: schemas.ArmBody) -> CommandResult:
 
 
 async def takeoff(vehicle: Vehicle, body: schemas.TakeoffBody) -> CommandResult:
-    limit = vehicle.envelope.max_alt_rel_m
-    if body.altitude_m is not None and limit is not None and body.altitude_m > limit:
-        raise ApiError(422, "takeoff altitude above the envelope", field="altitude_m", limit=limit)
+    check_takeoff_altitude(vehicle.envelope, body.altitude_m)
     return await vehicle.takeoff(body.altitude_m)
 
 
@@ -110,28 +118,114 @@ OPERATIONS: dict[str, Operation] = {
 
 
 def _check_reposition_envelope(vehicle: Vehicle, body: schemas.RepositionBody) -> None:
-    """The envelope guards repositions as it guards setpoints: they fly the vehicle too."""
-    envelope = vehicle.envelope
-    home = vehicle.snapshot().home
-    if home is None:
-        return
-    if envelope.max_alt_rel_m is not None:
-        alt_rel_m = body.alt_rel_m
-        if alt_rel_m is None and body.alt_amsl_m is not None:
-            alt_rel_m = body.alt_amsl_m - home.alt_amsl_m
-        if alt_rel_m is not None and alt_rel_m > envelope.max_alt_rel_m:
-            raise ApiError(
-                422,
-                "reposition altitude above the envelope",
-                field="alt_rel_m" if body.alt_rel_m is not None else "alt_amsl_m",
-                limit=envelope.max_alt_rel_m,
-            )
-    if envelope.max_distance_m is not None:
-        distance_m = ground_distance_m(home.lat_deg, home.lon_deg, body.lat_deg, body.lon_deg)
-        if distance_m > envelope.max_distance_m:
-            raise ApiError(
-                422,
-                f"reposition target {distance_m:.0f} m from home, beyond the envelope",
-                field="lat_deg",
-                limit=envelope.max_distance_m,
-            )
+    """The envelope guards repositions as it guards setpoints: they fly the vehicle too.
+    Without a home neither the distance nor an AMSL altitude's height can be known."""
+    home = vehicle.telemetry.home
+    alt_rel_m = body.alt_rel_m
+    if alt_rel_m is None and body.alt_amsl_m is not None and home is not None:
+        alt_rel_m = body.alt_amsl_m - home.alt_amsl_m
+    check_target(
+        vehicle.envelope,
+        home,
+        GeoTarget(body.lat_deg, body.lon_deg, alt_rel_m),
+        what="reposition",
+        alt_field="alt_rel_m" if body.alt_rel_m is not None else "alt_amsl_m",
+    )
+
+
+# -- intents ------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Intent:
+    body: type[BaseModel]
+    run: Callable[[Vehicle, Any], Awaitable[IntentResult]]
+
+
+async def brake(vehicle: Vehicle, _: BrakeBody) -> IntentResult:
+    return await intents.brake(vehicle)
+
+
+async def velocity(vehicle: Vehicle, body: VelocityIntentBody) -> IntentResult:
+    x_m_s, y_m_s = body.xy_m_s()
+    return await intents.velocity(
+        vehicle,
+        frame=body.frame,
+        x_m_s=x_m_s,
+        y_m_s=y_m_s,
+        up_m_s=body.up_m_s,
+        yaw_rate_deg_s=body.yaw_rate_deg_s,
+        hold_altitude=body.hold_altitude,
+    )
+
+
+async def offset(vehicle: Vehicle, body: OffsetIntentBody) -> IntentResult:
+    return await intents.offset(
+        vehicle, north_m=body.north_m, east_m=body.east_m, up_m=body.up_m, yaw_deg=body.yaw_deg
+    )
+
+
+async def goto(vehicle: Vehicle, body: GotoIntentBody) -> IntentResult:
+    return await intents.goto(
+        vehicle,
+        lat_deg=body.lat_deg,
+        lon_deg=body.lon_deg,
+        alt_rel_m=body.alt_rel_m,
+        yaw_deg=body.yaw_deg,
+    )
+
+
+INTENTS: dict[str, Intent] = {
+    "brake": Intent(BrakeBody, brake),
+    "velocity": Intent(VelocityIntentBody, velocity),
+    "offset": Intent(OffsetIntentBody, offset),
+    "goto": Intent(GotoIntentBody, goto),
+}
+INTENT_NAMES = frozenset(INTENTS)
+
+
+@dataclass(frozen=True)
+class IntentAnswer:
+    """An intent's answer: its status and JSON body, and whether the deadman must watch it
+    (a live velocity) or stop watching (anything else)."""
+
+    status: int
+    body: dict[str, Any]
+    live: bool
+
+
+def sent_out(sent: SentSetpoint) -> schemas.SentSetpointOut:
+    """What went on the wire, as the setpoint routes and the control socket answer it."""
+    return schemas.SentSetpointOut(
+        setpoint=schemas.setpoint_body(sent.setpoint),
+        message=sent.message,
+        frame=sent.frame,
+        type_mask=sent.type_mask,
+    )
+
+
+def intent_out(result: IntentResult, *, live: bool) -> IntentOut:
+    target = result.target
+    return IntentOut(
+        intent=result.intent,  # type: ignore[arg-type]
+        via=result.via,
+        setpoint=sent_out(result.sent) if result.sent is not None else None,
+        command=command_out(result.command) if result.command is not None else None,
+        target=GeoTargetOut(
+            lat_deg=target.lat_deg, lon_deg=target.lon_deg, alt_rel_m=target.alt_rel_m
+        )
+        if target is not None
+        else None,
+        live=live,
+    )
+
+
+async def run_intent(name: str, vehicle: Vehicle, args: object) -> IntentAnswer:
+    """Validate ``args`` (a body model or its JSON form) and run the intent. Bad input,
+    envelope refusals and missing positions raise what ``errors.error_status`` answers."""
+    intent = INTENTS.get(name)
+    if intent is None:
+        raise ApiError(422, f"unknown intent; one of {', '.join(INTENTS)}", field="name")
+    body = args if isinstance(args, intent.body) else intent.body.model_validate(args or {})
+    result = await intent.run(vehicle, body)
+    live = bool(getattr(body, "live", False)) and result.sent is not None
+    status = 200 if result.command is None else COMMAND_STATUS[result.command.outcome]
+    return IntentAnswer(status, intent_out(result, live=live).model_dump(mode="json"), live)
