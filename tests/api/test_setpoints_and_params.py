@@ -141,15 +141,15 @@ async def test_second_pilot_gets_409_until_takeover(quad_api: Api) -> None:
     assert first.status_code == 200
     second = await client.post("/api/v1/vehicles/1/control", json={"client_name": "bob"})
     assert second.status_code == 409
-    assert second.json()["detail"]["holder"] == "alice"
+    assert second.json()["detail"]["holder"] == "pilot · alice"
     takeover = await client.post(
-        "/api/v1/vehicles/1/control", json={"client_name": "bob", "takeover": True}
+        "/api/v1/vehicles/1/control", json={"client_name": "bob", "takeover": True, "force": True}
     )
     assert takeover.status_code == 200
     old = {"X-Lease-Id": first.json()["lease_id"]}
     assert (await client.post("/api/v1/vehicles/1/hold", headers=old)).status_code == 423
     state = await quad_api.state()
-    assert state["lease"]["holder"] == "bob"
+    assert state["lease"]["holder"] == "pilot · bob"
 
 
 async def test_lease_is_renewed_by_control_calls_and_released_by_delete(quad_api: Api) -> None:
@@ -163,12 +163,16 @@ async def test_lease_is_renewed_by_control_calls_and_released_by_delete(quad_api
     assert (await client.delete("/api/v1/vehicles/1/control", headers=headers)).status_code == 204
     assert (await client.get("/api/v1/vehicles/1/control")).json() == {
         "holder": None,
+        "session": None,
+        "since_s": None,
         "expires_in_s": None,
+        "ttl_s": None,
+        "request": None,
     }
 
 
 async def test_unrenewed_lease_lapses_after_ttl() -> None:
-    async with sim_cluster("quad") as sim, api_for(sim, lease_ttl_s=0.4) as api:
+    async with sim_cluster("quad") as sim, api_for(sim, lease_ttl_s=0.4, lease_ttl_min_s=0.2) as api:
         headers = await api.take_control()
         await eventually(lambda: _lease_gone(api), 2.0, "the lease to lapse", poll_s=0.05)
         assert (
