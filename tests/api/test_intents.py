@@ -84,8 +84,10 @@ async def test_intents_fly_by_rest(quad_api: Api) -> None:
     assert back.status_code == 200, back.text
     assert back.json()["setpoint"]["setpoint"]["type"] == "position_global"
     await api.wait_state(
-        lambda s: _ground_distance_m(s, home["lat_deg"], home["lon_deg"]) < 0.6
-        and abs(s["global"]["alt_rel_m"] - 6.0) < 0.6,
+        lambda s: (
+            _ground_distance_m(s, home["lat_deg"], home["lon_deg"]) < 0.6
+            and abs(s["global"]["alt_rel_m"] - 6.0) < 0.6
+        ),
         15.0,
         "back over home",
     )
