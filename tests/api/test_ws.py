@@ -159,7 +159,7 @@ async def test_control_session_gets_lease_and_answers_every_message(quad: Served
         await ws.send("not json")
         assert (await receive(ws))["status"] == 422
         state = await quad.api.state()
-        assert state["lease"]["holder"] == "ws-pilot"
+        assert state["lease"]["holder"] == "pilot · ws-pilot"
         # the WS lease id works for REST control calls too
         rest = await quad.api.client.post(
             "/api/v1/vehicles/1/hold", headers={"X-Lease-Id": lease["lease_id"]}
@@ -174,9 +174,9 @@ async def test_control_socket_refuses_observer_and_second_pilot(quad: Served) ->
         await receive(first)
         async with connect(quad.url("control", vehicle=1)) as second:
             refusal = await receive(second)
-            assert refusal["holder"] == "first"
+            assert refusal["holder"] == "pilot · first"
             assert await close_code(second) == 4409
-        async with connect(quad.url("control", vehicle=1, takeover="true")) as third:
+        async with connect(quad.url("control", vehicle=1, takeover="true", force="true")) as third:
             assert (await receive(third))["type"] == "lease"
             lost = await receive_until(first, {"type": "lease"})
             assert lost["state"] == "taken_over"
