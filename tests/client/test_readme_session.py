@@ -1,0 +1,45 @@
+"""The README's curl session, pasted into bash as it stands (only the URL line replaced by
+the live server's), flies with default control settings and ends landed and disarmed."""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import httpx
+import pytest
+
+from tests.client.conftest import pilot_url
+from tests.serve_process import Served
+
+README = Path(__file__).resolve().parents[2] / "README.md"
+URL_LINE = re.compile(r"^URL='[^']*'.*$", re.MULTILINE)
+
+
+def curl_session() -> str:
+    """The README's first ```sh block that defines URL= and uses curl."""
+    for block in re.findall(r"```sh\n(.*?)```", README.read_text(), re.DOTALL):
+        if URL_LINE.search(block) and "curl" in block:
+            return str(block)
+    raise AssertionError("README.md has no curl session block")
+
+
+@pytest.mark.skipif(shutil.which("curl") is None, reason="needs curl")
+def test_the_readme_curl_session_flies_and_lands(served: Served) -> None:
+    script = URL_LINE.sub(f"URL='{pilot_url(served)}'", curl_session(), count=1)
+    assert served.pilot_token in script
+    result = subprocess.run(
+        ["bash", "-c", script], capture_output=True, text=True, timeout=200, check=False
+    )
+    assert result.returncode == 0, result.stderr
+    assert '"result":"ACCEPTED"' in result.stdout  # arm, takeoff, offboard, rtl
+    assert "max_speed_xy_m_s" in result.stdout  # the envelope's refusal, as shown
+    state = httpx.get(
+        f"{served.base_url}/api/v1/vehicles/1",
+        headers={"Authorization": f"Bearer {served.pilot_token}"},
+    ).json()
+    assert state["armed"] is False
+    assert state["landed_state"] == "ON_GROUND"
+    assert state["position_ned"]["north_m"] == pytest.approx(0.0, abs=2.0)  # home again
