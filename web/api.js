@@ -12,19 +12,49 @@ export class ApiError extends Error {
   }
 }
 
+/** One line for a refusal: the status, the reason, and what it names (the field and limit
+ * of a 422, the holder of a 409/423, the mode a 409 observed). */
 export function describeError(status, body) {
   const detail = body && body.detail !== undefined ? body.detail : body;
+  if (Array.isArray(detail)) {
+    return `${status}: ${detail.map((d) => `${fieldOf(d.loc)}${d.msg || JSON.stringify(d)}`).join("; ")}`;
+  }
   if (detail && typeof detail === "object") {
-    if (Array.isArray(detail)) return detail.map((d) => d.msg || JSON.stringify(d)).join("; ");
     const parts = [detail.reason || detail.result || JSON.stringify(detail)];
-    if (detail.field) parts.push(`field ${detail.field}`);
+    if (detail.field && !parts[0].includes(detail.field)) parts.push(`field ${detail.field}`);
     if (detail.limit !== undefined && detail.limit !== null) parts.push(`limit ${detail.limit}`);
+    if (detail.holder && !parts[0].includes(detail.holder)) parts.push(`held by ${detail.holder}`);
     return `${status}: ${parts.join(", ")}`;
   }
   return `${status}: ${detail ?? "error"}`;
 }
 
+function fieldOf(loc) {
+  const path = Array.isArray(loc) ? loc.filter((part) => part !== "body") : [];
+  return path.length ? `${path.join(".")}: ` : "";
+}
+
+// A rejected token stops the page asking: every request and socket checks this first.
+let rejected = false;
+const rejectedListeners = [];
+
+/** Calls listener(reason) once, when the server first rejects the token (HTTP 401 / WS 4401). */
+export function onTokenRejected(listener) {
+  rejectedListeners.push(listener);
+}
+
+export function tokenRejected() {
+  return rejected;
+}
+
+function reject(reason) {
+  if (rejected) return;
+  rejected = true;
+  for (const listener of rejectedListeners) listener(reason);
+}
+
 export async function request(method, path, body, extraHeaders = {}) {
+  if (rejected) throw new ApiError(401, { detail: "the token was rejected" });
   const headers = { Authorization: `Bearer ${token}`, ...extraHeaders };
   if (body !== undefined) headers["Content-Type"] = "application/json";
   const response = await fetch(API + path, {
@@ -33,24 +63,33 @@ export async function request(method, path, body, extraHeaders = {}) {
   const text = await response.text();
   let data = null;
   try { data = text ? JSON.parse(text) : null; } catch { data = text; }
+  if (response.status === 401) reject(describeError(401, data));
   if (!response.ok) throw new ApiError(response.status, data);
   return data;
 }
 
-function socketUrl(path, params) {
+export function socketUrl(path, params) {
   const scheme = location.protocol === "https:" ? "wss:" : "ws:";
   const query = new URLSearchParams({ ...params, token });
   return `${scheme}//${location.host}${API}${path}?${query}`;
 }
 
-// Backoff for reconnecting: quick first retry, then up to 3 s.
-function retryDelayMs(attempt) {
-  return Math.min(3000, 250 * 2 ** attempt);
+export const CLOSE_UNAUTHORIZED = 4401;
+export const RECONNECT_FIRST_MS = 500;
+export const RECONNECT_MAX_MS = 15000;
+
+/** Reconnect delay before attempt `attempt` (0, 1, …): exponential backoff from
+ * RECONNECT_FIRST_MS to RECONNECT_MAX_MS with full jitter, so tabs that lost the same server
+ * do not all come back at the same instant. */
+export function reconnectDelayMs(attempt, random = Math.random) {
+  return random() * Math.min(RECONNECT_MAX_MS, RECONNECT_FIRST_MS * 2 ** attempt);
 }
 
 /**
  * Telemetry of one vehicle (or, with vehicleId null, of all): states, events, the vehicle
- * list and scene clicks; calls onMessage for every message and onStatus on changes.
+ * list and scene clicks; calls onMessage for every message and onStatus on changes. The
+ * backoff restarts only once a message has arrived: a socket the server accepts and closes
+ * at once (no such vehicle yet, a server still starting) keeps backing off.
  */
 export class TelemetrySocket {
   constructor(vehicleId, { onMessage, onStatus, rateHz = 10 }) {
@@ -60,56 +99,70 @@ export class TelemetrySocket {
     this.rateHz = rateHz;
     this.closed = false;
     this.attempt = 0;
+    this.retry = null;
     this.everConnected = false;
     this.open();
   }
 
   open() {
-    if (this.closed) return;
+    this.retry = null;
+    if (this.closed || rejected) return;
     const params = { rate_hz: this.rateHz };
     if (this.vehicleId !== null) params.vehicle = this.vehicleId;
     const ws = new WebSocket(socketUrl("/ws/telemetry", params));
     this.ws = ws;
-    ws.onopen = () => {
-      const again = this.everConnected;
-      this.everConnected = true;
-      this.attempt = 0;
-      this.onStatus({ state: "connected", reconnected: again });
-    };
+    let heard = false;
     ws.onmessage = (event) => {
+      if (!heard) {
+        heard = true;
+        this.attempt = 0;
+        const again = this.everConnected;
+        this.everConnected = true;
+        this.onStatus({ state: "connected", reconnected: again });
+      }
       try { this.onMessage(JSON.parse(event.data)); } catch (err) { console.error(err); }
     };
     ws.onclose = (event) => {
       if (this.closed) return;
-      this.onStatus({ state: "lost", code: event.code, reason: event.reason });
-      setTimeout(() => this.open(), retryDelayMs(this.attempt++));
+      if (event.code === CLOSE_UNAUTHORIZED) {
+        reject(event.reason || "the server rejected the token");
+        return;
+      }
+      const delayMs = reconnectDelayMs(this.attempt++);
+      this.onStatus({ state: "lost", code: event.code, reason: event.reason, retryInMs: delayMs });
+      this.retry = setTimeout(() => this.open(), delayMs);
     };
   }
 
   close() {
     this.closed = true;
+    clearTimeout(this.retry);
     if (this.ws) this.ws.close();
   }
 }
 
 /**
- * The pilot session: holds the control lease while open and carries setpoints and commands;
- * every message gets its result back (matched by id). The socket and its heartbeats run in
- * control-worker.js; this side pings the worker to show the page is alive.
+ * The pilot session: holds the control lease while open and carries setpoints, commands and
+ * intents; every message gets its result back (matched by id). The socket and its heartbeats
+ * run in control-worker.js; this side pings the worker to show the page is alive.
+ * `takeover` asks the holder first; with `force` it takes control at once.
  */
 export class ControlSession {
-  constructor(vehicleId, { takeover = false, onLease, onClosed, clientName }) {
+  constructor(vehicleId, { takeover = false, force = false, clientName, onLease, onClosed, onMessage }) {
     this.vehicleId = vehicleId;
     this.onLease = onLease;
     this.onClosed = onClosed;
+    this.onMessage = onMessage || (() => {});
     this.pending = new Map();
     this.nextId = 1;
     this.leaseId = null;
-    this.ttlS = 2;
+    this.lease = null;
+    this.ended = null; // the server's last word on the lease: {state, by, …}
     this.socketOpen = false;
     this.closedByUs = false;
     const params = { vehicle: vehicleId };
     if (takeover) params.takeover = "true";
+    if (force) params.force = "true";
     if (clientName) params.client_name = clientName;
     this.worker = new Worker(new URL("./control-worker.js", import.meta.url), { type: "module" });
     this.worker.onmessage = (event) => this.fromWorker(event.data);
@@ -126,9 +179,11 @@ export class ControlSession {
   receive(message) {
     if (message.type === "lease" && message.lease_id) {
       this.leaseId = message.lease_id;
-      this.ttlS = message.ttl_s || 2;
+      this.lease = message;
       this.holder = message.holder;
       this.onLease(message);
+    } else if (message.type === "lease") {
+      this.ended = message;
     } else if (message.type === "error") {
       this.refusal = message;
     } else if (message.type === "result") {
@@ -137,6 +192,8 @@ export class ControlSession {
         this.pending.delete(message.id);
         waiter(message);
       }
+    } else {
+      this.onMessage(message);
     }
   }
 
@@ -149,7 +206,10 @@ export class ControlSession {
     }
     this.pending.clear();
     this.leaseId = null;
-    this.onClosed({ code: event.code, reason: event.reason, refusal: this.refusal, byUs: this.closedByUs });
+    if (event.code === CLOSE_UNAUTHORIZED) reject(event.reason || "the server rejected the token");
+    this.onClosed({
+      code: event.code, reason: event.reason, refusal: this.refusal, ended: this.ended, byUs: this.closedByUs,
+    });
   }
 
   get open() {
@@ -167,12 +227,17 @@ export class ControlSession {
     });
   }
 
+  /** A command or an intent (brake, velocity, offset, goto): the same message on the socket. */
   command(name, args = {}) {
     return this.send({ type: "command", name, args });
   }
 
   setpoint(setpoint) {
     return this.send({ type: "setpoint", setpoint });
+  }
+
+  answerTakeover(requestId, grant) {
+    return this.send({ type: "takeover_answer", request_id: requestId, grant });
   }
 
   close() {

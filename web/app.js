@@ -2,21 +2,21 @@
 // answer shown is the one the API returned. The page polls nothing: state, events, the
 // vehicle list and clicks in the 3D scene all come on the telemetry socket.
 
-import { TelemetrySocket, request, token } from "./api.js";
+import { TelemetrySocket, onTokenRejected, reconnectDelayMs, request, token } from "./api.js";
 import {
-  confirmThen, continueHold, currentBody, inControl, offsetLatLon, panel, releaseControl,
-  renderHolder, reposition, runCommand, showResult, showSetpointType, takeControl, updateControls,
+  brake, confirmThen, goByOffset, goTo, panel, runCommand, showResult, showSetpointType,
+  startOffboard,
 } from "./control.js";
+import {
+  answerPrompt, clientLabel, clientName, inControl, onControlEvent, releaseControl, renderHolder,
+  setClientLabel, takeControl, takeControlClicked, updateControls,
+} from "./handover.js";
+import { modeMenu, modesFor } from "./modes.js";
 import { SETPOINT_TYPES } from "./offboard.js";
 import { page, plots } from "./page.js";
 import { render } from "./render.js";
 import { $, banner, log, nowS, num, setText } from "./ui.js";
 
-const FALLBACK_MODES = [
-  "MANUAL", "ALTCTL", "POSCTL", "POSCTL_ORBIT", "ACRO", "STABILIZED", "OFFBOARD", "HOLD",
-  "TAKEOFF", "LAND", "RTL", "MISSION", "FOLLOW_TARGET", "PRECLAND", "VTOL_TAKEOFF",
-  "TERMINATION", "RATTITUDE", "READY",
-];
 const OFFBOARD_PARAMS = [
   "COM_OF_LOSS_T", "COM_OBL_RC_ACT", "COM_RC_IN_MODE", "MIS_TAKEOFF_ALT", "RTL_RETURN_ALT",
   "RTL_DESCEND_ALT", "RTL_LAND_DELAY",
@@ -31,8 +31,8 @@ function onTelemetry(message) {
   } else if (message.type === "state") {
     if (message.vehicle !== page.vehicleId) return; // a socket for every vehicle, before one is chosen
     render(message);
-    renderHolder(message.lease?.holder);
-    continueHold(message);
+    renderHolder(message.lease);
+    modeMenu.follow(message.vehicle_type || page.vehicleType, message.mode);
   } else if (message.type === "vehicles") {
     showVehicles(message.vehicles);
   } else if (message.type === "scene_click") {
@@ -48,13 +48,27 @@ function onEvent(message) {
     log("INFO", data.armed ? "armed" : "disarmed");
   } else if (message.kind === "command") {
     return; // this page logs its own answers; what others' commands did shows as mode/armed events
+  } else if (message.kind === "control") {
+    onControlEvent(data);
+    log("NOTICE", controlText(data));
+  } else if (message.kind === "lease") {
+    return; // the same changes as the control events, in the older shape
   } else {
     const text = data.text || data.reason || Object.entries(data)
       .filter(([, v]) => v !== null && v !== undefined)
       .map(([k, v]) => `${k} ${typeof v === "object" ? JSON.stringify(v) : v}`).join(", ");
-    const severity = message.kind === "deadman" ? "WARNING" : message.kind === "lease" ? "NOTICE" : "INFO";
+    const severity = message.kind === "deadman" ? "WARNING" : "INFO";
     log(severity, `${message.kind}: ${text}`);
   }
+}
+
+/** "control taken_over: Chrome tab 7f3a (was pilot · Firefox tab 01ab)". */
+function controlText(data) {
+  const who = data.holder || data.by || "";
+  const was = data.previous_holder ? ` (was ${data.previous_holder})` : "";
+  const by = data.by && data.by !== who ? ` by ${data.by}` : "";
+  const reason = data.reason ? ` — ${data.reason}` : "";
+  return `control ${(data.action || "").replaceAll("_", " ")}: ${who}${by}${was}${reason}`;
 }
 
 function onTelemetryStatus(status) {
@@ -69,8 +83,9 @@ function onTelemetryStatus(status) {
       banner("");
     }
   } else {
+    const inS = Math.ceil((status.retryInMs ?? 0) / 1000);
     setText("conn-status", "reconnecting…", "bad");
-    banner("Connection to the server lost — reconnecting…");
+    banner(`Connection to the server lost — trying again${inS ? ` in ${inS} s` : ""}…`);
   }
   updateControls();
 }
@@ -81,7 +96,7 @@ function reloadAfterReconnect() {
   loadParams();
   if (page.wantControl && !page.control) {
     log("NOTICE", "taking control again");
-    takeControl(false);
+    takeControl("take");
   }
 }
 
@@ -106,7 +121,23 @@ async function loadVehicles() {
     showVehicles(await request("GET", "/vehicles"));
   } catch (err) {
     log("ERROR", `vehicle list: ${err.message}`);
+    // the telemetry socket brings the list when the server answers
+    if (!page.telemetry && !page.rejected) watchTelemetry(null);
   }
+}
+
+// The token was refused: nothing more will work, so stop asking and say what to do.
+function tokenRejected(reason) {
+  page.rejected = true;
+  page.wantControl = false;
+  page.telemetry?.close();
+  page.control?.close();
+  page.connected = false;
+  $("scene").src = "about:blank";
+  setText("conn-status", "token rejected", "bad");
+  banner("This link's token was rejected: open the URL printed by `skyhelm serve` (ask for a new link)", false, true);
+  log("ERROR", `token rejected: ${reason}`);
+  updateControls();
 }
 
 function showVehicles(vehicles) {
@@ -137,6 +168,7 @@ function watchTelemetry(vehicleId) {
 }
 
 function selectVehicle(id) {
+  if (page.rejected) return;
   releaseControl();
   page.vehicleId = Number(id);
   page.vehicleType = page.vehicles.find((v) => v.id === page.vehicleId)?.type || "";
@@ -156,7 +188,7 @@ function onSceneClick(click) {
   const overlay = $("scene-click");
   overlay.textContent = `clicked N ${num(click.north_m)} m, E ${num(click.east_m)} m → ${num(click.lat_deg, 6)}, ${num(click.lon_deg, 6)}`;
   overlay.classList.remove("hidden");
-  if ($("repo-on-click").checked && inControl()) reposition(click.lat_deg, click.lon_deg, "Reposition (scene click)");
+  if ($("repo-on-click").checked && inControl()) goTo(click.lat_deg, click.lon_deg, "Go to the clicked point");
 }
 
 function sceneUrl() {
@@ -165,6 +197,7 @@ function sceneUrl() {
 
 // The 3D scene renders continuously; switching it off frees the CPU on weak machines.
 function showScene(on) {
+  if (page.rejected) return;
   $("scene").src = on ? sceneUrl() : "about:blank";
   $("scene").classList.toggle("hidden", !on);
   $("scene-off").classList.toggle("hidden", on);
@@ -174,7 +207,7 @@ function showScene(on) {
 
 async function loadParams() {
   const table = $("params");
-  if (page.vehicleId === null) return;
+  if (page.vehicleId === null || page.rejected) return;
   let values = {};
   try {
     values = (await request("GET", `/vehicles/${page.vehicleId}/params?names=${OFFBOARD_PARAMS.join(",")}`)).params || {};
@@ -208,32 +241,18 @@ async function setParam(name) {
   }
 }
 
-// ---- modes --------------------------------------------------------------------------------
-
-async function loadModes() {
-  let modes = FALLBACK_MODES;
-  try {
-    const schema = await (await fetch("/openapi.json")).json();
-    const fromSchema = schema.components?.schemas?.ModeBody?.properties?.mode?.enum;
-    if (Array.isArray(fromSchema) && fromSchema.length) modes = fromSchema;
-  } catch {
-    // the built-in list matches PX4's modes
-  }
-  $("mode-select").replaceChildren(...modes.map((m) => {
-    const option = document.createElement("option");
-    option.value = option.textContent = m;
-    return option;
-  }));
-  $("mode-select").value = "HOLD";
-}
-
 // ---- wiring -------------------------------------------------------------------------------
 
 function wire() {
   $("vehicle-select").addEventListener("change", (e) => selectVehicle(e.target.value));
-  $("take-control").addEventListener("click", () => takeControl(false));
-  $("take-over").addEventListener("click", () => takeControl(true));
+  $("take-control").addEventListener("click", takeControlClicked);
+  confirmThen($("force-control"), () => takeControl("force"));
   $("release").addEventListener("click", releaseControl);
+  $("grant-control").addEventListener("click", () => answerPrompt(true));
+  $("deny-control").addEventListener("click", () => answerPrompt(false));
+  $("client-label").value = clientLabel();
+  $("client-label").title = `this tab is "${clientName()}" to the others`;
+  $("client-label").addEventListener("change", (e) => setClientLabel(e.target.value));
   confirmThen($("btn-arm"), () => runCommand("Arm", "arm", {}, $("btn-arm")));
   confirmThen($("btn-disarm"), () => runCommand("Disarm", "disarm", {}, $("btn-disarm")));
   $("btn-takeoff").addEventListener("click", (e) => {
@@ -249,28 +268,19 @@ function wire() {
   });
   $("sp-type").addEventListener("change", (e) => showSetpointType(e.target.value));
   $("sp-from-here").addEventListener("click", () => showSetpointType(panel.type));
-  $("btn-offboard-start").addEventListener("click", (e) => runCommand("Start offboard", "offboard_start", { setpoint: currentBody() }, e.target));
+  $("btn-offboard-start").addEventListener("click", (e) => startOffboard(e.target));
+  $("btn-brake").addEventListener("click", (e) => brake(e.target));
   $("btn-offboard-stop").addEventListener("click", (e) => runCommand("Stop offboard", "offboard_stop", { then_mode: "HOLD" }, e.target));
   $("btn-repo-global").addEventListener("click", (e) => {
     const lat = parseFloat($("repo-lat").value);
     const lon = parseFloat($("repo-lon").value);
     if (!Number.isFinite(lat) || !Number.isFinite(lon)) {
-      showResult("Reposition", { ok: false, status: 422, body: { detail: { reason: "enter lat and lon" } } });
+      showResult("Go to", { ok: false, status: 422, body: { detail: { reason: "enter lat and lon" } } });
       return;
     }
-    reposition(lat, lon, "Reposition", e.target);
+    goTo(lat, lon, "Go to lat/lon", e.target);
   });
-  $("btn-repo-offset").addEventListener("click", (e) => {
-    const g = page.state?.global;
-    if (!g) {
-      showResult("Reposition", { ok: false, status: 0, body: { detail: { reason: "no global position yet" } } });
-      return;
-    }
-    const north = parseFloat($("repo-north").value) || 0;
-    const east = parseFloat($("repo-east").value) || 0;
-    const [lat, lon] = offsetLatLon(g.lat_deg, g.lon_deg, north, east);
-    reposition(lat, lon, `Reposition ${north} N ${east} E`, e.target);
-  });
+  $("btn-repo-offset").addEventListener("click", (e) => goByOffset(e.target));
   $("btn-to-fw").addEventListener("click", (e) => runCommand("Transition to FW", "vtol_transition", { to: "fixed_wing" }, e.target));
   $("btn-to-mc").addEventListener("click", (e) => runCommand("Transition to MC", "vtol_transition", { to: "multicopter" }, e.target));
   $("params-refresh").addEventListener("click", loadParams);
@@ -286,6 +296,7 @@ function drawLoop() {
 }
 
 async function main() {
+  onTokenRejected(tokenRejected);
   if (!token) {
     banner("Open the URL printed by `skyhelm serve` (it carries ?token=…)");
   }
@@ -295,7 +306,7 @@ async function main() {
   updateControls();
   showScene($("scene-enable").checked);
   await loadServerMode();
-  await loadModes();
+  await modeMenu.load();
   await loadVehicles();
   drawLoop();
   log("INFO", "dashboard ready");
@@ -304,4 +315,4 @@ async function main() {
 main();
 
 // The page's state, for the browser console and the browser tests.
-window.skyhelm = { page, SETPOINT_TYPES };
+window.skyhelm = { page, SETPOINT_TYPES, modesFor, reconnectDelayMs };

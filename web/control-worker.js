@@ -21,7 +21,8 @@ self.onmessage = (event) => {
     ws.onmessage = (e) => {
       const data = JSON.parse(e.data);
       if (data.type === "lease" && data.lease_id && !heartbeat) {
-        const everyMs = Math.max(100, ((data.ttl_s || 2) * 1000) / 4);
+        // a quarter of the TTL, at least once a second so a dead socket shows soon
+        const everyMs = Math.min(1000, Math.max(100, ((data.ttl_s || 2) * 1000) / 4));
         heartbeat = setInterval(() => {
           if (Date.now() - lastPagePing > PAGE_SILENCE_MS) return;
           if (ws.readyState === WebSocket.OPEN) ws.send(JSON.stringify({ type: "heartbeat" }));

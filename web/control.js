@@ -1,47 +1,51 @@
-// Flying from the page: the control lease, commands and their answers, setpoints from the
-// panel and the keyboard, reposition.
+// Flying from the page: commands and their answers, setpoints from the panel, and the
+// intents the server flies (keyboard velocity, brake, go by an offset, go to a point). The
+// page decides nothing about how they are flown: it sends them and shows the answers.
 
-import { ControlSession, describeError } from "./api.js";
-import { KeyboardPilot, SetpointPanel, setpointBody, valuesFromState } from "./offboard.js";
+import { describeError } from "./api.js";
+import { inControl, onControl } from "./handover.js";
+import { KeyboardPilot, SetpointPanel, panelForSetpoint, panelMessage, valuesFromState } from "./offboard.js";
 import { page } from "./page.js";
-import { altitudeAboveHome } from "./render.js";
 import { $, log, num, setText } from "./ui.js";
 
 const SETPOINT_SEND_INTERVAL_MS = 50;
 const CONFIRM_WINDOW_MS = 4000;
-const EARTH_RADIUS_M = 6378137;
-const RETAKE_DELAY_MS = 1000;
 
 // ---- command answers ----------------------------------------------------------------------
 
-export function showResult(label, answer) {
-  const body = answer.body || {};
-  let text;
-  let cls;
-  if (answer.ok) {
-    text = `${label}: ${body.result || "OK"}${body.elapsed_ms !== undefined ? ` (${num(body.elapsed_ms, 0)} ms)` : ""}`;
-    cls = "ok";
-  } else if (body.result) {
-    text = `${label}: ${body.result}${body.reason ? ` — ${body.reason}` : ""}`;
-    cls = "bad";
-  } else {
-    text = `${label}: refused — ${describeError(answer.status, body)}`;
-    cls = "bad";
-  }
+function showLine(text, cls) {
   const el = $("result");
   el.textContent = text;
   el.className = `result ${cls}`;
+}
+
+export function showResult(label, answer) {
+  const body = answer.body || {};
+  const command = body.command && typeof body.command === "object" ? body.command : body;
+  let text;
+  if (answer.ok) {
+    const elapsed = command.elapsed_ms !== undefined ? ` (${num(command.elapsed_ms, 0)} ms)` : "";
+    const result = command.result || (body.via ? `OK via ${body.via.replace("_", " ")}` : "OK");
+    text = `${label}: ${result}${elapsed}${command.reason ? ` — ${command.reason}` : ""}`;
+  } else if (command.result) {
+    text = `${label}: ${command.result}${command.reason ? ` — ${command.reason}` : ""}`;
+  } else {
+    text = `${label}: refused — ${describeError(answer.status, body)}`;
+  }
+  showLine(text, answer.ok ? "ok" : "bad");
   log(answer.ok ? "OK" : "ERROR", text);
 }
 
+/** Sends a command or an intent on the control socket and shows the vehicle's answer. */
 export async function runCommand(label, name, args, button) {
-  if (!page.control) return;
-  const el = $("result");
-  el.textContent = `${label}: sent, waiting for the vehicle…`;
-  el.className = "result pending";
+  if (!page.control) return null;
+  showLine(`${label}: sent, waiting for the vehicle…`, "pending");
   button?.classList.add("busy");
   try {
-    showResult(label, await page.control.command(name, args));
+    const answer = await page.control.command(name, args);
+    showResult(label, answer);
+    if (answer.ok) showFlown(answer.body?.setpoint?.setpoint);
+    return answer;
   } finally {
     button?.classList.remove("busy");
   }
@@ -66,108 +70,48 @@ export function confirmThen(button, action) {
   });
 }
 
-// ---- control lease ------------------------------------------------------------------------
-
-export function takeControl(takeover = false) {
-  if (page.vehicleId === null) return;
-  page.control?.close();
-  page.wantControl = true;
-  const session = new ControlSession(page.vehicleId, {
-    takeover,
-    clientName: `dashboard ${navigator.userAgent.includes("Headless") ? "(headless)" : ""}`.trim(),
-    onLease: (lease) => {
-      log("NOTICE", `control taken (lease ${lease.ttl_s} s)`);
-      $("take-over").classList.add("hidden");
-      updateControls();
-    },
-    onClosed: (info) => {
-      if (page.control === session) page.control = null;
-      if (info.byUs) {
-        log("NOTICE", "control released");
-      } else if (info.code === 4409) {
-        page.wantControl = false;
-        const holder = info.refusal?.holder || "another pilot";
-        log("WARNING", `control is held by ${holder}`);
-        $("take-over").classList.remove("hidden");
-      } else if (info.code === 4403) {
-        page.wantControl = false;
-        log("ERROR", `control refused: ${info.reason || "this token may only observe"}`);
-      } else if (info.code === 4408) {
-        log("WARNING", `control lease lost (${info.reason || "expired"})`);
-      } else if (page.wantControl) {
-        log("WARNING", "control connection lost; taking control again when the server answers");
-        // A blip of the control socket alone: retry while the telemetry socket is up (a
-        // server restart is handled when telemetry reconnects).
-        setTimeout(() => {
-          if (page.wantControl && !page.control && page.connected) takeControl(false);
-        }, RETAKE_DELAY_MS);
-      }
-      updateControls();
-    },
-  });
-  page.control = session;
-}
-
-export function releaseControl() {
-  page.wantControl = false;
-  page.control?.close();
-  page.control = null;
-  updateControls();
-}
-
-export function inControl() {
-  return Boolean(page.control && page.control.open);
-}
-
-export function renderHolder(holder) {
-  const mine = inControl();
-  setText("holder", mine ? `you (${page.control.holder || holder || "this page"})` : holder || "nobody");
-}
-
-export function updateControls() {
-  const pilot = inControl() && page.connected;
-  document.body.classList.toggle("observing", !pilot);
-  for (const el of document.querySelectorAll(".ctl")) el.disabled = !pilot;
-  $("take-control").classList.toggle("hidden", inControl() || page.readOnly);
-  $("release").classList.toggle("hidden", !inControl());
-  renderHolder(page.state?.lease?.holder);
-}
-
-// ---- offboard -----------------------------------------------------------------------------
+// ---- offboard panel -----------------------------------------------------------------------
 
 export const panel = new SetpointPanel($("sp-fields"), () => scheduleSetpoint());
 let sendTimer = null;
 let lastSentAt = 0;
 let lastSetpointError = "";
 
-export function currentBody() {
-  return setpointBody(panel.type, panel.values, page.state?.home?.down_m ?? 0);
+const homeDownM = () => page.state?.home?.down_m ?? 0;
+
+export function currentMessage() {
+  return panelMessage(panel.type, panel.values, homeDownM());
 }
 
 function scheduleSetpoint() {
   if (!inControl()) return;
   const wait = SETPOINT_SEND_INTERVAL_MS - (performance.now() - lastSentAt);
-  if (wait <= 0) sendSetpoint();
-  else if (!sendTimer) sendTimer = setTimeout(() => { sendTimer = null; sendSetpoint(); }, wait);
+  if (wait <= 0) sendPanel();
+  else if (!sendTimer) sendTimer = setTimeout(() => { sendTimer = null; sendPanel(); }, wait);
 }
 
-export async function sendSetpoint(body = currentBody()) {
-  if (!page.control) return null; // released while a send was scheduled
+/** Sends what the panel shows: its setpoint, or its intent. */
+export async function sendPanel(message = currentMessage()) {
+  if (!inControl()) return null; // control lost or released while a send was scheduled
   lastSentAt = performance.now();
-  const answer = await page.control.setpoint(body);
+  const answer = message.intent
+    ? await page.control.command(message.intent, message.args)
+    : await page.control.setpoint(message.setpoint);
+  showRefusal(answer, message.intent ? `${message.intent} refused` : "setpoint refused");
+  return answer;
+}
+
+function showRefusal(answer, what) {
   if (!answer.ok) {
-    const text = `setpoint refused — ${describeError(answer.status, answer.body)}`;
+    const text = `${what} — ${describeError(answer.status, answer.body)}`;
     if (text !== lastSetpointError) {
-      const el = $("result");
-      el.textContent = text;
-      el.className = "result bad";
+      showLine(text, "bad");
       log("WARNING", text);
     }
     lastSetpointError = text;
   } else {
     lastSetpointError = "";
   }
-  return answer;
 }
 
 export function showSetpointType(type) {
@@ -175,56 +119,80 @@ export function showSetpointType(type) {
   panel.show(type, valuesFromState(type, page.state));
 }
 
+/** Shows a setpoint the vehicle flies (the lease's, or an answer's) in the panel. */
+function showFlown(setpoint) {
+  const shown = panelForSetpoint(setpoint, homeDownM());
+  if (!shown) return false;
+  if (shown.type === panel.type) {
+    panel.set(shown.values);
+  } else {
+    $("sp-type").value = shown.type;
+    panel.show(shown.type, { ...valuesFromState(shown.type, page.state), ...shown.values });
+  }
+  return true;
+}
+
+/** Starts OFFBOARD with the panel's setpoint (an intent panel sends its intent first). */
+export async function startOffboard(button) {
+  const message = currentMessage();
+  if (message.intent) {
+    const answer = await sendPanel(message);
+    if (!answer?.ok) return;
+    await runCommand("Start offboard", "offboard_start", {}, button);
+  } else {
+    await runCommand("Start offboard", "offboard_start", { setpoint: message.setpoint }, button);
+  }
+}
+
+// ---- keyboard: velocity intents, brake ------------------------------------------------------
+
 const keyboard = new KeyboardPilot({
   enabled: () => $("kbd-enable").checked && inControl(),
   speed: () => parseFloat($("kbd-speed").value) || 1,
   onKeys: (text) => setText("kbd-state", `keys: ${text}`),
-  onVelocity: (v) => {
-    holdBrakingSince = null;
-    if (panel.type !== "velocity_body") showSetpointType("velocity_body");
-    panel.set(v);
-    sendSetpoint(setpointBody("velocity_body", panel.values));
+  onVelocity: async (v) => {
+    const answer = await page.control.command("velocity", { frame: "body", ...v });
+    showRefusal(answer, "velocity refused");
+    if (answer.ok) showFlown(answer.body?.setpoint?.setpoint);
   },
-  onHold: () => startHold(),
+  onBrake: () => brake(),
 });
 
-// Space: brake with a zero velocity first, then hold the position where the vehicle stopped,
-// so it does not fly back to where the key was pressed.
-const HOLD_STOPPED_M_S = 0.3;
-const HOLD_BRAKE_TIMEOUT_MS = 5000;
-let holdBrakingSince = null;
-
-function startHold() {
-  holdBrakingSince = performance.now();
-  showSetpointType("velocity");
-  sendSetpoint(setpointBody("velocity", panel.values));
-  log("NOTICE", "hold: braking, then holding the position where it stops");
+/** Brake, then hold where the vehicle stopped (the server decides how). */
+export function brake(button) {
+  return runCommand("Brake", "brake", {}, button);
 }
 
-export function continueHold(state) {
-  if (holdBrakingSince === null || !inControl()) return;
-  const v = state.velocity_ned;
-  const speed = v ? Math.hypot(v.north_m_s, v.east_m_s, v.down_m_s) : 0;
-  if (speed > HOLD_STOPPED_M_S && performance.now() - holdBrakingSince < HOLD_BRAKE_TIMEOUT_MS) return;
-  holdBrakingSince = null;
-  showSetpointType("position");
-  sendSetpoint();
-}
+// Control gained: show what the vehicle flies, not the form's defaults. Lost: stop sending.
+onControl({
+  gained: (lease) => {
+    clearTimeout(sendTimer);
+    sendTimer = null;
+    const flying = lease.setpoint ?? (page.state?.stream?.active ? page.state.setpoint : null);
+    if (!showFlown(flying)) panel.show(panel.type, valuesFromState(panel.type, page.state));
+  },
+  lost: () => {
+    clearTimeout(sendTimer);
+    sendTimer = null;
+    keyboard.stop();
+  },
+  change: () => {},
+});
 
 // ---- reposition ---------------------------------------------------------------------------
 
-export function offsetLatLon(latDeg, lonDeg, northM, eastM) {
-  const dLat = (northM / EARTH_RADIUS_M) * (180 / Math.PI);
-  const dLon = (eastM / (EARTH_RADIUS_M * Math.cos((latDeg * Math.PI) / 180))) * (180 / Math.PI);
-  return [latDeg + dLat, lonDeg + dLon];
-}
-
 function repositionAltitude() {
   const alt = parseFloat($("repo-alt").value);
-  if (Number.isFinite(alt)) return alt;
-  return altitudeAboveHome(page.state || {}) ?? 10;
+  return Number.isFinite(alt) ? alt : null;
 }
 
-export function reposition(latDeg, lonDeg, label, button) {
-  return runCommand(label, "reposition", { lat_deg: latDeg, lon_deg: lonDeg, alt_rel_m: repositionAltitude() }, button);
+export function goTo(latDeg, lonDeg, label, button) {
+  return runCommand(label, "goto", { lat_deg: latDeg, lon_deg: lonDeg, alt_rel_m: repositionAltitude() }, button);
+}
+
+export function goByOffset(button) {
+  const north = parseFloat($("repo-north").value) || 0;
+  const east = parseFloat($("repo-east").value) || 0;
+  const up = parseFloat($("repo-up").value) || 0;
+  return runCommand(`Go ${north} m N ${east} m E ${up} m up`, "offset", { north_m: north, east_m: east, up_m: up }, button);
 }

@@ -3,22 +3,17 @@
 // from the API's /openapi.json (built from the link's one definition); this module only says
 // which kind each panel type sends, how a field is shown, and the sliders' display ranges.
 
-// POSITION_TARGET_TYPEMASK bits (MAVLink): ignore x, y, vz, the accelerations and yaw rate,
-// leaving velocity x/y with position z: velocity in the horizontal plane at a held altitude.
-const IGNORE_PX = 1, IGNORE_PY = 2, IGNORE_VZ = 32, IGNORE_ACCEL = 64 | 128 | 256;
-const IGNORE_YAW_RATE = 2048;
-const ALT_HOLD_VELOCITY_MASK = IGNORE_PX | IGNORE_PY | IGNORE_VZ | IGNORE_ACCEL | IGNORE_YAW_RATE;
-const MAV_FRAME_LOCAL_NED = 1;
 const SETPOINT_PATH = "/api/v1/vehicles/{vehicle_id}/setpoint";
 
 // How a panel shows an API field: under another key and label, as api = scale·value (+ the
 // home's down_m when fromHome: altitudes above home), in another unit.
 const ALTITUDE = { key: "alt_m", label: "Altitude", scale: -1, fromHome: true };
 const UP = { key: "up_m_s", label: "Up", scale: -1 };
-const YAW_FROM_RAD = { key: "yaw_deg", label: "Yaw", scale: Math.PI / 180, unit: "deg" };
 
-// Panel types: the API kind each sends; `show` picks and orders the kind's fields (default:
-// all), `views` changes how one shows, `fixed` values are sent as they are.
+// Panel types: the API kind whose fields each shows; `show` picks and orders them (default:
+// all), `views` changes how one shows, `fixed` values are sent as they are. A panel with an
+// `intent` sends that intent with its fields instead of a setpoint (the server decides how
+// it is flown, e.g. the held altitude).
 const PANELS = {
   position: { kind: "position_ned", views: { down_m: ALTITUDE } },
   velocity: {
@@ -27,12 +22,8 @@ const PANELS = {
   },
   velocity_body: { kind: "velocity_body", views: { down_m_s: UP } },
   alt_hold_velocity: {
-    kind: "raw_local", show: ["vx", "vy", "z", "yaw"],
-    fixed: { frame: MAV_FRAME_LOCAL_NED, type_mask: ALT_HOLD_VELOCITY_MASK },
-    views: {
-      vx: { key: "north_m_s", label: "North" }, vy: { key: "east_m_s", label: "East" },
-      z: ALTITUDE, yaw: YAW_FROM_RAD,
-    },
+    kind: "velocity_ned", show: ["north_m_s", "east_m_s", "yaw_rate_deg_s"],
+    intent: "velocity", fixed: { frame: "ned", hold_altitude: true, live: false },
   },
   attitude: { kind: "attitude" },
 };
@@ -111,15 +102,33 @@ function labelOf(name) {
   return text.charAt(0).toUpperCase() + text.slice(1);
 }
 
-/** The API setpoint body for a panel type and its values; altitudes are above home. */
-export function setpointBody(type, v, homeDownM = 0) {
+/** What a panel type sends for its values: `{setpoint}` (a setpoint body) or `{intent, args}`;
+ * altitudes are above home. */
+export function panelMessage(type, v, homeDownM = 0) {
   const panel = PANELS[type];
   if (!panel) throw new Error(`unknown setpoint type ${type}`);
-  const body = { type: panel.kind, ...panel.fixed };
+  const fields = {};
   for (const field of SETPOINT_TYPES[type] || []) {
-    body[field.api] = field.scale * v[field.key] + (field.fromHome ? homeDownM : 0);
+    fields[field.api] = field.scale * v[field.key] + (field.fromHome ? homeDownM : 0);
   }
-  return body;
+  if (panel.intent) return { intent: panel.intent, args: { ...panel.fixed, ...fields } };
+  return { setpoint: { type: panel.kind, ...panel.fixed, ...fields } };
+}
+
+/** The panel type and values that show a setpoint the vehicle flies (from the state or an
+ * answer), or null for a kind no panel shows. */
+export function panelForSetpoint(setpoint, homeDownM = 0) {
+  if (!setpoint) return null;
+  const entry = Object.entries(PANELS).find(([, panel]) => !panel.intent && panel.kind === setpoint.type);
+  if (!entry) return null;
+  const [type] = entry;
+  const values = {};
+  for (const field of SETPOINT_TYPES[type] || []) {
+    const api = setpoint[field.api];
+    if (!Number.isFinite(api)) continue;
+    values[field.key] = round((api - (field.fromHome ? homeDownM : 0)) / field.scale, 2);
+  }
+  return { type, values };
 }
 
 /** Panel values that hold the vehicle where it is (for "Here" and for switching types). */
@@ -230,13 +239,14 @@ const KEYS = {
 const YAW_RATE_DEG_S = 45;
 const MAX_CLIMB_M_S = 1.5;
 
-/** Keyboard velocity control: body-frame velocity while keys are held, space = hold here. */
+/** Keyboard velocity control: body-frame velocity while keys are held (repeated, so the
+ * server's deadman sees a live input), a brake when the last key is let go, space = brake. */
 export class KeyboardPilot {
-  constructor({ enabled, speed, onVelocity, onHold, onKeys }) {
+  constructor({ enabled, speed, onVelocity, onBrake, onKeys }) {
     this.enabled = enabled;
     this.speed = speed;
     this.onVelocity = onVelocity;
-    this.onHold = onHold;
+    this.onBrake = onBrake;
     this.onKeys = onKeys;
     this.held = new Set();
     this.timer = null;
@@ -259,8 +269,8 @@ export class KeyboardPilot {
       document.activeElement?.blur();
       this.held.clear();
       this.stopTimer();
-      this.onKeys("HOLD");
-      this.onHold();
+      this.onKeys("BRAKE");
+      this.onBrake();
       return;
     }
     if (!(event.code in KEYS)) return;
@@ -275,15 +285,21 @@ export class KeyboardPilot {
     if (event.code === "Space" && this.enabled() && !KeyboardPilot.typing(event)) event.preventDefault();
     if (!this.held.delete(event.code)) return;
     event.preventDefault();
-    this.send();
-    if (this.held.size === 0) this.stopTimer();
+    if (this.held.size === 0) this.releaseAll();
+    else this.send();
+  }
+
+  /** Stops at once, without a brake: control was lost or given away. */
+  stop() {
+    this.held.clear();
+    this.stopTimer();
+    this.onKeys("–");
   }
 
   releaseAll() {
-    if (this.held.size === 0) return;
-    this.held.clear();
-    this.send();
-    this.stopTimer();
+    if (this.held.size === 0 && !this.timer) return;
+    this.stop();
+    if (this.enabled()) this.onBrake();
   }
 
   stopTimer() {

@@ -16,6 +16,7 @@ export const page = {
   state: null,
   vtol: { state: null, since: 0 },
   readOnly: false, // a replayed recording: nobody may take control
+  rejected: false, // the server refused the token: the page stops asking
 };
 
 export const plots = {

@@ -36,7 +36,9 @@ export function log(severity, text, time = new Date()) {
   if (atBottom) box.scrollTop = box.scrollHeight;
 }
 
-export function banner(text, ok = false) {
+/** The banner; once the token is rejected only that (sticky) message shows. */
+export function banner(text, ok = false, sticky = false) {
+  if (page.rejected && !sticky) return;
   const el = $("banner");
   // A replay keeps saying so whenever no other message is showing.
   const shown = text || (page.readOnly ? REPLAY_NOTICE : "");

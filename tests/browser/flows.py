@@ -12,9 +12,12 @@ from .harness import altitude_m, vehicle_state, wait_for
 RESULT_TIMEOUT_S = 30.0
 
 
-def open_dashboard(context: Any, url: str, scene: bool = True) -> Any:
-    """Opens the page; without the scene, software WebGL leaves the CPU to the vehicle."""
+def open_dashboard(context: Any, url: str, scene: bool = True, init_script: str = "") -> Any:
+    """Opens the page; without the scene, software WebGL leaves the CPU to the vehicle.
+    ``init_script`` runs in the page before its own scripts."""
     page = context.new_page()
+    if init_script:
+        page.add_init_script(init_script)
     page.goto(url if scene else f"{url}&scene=off")
     page.wait_for_function("document.getElementById('mode').textContent !== '–'", timeout=30_000)
     return page
@@ -92,12 +95,12 @@ def start_offboard_here(page: Any, api: httpx.Client) -> None:
 
 
 class _RestPilot:
-    """Takes the lease over REST (from whoever holds it) to put the vehicle in a known state,
-    renewing it on every poll, and gives it back afterwards."""
+    """Takes the lease over REST (forced, from whoever holds it) to put the vehicle in a known
+    state, renewing it on every poll, and gives it back afterwards."""
 
     def __init__(self, api: httpx.Client) -> None:
         self.api = api
-        taken = api.post("/vehicles/1/control", json={"takeover": True})
+        taken = api.post("/vehicles/1/control", json={"takeover": True, "force": True})
         taken.raise_for_status()
         self.headers = {"X-Lease-Id": taken.json()["lease_id"]}
 

@@ -266,10 +266,11 @@ def test_keyboard_velocity_moves_the_vehicle_and_space_holds_it(
 
 
 def test_reposition_by_offset_from_the_form(flying: None, page: Any, api: httpx.Client) -> None:
-    before = vehicle_state(api)["position_ned"]
+    start = vehicle_state(api)
+    before = start["position_ned"]
     page.fill("#repo-north", "8")
     page.fill("#repo-east", "-4")
-    page.fill("#repo-alt", "7")
+    page.fill("#repo-up", "2")
     click_and_wait_result(page, "#btn-repo-offset")
     wait_for("HOLD", lambda: vehicle_state(api)["mode"] == "HOLD", 10.0)
 
@@ -279,10 +280,10 @@ def test_reposition_by_offset_from_the_form(flying: None, page: Any, api: httpx.
         return (
             math.hypot(p["north_m"] - before["north_m"] - 8, p["east_m"] - before["east_m"] + 4)
             < 1.0
-            and abs(altitude_m(s) - 7.0) < 0.7
+            and abs(altitude_m(s) - altitude_m(start) - 2.0) < 0.7
         )
 
-    wait_for("arrival 8 m north, 4 m west, at 7 m", arrived, 30.0)
+    wait_for("arrival 8 m north, 4 m west, 2 m up", arrived, 30.0)
 
 
 def test_return_lands_and_disarms(flying: None, page: Any, api: httpx.Client) -> None:

@@ -1,0 +1,298 @@
+"""Two tabs of the dashboard in Chromium against `skyhelm serve` with the simulated quad: a
+pilot flies, a second tab asks for control and gets it, control is forced with a confirmation,
+each tab always shows who controls; and the page as a client: reconnecting with backoff, a
+rejected token, the mode menu, refusals shown with their reasons. Every test settles the
+vehicle first, so they run in any order."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from typing import Any
+
+import httpx
+import pytest
+
+from tests.waiting import holds_for_blocking
+
+from .flows import (
+    arm_and_take_off,
+    click_and_wait_result,
+    open_dashboard,
+    settle_vehicle,
+    start_offboard_here,
+    take_control,
+)
+from .harness import Serve, altitude_m, speed_m_s, vehicle_state, wait_for
+
+SERVE_ARGS = ["--sim-speed", "3"]
+# Counts the telemetry sockets the page opens (the control socket lives in a worker).
+COUNT_SOCKETS = """
+window.__sockets = [];
+const NativeWebSocket = window.WebSocket;
+window.WebSocket = class extends NativeWebSocket {
+  constructor(url, protocols) {
+    super(url, protocols);
+    if (String(url).includes("/ws/telemetry")) window.__sockets.push(performance.now());
+  }
+};
+"""
+
+
+@pytest.fixture
+def second(browser: Any, serve: Serve) -> Iterator[Any]:
+    """Another tab of the same browser."""
+    tab = open_dashboard(browser, serve.url, scene=False)
+    try:
+        yield tab
+    finally:
+        if not tab.is_closed():
+            tab.close()
+
+
+def _holder(tab: Any) -> str:
+    return str(tab.text_content("#holder") or "")
+
+
+def _wait_holder(tab: Any, starts: str) -> None:
+    tab.wait_for_function(
+        "([s]) => document.getElementById('holder').textContent.startsWith(s)",
+        arg=[starts],
+        timeout=15_000,
+    )
+
+
+def _name(tab: Any) -> str:
+    """This tab's session name as the server shows it (the holder's name once in control)."""
+    text = _holder(tab)
+    assert text.startswith("you ("), text
+    assert text.endswith(")"), text
+    return text[len("you (") : -1]
+
+
+def _not_in_control(tab: Any) -> None:
+    tab.wait_for_selector("#release", state="hidden", timeout=15_000)
+    tab.wait_for_selector("#btn-arm[disabled]", timeout=10_000)
+
+
+def test_pilot_flies_then_a_second_tab_asks_and_the_first_grants(
+    page: Any, second: Any, api: httpx.Client
+) -> None:
+    settle_vehicle(api, flying=False)
+    take_control(page)
+    first_name = _name(page)
+    _wait_holder(second, first_name)
+    assert "since" in (second.text_content("#holder-since") or "")
+    arm_and_take_off(page, api, 5.0)
+    start_offboard_here(page, api)
+
+    # keys: a live body-frame velocity intent while W is held, a brake when it is let go
+    start = vehicle_state(api)["position_ned"]
+    page.click("#kbd-state")
+    page.keyboard.down("w")
+    wait_for(
+        "a body velocity forward",
+        lambda: (
+            (sp := vehicle_state(api)["setpoint"]) is not None
+            and sp["type"] == "velocity_body"
+            and sp["forward_m_s"] > 0
+        ),
+        10.0,
+    )
+    wait_for("forward speed above 1 m/s", lambda: speed_m_s(vehicle_state(api)) > 1.0, 15.0)
+    page.keyboard.up("w")
+    held = wait_for(
+        "a position hold where it stopped",
+        lambda: (
+            (s := vehicle_state(api))["setpoint"]["type"] == "position_ned"
+            and speed_m_s(s) < 0.3
+            and s
+        ),
+        15.0,
+    )
+    p = held["position_ned"]
+    assert math.hypot(p["north_m"] - start["north_m"], p["east_m"] - start["east_m"]) > 0.5
+
+    # the second tab asks; the first sees who asks and a countdown, and grants
+    assert second.text_content("#take-control") == "Ask for control"
+    second.click("#take-control")
+    page.wait_for_selector("#takeover-prompt:not(.hidden)", timeout=10_000)
+    assert "asks to take control" in (page.text_content("#takeover-by") or "")
+    assert (page.text_content("#takeover-countdown") or "").endswith(" s")
+    page.click("#grant-control")
+    _wait_holder(second, "you")
+    second_name = _name(second)
+    assert second_name != first_name
+
+    # the old holder says who took control and stops sending; the stream never stopped
+    _not_in_control(page)
+    page.wait_for_function(
+        "([n]) => document.getElementById('control-note').textContent.includes(n)",
+        arg=[second_name],
+        timeout=10_000,
+    )
+    _wait_holder(page, second_name)
+    state = vehicle_state(api)
+    assert state["mode"] == "OFFBOARD"
+    assert state["stream"]["active"]
+
+    # the new holder's panel shows the setpoint being flown, not the form's defaults
+    assert second.input_value("#sp-type") == "position"
+    flown = state["setpoint"]
+    assert float(second.input_value("#sp-north_m")) == pytest.approx(flown["north_m"], abs=0.1)
+    assert float(second.input_value("#sp-alt_m")) == pytest.approx(altitude_m(state), abs=0.8)
+
+    # return from the new holder's tab
+    click_and_wait_result(second, "#btn-rtl")
+    wait_for(
+        "landed and disarmed",
+        lambda: (s := vehicle_state(api))["landed_state"] == "ON_GROUND" and not s["armed"],
+        60.0,
+        every_s=0.25,
+    )
+
+
+def test_a_denied_request_says_so_in_the_asking_tab(
+    page: Any, second: Any, api: httpx.Client
+) -> None:
+    settle_vehicle(api, flying=False)
+    take_control(page)
+    _wait_holder(second, _name(page))
+    second.click("#take-control")
+    page.wait_for_selector("#takeover-prompt:not(.hidden)", timeout=10_000)
+    page.click("#deny-control")
+    second.wait_for_function(
+        "document.getElementById('control-note').textContent.includes('denied')", timeout=10_000
+    )
+    assert _holder(page).startswith("you")
+    assert not _holder(second).startswith("you")
+
+
+def test_force_takes_control_only_after_a_confirmation(
+    page: Any, second: Any, api: httpx.Client
+) -> None:
+    settle_vehicle(api, flying=False)
+    take_control(page)
+    first_name = _name(page)
+    _wait_holder(second, first_name)
+    second.click("#force-control")
+    assert second.text_content("#force-control") == "Confirm: force"
+    holds_for_blocking(
+        "the first tab still in control",
+        lambda: api.get("/vehicles/1/control").json()["holder"] == first_name,
+        0.5,
+    )
+    second.click("#force-control")
+    _wait_holder(second, "you")
+    _not_in_control(page)
+    page.wait_for_function(
+        "document.getElementById('control-note').textContent.startsWith('Control taken by')",
+        timeout=10_000,
+    )
+    assert "Control taken by" in (page.text_content("#banner") or "")
+
+
+def test_every_tab_shows_who_controls_and_the_label_is_editable(
+    page: Any, second: Any, api: httpx.Client
+) -> None:
+    settle_vehicle(api, flying=False)
+    _wait_holder(page, "nobody")
+    page.fill("#client-label", "Ground station A")
+    page.press("#client-label", "Enter")
+    page.click("#kbd-state")
+    assert page.evaluate("localStorage.getItem('skyhelm.clientLabel')") == "Ground station A"
+    take_control(page)
+    name = _name(page)
+    assert "Ground station A" in name
+    _wait_holder(second, name)
+    page.click("#release")
+    _wait_holder(page, "nobody")
+    _wait_holder(second, "nobody")
+    page.evaluate("localStorage.removeItem('skyhelm.clientLabel')")
+
+
+def test_mode_menu_lists_this_vehicles_modes_and_follows_the_mode(
+    page: Any, api: httpx.Client
+) -> None:
+    settle_vehicle(api, flying=True)
+    modes = page.eval_on_selector_all("#mode-select option", "os => os.map(o => o.value)")
+    assert "VTOL_TAKEOFF" not in modes
+    assert "TERMINATION" not in modes
+    assert {"POSCTL", "OFFBOARD", "HOLD", "TAKEOFF", "LAND", "RTL"} <= set(modes)
+    by_type = page.evaluate(
+        "['FIXED_WING', 'VTOL_FIXEDROTOR', 'GROUND_ROVER'].map(t => window.skyhelm.modesFor(t))"
+    )
+    plane, vtol, rover = by_type
+    assert "VTOL_TAKEOFF" in vtol
+    assert "VTOL_TAKEOFF" not in plane
+    assert not {"TAKEOFF", "LAND"} & set(rover)
+    assert "HOLD" in rover
+    page.wait_for_function(
+        "document.getElementById('mode-select').value === 'HOLD'", timeout=10_000
+    )
+
+
+def test_refusals_show_their_reason_and_field(page: Any, api: httpx.Client) -> None:
+    settle_vehicle(api, flying=True)
+    take_control(page)
+    page.fill("#repo-north", "5000")
+    text = click_and_wait_result(page, "#btn-repo-offset", expect="422")
+    assert "north_m" in text, text
+    assert "envelope" in text, text
+    page.fill("#takeoff-alt", "500")
+    text = click_and_wait_result(page, "#btn-takeoff", expect="422")
+    assert "altitude_m" in text, text
+
+
+def test_reconnects_with_a_bounded_backoff_after_the_server_stops(
+    browser: Any, serve: Serve
+) -> None:
+    tab = open_dashboard(browser, serve.url, scene=False, init_script=COUNT_SOCKETS)
+    try:
+        assert tab.evaluate("window.__sockets.length") >= 1
+        delays = tab.evaluate(
+            "[0, 1, 2, 3, 4, 5, 10].map(a => window.skyhelm.reconnectDelayMs(a, () => 1))"
+        )
+        assert delays == [500, 1000, 2000, 4000, 8000, 15000, 15000]
+        serve.stop()
+        tab.wait_for_function(
+            "document.getElementById('conn-status').textContent.startsWith('reconnecting')",
+            timeout=10_000,
+        )
+        before = tab.evaluate("window.__sockets.length")
+
+        def attempts() -> int:
+            return int(tab.evaluate("window.__sockets.length")) - before
+
+        # 0.5 s doubling to 15 s with full jitter: about 5 in 10 s (4 a second before)
+        holds_for_blocking("at most 8 attempts", lambda: attempts() <= 8, 10.0, every_s=0.5)
+        assert attempts() >= 1
+        serve.restart()
+        tab.wait_for_function(
+            "document.getElementById('conn-status').textContent === 'connected'", timeout=60_000
+        )
+    finally:
+        tab.close()
+
+
+def test_a_rejected_token_shows_a_banner_and_stops_asking(browser: Any, serve: Serve) -> None:
+    tab = browser.new_page()
+    requests: list[str] = []
+    tab.on("request", lambda r: requests.append(r.url) if "/api/v1/" in r.url else None)
+    try:
+        tab.add_init_script(COUNT_SOCKETS)
+        tab.goto(f"{serve.base}/?token=not-the-token&scene=off")
+        tab.wait_for_function(
+            "document.getElementById('banner').textContent.includes('new link')", timeout=15_000
+        )
+        assert tab.text_content("#conn-status") == "token rejected"
+        asked = len(requests)
+        sockets = tab.evaluate("window.__sockets.length")
+        holds_for_blocking(
+            "no more requests or sockets",
+            lambda: len(requests) == asked and tab.evaluate("window.__sockets.length") == sockets,
+            3.0,
+        )
+        assert tab.is_visible("#banner")
+    finally:
+        tab.close()

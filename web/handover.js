@@ -1,0 +1,238 @@
+// Who controls the vehicle, and handing control over: this tab's name, taking control (asking
+// the holder first, or forcing it after a confirmation), answering another tab's request, and
+// what the page shows when control is taken from it.
+
+import { ControlSession, describeError, reconnectDelayMs, request } from "./api.js";
+import { page } from "./page.js";
+import { $, banner, log, setText } from "./ui.js";
+
+const LABEL_KEY = "skyhelm.clientLabel";
+const PROMPT_TICK_MS = 250;
+// A label a person can tell apart from other tabs: the browser's name (editable, kept for the
+// next visit) and a short id of this tab (two tabs of one browser differ by it).
+const TAB_ID = Math.floor(Math.random() * 0x10000).toString(16).padStart(4, "0");
+
+const hooks = { onGained: () => {}, onLost: () => {}, onChange: () => {} };
+
+/** Lets the flying side hear of control gained (with the lease answer) and lost, and of
+ * every change that enables or disables the controls. */
+export function onControl({ gained, lost, change }) {
+  Object.assign(hooks, { onGained: gained, onLost: lost, onChange: change });
+}
+
+function browserName() {
+  const ua = navigator.userAgent;
+  const name = /Firefox\//.test(ua) ? "Firefox" : /Edg\//.test(ua) ? "Edge"
+    : /Chrom(e|ium)\//.test(ua) ? "Chrome" : /Safari\//.test(ua) ? "Safari" : "Browser";
+  return /Headless/.test(ua) ? `${name} (headless)` : name;
+}
+
+export function clientLabel() {
+  return localStorage.getItem(LABEL_KEY) || browserName();
+}
+
+/** The client name the server puts after the token's name, e.g. "Chrome tab 7f3a". */
+export function clientName() {
+  return `${clientLabel()} tab ${TAB_ID}`;
+}
+
+/** A new label for this tab: kept for the next visit, and the holder renamed at once when
+ * this tab controls the vehicle. */
+export async function setClientLabel(text) {
+  const label = text.trim().slice(0, 40);
+  if (label && label !== browserName()) localStorage.setItem(LABEL_KEY, label);
+  else localStorage.removeItem(LABEL_KEY);
+  $("client-label").value = clientLabel();
+  log("NOTICE", `this tab is called "${clientName()}"`);
+  if (!inControl()) return;
+  try {
+    const lease = await request("PUT", `/vehicles/${page.vehicleId}/control`, { client_name: clientName() },
+      { "X-Lease-Id": page.control.leaseId });
+    page.control.holder = lease.holder;
+    renderHolder();
+  } catch (err) {
+    log("WARNING", `renaming the session: ${err.message}`);
+  }
+}
+
+export function inControl() {
+  return Boolean(page.control && page.control.open);
+}
+
+// ---- taking and giving control -------------------------------------------------------------
+
+let retakeAttempt = 0;
+let retakeTimer = null;
+
+/** how: "take" (free control), "ask" (ask the holder), "force" (take it at once). */
+export function takeControl(how = "take") {
+  if (page.vehicleId === null || page.rejected) return;
+  clearTimeout(retakeTimer);
+  page.control?.close();
+  page.wantControl = true;
+  const asking = how === "ask";
+  if (asking) showNote(`asking ${page.state?.lease?.holder || "the holder"} for control…`, "warn");
+  const session = new ControlSession(page.vehicleId, {
+    takeover: how !== "take",
+    force: how === "force",
+    clientName: clientName(),
+    onLease: (lease) => {
+      retakeAttempt = 0;
+      showNote("");
+      log("NOTICE", `control taken as ${lease.holder}${how === "force" ? " (forced)" : ""}`);
+      hooks.onGained(lease);
+      updateControls();
+    },
+    onClosed: (info) => closed(session, info),
+    onMessage: (message) => onControlMessage(message),
+  });
+  page.control = session;
+  updateControls();
+}
+
+function closed(session, info) {
+  if (page.control === session) page.control = null;
+  hooks.onLost();
+  const takenBy = info.ended?.by || (info.ended?.state === "taken_over" ? "another pilot" : null);
+  if (info.byUs) {
+    log("NOTICE", "control released");
+  } else if (takenBy) {
+    page.wantControl = false;
+    const text = `Control taken by ${takenBy}`;
+    showNote(`${text} at ${new Date().toTimeString().slice(0, 8)}`, "bad");
+    banner(`${text}: this tab no longer sends anything`);
+    log("WARNING", text);
+  } else if (info.code === 4409) {
+    page.wantControl = false;
+    const reason = info.refusal?.reason || info.reason || "control is held by another pilot";
+    showNote(reason, "bad");
+    log("WARNING", `control refused: ${reason}`);
+  } else if (info.code === 4403 || info.code === 4401) {
+    page.wantControl = false;
+    log("ERROR", `control refused: ${info.reason || "this token may only observe"}`);
+  } else if (info.code === 4408) {
+    page.wantControl = false;
+    showNote(`control lease ended (${info.ended?.state || info.reason || "expired"})`, "bad");
+    log("WARNING", `control lease ended (${info.ended?.state || info.reason || "expired"})`);
+  } else if (page.wantControl) {
+    // A blip of the control socket alone: retry with backoff while the telemetry socket is
+    // up (a server restart is handled when telemetry reconnects).
+    const delayMs = reconnectDelayMs(retakeAttempt++);
+    log("WARNING", `control connection lost; taking control again in ${(delayMs / 1000).toFixed(1)} s`);
+    retakeTimer = setTimeout(() => {
+      if (page.wantControl && !page.control && page.connected) takeControl("take");
+    }, delayMs);
+  }
+  hidePrompt();
+  updateControls();
+}
+
+export function releaseControl() {
+  page.wantControl = false;
+  clearTimeout(retakeTimer);
+  page.control?.close();
+  page.control = null;
+  hooks.onLost();
+  hidePrompt();
+  updateControls();
+}
+
+// ---- another tab asks for control -----------------------------------------------------------
+
+let prompt = null;
+
+/** A control event, from the telemetry socket or the control socket. */
+export function onControlEvent(data) {
+  if (data.action === "renamed" && inControl() && data.previous_holder === page.control.holder) {
+    page.control.holder = data.holder;
+  }
+  if (data.action === "takeover_requested") {
+    if (inControl() && (!data.holder || data.holder === page.control.holder)) showPrompt(data);
+  } else if (prompt && (!data.request_id || data.request_id === prompt.requestId)
+             && data.action !== "takeover_requested") {
+    if (/takeover|taken|granted|denied|expired/.test(data.action || "")) hidePrompt();
+  }
+}
+
+// On the control socket the holder hears of a request addressed to it.
+function onControlMessage(message) {
+  if (message.type === "takeover_requested") onControlEvent({ action: "takeover_requested", ...message });
+}
+
+function showPrompt(data) {
+  if (prompt && prompt.requestId === data.request_id) return; // heard on both sockets
+  hidePrompt();
+  const timeoutS = Number(data.timeout_s) || 10;
+  prompt = { requestId: data.request_id, deadline: performance.now() + timeoutS * 1000 };
+  setText("takeover-by", `${data.by || "another pilot"} asks to take control`);
+  $("takeover-prompt").classList.remove("hidden");
+  const tick = () => {
+    if (!prompt) return;
+    const leftS = Math.max(0, (prompt.deadline - performance.now()) / 1000);
+    setText("takeover-countdown", `${Math.ceil(leftS)} s`);
+    if (leftS <= 0) hidePrompt();
+    else prompt.timer = setTimeout(tick, PROMPT_TICK_MS);
+  };
+  tick();
+  log("WARNING", `${data.by || "another pilot"} asks to take control (${timeoutS} s to answer)`);
+}
+
+function hidePrompt() {
+  if (prompt) clearTimeout(prompt.timer);
+  prompt = null;
+  $("takeover-prompt").classList.add("hidden");
+}
+
+export async function answerPrompt(grant) {
+  if (!prompt || !page.control) return;
+  const { requestId } = prompt;
+  hidePrompt();
+  const answer = await page.control.answerTakeover(requestId, grant);
+  if (answer.ok) log("NOTICE", grant ? "control handed over" : "request for control denied");
+  else log("WARNING", `answer not taken: ${describeError(answer.status, answer.body)}`);
+}
+
+// ---- who controls ---------------------------------------------------------------------------
+
+let shownHolder = { name: undefined, since: 0 };
+
+function showNote(text, cls = "") {
+  setText("control-note", text, cls);
+  $("control-note").classList.toggle("hidden", !text);
+}
+
+/** The holder from a state message's lease ({holder, since_s, session, …}). */
+export function renderHolder(lease = page.state?.lease) {
+  const holder = lease?.holder || null;
+  const mine = inControl();
+  if (holder !== shownHolder.name) {
+    const sinceS = Number.isFinite(lease?.since_s) ? lease.since_s : 0;
+    shownHolder = { name: holder, since: Date.now() - sinceS * 1000 };
+  }
+  const name = mine ? `you (${page.control.holder || holder || clientName()})` : holder || "nobody";
+  setText("holder", name, mine ? "mine" : holder ? "other" : "");
+  const since = holder || mine ? `since ${new Date(shownHolder.since).toTimeString().slice(0, 8)}` : "";
+  setText("holder-since", `${since}${lease?.session ? ` · ${lease.session}` : ""}`);
+  const otherHolds = Boolean(holder) && !mine;
+  const asking = page.control && !page.control.open;
+  $("take-control").classList.toggle("hidden", mine || page.readOnly);
+  $("take-control").disabled = Boolean(asking) || !page.connected;
+  setText("take-control", otherHolds ? "Ask for control" : "Take control");
+  $("force-control").classList.toggle("hidden", !otherHolds || page.readOnly);
+  $("force-control").disabled = !page.connected;
+  $("release").classList.toggle("hidden", !mine);
+}
+
+export function updateControls() {
+  const pilot = inControl() && page.connected;
+  document.body.classList.toggle("observing", !pilot);
+  for (const el of document.querySelectorAll(".ctl")) el.disabled = !pilot;
+  renderHolder();
+  hooks.onChange(pilot);
+}
+
+/** "Take control" when nobody holds it, "Ask for control" when someone does. */
+export function takeControlClicked() {
+  const holder = page.state?.lease?.holder;
+  takeControl(holder && !inControl() ? "ask" : "take");
+}
