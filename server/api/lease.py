@@ -262,7 +262,10 @@ class LeaseManager:
         ttl_s: float | None,
     ) -> Lease:
         if held.end is not None:  # the holder let go meanwhile: control is free to take
-            return self.acquire(held.vehicle_id, holder, session=session, ttl_s=ttl_s)
+            try:
+                return self.acquire(held.vehicle_id, holder, session=session, ttl_s=ttl_s)
+            except LeaseHeld as taken:  # unless someone else took it first
+                raise TakeoverRefused(str(taken), taken.lease.holder) from None
         if request.answer.cancelled() or not request.answer.done():
             raise TakeoverRefused(
                 f"{held.holder} did not answer within {request.timeout_s:g} s", held.holder
