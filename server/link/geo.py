@@ -29,15 +29,8 @@ def ground_distance_m(lat1_deg: float, lon1_deg: float, lat2_deg: float, lon2_de
 
 
 def geodetic_from_ned_m(
-    north_m: float,
-    east_m: float,
-    down_m: float,
-    ref_lat_deg: float,
-    ref_lon_deg: float,
-    ref_alt_m: float,
+    ned_m: tuple[float, float, float], ref_lat_deg: float, ref_lon_deg: float, ref_alt_m: float
 ) -> tuple[float, float, float]:
-    """(lat, lon, alt) of the point (north, east, down) metres from a reference point."""
-    lat_deg, lon_deg, alt_m = pymap3d.ned2geodetic(
-        north_m, east_m, down_m, ref_lat_deg, ref_lon_deg, ref_alt_m
-    )
+    """(lat, lon, alt) of the point ``ned_m`` (north, east, down) metres from a reference."""
+    lat_deg, lon_deg, alt_m = pymap3d.ned2geodetic(*ned_m, ref_lat_deg, ref_lon_deg, ref_alt_m)
     return float(lat_deg), float(lon_deg), float(alt_m)

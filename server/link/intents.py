@@ -191,7 +191,7 @@ async def offset(
     if here is None:
         raise SetpointRejected("no global position yet", field="north_m")
     lat_deg, lon_deg, _ = geodetic_from_ned_m(
-        north_m, east_m, -up_m, here.lat_deg, here.lon_deg, here.alt_amsl_m
+        (north_m, east_m, -up_m), here.lat_deg, here.lon_deg, here.alt_amsl_m
     )
     target = GeoTarget(lat_deg, lon_deg, here.alt_rel_m + up_m)
     _check(vehicle, target, "offset", position_field="north_m", alt_field="up_m")

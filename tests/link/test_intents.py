@@ -37,6 +37,19 @@ def _ground_distance_to_m(vehicle: Vehicle, lat_deg: float, lon_deg: float) -> f
     return math.hypot(north_m, east_m)
 
 
+async def _arrives(
+    vehicle: Vehicle, lat_deg: float, lon_deg: float, alt_rel_m: float | None, *, within_m: float
+) -> None:
+    """Wait until the vehicle is within_m of the point (and of the altitude, if given)."""
+
+    def there() -> bool:
+        if _ground_distance_to_m(vehicle, lat_deg, lon_deg) >= within_m:
+            return False
+        return alt_rel_m is None or abs(_alt_rel_m(vehicle) - alt_rel_m) < within_m
+
+    await wait_for(there, 40 / SPEED, f"arrival at {lat_deg:.6f}, {lon_deg:.6f}")
+
+
 async def _hovering(session: SimSession, altitude_rel_m: float = 5.0) -> None:
     vehicle = session.vehicle
     assert (await vehicle.arm()).ok
@@ -133,9 +146,7 @@ async def test_offset_in_offboard_arrives_at_the_point_pymap3d_gives() -> None:
             (lat_deg, lon_deg), abs=1e-9
         )
         assert result.target.alt_rel_m == pytest.approx(here.alt_rel_m + 2.0)
-        await wait_for(lambda: _ground_distance_to_m(vehicle, lat_deg, lon_deg) < 0.5
-                       and abs(_alt_rel_m(vehicle) - (here.alt_rel_m + 2.0)) < 0.5,
-                       40 / SPEED, "arrival")  # fmt: skip
+        await _arrives(vehicle, lat_deg, lon_deg, here.alt_rel_m + 2.0, within_m=0.5)
         assert vehicle.telemetry.mode == "OFFBOARD"
 
 
@@ -152,16 +163,13 @@ async def test_offset_and_goto_outside_offboard_are_repositions() -> None:
         assert moved.via == "reposition"
         assert moved.command is not None
         assert moved.command.ok
-        await wait_for(lambda: _ground_distance_to_m(vehicle, lat_deg, lon_deg) < 1.0,
-                       40 / SPEED, "offset arrival")  # fmt: skip
+        await _arrives(vehicle, lat_deg, lon_deg, None, within_m=1.0)
 
         back = await intents.goto(vehicle, lat_deg=here.lat_deg, lon_deg=here.lon_deg,
                                   alt_rel_m=7.0)  # fmt: skip
         assert back.via == "reposition"
         assert back.ok
-        await wait_for(lambda: _ground_distance_to_m(vehicle, here.lat_deg, here.lon_deg) < 1.0
-                       and abs(_alt_rel_m(vehicle) - 7.0) < 0.6, 40 / SPEED,
-                       "goto arrival")  # fmt: skip
+        await _arrives(vehicle, here.lat_deg, here.lon_deg, 7.0, within_m=0.6)
         assert vehicle.telemetry.mode == "HOLD"
 
 
@@ -180,9 +188,7 @@ async def test_goto_in_offboard_streams_a_global_position_and_arrives() -> None:
         assert result.via == "setpoint"
         assert result.sent is not None
         assert result.sent.setpoint.kind == "position_global"
-        await wait_for(lambda: _ground_distance_to_m(vehicle, lat_deg, lon_deg) < 0.5
-                       and abs(_alt_rel_m(vehicle) - 6.0) < 0.5, 40 / SPEED,
-                       "arrival")  # fmt: skip
+        await _arrives(vehicle, lat_deg, lon_deg, 6.0, within_m=0.5)
         assert vehicle.telemetry.mode == "OFFBOARD"
 
 
