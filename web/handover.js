@@ -207,12 +207,14 @@ export function renderHolder(lease = page.state?.lease) {
   const mine = inControl();
   if (holder !== shownHolder.name) {
     const sinceS = Number.isFinite(lease?.since_s) ? lease.since_s : 0;
-    shownHolder = { name: holder, since: Date.now() - sinceS * 1000 };
+    shownHolder = { name: holder, since: Date.now() - sinceS * 1000, session: lease?.session };
+    if (holder && !Number.isFinite(lease?.since_s)) readHolderSince(holder);
   }
   const name = mine ? `you (${page.control.holder || holder || clientName()})` : holder || "nobody";
   setText("holder", name, mine ? "mine" : holder ? "other" : "");
   const since = holder || mine ? `since ${new Date(shownHolder.since).toTimeString().slice(0, 8)}` : "";
-  setText("holder-since", `${since}${lease?.session ? ` · ${lease.session}` : ""}`);
+  const session = lease?.session || shownHolder.session;
+  setText("holder-since", `${since}${holder && session ? ` · ${session}` : ""}`);
   const otherHolds = Boolean(holder) && !mine;
   const asking = page.control && !page.control.open;
   $("take-control").classList.toggle("hidden", mine || page.readOnly);
@@ -221,6 +223,19 @@ export function renderHolder(lease = page.state?.lease) {
   $("force-control").classList.toggle("hidden", !otherHolds || page.readOnly);
   $("force-control").disabled = !page.connected;
   $("release").classList.toggle("hidden", !mine);
+}
+
+// The state names the holder; since when, and over which session, the control resource says.
+async function readHolderSince(holder) {
+  try {
+    const status = await request("GET", `/vehicles/${page.vehicleId}/control`);
+    if (status.holder !== holder || shownHolder.name !== holder) return;
+    if (Number.isFinite(status.since_s)) shownHolder.since = Date.now() - status.since_s * 1000;
+    shownHolder.session = status.session;
+    renderHolder();
+  } catch {
+    // the state keeps naming the holder; only the time it took control is missing
+  }
 }
 
 export function updateControls() {

@@ -59,8 +59,7 @@ def api(serve: Serve) -> Iterator[httpx.Client]:
         yield client
 
 
-@pytest.fixture
-def page(browser: Any, serve: Serve) -> Iterator[Any]:
+def _dashboard(browser: Any, serve: Serve) -> Iterator[Any]:
     """A fresh dashboard page for one test (without the scene, which software WebGL makes
     slow), closed after it."""
     page = open_dashboard(browser, serve.url, scene=False)
@@ -69,3 +68,14 @@ def page(browser: Any, serve: Serve) -> Iterator[Any]:
     finally:
         if not page.is_closed():
             page.close()
+
+
+@pytest.fixture
+def page(browser: Any, serve: Serve) -> Iterator[Any]:
+    yield from _dashboard(browser, serve)
+
+
+@pytest.fixture
+def second_page(browser: Any, serve: Serve) -> Iterator[Any]:
+    """Another tab of the same browser, beside `page`."""
+    yield from _dashboard(browser, serve)

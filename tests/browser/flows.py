@@ -7,7 +7,7 @@ from typing import Any
 
 import httpx
 
-from .harness import altitude_m, vehicle_state, wait_for
+from .harness import altitude_m, speed_m_s, vehicle_state, wait_for
 
 RESULT_TIMEOUT_S = 30.0
 
@@ -92,6 +92,21 @@ def start_offboard_here(page: Any, api: httpx.Client) -> None:
     page.click("#sp-from-here")
     click_and_wait_result(page, "#btn-offboard-start")
     wait_for("OFFBOARD", lambda: vehicle_state(api)["mode"] == "OFFBOARD", 10.0)
+
+
+def wait_position_hold(api: httpx.Client) -> dict[str, Any]:
+    """Waits for a position setpoint with the vehicle stopped (after a brake); that state."""
+    state: dict[str, Any] = wait_for(
+        "a position hold with the vehicle stopped",
+        lambda: (
+            (s := vehicle_state(api))["setpoint"] is not None
+            and s["setpoint"]["type"] == "position_ned"
+            and speed_m_s(s) < 0.3
+            and s
+        ),
+        15.0,
+    )
+    return state
 
 
 class _RestPilot:

@@ -7,7 +7,6 @@ vehicle first, so they run in any order."""
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
 from typing import Any
 
 import httpx
@@ -22,6 +21,7 @@ from .flows import (
     settle_vehicle,
     start_offboard_here,
     take_control,
+    wait_position_hold,
 )
 from .harness import Serve, altitude_m, speed_m_s, vehicle_state, wait_for
 
@@ -37,17 +37,6 @@ window.WebSocket = class extends NativeWebSocket {
   }
 };
 """
-
-
-@pytest.fixture
-def second(browser: Any, serve: Serve) -> Iterator[Any]:
-    """Another tab of the same browser."""
-    tab = open_dashboard(browser, serve.url, scene=False)
-    try:
-        yield tab
-    finally:
-        if not tab.is_closed():
-            tab.close()
 
 
 def _holder(tab: Any) -> str:
@@ -70,19 +59,25 @@ def _name(tab: Any) -> str:
     return text[len("you (") : -1]
 
 
+def _first_tab_in_control(first: Any, second_page: Any, api: httpx.Client) -> str:
+    """The vehicle on the ground, the first tab in control as the second tab shows; its name."""
+    settle_vehicle(api, flying=False)
+    take_control(first)
+    name = _name(first)
+    _wait_holder(second_page, name)
+    return name
+
+
 def _not_in_control(tab: Any) -> None:
     tab.wait_for_selector("#release", state="hidden", timeout=15_000)
     tab.wait_for_selector("#btn-arm[disabled]", timeout=10_000)
 
 
 def test_pilot_flies_then_a_second_tab_asks_and_the_first_grants(
-    page: Any, second: Any, api: httpx.Client
+    page: Any, second_page: Any, api: httpx.Client
 ) -> None:
-    settle_vehicle(api, flying=False)
-    take_control(page)
-    first_name = _name(page)
-    _wait_holder(second, first_name)
-    assert "since" in (second.text_content("#holder-since") or "")
+    first_name = _first_tab_in_control(page, second_page, api)
+    assert "since" in (second_page.text_content("#holder-since") or "")
     arm_and_take_off(page, api, 5.0)
     start_offboard_here(page, api)
 
@@ -101,27 +96,19 @@ def test_pilot_flies_then_a_second_tab_asks_and_the_first_grants(
     )
     wait_for("forward speed above 1 m/s", lambda: speed_m_s(vehicle_state(api)) > 1.0, 15.0)
     page.keyboard.up("w")
-    held = wait_for(
-        "a position hold where it stopped",
-        lambda: (
-            (s := vehicle_state(api))["setpoint"]["type"] == "position_ned"
-            and speed_m_s(s) < 0.3
-            and s
-        ),
-        15.0,
-    )
+    held = wait_position_hold(api)
     p = held["position_ned"]
     assert math.hypot(p["north_m"] - start["north_m"], p["east_m"] - start["east_m"]) > 0.5
 
     # the second tab asks; the first sees who asks and a countdown, and grants
-    assert second.text_content("#take-control") == "Ask for control"
-    second.click("#take-control")
+    assert second_page.text_content("#take-control") == "Ask for control"
+    second_page.click("#take-control")
     page.wait_for_selector("#takeover-prompt:not(.hidden)", timeout=10_000)
     assert "asks to take control" in (page.text_content("#takeover-by") or "")
     assert (page.text_content("#takeover-countdown") or "").endswith(" s")
     page.click("#grant-control")
-    _wait_holder(second, "you")
-    second_name = _name(second)
+    _wait_holder(second_page, "you")
+    second_name = _name(second_page)
     assert second_name != first_name
 
     # the old holder says who took control and stops sending; the stream never stopped
@@ -137,13 +124,13 @@ def test_pilot_flies_then_a_second_tab_asks_and_the_first_grants(
     assert state["stream"]["active"]
 
     # the new holder's panel shows the setpoint being flown, not the form's defaults
-    assert second.input_value("#sp-type") == "position"
+    assert second_page.input_value("#sp-type") == "position"
     flown = state["setpoint"]
-    assert float(second.input_value("#sp-north_m")) == pytest.approx(flown["north_m"], abs=0.1)
-    assert float(second.input_value("#sp-alt_m")) == pytest.approx(altitude_m(state), abs=0.8)
+    assert float(second_page.input_value("#sp-north_m")) == pytest.approx(flown["north_m"], abs=0.1)
+    assert float(second_page.input_value("#sp-alt_m")) == pytest.approx(altitude_m(state), abs=0.8)
 
     # return from the new holder's tab
-    click_and_wait_result(second, "#btn-rtl")
+    click_and_wait_result(second_page, "#btn-rtl")
     wait_for(
         "landed and disarmed",
         lambda: (s := vehicle_state(api))["landed_state"] == "ON_GROUND" and not s["armed"],
@@ -153,37 +140,32 @@ def test_pilot_flies_then_a_second_tab_asks_and_the_first_grants(
 
 
 def test_a_denied_request_says_so_in_the_asking_tab(
-    page: Any, second: Any, api: httpx.Client
+    page: Any, second_page: Any, api: httpx.Client
 ) -> None:
-    settle_vehicle(api, flying=False)
-    take_control(page)
-    _wait_holder(second, _name(page))
-    second.click("#take-control")
+    _first_tab_in_control(page, second_page, api)
+    second_page.click("#take-control")
     page.wait_for_selector("#takeover-prompt:not(.hidden)", timeout=10_000)
     page.click("#deny-control")
-    second.wait_for_function(
+    second_page.wait_for_function(
         "document.getElementById('control-note').textContent.includes('denied')", timeout=10_000
     )
     assert _holder(page).startswith("you")
-    assert not _holder(second).startswith("you")
+    assert not _holder(second_page).startswith("you")
 
 
 def test_force_takes_control_only_after_a_confirmation(
-    page: Any, second: Any, api: httpx.Client
+    page: Any, second_page: Any, api: httpx.Client
 ) -> None:
-    settle_vehicle(api, flying=False)
-    take_control(page)
-    first_name = _name(page)
-    _wait_holder(second, first_name)
-    second.click("#force-control")
-    assert second.text_content("#force-control") == "Confirm: force"
+    first_name = _first_tab_in_control(page, second_page, api)
+    second_page.click("#force-control")
+    assert second_page.text_content("#force-control") == "Confirm: force"
     holds_for_blocking(
         "the first tab still in control",
         lambda: api.get("/vehicles/1/control").json()["holder"] == first_name,
         0.5,
     )
-    second.click("#force-control")
-    _wait_holder(second, "you")
+    second_page.click("#force-control")
+    _wait_holder(second_page, "you")
     _not_in_control(page)
     page.wait_for_function(
         "document.getElementById('control-note').textContent.startsWith('Control taken by')",
@@ -193,7 +175,7 @@ def test_force_takes_control_only_after_a_confirmation(
 
 
 def test_every_tab_shows_who_controls_and_the_label_is_editable(
-    page: Any, second: Any, api: httpx.Client
+    page: Any, second_page: Any, api: httpx.Client
 ) -> None:
     settle_vehicle(api, flying=False)
     _wait_holder(page, "nobody")
@@ -204,10 +186,10 @@ def test_every_tab_shows_who_controls_and_the_label_is_editable(
     take_control(page)
     name = _name(page)
     assert "Ground station A" in name
-    _wait_holder(second, name)
+    _wait_holder(second_page, name)
     page.click("#release")
     _wait_holder(page, "nobody")
-    _wait_holder(second, "nobody")
+    _wait_holder(second_page, "nobody")
     page.evaluate("localStorage.removeItem('skyhelm.clientLabel')")
 
 

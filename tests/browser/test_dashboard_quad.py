@@ -23,6 +23,7 @@ from .flows import (
     settle_vehicle,
     start_offboard_here,
     take_control,
+    wait_position_hold,
 )
 from .harness import Serve, altitude_m, empty_scene, speed_m_s, vehicle_state, wait_for
 
@@ -241,15 +242,7 @@ def test_keyboard_velocity_moves_the_vehicle_and_space_holds_it(
     wait_for("1 m flown", lambda: moved_m() > 1.0, 15.0)
     page.keyboard.press("Space")
     page.keyboard.up("w")
-    held = wait_for(
-        "a position hold with the vehicle stopped",
-        lambda: (
-            (s := vehicle_state(api))["setpoint"]["type"] == "position_ned"
-            and speed_m_s(s) < 0.3
-            and s
-        ),
-        15.0,
-    )
+    held = wait_position_hold(api)
     assert held["mode"] == "OFFBOARD"
 
     def near_the_hold() -> bool:
