@@ -7,7 +7,7 @@ STAMP   := $(VENV)/.installed
 TSTAMP  := $(VENV)/.installed-test
 ARGS    ?=
 
-.PHONY: run test lint bench sim chromium clean
+.PHONY: run test test-px4 lint bench sim chromium clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -44,6 +44,17 @@ lint: $(TSTAMP)
 
 test: $(TSTAMP) chromium lint
 	$(VENV)/bin/pytest -q -p no:cacheprovider
+
+## The REST flight against real PX4 v1.16 SITL (the kit of shared/px4-sitl, built into
+## SKYHELM_PX4_SITL_DIR or /root/px4sitl); skipped with a message when there is no build.
+## SKYHELM_PX4_INSTANCE=N picks the instance (its ports follow the kit's layout).
+test-px4: $(TSTAMP)
+	@dir="$${SKYHELM_PX4_SITL_DIR:-/root/px4sitl}"; \
+	if [ ! -x "$$dir/build/px4_sitl_default/bin/px4" ]; then \
+	  echo "test-px4: skipped, no PX4 SITL build in $$dir (set SKYHELM_PX4_SITL_DIR)"; \
+	else \
+	  SKYHELM_PX4_SITL_DIR="$$dir" $(VENV)/bin/pytest -q -p no:cacheprovider -m px4 -rs tests/px4; \
+	fi
 
 bench: $(TSTAMP)
 	$(PY) -m bench.run_all

@@ -1,0 +1,26 @@
+"""The REST flight of docs/api.md on the built-in simulated quad, with `skyhelm serve`'s
+default settings: one test per stage, in flying order (tests/rest_flight_stages.py)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import pytest
+
+from tests.rest_flight import RestFlight
+from tests.rest_flight_stages import STAGE_NAMES, run_stage
+from tests.serve_process import skyhelm_serve
+
+
+@pytest.fixture(scope="module")
+def flight(tmp_path_factory: pytest.TempPathFactory) -> Iterator[RestFlight]:
+    # --no-scene: the 3D scene has nothing to do with control and costs CPU on a small machine.
+    with skyhelm_serve(tmp_path_factory.mktemp("rest-flight"), "--no-scene") as served:
+        session = RestFlight(served)
+        yield session
+        session.http.close()
+
+
+@pytest.mark.parametrize("stage", STAGE_NAMES)
+def test_rest_flight(flight: RestFlight, stage: str) -> None:
+    run_stage(flight, stage)
