@@ -12,6 +12,7 @@ import pytest
 from server.link import intents
 from server.link.envelope import Envelope, SetpointRejected, check_takeoff_altitude
 from server.link.setpoints import PositionNed, RawLocal, VelocityNed
+from server.link.state import GlobalState, HomeState
 from server.link.vehicle import Vehicle
 from tests.link.conftest import SimSession, open_sim, wait_for
 from tests.waiting import holds_for
@@ -37,6 +38,16 @@ def _ground_distance_to_m(vehicle: Vehicle, lat_deg: float, lon_deg: float) -> f
     return math.hypot(north_m, east_m)
 
 
+def _point_from(
+    ref: GlobalState | HomeState, north_m: float, east_m: float, down_m: float = 0.0
+) -> tuple[float, float]:
+    """(lat, lon) of a point seen from ref, by pymap3d: the expected answer of a move."""
+    lat_deg, lon_deg, _ = pymap3d.ned2geodetic(
+        north_m, east_m, down_m, ref.lat_deg, ref.lon_deg, ref.alt_amsl_m
+    )
+    return lat_deg, lon_deg
+
+
 async def _arrives(
     vehicle: Vehicle, lat_deg: float, lon_deg: float, alt_rel_m: float | None, *, within_m: float
 ) -> None:
@@ -50,17 +61,20 @@ async def _arrives(
     await wait_for(there, 40 / SPEED, f"arrival at {lat_deg:.6f}, {lon_deg:.6f}")
 
 
-async def _hovering(session: SimSession, altitude_rel_m: float = 5.0) -> None:
+async def _hovering(session: SimSession, *, offboard: bool = False) -> Vehicle:
+    """Armed and 5 m up (holding there in OFFBOARD, with offboard)."""
     vehicle = session.vehicle
     assert (await vehicle.arm()).ok
-    assert (await vehicle.takeoff(altitude_rel_m)).ok
-    await wait_for(lambda: _alt_rel_m(vehicle) > altitude_rel_m - 0.6, 40 / SPEED, "takeoff")
+    assert (await vehicle.takeoff(5.0)).ok
+    await wait_for(lambda: _alt_rel_m(vehicle) > 4.4, 40 / SPEED, "takeoff")
+    if offboard:
+        assert (await vehicle.start_offboard()).ok
+    return vehicle
 
 
 async def test_brake_stops_and_holds_where_it_stopped_without_flying_back() -> None:
     async with open_sim(speed=SPEED) as session:
-        vehicle = session.vehicle
-        await _hovering(session)
+        vehicle = await _hovering(session)
         assert (await vehicle.start_offboard(VelocityNed(4.0, 0.0, 0.0, yaw_deg=0))).ok
         await wait_for(lambda: _speed_m_s(vehicle) > 3.5, 20 / SPEED, "4 m/s north")
         events = vehicle.subscribe_events(maxsize=1024)
@@ -90,8 +104,7 @@ async def test_brake_stops_and_holds_where_it_stopped_without_flying_back() -> N
 
 async def test_a_new_intent_during_the_brake_wins_over_the_hold() -> None:
     async with open_sim(speed=SPEED) as session:
-        vehicle = session.vehicle
-        await _hovering(session)
+        vehicle = await _hovering(session)
         assert (await vehicle.start_offboard(VelocityNed(4.0, 0.0, 0.0, yaw_deg=0))).ok
         await wait_for(lambda: _speed_m_s(vehicle) > 3.5, 20 / SPEED, "4 m/s north")
 
@@ -107,9 +120,7 @@ async def test_a_new_intent_during_the_brake_wins_over_the_hold() -> None:
 
 async def test_velocity_with_altitude_hold_keeps_the_altitude_it_started_at() -> None:
     async with open_sim(speed=SPEED) as session:
-        vehicle = session.vehicle
-        await _hovering(session)
-        assert (await vehicle.start_offboard()).ok
+        vehicle = await _hovering(session, offboard=True)
         start_down_m = session.truth_ned_m[2]
 
         first = await intents.velocity(vehicle, frame="body", x_m_s=3.0, y_m_s=0.0,
@@ -130,13 +141,10 @@ async def test_velocity_with_altitude_hold_keeps_the_altitude_it_started_at() ->
 
 async def test_offset_in_offboard_arrives_at_the_point_pymap3d_gives() -> None:
     async with open_sim(speed=SPEED) as session:
-        vehicle = session.vehicle
-        await _hovering(session)
-        assert (await vehicle.start_offboard()).ok
+        vehicle = await _hovering(session, offboard=True)
         here = vehicle.telemetry.global_position
         assert here is not None
-        lat_deg, lon_deg, _ = pymap3d.ned2geodetic(12.0, -7.0, -2.0, here.lat_deg,
-                                                   here.lon_deg, here.alt_amsl_m)  # fmt: skip
+        lat_deg, lon_deg = _point_from(here, 12.0, -7.0, -2.0)
 
         result = await intents.offset(vehicle, north_m=12.0, east_m=-7.0, up_m=2.0)
 
@@ -152,12 +160,10 @@ async def test_offset_in_offboard_arrives_at_the_point_pymap3d_gives() -> None:
 
 async def test_offset_and_goto_outside_offboard_are_repositions() -> None:
     async with open_sim(speed=SPEED) as session:
-        vehicle = session.vehicle
-        await _hovering(session)
+        vehicle = await _hovering(session)
         here = vehicle.telemetry.global_position
         assert here is not None
-        lat_deg, lon_deg, _ = pymap3d.ned2geodetic(10.0, 0.0, 0.0, here.lat_deg, here.lon_deg,
-                                                   here.alt_amsl_m)  # fmt: skip
+        lat_deg, lon_deg = _point_from(here, 10.0, 0.0)
 
         moved = await intents.offset(vehicle, north_m=10.0, east_m=0.0)
         assert moved.via == "reposition"
@@ -175,13 +181,10 @@ async def test_offset_and_goto_outside_offboard_are_repositions() -> None:
 
 async def test_goto_in_offboard_streams_a_global_position_and_arrives() -> None:
     async with open_sim(speed=SPEED) as session:
-        vehicle = session.vehicle
-        await _hovering(session)
-        assert (await vehicle.start_offboard()).ok
+        vehicle = await _hovering(session, offboard=True)
         home = vehicle.telemetry.home
         assert home is not None
-        lat_deg, lon_deg, _ = pymap3d.ned2geodetic(-8.0, 9.0, 0.0, home.lat_deg, home.lon_deg,
-                                                   home.alt_amsl_m)  # fmt: skip
+        lat_deg, lon_deg = _point_from(home, -8.0, 9.0)
 
         result = await intents.goto(vehicle, lat_deg=lat_deg, lon_deg=lon_deg, alt_rel_m=6.0)
 
@@ -200,8 +203,7 @@ async def test_moves_outside_the_envelope_are_refused_naming_the_limit() -> None
                        "home")  # fmt: skip
         home = vehicle.telemetry.home
         assert home is not None
-        far_lat, far_lon, _ = pymap3d.ned2geodetic(0.0, 501.0, 0.0, home.lat_deg, home.lon_deg,
-                                                   home.alt_amsl_m)  # fmt: skip
+        far_lat, far_lon = _point_from(home, 0.0, 501.0)
 
         with pytest.raises(SetpointRejected) as far:
             await intents.goto(vehicle, lat_deg=far_lat, lon_deg=far_lon, alt_rel_m=10.0)
