@@ -3,9 +3,12 @@ a 409 carrying its MAV_RESULT and reason, no answer a 504, a lost vehicle a 503:
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 from fastapi import FastAPI, Request
+from fastapi.encoders import jsonable_encoder
+from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel, ValidationError
 
@@ -136,6 +139,51 @@ async def _handle(_: Request, exc: Exception) -> JSONResponse:
     return JSONResponse({"detail": detail}, status_code=status_code, headers=headers)
 
 
+def json_safe(value: Any) -> Any:
+    """``value`` with every NaN or infinity as a string ("nan", "inf", "-inf"): JSON has no
+    such numbers, and an error answer must be able to echo the input that caused it."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)
+    if isinstance(value, dict):
+        return {key: json_safe(item) for key, item in value.items()}
+    if isinstance(value, list | tuple):
+        return [json_safe(item) for item in value]
+    return value
+
+
+def non_finite_field(value: Any, path: str = "") -> str | None:
+    """The dotted name of the first NaN or infinity in parsed JSON (``setpoint.north_m``,
+    ``id``), or None: a WebSocket message is parsed by json.loads, which takes them."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return path or "message"
+    items: Any = ()
+    if isinstance(value, dict):
+        items = value.items()
+    elif isinstance(value, list):
+        items = enumerate(value)
+    for key, item in items:
+        found = non_finite_field(item, f"{path}.{key}" if path else str(key))
+        if found is not None:
+            return found
+    return None
+
+
+def refuse_non_finite(message: Any) -> None:
+    """422 naming the field when a parsed message holds NaN or infinity."""
+    field = non_finite_field(message)
+    if field is not None:
+        raise ApiError(422, "NaN and infinity are not numbers (JSON has neither)", field=field)
+
+
+async def _invalid_request(_: Request, exc: Exception) -> JSONResponse:
+    """FastAPI's 422, with the offending input echoed safely (Python's JSON parser takes
+    NaN and Infinity, which the answer could not encode: a 500 instead of the 422)."""
+    assert isinstance(exc, RequestValidationError)
+    errors = [json_safe(jsonable_encoder(error)) for error in exc.errors()]
+    return JSONResponse({"detail": errors}, status_code=422)
+
+
 def install_error_handlers(app: FastAPI) -> None:
     for exc_type in (ApiError, SetpointRejected, LeaseInvalid, ParamError, TimeoutError):
         app.add_exception_handler(exc_type, _handle)
+    app.add_exception_handler(RequestValidationError, _invalid_request)
