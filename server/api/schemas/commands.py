@@ -56,8 +56,8 @@ class RepositionBody(StrictBody):
 
 class VtolTransitionBody(StrictBody):
     to: Literal["fixed_wing", "multicopter"]
-    immediate: bool = False
-    wait: bool = True
+    immediate: bool = Field(False, description="switch at once, without a transition phase")
+    wait: bool = Field(True, description="answer once the vehicle reports the new VTOL state")
 
 
 class OriginBody(StrictBody):
