@@ -126,7 +126,7 @@ async def _hold_when_stopped(vehicle: Vehicle, brake: object) -> None:
         return speed is not None and speed <= HOLD_STOPPED_M_S
 
     await vehicle.wait_until(stopped, HOLD_BRAKE_TIMEOUT_S)
-    if vehicle.offboard.setpoint is not brake:
+    if vehicle.offboard.setpoint is not brake or not vehicle.streamer_active:
         return  # another setpoint (or the end of the stream) came first: it wins
     try:
         await _hold(vehicle)
