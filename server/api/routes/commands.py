@@ -33,13 +33,15 @@ _ROUTES: tuple[tuple[str, str, str, str | None], ...] = (
     ("disarm", "/disarm", "disarm",
      'Without force PX4 refuses unless landed ("Disarming denied: not landed").'),
     ("takeoff", "/takeoff", "takeoff",
-     "Climb to altitude_m above home (default: the vehicle's MIS_TAKEOFF_ALT)."),
+     "Climb to altitude_m above home (default: the vehicle's MIS_TAKEOFF_ALT); above the\n"
+     "envelope's max_alt_rel_m: 422."),
     ("land", "/land", "land", None),
     ("rtl", "/rtl", "rtl", None),
     ("hold", "/hold", "hold", None),
     ("mode", "/mode", "set_mode", "Resolves when the vehicle reports the mode (or says why not)."),
     ("reposition", "/reposition", "reposition",
-     "MAV_CMD_DO_REPOSITION: fly there and hold (ends OFFBOARD)."),
+     "MAV_CMD_DO_REPOSITION: fly there and hold (ends OFFBOARD). Outside the envelope: 422\n"
+     "naming the field and the limit. The goto intent picks this or a setpoint by mode."),
     ("vtol_transition", "/vtol/transition", "vtol_transition",
      "With wait, resolves when EXTENDED_SYS_STATE shows the new VTOL state."),
     ("origin", "/origin", "set_origin",
