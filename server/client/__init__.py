@@ -1,7 +1,8 @@
 """A typed Python client for the SkyHelm API: :class:`SkyHelm` (blocking) and
 :class:`AsyncSkyHelm` (asyncio), with the same calls. Setpoints are the link's own setpoint
-kinds (``PositionNed(north_m=10, east_m=0, down_m=-5)``), so their fields, units and limits
-have one definition. Only the package's runtime dependencies are needed (httpx,
+kinds (``PositionNed(north_m=10, east_m=0, down_m=-5)``; every kind in
+``server.client.setpoints``, which is ``server.link.setpoint_kinds``), so their fields, units
+and limits have one definition. Only the package's runtime dependencies are needed (httpx,
 websockets).
 
     from server.client import PositionNed, SkyHelm
@@ -29,28 +30,11 @@ from server.client.errors import (
 )
 from server.client.models import CommandResult, Lease, Message, Ned, State
 from server.client.sync import SkyHelm
-from server.link.setpoint_kinds import (
-    SETPOINT_KINDS,
-    AccelerationNed,
-    Attitude,
-    BodyRates,
-    OffsetBody,
-    OffsetNed,
-    PositionGlobal,
-    PositionNed,
-    PositionVelocityNed,
-    RawLocal,
-    SetpointKind,
-    VelocityBody,
-    VelocityNed,
-)
+from server.link import setpoint_kinds as setpoints
+from server.link.setpoint_kinds import PositionNed, SetpointKind, VelocityBody, VelocityNed
 
 __all__ = [
-    "SETPOINT_KINDS",
-    "AccelerationNed",
     "AsyncSkyHelm",
-    "Attitude",
-    "BodyRates",
     "CommandResult",
     "Forbidden",
     "InvalidInput",
@@ -60,12 +44,7 @@ __all__ = [
     "NoAnswer",
     "NoLease",
     "NotFound",
-    "OffsetBody",
-    "OffsetNed",
-    "PositionGlobal",
     "PositionNed",
-    "PositionVelocityNed",
-    "RawLocal",
     "Refused",
     "SetpointKind",
     "SkyHelm",
@@ -76,4 +55,5 @@ __all__ = [
     "VelocityBody",
     "VelocityNed",
     "WaitTimedOut",
+    "setpoints",
 ]

@@ -4,15 +4,14 @@ from __future__ import annotations
 
 import asyncio
 import json
-from collections.abc import AsyncGenerator, Callable, Coroutine
-from types import TracebackType
+from collections.abc import AsyncGenerator, Coroutine
 from typing import Any
 
 import httpx
 from websockets.asyncio.client import connect
 
-from server.client.calls import DEFAULT_TIMEOUT_S, Call, Calls
-from server.client.errors import SkyHelmError, timed_out
+from server.client.calls import Call, Calls, Waiting
+from server.client.errors import SkyHelmError
 from server.client.models import CommandResult, Lease, Message, State
 from server.client.urls import ws_url
 
@@ -39,26 +38,15 @@ class AsyncSkyHelm(
 
     The same calls as :class:`~server.client.SkyHelm`, awaited."""
 
-    def __init__(
-        self,
-        url: str,
-        token: str | None = None,
-        *,
-        vehicle: int = 1,
-        timeout_s: float = DEFAULT_TIMEOUT_S,
-    ) -> None:
-        super().__init__(url, token, vehicle=vehicle)
+    _http: httpx.AsyncClient
+
+    def _open(self, timeout_s: float) -> None:
         self._http = httpx.AsyncClient(timeout=timeout_s)
 
     async def __aenter__(self) -> AsyncSkyHelm:
         return self
 
-    async def __aexit__(
-        self,
-        kind: type[BaseException] | None,
-        error: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
+    async def __aexit__(self, *exc_info: object) -> None:
         await self.aclose()
 
     async def aclose(self) -> None:
@@ -94,27 +82,17 @@ class AsyncSkyHelm(
     def _now(self) -> float:
         return asyncio.get_running_loop().time()
 
-    async def wait_until(
-        self,
-        predicate: Callable[[State], bool],
-        timeout_s: float,
-        *,
-        what: str = "the condition",
-        poll_s: float = 0.1,
-    ) -> State:
-        """Read the state until ``predicate(state)`` holds and return that state; a held
-        lease is renewed meanwhile. Raises ``WaitTimedOut`` (a TimeoutError) after
-        ``timeout_s``."""
-        deadline = self._now() + timeout_s
+    async def _wait(self, waiting: Waiting, poll_s: float) -> State:
         while True:
-            if self._renew_due():
-                await self.renew()
-            state = await self.state()
-            if predicate(state):
+            state = await self._renewed_state()
+            if waiting.met(state):
                 return state
-            if self._now() >= deadline:
-                raise timed_out(what, timeout_s, state)
             await asyncio.sleep(poll_s)
+
+    async def _renewed_state(self) -> State:
+        if self._renew_due():
+            await self.renew()
+        return await self.state()
 
     async def telemetry(
         self, *, rate_hz: float = 10.0, all_vehicles: bool = False

@@ -11,12 +11,12 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Generic, Literal, TypeVar
 
-from server.client.errors import NoLease, error_for
-from server.client.models import Lease
+from server.client.errors import NoLease, error_for, timed_out
+from server.client.models import Lease, State
 from server.client.urls import API_PREFIX, split_url
 from server.link.setpoint_kinds import SetpointKind, describe
 
@@ -58,12 +58,44 @@ def _given(**values: Any) -> dict[str, Any]:
     return {key: value for key, value in values.items() if value is not None}
 
 
+def _arguments(values: dict[str, Any]) -> dict[str, Any]:
+    """A method's arguments (its ``locals()`` on entry) that were given, as the JSON body
+    whose fields they are named after."""
+    return _given(**{key: value for key, value in values.items() if key != "self"})
+
+
+@dataclass
+class Waiting:
+    """A ``wait_until`` in progress: ``met(state)`` until the predicate holds, raising
+    ``WaitTimedOut`` past the deadline."""
+
+    predicate: Callable[[State], bool]
+    deadline: float
+    what: str
+    clock: Callable[[], float]
+
+    def met(self, state: State) -> bool:
+        if self.predicate(state):
+            return True
+        if self.clock() >= self.deadline:
+            raise timed_out(self.what, state)
+        return False
+
+
 class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
     """The API of one vehicle (and the server's shared reads), for a client that sends each
     kind of answer through its own sender."""
 
-    def __init__(self, url: str, token: str | None = None, *, vehicle: int = 1) -> None:
+    def __init__(
+        self,
+        url: str,
+        token: str | None = None,
+        *,
+        vehicle: int = 1,
+        timeout_s: float = DEFAULT_TIMEOUT_S,
+    ) -> None:
         self.base_url, self.token = split_url(url, token)
+        self._open(timeout_s)
         self.vehicle_id = vehicle
         self.lease: Lease | None = None
         # when the lease was last renewed (any control call renews it), on the client's clock
@@ -71,23 +103,19 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
 
     # -- the senders each client provides ----------------------------------------------
 
-    @abstractmethod
-    def _command(self, call: Call) -> _Cmd: ...
+    # what each kind of answer becomes: the value (blocking) or an awaitable of it (asyncio)
+    _command: Callable[[Call], _Cmd]
+    _lease: Callable[[Call], _Lease]
+    _state: Callable[[Call], _State]
+    _json: Callable[[Call], _Json]
+    _value: Callable[[Call], _Value]
+    _none: Callable[[Call], _None]
+    # reads the state (renewing a held lease) until the wait is over, pausing between reads
+    _wait: Callable[[Waiting, float], _State]
 
     @abstractmethod
-    def _lease(self, call: Call) -> _Lease: ...
-
-    @abstractmethod
-    def _state(self, call: Call) -> _State: ...
-
-    @abstractmethod
-    def _json(self, call: Call) -> _Json: ...
-
-    @abstractmethod
-    def _value(self, call: Call) -> _Value: ...
-
-    @abstractmethod
-    def _none(self, call: Call) -> _None: ...
+    def _open(self, timeout_s: float) -> None:
+        """Open the HTTP connection pool, each request bounded by ``timeout_s``."""
 
     @abstractmethod
     def _now(self) -> float: ...
@@ -124,6 +152,9 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
             self._renewed_at = self._now()
         return body[call.pick] if call.pick is not None else body
 
+    def _waiting(self, predicate: Callable[[State], bool], timeout_s: float, what: str) -> Waiting:
+        return Waiting(predicate, self._now() + timeout_s, f"{what} ({timeout_s} s)", self._now)
+
     def _renew_due(self) -> bool:
         """A wait renews a held lease at a third of its TTL, so waiting never loses it."""
         return self.lease is not None and self._now() - self._renewed_at > self.lease.ttl_s / 3
@@ -146,6 +177,22 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
 
     def state(self) -> _State:
         return self._state(Call("GET", self._vehicle()))
+
+    def wait_until(
+        self,
+        predicate: Callable[[State], bool],
+        timeout_s: float,
+        *,
+        what: str = "the condition",
+        poll_s: float = 0.1,
+    ) -> _State:
+        """Read the state every ``poll_s`` until ``predicate(state)`` holds, and answer that
+        state; a held lease is renewed meanwhile. Raises ``WaitTimedOut`` (a TimeoutError)
+        after ``timeout_s``."""
+        deadline = self._now() + timeout_s
+        return self._wait(
+            Waiting(predicate, deadline, f"{what} ({timeout_s} s)", self._now), poll_s
+        )
 
     def stream_stats(self) -> _Json:
         return self._json(Call("GET", self._vehicle("/stream")))
@@ -221,26 +268,14 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
         return self._command(self._op("/mode", {"mode": mode}))
 
     def reposition(
-        self,
-        *,
-        lat_deg: float,
-        lon_deg: float,
-        alt_amsl_m: float | None = None,
-        alt_rel_m: float | None = None,
-        ground_speed_m_s: float | None = None,
-        yaw_deg: float | None = None,
-        loiter_radius_m: float | None = None,
-    ) -> _Cmd:
-        body = _given(
-            lat_deg=lat_deg,
-            lon_deg=lon_deg,
-            alt_amsl_m=alt_amsl_m,
-            alt_rel_m=alt_rel_m,
-            ground_speed_m_s=ground_speed_m_s,
-            yaw_deg=yaw_deg,
-            loiter_radius_m=loiter_radius_m,
-        )
-        return self._command(self._op("/reposition", body))
+        self, lat_deg: float, lon_deg: float, alt_rel_m: float | None = None, *,
+        alt_amsl_m: float | None = None, ground_speed_m_s: float | None = None,
+        yaw_deg: float | None = None, loiter_radius_m: float | None = None,
+    ) -> _Cmd:  # fmt: skip
+        """Fly to a point and hold there (ends OFFBOARD); the altitude above home or AMSL
+        (neither: the current one); the rest None: PX4's own (MPC_XY_CRUISE, the heading
+        now, NAV_LOITER_RAD)."""
+        return self._command(self._op("/reposition", _arguments(locals())))
 
     def vtol_transition(
         self,
@@ -264,8 +299,7 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
         alt_amsl_m: float | None = None,
     ) -> _Cmd:
         """Home at the point given, or where the vehicle is without one."""
-        body = _given(lat_deg=lat_deg, lon_deg=lon_deg, alt_amsl_m=alt_amsl_m)
-        return self._command(self._op("/home", body))
+        return self._command(self._op("/home", _arguments(locals())))
 
     def offboard_start(self, setpoint: SetpointKind | Mapping[str, Any] | None = None) -> _Cmd:
         """Stream ``setpoint`` (default: hold here) and switch to OFFBOARD."""
@@ -311,16 +345,7 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
         the altitude instead). Live input by default: without a new call within the
         server's deadman timeout the vehicle brakes and holds; ``live=False`` flies it until
         replaced. Needs OFFBOARD (``offboard_start``) to fly."""
-        body = _given(
-            forward_m_s=forward_m_s,
-            right_m_s=right_m_s,
-            north_m_s=north_m_s,
-            east_m_s=east_m_s,
-            up_m_s=up_m_s,
-            yaw_rate_deg_s=yaw_rate_deg_s,
-        )
-        body.update(frame=frame, hold_altitude=hold_altitude, live=live)
-        return self._json(self._op("/intents/velocity", body, "PUT"))
+        return self._json(self._op("/intents/velocity", _arguments(locals()), "PUT"))
 
     def offset(
         self,
@@ -331,20 +356,14 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
         yaw_deg: float | None = None,
     ) -> _Json:
         """Go by an offset from where the vehicle is (checked against the envelope)."""
-        body = _given(north_m=north_m, east_m=east_m, up_m=up_m, yaw_deg=yaw_deg)
-        return self._json(self._op("/intents/offset", body))
+        return self._json(self._op("/intents/offset", _arguments(locals())))
 
     def goto(
-        self,
-        *,
-        lat_deg: float,
-        lon_deg: float,
-        alt_rel_m: float | None = None,
+        self, lat_deg: float, lon_deg: float, alt_rel_m: float | None = None, *,
         yaw_deg: float | None = None,
-    ) -> _Json:
+    ) -> _Json:  # fmt: skip
         """Go to a point, ``alt_rel_m`` above home (default: the current altitude)."""
-        body = _given(lat_deg=lat_deg, lon_deg=lon_deg, alt_rel_m=alt_rel_m, yaw_deg=yaw_deg)
-        return self._json(self._op("/intents/goto", body))
+        return self._json(self._op("/intents/goto", _arguments(locals())))
 
     # -- parameters -------------------------------------------------------------------
 

@@ -8,34 +8,22 @@ from typing import Any
 
 
 class SkyHelmError(Exception):
-    """A call the server refused or could not carry out.
+    """A call the server refused or could not carry out: the HTTP status (0 when the server
+    could not be reached), the server's reason, and what else the answer named."""
 
-    ``status`` is the HTTP status (0 when the server could not be reached), ``reason`` the
-    server's explanation; ``result`` and ``result_code`` are the command's outcome and
-    MAV_RESULT when a vehicle answered, ``field``/``limit`` name bad input, ``holder`` who
-    holds the control lease. ``body`` is the answer as received."""
-
-    def __init__(
-        self,
-        status: int,
-        reason: str,
-        *,
-        result: str | None = None,
-        result_code: int | None = None,
-        field: str | None = None,
-        limit: float | None = None,
-        holder: str | None = None,
-        body: Any = None,
-    ) -> None:
+    def __init__(self, status: int, reason: str, *, body: Any = None, **named: Any) -> None:
         super().__init__(f"{status}: {reason}" if status else reason)
         self.status = status
         self.reason = reason
-        self.result = result
-        self.result_code = result_code
-        self.field = field
-        self.limit = limit
-        self.holder = holder
-        self.body = body
+        self.body = body  # the answer as received
+        # a command the vehicle answered: its outcome (DENIED, ...) and MAV_RESULT
+        self.result: str | None = named.get("result")
+        self.result_code: int | None = named.get("result_code")
+        # bad input: the field, and the limit it broke
+        self.field: str | None = named.get("field")
+        self.limit: float | None = named.get("limit")
+        # who holds the control lease
+        self.holder: str | None = named.get("holder")
 
 
 class Unauthorized(SkyHelmError):
@@ -118,5 +106,5 @@ class WaitTimedOut(SkyHelmError, TimeoutError):
     """``wait_until`` ran out of time; ``body`` is the last state seen."""
 
 
-def timed_out(what: str, timeout_s: float, last: Any) -> WaitTimedOut:
-    return WaitTimedOut(0, f"timed out after {timeout_s} s waiting for {what}", body=last)
+def timed_out(what: str, last: Any) -> WaitTimedOut:
+    return WaitTimedOut(0, f"timed out waiting for {what}", body=last)

@@ -4,9 +4,11 @@ telemetry socket's messages, each keeping the JSON it came from."""
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Generic, TypeVar
+
+_T = TypeVar("_T")
 
 
 @dataclass(frozen=True)
@@ -77,6 +79,16 @@ class Ned:
         return math.hypot(self.north_m - north_m, self.east_m - east_m)
 
 
+class _Field(Generic[_T]):
+    """A state field read from the JSON as a typed attribute."""
+
+    def __init__(self, key: str, convert: Callable[[Any], _T]) -> None:
+        self.key, self.convert = key, convert
+
+    def __get__(self, state: State, owner: type[State] | None = None) -> _T:
+        return self.convert(state.get(self.key))
+
+
 class State(Mapping[str, Any]):
     """A vehicle's state snapshot (``GET /vehicles/{id}``, or a telemetry ``state``
     message). Every field of the JSON is there by key (``state["battery"]``); the ones a
@@ -100,21 +112,10 @@ class State(Mapping[str, Any]):
             f"{self.landed_state!r}, position_ned={self.position_ned})"
         )
 
-    @property
-    def mode(self) -> str:
-        return str(self._data.get("mode"))
-
-    @property
-    def armed(self) -> bool:
-        return bool(self._data.get("armed"))
-
-    @property
-    def connected(self) -> bool:
-        return bool(self._data.get("connected"))
-
-    @property
-    def landed_state(self) -> str:
-        return str(self._data.get("landed_state"))
+    mode = _Field("mode", str)
+    armed = _Field("armed", bool)
+    connected = _Field("connected", bool)
+    landed_state = _Field("landed_state", str)
 
     @property
     def position_ned(self) -> Ned:

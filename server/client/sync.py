@@ -5,14 +5,13 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable, Generator
-from types import TracebackType
 from typing import Any
 
 import httpx
 from websockets.sync.client import connect
 
-from server.client.calls import DEFAULT_TIMEOUT_S, Call, Calls
-from server.client.errors import SkyHelmError, timed_out
+from server.client.calls import Call, Calls, Waiting
+from server.client.errors import SkyHelmError
 from server.client.models import CommandResult, Lease, Message, State
 from server.client.urls import ws_url
 
@@ -26,31 +25,19 @@ class SkyHelm(Calls[CommandResult, Lease, State, Any, float, None]):
             sky.takeoff(altitude_m=5)
             sky.wait_until(lambda s: s.altitude_m > 4.5, timeout_s=60)
 
-    Refusals raise :class:`~server.client.errors.SkyHelmError` subclasses. ``clock`` is what
-    waits measure time with."""
+    Refusals raise :class:`~server.client.errors.SkyHelmError` subclasses."""
 
-    def __init__(
-        self,
-        url: str,
-        token: str | None = None,
-        *,
-        vehicle: int = 1,
-        timeout_s: float = DEFAULT_TIMEOUT_S,
-        clock: Callable[[], float] = time.monotonic,
-    ) -> None:
-        super().__init__(url, token, vehicle=vehicle)
-        self._clock = clock
+    # what waits measure time with
+    clock: Callable[[], float] = time.monotonic
+    _http: httpx.Client
+
+    def _open(self, timeout_s: float) -> None:
         self._http = httpx.Client(timeout=timeout_s)
 
     def __enter__(self) -> SkyHelm:
         return self
 
-    def __exit__(
-        self,
-        kind: type[BaseException] | None,
-        error: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
+    def __exit__(self, *exc_info: object) -> None:
         self.close()
 
     def close(self) -> None:
@@ -84,29 +71,19 @@ class SkyHelm(Calls[CommandResult, Lease, State, Any, float, None]):
         self._send(call)
 
     def _now(self) -> float:
-        return self._clock()
+        return self.clock()
 
-    def wait_until(
-        self,
-        predicate: Callable[[State], bool],
-        timeout_s: float,
-        *,
-        what: str = "the condition",
-        poll_s: float = 0.1,
-    ) -> State:
-        """Read the state until ``predicate(state)`` holds and return that state; a held
-        lease is renewed meanwhile. Raises ``WaitTimedOut`` (a TimeoutError) after
-        ``timeout_s``."""
-        deadline = self._now() + timeout_s
+    def _wait(self, waiting: Waiting, poll_s: float) -> State:
         while True:
-            if self._renew_due():
-                self.renew()
-            state = self.state()
-            if predicate(state):
+            state = self._renewed_state()
+            if waiting.met(state):
                 return state
-            if self._now() >= deadline:
-                raise timed_out(what, timeout_s, state)
             time.sleep(poll_s)
+
+    def _renewed_state(self) -> State:
+        if self._renew_due():
+            self.renew()
+        return self.state()
 
     def telemetry(
         self, *, rate_hz: float = 10.0, all_vehicles: bool = False
