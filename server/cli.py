@@ -9,6 +9,7 @@ import logging
 import os
 import re
 import sys
+import typing
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -77,7 +78,7 @@ def _serve_parser(sub: Any) -> None:
     serve.add_argument("--sim-count", type=int, help="number of simulated vehicles")
     serve.add_argument("--sim-speed", type=float, help="simulated time per wall second")
     serve.add_argument("--rate-hz", type=float, help="offboard setpoint stream rate")
-    serve.add_argument("--lease-ttl-s", type=float, help="control lease TTL (default 2)")
+    serve.add_argument("--lease-ttl-s", type=float, help="control lease TTL (default 120)")
     serve.add_argument("--on-operator-loss", help="hold|land|rtl|hold-mode|continue")
     serve.add_argument("--max-alt-rel-m", type=float, help="envelope: altitude above home")
     serve.add_argument("--max-distance-m", type=float, help="envelope: distance from home")
@@ -85,6 +86,20 @@ def _serve_parser(sub: Any) -> None:
     serve.add_argument("--max-speed-z-m-s", type=float, help="envelope: vertical speed")
     serve.add_argument("--log-dir", type=Path, help="where .tlog recordings go (default logs)")
     serve.add_argument("--no-tlog", action="store_true", help="record no .tlog")
+    _numeric_setting_flags(serve)
+
+
+def _numeric_setting_flags(parser: argparse.ArgumentParser) -> None:
+    """A flag for every numeric setting that has none above, so each can be given, and is
+    checked, from the command line as from the environment."""
+    for name, field in Settings.model_fields.items():
+        flag = "--" + name.replace("_", "-")
+        kinds = typing.get_args(field.annotation) or (field.annotation,)
+        kind = next((k for k in kinds if k in (int, float)), None)
+        if kind is None or flag in parser._option_string_actions:
+            continue
+        help_text = f"{field.description} " if field.description else ""
+        parser.add_argument(flag, type=kind, help=f"{help_text}(default {field.default})")
 
 
 def _replay_parser(sub: Any) -> None:

@@ -23,6 +23,7 @@ from pydantic_settings import (
     TomlConfigSettingsSource,
 )
 
+from server.link.streamer import DEFAULT_RATE_HZ, MAX_RATE_HZ, MIN_RATE_HZ
 from server.link.urls import LinkUrlError, parse_link_url
 
 OperatorLossAction = Literal["hold", "land", "rtl", "hold-mode", "continue"]
@@ -38,7 +39,11 @@ def _default_web_dir() -> Path | None:
 
 
 class Settings(BaseSettings):
-    model_config = SettingsConfigDict(env_prefix="SKYHELM_", extra="forbid", frozen=True)
+    # A bound that code below also checks is that code's constant (the streamer's rate), so
+    # a value that passes here never fails later at run time; NaN and infinity never pass.
+    model_config = SettingsConfigDict(
+        env_prefix="SKYHELM_", extra="forbid", frozen=True, allow_inf_nan=False
+    )
 
     host: str = "127.0.0.1"
     port: int = Field(8000, ge=0, le=65535)
@@ -50,7 +55,9 @@ class Settings(BaseSettings):
     sim_airframe: Airframe = "quad"
     sim_count: int = Field(1, ge=1, le=32)
     sim_speed: float = Field(1.0, gt=0.0, le=50.0)
-    rate_hz: float = Field(20.0, ge=2.0, le=200.0, description="offboard setpoint rate")
+    rate_hz: float = Field(
+        DEFAULT_RATE_HZ, ge=MIN_RATE_HZ, le=MAX_RATE_HZ, description="offboard setpoint rate"
+    )
     lease_ttl_s: float = Field(
         120.0, ge=0.2, le=86400.0, description="control lease TTL when the client asks none"
     )
