@@ -1,0 +1,103 @@
+"""Truthful answers through the REST API, against the simulated vehicle: a repeated setpoint
+PUT renews the stream without extra sends, OFFBOARD that PX4 accepts but does not enter is
+asked once more and then refused with the mode seen, a takeoff after PX4 disarmed itself
+is refused with what happened."""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import AsyncIterator
+from typing import Any
+
+import pytest
+
+from server.link import Vehicle
+from tests.api.conftest import Api, api_for, sim_cluster
+from tests.waiting import wait_for
+
+STREAM_RATE_HZ = 50.0
+RENEWALS = 40
+SETPOINT = {"type": "position_ned", "north_m": 0.0, "east_m": 0.0, "down_m": -2.0}
+
+
+@pytest.fixture
+async def api() -> AsyncIterator[Api]:
+    async with (
+        sim_cluster("quad") as sim,
+        api_for(sim, rate_hz=STREAM_RATE_HZ, lease_ttl_s=60.0) as api,
+    ):
+        await api.wait_ready()
+        await api.take_control()
+        yield api
+
+
+def _vehicle(api: Api) -> Vehicle:
+    vehicle: Vehicle | None = api.app.state.api.registry.get(1)
+    assert vehicle is not None
+    return vehicle
+
+
+async def test_put_of_the_streamed_setpoint_renews_it_without_an_extra_send(
+    api: Api, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # the simulated vehicle's receiver notes when each setpoint arrives
+    receiver = api.inst.vehicle.receiver
+    arrivals: list[float] = []
+    handle = receiver.handle
+
+    def noting(link: Any, msg: Any) -> None:
+        if msg.get_type() == "SET_POSITION_TARGET_LOCAL_NED":
+            arrivals.append(time.monotonic())
+        handle(link, msg)
+
+    monkeypatch.setattr(receiver, "handle", noting)
+    assert (await api.control("setpoint", SETPOINT)).status_code == 200
+    await wait_for(lambda: len(arrivals) >= 1, 2.0, "the first setpoint")
+
+    for _ in range(RENEWALS):
+        assert (await api.control("setpoint", SETPOINT)).status_code == 200
+        # paced by the stream: the next PUT once the vehicle has one more setpoint (with an
+        # extra send per PUT this would not wait at all)
+        seen = len(arrivals)
+        await wait_for(lambda n=seen: len(arrivals) > n, 1.0, "the next tick")
+
+    first, last = arrivals[0], arrivals[-1]
+    scheduled = 1 + math.floor((last - first) * STREAM_RATE_HZ + 0.5)
+    assert len(arrivals) <= scheduled + 1, (len(arrivals), scheduled)
+    assert last - first >= (len(arrivals) - 3) / STREAM_RATE_HZ
+
+
+async def test_offboard_accepted_but_not_entered_is_retried_once_and_then_409(api: Api) -> None:
+    vehicle = _vehicle(api)
+    vehicle.mode_confirm_timeout_s = 1.0
+    vehicle.offboard_prestream_s = 0.2
+    commander = api.inst.vehicle.commander
+
+    commander.offboard_requests_lost = 1
+    retried = await api.control("offboard/start", {})
+    assert retried.status_code == 200, retried.text
+    assert retried.json()["result"] == "ACCEPTED"
+    assert (await api.control("offboard/stop", {})).status_code == 200
+
+    commander.offboard_requests_lost = 2
+    refused = await api.control("offboard/start", {})
+    assert refused.status_code == 409, refused.text
+    assert refused.json()["result"] == "NOT_CONFIRMED"
+    assert refused.json()["reason"] == "accepted twice, but the vehicle still reports HOLD"
+    assert commander.offboard_requests_lost == 0
+
+
+async def test_takeoff_after_px4_disarmed_itself_is_409_saying_so(api: Api) -> None:
+    assert (await api.control("arm")).status_code == 200
+    await api.wait_state(lambda s: s["armed"], 5.0, "armed")
+    # PX4 disarms a vehicle left armed on the ground after COM_DISARM_PRFLT (10 sim s)
+    await api.wait_state(lambda s: not s["armed"], 10.0, "PX4's own disarm")
+
+    response = await api.control("takeoff", {"altitude_m": 3.0})
+
+    assert response.status_code == 409, response.text
+    body = response.json()
+    assert body["result"] == "NOT_CONFIRMED"
+    assert body["result_code"] == 0  # PX4 acked it ACCEPTED
+    assert body["reason"].startswith("accepted, but the vehicle disarmed itself")
