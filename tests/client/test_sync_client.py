@@ -96,7 +96,11 @@ def test_parameters_reads_and_the_other_refusals(served: Served) -> None:
     with SkyHelm(pilot_url(served)) as sky:
         assert sky.health()["status"] == "ok"
         assert [vehicle["id"] for vehicle in sky.vehicles()] == [1]
-        sky.acquire()
+        sky.acquire(ttl_s=1.0)
+        with pytest.raises(WaitTimedOut):  # waiting longer than the TTL keeps the lease
+            sky.wait_until(lambda s: False, timeout_s=2.5)
+        assert sky.lease is not None
+        assert sky.control_status()["holder"] == sky.lease.holder
         assert sky.set_param("MIS_TAKEOFF_ALT", 3.5) == pytest.approx(3.5)
         assert sky.param("MIS_TAKEOFF_ALT") == pytest.approx(3.5)
         assert sky.params("MIS_TAKEOFF_ALT", "NAV_RCL_ACT").keys() == {
