@@ -9,7 +9,7 @@ import {
 } from "./control.js";
 import {
   answerPrompt, clientLabel, clientName, inControl, onControlEvent, releaseControl, renderHolder,
-  setClientLabel, takeControl, takeControlClicked, updateControls,
+  setClientLabel, tabId, takeControl, takeControlClicked, updateControls,
 } from "./handover.js";
 import { modeMenu, modesFor } from "./modes.js";
 import { SETPOINT_TYPES } from "./offboard.js";
@@ -251,6 +251,7 @@ function wire() {
   $("grant-control").addEventListener("click", () => answerPrompt(true));
   $("deny-control").addEventListener("click", () => answerPrompt(false));
   $("client-label").value = clientLabel();
+  setText("tab-id", `tab ${tabId()}`);
   $("client-label").title = `this tab is "${clientName()}" to the others`;
   $("client-label").addEventListener("change", (e) => setClientLabel(e.target.value));
   confirmThen($("btn-arm"), () => runCommand("Arm", "arm", {}, $("btn-arm")));

@@ -8,6 +8,7 @@ import { $, banner, log, setText } from "./ui.js";
 
 const LABEL_KEY = "skyhelm.clientLabel";
 const PROMPT_TICK_MS = 250;
+const TAKEN_BANNER_MS = 10000; // then the note beside the holder keeps saying it
 // A label a person can tell apart from other tabs: the browser's name (editable, kept for the
 // next visit) and a short id of this tab (two tabs of one browser differ by it).
 const TAB_ID = Math.floor(Math.random() * 0x10000).toString(16).padStart(4, "0");
@@ -25,6 +26,10 @@ function browserName() {
   const name = /Firefox\//.test(ua) ? "Firefox" : /Edg\//.test(ua) ? "Edge"
     : /Chrom(e|ium)\//.test(ua) ? "Chrome" : /Safari\//.test(ua) ? "Safari" : "Browser";
   return /Headless/.test(ua) ? `${name} (headless)` : name;
+}
+
+export function tabId() {
+  return TAB_ID;
 }
 
 export function clientLabel() {
@@ -100,7 +105,9 @@ function closed(session, info) {
     page.wantControl = false;
     const text = `Control taken by ${takenBy}`;
     showNote(`${text} at ${new Date().toTimeString().slice(0, 8)}`, "bad");
-    banner(`${text}: this tab no longer sends anything`);
+    const told = `${text}: this tab no longer sends anything`;
+    banner(told);
+    setTimeout(() => { if ($("banner").textContent === told) banner(""); }, TAKEN_BANNER_MS);
     log("WARNING", text);
   } else if (info.code === 4409) {
     page.wantControl = false;
