@@ -49,6 +49,7 @@ class Lease:
     holder: str
     expires_in_s: float
     session: str = "rest"
+    since_s: float = 0.0
     setpoint: dict[str, Any] | None = None
     taken_from: str | None = None
     raw: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
@@ -61,6 +62,7 @@ class Lease:
             holder=str(body.get("holder", "")),
             expires_in_s=float(body.get("expires_in_s") or 0.0),
             session=str(body.get("session", "rest")),
+            since_s=float(body.get("since_s") or 0.0),
             setpoint=body.get("setpoint"),
             taken_from=body.get("taken_from"),
             raw=dict(body),

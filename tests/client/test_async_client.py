@@ -8,9 +8,18 @@ import contextlib
 
 import pytest
 
-from server.client import AsyncSkyHelm, InvalidInput, Message, NoLease, PositionNed, VelocityNed
+from server.client import (
+    AsyncSkyHelm,
+    InvalidInput,
+    Message,
+    NoLease,
+    PositionNed,
+    Refused,
+    VelocityNed,
+)
 from tests.client.conftest import pilot_url, ready
 from tests.serve_process import Served
+from tests.waiting import eventually
 
 ALTITUDE_M = 5.0
 
@@ -77,3 +86,37 @@ async def test_flies_watches_telemetry_and_is_taken_over(served: Served) -> None
     actions = [event.get("action") for event in _events(messages, "control")]
     assert "acquired" in actions
     assert "taken_over" in actions
+
+
+async def _pending_request(holder: AsyncSkyHelm) -> str:
+    async def request() -> dict[str, str] | None:
+        pending: dict[str, str] | None = (await holder.control_status())["request"]
+        return pending
+
+    found = await eventually(request, 10.0, "the takeover request")
+    assert found is not None
+    return found["request_id"]
+
+
+async def test_a_takeover_is_asked_and_the_holder_answers(served: Served) -> None:
+    async with AsyncSkyHelm(pilot_url(served)) as holder, AsyncSkyHelm(pilot_url(served)) as asker:
+        first = await holder.acquire(client_name="holder")
+
+        asking = asyncio.create_task(asker.take_over(client_name="asker"))
+        request_id = await _pending_request(holder)
+        await holder.answer_takeover(request_id, grant=False)
+        with pytest.raises(Refused) as denied:
+            await asking
+        assert denied.value.status == 409
+        assert first.holder in denied.value.reason
+        assert (await holder.renew()).holder == first.holder  # still the holder's
+
+        asking = asyncio.create_task(asker.take_over(client_name="asker"))
+        request_id = await _pending_request(holder)
+        await holder.answer_takeover(request_id, grant=True)
+        granted = await asking
+        assert granted.taken_from == first.holder
+        assert (await asker.control_status())["holder"] == granted.holder
+        with pytest.raises(NoLease):
+            await holder.renew()
+        assert holder.lease is None
