@@ -272,6 +272,40 @@ def _holding_after_operator_loss(flight: RestFlight) -> None:
     )
 
 
+def intents(flight: RestFlight) -> None:
+    """Moves decided in the server: offset and go-to stay in OFFBOARD, brake stops there."""
+    here = flight.state()["position_ned"]
+    moved = flight.expect(flight.call("POST", "intents/offset", {"north_m": 5.0}), 200, "offset")
+    assert moved.get("via") == "setpoint", f"an offset in OFFBOARD stays in OFFBOARD: {moved}"
+    flight.wait_state(
+        "5 m north by the offset intent (1 m, < 0.5 m/s), still OFFBOARD",
+        lambda s: in_offboard(s) and distance_ned(s, here["north_m"] + 5.0, here["east_m"]) < 1.0
+        and speed_xy(s) < 0.5,
+        20.0,
+    )
+    flight.expect(flight.call("PUT", "intents/velocity",
+                              {"frame": "ned", "north_m_s": 1.5, "live": False}), 200, "velocity")
+    flight.wait_state("flying at 1.5 m/s (1.0 reached)", lambda s: speed_xy(s) >= 1.0, 10.0)
+    braked = flight.expect(flight.call("POST", "intents/brake"), 200, "brake")
+    assert braked.get("via") == "setpoint", f"brake in OFFBOARD streams a stop: {braked}"
+    flight.wait_state("braked and holding in OFFBOARD",
+                      lambda s: in_offboard(s) and speed_xy(s) < 0.3, 10.0)
+    origin = flight.state()["origin"]
+    lat, lon, _ = pymap3d.ned2geodetic(
+        here["north_m"], here["east_m"], here["down_m"], origin["lat_deg"], origin["lon_deg"],
+        origin["alt_amsl_m"],
+    )
+    back = flight.expect(flight.call("POST", "intents/goto", {"lat_deg": lat, "lon_deg": lon}),
+                         200, "goto")
+    assert back.get("via") == "setpoint", f"goto in OFFBOARD: {back}"
+    flight.wait_state(
+        "back where the intents started (1 m, < 0.5 m/s), still OFFBOARD",
+        lambda s: in_offboard(s) and distance_ned(s, here["north_m"], here["east_m"]) < 1.0
+        and speed_xy(s) < 0.5 and abs(s["position_ned"]["down_m"] - here["down_m"]) < 1.0,
+        20.0,
+    )
+
+
 def reposition(flight: RestFlight) -> None:
     state = flight.state()
     origin, here = state["origin"], state["position_ned"]
@@ -318,7 +352,7 @@ STAGES: dict[str, Callable[[RestFlight], None]] = {
         connected, observer_reads_but_cannot_control, take_control, control_needs_the_lease,
         arm, takeoff, offboard_start, position_setpoint, waiting_keeps_a_position_setpoint,
         velocity_setpoint, bad_input_is_422, live_setpoint_and_deadman, lease_released_holds,
-        lease_ttl_lapses, reposition, rtl, release_control,
+        lease_ttl_lapses, intents, reposition, rtl, release_control,
     )
 }
 STAGE_NAMES = list(STAGES)

@@ -62,6 +62,9 @@ def _first_line(server: subprocess.Popen[str], timeout_s: float, stderr_path: Pa
         readable, _, _ = select.select([server.stdout], [], [], 0.2)
         if readable:
             line = server.stdout.readline()
+            if not line:  # stdout closed: it is exiting; report why
+                server.wait(timeout=10)
+                continue
             assert line.startswith(READY_PREFIX), f"unexpected first line: {line!r}"
             return line
     raise AssertionError(f"skyhelm serve printed no URL within {timeout_s} s")
