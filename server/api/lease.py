@@ -239,7 +239,7 @@ class LeaseManager:
         outcome = "takeover_withdrawn"  # unless the wait below ends: the asker went away
         try:
             waiting: set[asyncio.Future[Any]] = {request.answer, ended}
-            await asyncio.wait(waiting, timeout=ask_s)
+            await asyncio.wait(waiting, timeout=ask_s, return_when=asyncio.FIRST_COMPLETED)
             outcome = "takeover_timed_out"
         finally:
             ended.cancel()

@@ -115,8 +115,11 @@ async def test_a_granted_takeover_hands_the_lease_over() -> None:
     )
     request_id = await _asked(leases)
     assert leases.current(1) is alice  # the holder flies on while being asked
+    loop = asyncio.get_running_loop()
+    answered_at = loop.time()
     leases.answer(1, alice.lease_id, request_id, True)
     bob = await asking
+    assert loop.time() == answered_at  # the answer, not the ask time, ends the wait
 
     assert bob.holder == "pilot · bob"
     assert bob.taken_from == "pilot · alice"
@@ -161,8 +164,10 @@ async def test_a_denied_takeover_leaves_the_holder_in_control() -> None:
     alice = leases.acquire(1, "pilot · alice", session="ws")
     asking = asyncio.ensure_future(leases.take_over(1, "pilot · bob", session="ws", ask_s=10.0))
     leases.answer(1, alice.lease_id, await _asked(leases), False)
+    answered_at = asyncio.get_running_loop().time()
     with pytest.raises(TakeoverRefused) as refused:
         await asking
+    assert asyncio.get_running_loop().time() == answered_at
     assert str(refused.value) == "denied by pilot · alice"
     assert refused.value.holder == "pilot · alice"
     assert leases.current(1) is alice
@@ -195,7 +200,9 @@ async def test_a_holder_letting_go_while_asked_lets_the_asker_in() -> None:
     asking = asyncio.ensure_future(leases.take_over(1, "pilot · bob", session="ws", ask_s=10.0))
     await _asked(leases)
     leases.release(1, alice.lease_id, LeaseEnd.CLOSED)
+    released_at = asyncio.get_running_loop().time()
     bob = await asking
+    assert asyncio.get_running_loop().time() == released_at
     assert leases.current(1) is bob
     assert bob.taken_from is None  # nobody held it any more when bob got it
 

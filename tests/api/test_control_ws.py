@@ -1,0 +1,156 @@
+"""The control model over WebSockets on a real uvicorn, flying the simulated vehicle over
+UDP: a holder asked for control on its socket grants or denies it, every client sees the
+control events, the new holder starts from the flown setpoint while the stream goes on, and
+a live input that falls silent brakes the vehicle while the lease stays."""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import AsyncIterator
+from typing import Any
+
+import pytest
+from websockets.asyncio.client import connect
+
+from server.link import Vehicle
+from tests.api.test_ws import (
+    Served,
+    close_code,
+    fly_offboard_at_2_m_s,
+    receive,
+    receive_until,
+    served,
+)
+from tests.waiting import eventually, wait_for
+
+DEADMAN_S = 0.5
+HERE = {"type": "position_ned", "north_m": 0.0, "east_m": 0.0, "down_m": -2.0, "yaw_deg": 0.0}
+
+
+@pytest.fixture
+async def quad() -> AsyncIterator[Served]:
+    async with served(takeover_ask_s=10.0, deadman_timeout_s=DEADMAN_S) as s:
+        yield s
+
+
+def _vehicle(quad: Served) -> Vehicle:
+    vehicle: Vehicle | None = quad.api.app.state.api.registry.get(1)
+    assert vehicle is not None
+    return vehicle
+
+
+def _speed(state: dict[str, Any]) -> float:
+    velocity = state["velocity_ned"]
+    return math.hypot(velocity["north_m_s"], velocity["east_m_s"])
+
+
+async def _control_events(telemetry: Any, count: int) -> list[dict[str, Any]]:
+    return [
+        (await receive_until(telemetry, {"type": "event", "kind": "control"}))["data"]
+        for _ in range(count)
+    ]
+
+
+async def test_a_holder_grants_a_takeover_on_its_socket(quad: Served) -> None:
+    vehicle = _vehicle(quad)
+    async with (
+        connect(quad.url("telemetry", vehicle=1, rate_hz=1)) as telemetry,
+        connect(quad.url("control", vehicle=1, client_name="tab-1", ttl_s=30)) as first,
+    ):
+        assert (await receive(first))["holder"] == "pilot · tab-1"
+        await first.send(json.dumps({"type": "setpoint", "id": 1, "setpoint": HERE}))
+        flown = await receive_until(first, {"id": 1})
+        assert flown["status"] == 200
+        await wait_for(lambda: vehicle.stream_stats().sent >= 10, 5.0, "the stream to run")
+
+        async with connect(
+            quad.url("control", vehicle=1, client_name="tab-2", takeover="true")
+        ) as second:
+            asked = await receive_until(first, {"type": "takeover_requested"})
+            assert asked["by"] == "pilot · tab-2"
+            assert asked["timeout_s"] == 10.0
+            answer = {"type": "takeover_answer", "id": 2, "request_id": asked["request_id"]}
+            await first.send(json.dumps({**answer, "grant": True}))
+            assert (await receive_until(first, {"id": 2}))["status"] == 200
+            told = await receive_until(first, {"type": "lease"})
+            assert told == {"type": "lease", "state": "taken_over", "by": "pilot · tab-2"}
+            assert await close_code(first) == 4408
+
+            lease = await receive(second)
+            assert lease["type"] == "lease"
+            assert lease["holder"] == "pilot · tab-2"
+            assert lease["taken_from"] == "pilot · tab-1"
+            assert lease["setpoint"] == flown["body"]["setpoint"]
+            sent_then = vehicle.stream_stats().sent
+            await wait_for(
+                lambda: vehicle.stream_stats().sent >= sent_then + 10, 5.0, "the stream to go on"
+            )
+            stats = vehicle.stream_stats()
+            assert stats.gaps == 0, stats
+            assert stats.max_gap_ms is not None
+            assert stats.max_gap_ms <= 2 * 1000.0 / vehicle.stream_rate_hz, stats
+
+        events = await _control_events(telemetry, 5)
+    assert [e["action"] for e in events] == [
+        "acquired",
+        "takeover_requested",
+        "takeover_granted",
+        "taken_over",
+        "acquired",
+    ]
+    assert (events[3]["holder"], events[3]["previous_holder"]) == ("pilot · tab-2", "pilot · tab-1")
+
+
+async def test_a_denied_takeover_closes_the_asking_socket(quad: Served) -> None:
+    async with connect(quad.url("control", vehicle=1, client_name="tab-1", ttl_s=30)) as first:
+        await receive(first)
+        async with connect(quad.url("control", vehicle=1, takeover="true")) as second:
+            asked = await receive_until(first, {"type": "takeover_requested"})
+            deny = {"type": "takeover_answer", "request_id": asked["request_id"], "grant": False}
+            await first.send(json.dumps(deny))
+            refusal = await receive(second)
+            assert refusal == {
+                "type": "error",
+                "reason": "denied by pilot · tab-1",
+                "holder": "pilot · tab-1",
+            }
+            assert await close_code(second) == 4409
+        await first.send(json.dumps({"type": "heartbeat", "id": 9}))
+        assert (await receive_until(first, {"id": 9}))["status"] == 200
+
+
+async def test_the_socket_asks_its_ttl_within_the_bounds(quad: Served) -> None:
+    async with connect(quad.url("control", vehicle=1, ttl_s=700)) as refused:
+        error = await receive(refused)
+        assert (error["type"], error["field"], error["limit"]) == ("error", "ttl_s", 600.0)
+        assert await close_code(refused) == 4422
+    async with connect(quad.url("control", vehicle=1, ttl_s=5)) as ws:
+        lease = await receive(ws)
+        assert lease["ttl_s"] == 5.0
+        assert lease["session"] == "ws"
+
+
+async def test_a_silent_live_input_brakes_while_the_lease_stays(quad: Served) -> None:
+    async with connect(quad.url("telemetry", vehicle=1, rate_hz=2)) as telemetry:
+        ws = await fly_offboard_at_2_m_s(quad)
+        north = {"type": "velocity_ned", "north_m_s": 2.0, "east_m_s": 0.0, "down_m_s": 0.0}
+        await ws.send(json.dumps({"type": "setpoint", "id": 10, "setpoint": north, "live": True}))
+        assert (await receive_until(ws, {"id": 10}))["status"] == 200
+        fed_at = time.monotonic()
+
+        async def stopped_while_heartbeating() -> dict[str, Any] | None:
+            # heartbeats keep the lease; they are not live input
+            await ws.send(json.dumps({"type": "heartbeat"}))
+            state = await quad.api.state()
+            return state if _speed(state) < 0.3 else None
+
+        state = await eventually(stopped_while_heartbeating, 10.0, "the brake", poll_s=0.05)
+        assert time.monotonic() - fed_at >= DEADMAN_S
+        assert state["mode"] == "OFFBOARD"
+        assert state["stream"]["active"] is True
+        assert state["lease"]["holder"] is not None
+        event = await receive_until(telemetry, {"type": "event", "kind": "deadman"})
+        assert (event["data"]["action"], event["data"]["cause"]) == ("brake", "live_timeout")
+        await ws.close()
