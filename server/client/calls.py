@@ -152,9 +152,6 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
             self._renewed_at = self._now()
         return body[call.pick] if call.pick is not None else body
 
-    def _waiting(self, predicate: Callable[[State], bool], timeout_s: float, what: str) -> Waiting:
-        return Waiting(predicate, self._now() + timeout_s, f"{what} ({timeout_s} s)", self._now)
-
     def _renew_due(self) -> bool:
         """A wait renews a held lease at a third of its TTL, so waiting never loses it."""
         return self.lease is not None and self._now() - self._renewed_at > self.lease.ttl_s / 3
@@ -162,8 +159,14 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
     def _vehicle(self, path: str = "") -> str:
         return f"/vehicles/{self.vehicle_id}{path}"
 
-    def _op(self, path: str, body: Any = None, method: str = "POST") -> Call:
-        return Call(method, self._vehicle(path), body, control=True)
+    def _op(
+        self,
+        path: str,
+        body: Any = None,
+        method: str = "POST",
+        params: dict[str, str] | None = None,
+    ) -> Call:
+        return Call(method, self._vehicle(path), body, params or {}, control=True)
 
     # -- reads ------------------------------------------------------------------------
 
@@ -189,41 +192,34 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
         """Read the state every ``poll_s`` until ``predicate(state)`` holds, and answer that
         state; a held lease is renewed meanwhile. Raises ``WaitTimedOut`` (a TimeoutError)
         after ``timeout_s``."""
-        deadline = self._now() + timeout_s
-        return self._wait(
-            Waiting(predicate, deadline, f"{what} ({timeout_s} s)", self._now), poll_s
-        )
+        waiting = Waiting(predicate, self._now() + timeout_s, f"{what} ({timeout_s} s)", self._now)
+        return self._wait(waiting, poll_s)
 
     def stream_stats(self) -> _Json:
         return self._json(Call("GET", self._vehicle("/stream")))
 
     # -- control ----------------------------------------------------------------------
 
+    def _control(self, method: str, body: dict[str, Any] | None) -> _Lease:
+        call = Call(method, self._vehicle("/control"), body, control=True, lease="grant")
+        return self._lease(call)
+
     def acquire(self, *, ttl_s: float | None = None, client_name: str | None = None) -> _Lease:
         """Take the control lease (409 :class:`Refused` naming the holder while someone else
         has it); ``ttl_s`` within the server's bounds, its default otherwise."""
-        body = _given(ttl_s=ttl_s, client_name=client_name)
-        return self._lease(
-            Call("POST", self._vehicle("/control"), body, control=True, lease="grant")
-        )
+        return self._control("POST", _arguments(locals()))
 
     def take_over(
         self, *, force: bool = False, ttl_s: float | None = None, client_name: str | None = None
     ) -> _Lease:
         """Ask the holder for control (granted: the lease; denied or unanswered: 409), or
         with ``force`` take it at once."""
-        body = _given(takeover=True, force=force or None, ttl_s=ttl_s, client_name=client_name)
-        return self._lease(
-            Call("POST", self._vehicle("/control"), body, control=True, lease="grant")
-        )
+        return self._control("POST", {"takeover": True, **_arguments(locals())})
 
     def renew(self, *, ttl_s: float | None = None, client_name: str | None = None) -> _Lease:
         """Renew the lease (any control call also does), optionally with a new TTL or
         label."""
-        body = _given(ttl_s=ttl_s, client_name=client_name) or None
-        return self._lease(
-            Call("PUT", self._vehicle("/control"), body, control=True, lease="grant")
-        )
+        return self._control("PUT", _arguments(locals()) or None)
 
     def control_status(self) -> _Json:
         """Who holds control: ``{holder, session, since_s, expires_in_s, ttl_s, request}``;
@@ -317,10 +313,8 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
         """Replace the streamed setpoint; ``live`` ones (hold-to-fly input) are braked by the
         deadman when no update follows in time. Answers what is sent:
         ``{setpoint, message, frame, type_mask}``."""
-        call = self._op("/setpoint", setpoint_json(setpoint), method="PUT")
-        if live:
-            call = Call(call.method, call.path, call.body, {"live": "true"}, control=True)
-        return self._json(call)
+        live_query = {"live": "true"} if live else None
+        return self._json(self._op("/setpoint", setpoint_json(setpoint), "PUT", live_query))
 
     def brake(self) -> _Json:
         """Brake, then hold where the vehicle stops (HOLD mode when not streaming). Answers
