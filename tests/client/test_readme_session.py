@@ -35,7 +35,7 @@ def test_the_readme_curl_session_flies_and_lands(served: Served) -> None:
     )
     assert result.returncode == 0, result.stderr
     assert '"result":"ACCEPTED"' in result.stdout  # arm, takeoff, offboard, rtl
-    assert "max_speed_xy_m_s" in result.stdout  # the envelope's refusal, as shown
+    assert '"limit":12.0' in result.stdout  # the envelope's refusal, as shown
     state = httpx.get(
         f"{served.base_url}/api/v1/vehicles/1",
         headers={"Authorization": f"Bearer {served.pilot_token}"},
