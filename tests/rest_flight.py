@@ -22,6 +22,7 @@ from tests.serve_process import Served
 
 Json = dict[str, Any]
 
+CLIENT_NAME = "rest flight"
 TAKEOFF_ALT_M = 5.0
 # docs/api.md: the default lease outlives a 60 s wait for a takeoff without any renewal.
 LEASE_SURVIVES_WAIT_S = 60.0

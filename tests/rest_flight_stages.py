@@ -10,6 +10,7 @@ import pymap3d
 import pytest
 
 from tests.rest_flight import (
+    CLIENT_NAME,
     DEADMAN_TIMEOUT_S,
     LEASE_SURVIVES_WAIT_S,
     LIVE_REPEAT_S,
@@ -25,8 +26,8 @@ from tests.rest_flight import (
     speed_xy,
     velocity_ned,
 )
+from tests.rest_flight_handover import handover
 
-CLIENT_NAME = "rest flight"
 # PX4 SITL passes its pre-arm checks a few seconds after boot; the sim at once.
 ARM_READY_WITHIN_S = 20.0
 
@@ -224,8 +225,12 @@ def live_setpoint_and_deadman(flight: RestFlight) -> None:
     assert braked_after_s <= DEADMAN_TIMEOUT_S + 1.0, (
         f"braked {braked_after_s:.2f} s after the last live setpoint, deadman {DEADMAN_TIMEOUT_S} s"
     )
-    flight.wait_state("held after braking (< 0.5 m/s, OFFBOARD)",
-                      lambda s: in_offboard(s) and speed_xy(s) < 0.5, 10.0)
+    flight.wait_state(
+        "holding a position after braking (< 0.3 m/s, OFFBOARD)",
+        lambda s: in_offboard(s) and speed_xy(s) < 0.3
+        and (s.get("setpoint") or {}).get("type") == "position_ned",
+        10.0,
+    )
     status = flight.control()
     assert CLIENT_NAME in (status.get("holder") or ""), f"the deadman ended the lease: {status}"
 
@@ -264,7 +269,7 @@ def lease_ttl_lapses(flight: RestFlight) -> None:
 def _holding_after_operator_loss(flight: RestFlight) -> None:
     """on_operator_loss default `hold`: still streaming, still OFFBOARD, not moving."""
     flight.wait_state("holding in OFFBOARD after the operator left",
-                      lambda s: in_offboard(s) and speed_xy(s) < 0.5, 5.0)
+                      lambda s: in_offboard(s) and speed_xy(s) < 0.3, 5.0)
     flight.hold_state(
         "holding with the stream on",
         lambda s: in_offboard(s) and speed_xy(s) < 0.5 and (s.get("stream") or {}).get("active"),
@@ -352,7 +357,7 @@ STAGES: dict[str, Callable[[RestFlight], None]] = {
         connected, observer_reads_but_cannot_control, take_control, control_needs_the_lease,
         arm, takeoff, offboard_start, position_setpoint, waiting_keeps_a_position_setpoint,
         velocity_setpoint, bad_input_is_422, live_setpoint_and_deadman, lease_released_holds,
-        lease_ttl_lapses, intents, reposition, rtl, release_control,
+        lease_ttl_lapses, handover, intents, reposition, rtl, release_control,
     )
 }
 STAGE_NAMES = list(STAGES)
