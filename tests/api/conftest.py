@@ -13,6 +13,7 @@ import pytest
 from fastapi import FastAPI
 
 from server.app import create_app
+from server.link import Vehicle
 from server.settings import Settings, load_settings
 from sim.runner import SimCluster, SimInstance
 from tests.waiting import eventually
@@ -54,6 +55,12 @@ class Api:
     def inst(self) -> SimInstance:
         assert self.sim is not None
         return self.sim.instances[0]
+
+    def vehicle(self, vehicle_id: int = 1) -> Vehicle:
+        """The server's own vehicle object, for what the API does not show (stream stats)."""
+        vehicle: Vehicle | None = self.app.state.api.registry.get(vehicle_id)
+        assert vehicle is not None, f"no vehicle {vehicle_id}"
+        return vehicle
 
     async def state(self, vehicle_id: int = 1) -> dict[str, Any]:
         response = await self.client.get(f"/api/v1/vehicles/{vehicle_id}")

@@ -9,6 +9,7 @@ import contextlib
 import json
 import math
 from collections.abc import AsyncIterator
+from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any, cast
@@ -16,8 +17,8 @@ from typing import Any, cast
 import pytest
 
 from server.api.audit import AUDIT_FILE_NAME, AuditLog
-from server.api.deadman import CHECK_PERIOD_S, Deadman
-from server.api.lease import LeaseEnd, LeaseManager
+from server.api.deadman import CHECK_PERIOD_S, Brake, Deadman
+from server.api.lease import Lease, LeaseEnd, LeaseManager
 from server.api.registry import VehicleRegistry
 from server.api.schemas import setpoint_as_dict
 from server.link import PositionNed, SentSetpoint, VelocityNed
@@ -65,40 +66,43 @@ async def _brake(vehicle: Any) -> SentSetpoint:
     return cast("SentSetpoint", SimpleNamespace(setpoint=VelocityNed(0.0, 0.0, 0.0)))
 
 
+@dataclass
+class _Flight:
+    vehicle: _Vehicle
+    leases: LeaseManager
+    deadman: Deadman
+    lease: Lease
+    fed_at: float
+
+
 @contextlib.asynccontextmanager
-async def _running(
-    vehicle: _Vehicle, audit: AuditLog | None = None
-) -> AsyncIterator[tuple[LeaseManager, Deadman]]:
+async def _keys_flying(
+    audit: AuditLog | None = None, brake: Brake = _brake
+) -> AsyncIterator[_Flight]:
+    """A pilot on the keys: holding the lease, flying a live velocity just fed, the
+    deadman running."""
+    vehicle = _Vehicle()
     leases = LeaseManager(120.0, min_ttl_s=1.0, max_ttl_s=600.0)
-    deadman = Deadman(
-        leases,
-        cast("VehicleRegistry", _Registry(vehicle)),
-        "hold",
-        live_timeout_s=TIMEOUT_S,
-        audit=audit,
-        brake=_brake,
-    )
+    registry = cast("VehicleRegistry", _Registry(vehicle))
+    deadman = Deadman(leases, registry, "hold", live_timeout_s=TIMEOUT_S, audit=audit, brake=brake)
     await deadman.start()
     try:
-        yield leases, deadman
+        lease = leases.acquire(1, "pilot · keys", session="ws")
+        vehicle.fly(VelocityNed(2.0, 0.0, 0.0))
+        deadman.watch_live(1, live=True)
+        yield _Flight(vehicle, leases, deadman, lease, asyncio.get_running_loop().time())
     finally:
         await deadman.stop()
 
 
 @pytest.mark.looptime
 async def test_a_silent_live_input_brakes_after_the_timeout() -> None:
-    vehicle = _Vehicle()
-    loop = asyncio.get_running_loop()
-    async with _running(vehicle) as (leases, deadman):
-        leases.acquire(1, "pilot · keys", session="ws")
-        vehicle.fly(VelocityNed(2.0, 0.0, 0.0))
-        deadman.watch_live(1, live=True)
-        fed_at = loop.time()
+    async with _keys_flying() as flight:
         await asyncio.sleep(TIMEOUT_S + 2 * CHECK_PERIOD_S)
 
-    ((braked_at, event),) = vehicle.deadman()
-    assert fed_at + TIMEOUT_S <= braked_at < fed_at + TIMEOUT_S + CHECK_PERIOD_S + 0.001
-    assert vehicle.actions == ["brake"]
+    ((braked_at, event),) = flight.vehicle.deadman()
+    assert flight.fed_at + TIMEOUT_S <= braked_at < flight.fed_at + TIMEOUT_S + CHECK_PERIOD_S
+    assert flight.vehicle.actions == ["brake"]
     assert event == {
         "action": "brake",
         "cause": "live_timeout",
@@ -106,95 +110,70 @@ async def test_a_silent_live_input_brakes_after_the_timeout() -> None:
         "ok": True,
         "setpoint": setpoint_as_dict(VelocityNed(0.0, 0.0, 0.0)),
     }
-    assert not deadman.live_watched(1)
+    assert not flight.deadman.live_watched(1)
 
 
 @pytest.mark.looptime
 async def test_a_live_input_fed_in_time_never_brakes() -> None:
-    vehicle = _Vehicle()
-    async with _running(vehicle) as (leases, deadman):
-        leases.acquire(1, "pilot · keys", session="ws")
+    async with _keys_flying() as flight:
         for step in range(100):  # 20 s of key repeats every 0.2 s
-            vehicle.fly(VelocityNed(1.0 + step % 2, 0.0, 0.0))
-            deadman.watch_live(1, live=True)
             await asyncio.sleep(0.2)
-        assert deadman.live_watched(1)
-    assert vehicle.actions == []
+            flight.vehicle.fly(VelocityNed(1.0 + step % 2, 0.0, 0.0))
+            flight.deadman.watch_live(1, live=True)
+        assert flight.deadman.live_watched(1)
+    assert flight.vehicle.actions == []
 
 
 @pytest.mark.looptime
 async def test_a_script_setpoint_is_never_cancelled_by_waiting() -> None:
-    vehicle = _Vehicle()
-    async with _running(vehicle) as (leases, deadman):
-        leases.acquire(1, "pilot · script", session="rest")
-        vehicle.fly(VelocityNed(2.0, 0.0, 0.0))
-        deadman.watch_live(1, live=True)
-        # the script then sends a position setpoint, not live, and waits a minute
-        vehicle.fly(PositionNed(10.0, 0.0, -5.0, None))
-        deadman.watch_live(1, live=False)
+    async with _keys_flying() as flight:
+        # then a position setpoint, not live, and a minute's wait
+        flight.vehicle.fly(PositionNed(10.0, 0.0, -5.0, None))
+        flight.deadman.watch_live(1, live=False)
         await asyncio.sleep(60.0)
-    assert vehicle.actions == []
-    assert not vehicle.deadman()
+    assert flight.vehicle.actions == []
+    assert not flight.vehicle.deadman()
 
 
 @pytest.mark.looptime
 async def test_a_setpoint_replacing_the_live_one_unannounced_is_not_braked() -> None:
-    vehicle = _Vehicle()
-    async with _running(vehicle) as (leases, deadman):
-        leases.acquire(1, "pilot · keys", session="ws")
-        vehicle.fly(VelocityNed(2.0, 0.0, 0.0))
-        deadman.feed_live(1)
+    async with _keys_flying() as flight:
+        vehicle = flight.vehicle
         vehicle.fly(PositionNed(0.0, 0.0, -5.0, None))  # e.g. an intent's position hold
         await asyncio.sleep(5.0)
         vehicle.fly(VelocityNed(2.0, 0.0, 0.0))
         vehicle.streamer_active = False  # and nothing is braked once the stream stopped
-        deadman.feed_live(1)
+        flight.deadman.feed_live(1)
         await asyncio.sleep(5.0)
     assert vehicle.actions == []
 
 
 @pytest.mark.looptime
 async def test_lease_loss_runs_the_operator_loss_action_not_the_brake() -> None:
-    vehicle = _Vehicle()
-    async with _running(vehicle) as (leases, deadman):
-        lease = leases.acquire(1, "pilot · keys", session="ws")
-        vehicle.fly(VelocityNed(2.0, 0.0, 0.0))
-        deadman.feed_live(1)
-        leases.release(1, lease.lease_id, LeaseEnd.CLOSED)
+    async with _keys_flying() as flight:
+        flight.leases.release(1, flight.lease.lease_id, LeaseEnd.CLOSED)
         await asyncio.sleep(5.0)
-    assert vehicle.actions == ["hold"]
-    assert [data["cause"] for _, data in vehicle.deadman()] == ["closed"]
+    assert flight.vehicle.actions == ["hold"]
+    assert [data["cause"] for _, data in flight.vehicle.deadman()] == ["closed"]
 
 
 @pytest.mark.looptime
 async def test_a_takeover_keeps_the_live_watch_for_the_new_holder() -> None:
-    vehicle = _Vehicle()
-    async with _running(vehicle) as (leases, deadman):
-        leases.acquire(1, "pilot · keys", session="ws")
-        vehicle.fly(VelocityNed(2.0, 0.0, 0.0))
-        deadman.feed_live(1)
-        leases.acquire(1, "pilot · tab 2", session="ws", takeover=True)
+    async with _keys_flying() as flight:
+        flight.leases.acquire(1, "pilot · tab 2", session="ws", takeover=True)
         await asyncio.sleep(TIMEOUT_S + 2 * CHECK_PERIOD_S)
     # the old holder's keys went quiet and the new holder sent nothing live: brake
-    assert vehicle.actions == ["brake"]
+    assert flight.vehicle.actions == ["brake"]
 
 
 @pytest.mark.looptime
 async def test_a_failed_brake_is_announced_as_failed() -> None:
-    vehicle = _Vehicle()
-
     async def no_position(_: Any) -> SentSetpoint:
         raise RuntimeError("no local position yet")
 
-    leases = LeaseManager(120.0)
-    registry = cast("VehicleRegistry", _Registry(vehicle))
-    deadman = Deadman(leases, registry, "hold", live_timeout_s=0.5, brake=no_position)
-    await deadman.start()
-    vehicle.fly(VelocityNed(1.0, 0.0, 0.0))
-    deadman.feed_live(1)
-    await asyncio.sleep(1.0)
-    await deadman.stop()
-    ((_, event),) = vehicle.deadman()
+    async with _keys_flying(brake=no_position) as flight:
+        await asyncio.sleep(TIMEOUT_S + 2 * CHECK_PERIOD_S)
+    ((_, event),) = flight.vehicle.deadman()
     assert event["ok"] is False
     assert event["reason"] == "RuntimeError: no local position yet"
 
@@ -215,14 +194,10 @@ class _WallClock:
 async def test_control_and_deadman_events_are_audited_and_survive_a_restart(
     tmp_path: Path,
 ) -> None:
-    vehicle = _Vehicle()
     audit = AuditLog(tmp_path, wall_clock=_WallClock())
-    async with _running(vehicle, audit) as (leases, deadman):
-        lease = leases.acquire(1, "pilot · keys", session="ws")
-        vehicle.fly(VelocityNed(2.0, 0.0, 0.0))
-        deadman.feed_live(1)
+    async with _keys_flying(audit) as flight:
         await asyncio.sleep(TIMEOUT_S + 2 * CHECK_PERIOD_S)
-        leases.release(1, lease.lease_id)
+        flight.leases.release(1, flight.lease.lease_id)
         await asyncio.sleep(0.1)
 
     lines = (tmp_path / AUDIT_FILE_NAME).read_text().splitlines()

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import math
+from dataclasses import dataclass
 from typing import Any, cast
 
 import pytest
@@ -13,6 +14,7 @@ import pytest
 from server.api.auth import Role, TokenChecker
 from server.api.control_events import ControlEvents
 from server.api.lease import (
+    Lease,
     LeaseEnd,
     LeaseInvalid,
     LeaseManager,
@@ -44,10 +46,12 @@ class _EventSink:
         return [data for kind, data in self.events if kind == "control"]
 
 
-def _watched(leases: LeaseManager) -> _EventSink:
+def _watched_leases() -> tuple[LeaseManager, _EventSink]:
+    """Leases with the server's bounds, and the control events they cause."""
+    leases = _leases()
     sink = _EventSink()
     ControlEvents(leases, sink)
-    return sink
+    return leases, sink
 
 
 # ---- TTL asked by the client, within the server's bounds -----------------------------------
@@ -92,33 +96,41 @@ async def test_a_renewal_may_change_the_ttl_within_the_bounds() -> None:
 # ---- handover -----------------------------------------------------------------------------
 
 
-async def _asked(leases: LeaseManager, vehicle_id: int = 1) -> str:
-    """The id of the takeover request the holder of the vehicle is being asked."""
+@dataclass
+class _Asking:
+    alice: Lease  # the holder, asked
+    takeover: asyncio.Future[Lease]  # bob's take_over, waiting for the answer
+    request_id: str
+
+
+async def _bob_asks_alice(
+    leases: LeaseManager, *, ask_s: float = 10.0, session: str = "ws", ttl_s: float | None = None
+) -> _Asking:
+    """Alice holds vehicle 1; bob asks her for it. Returns once she is being asked."""
+    alice = leases.acquire(1, "pilot · alice", session="ws")
+    takeover = asyncio.ensure_future(
+        leases.take_over(1, "pilot · bob", session=session, ask_s=ask_s, ttl_s=ttl_s)
+    )
 
     def request_id() -> str | None:
-        held = leases.current(vehicle_id)
-        return held.request.request_id if held is not None and held.request else None
+        return alice.request.request_id if alice.request is not None else None
 
     await wait_for(request_id, 5.0, "the takeover request")
     asked = request_id()
     assert asked is not None
-    return asked
+    return _Asking(alice, takeover, asked)
 
 
 @pytest.mark.looptime
 async def test_a_granted_takeover_hands_the_lease_over() -> None:
-    leases = _leases()
-    events = _watched(leases)
-    alice = leases.acquire(1, "pilot · alice", session="ws")
-    asking = asyncio.ensure_future(
-        leases.take_over(1, "pilot · bob", session="rest", ask_s=10.0, ttl_s=30.0)
-    )
-    request_id = await _asked(leases)
+    leases, events = _watched_leases()
+    asking = await _bob_asks_alice(leases, session="rest", ttl_s=30.0)
+    alice, request_id = asking.alice, asking.request_id
     assert leases.current(1) is alice  # the holder flies on while being asked
     loop = asyncio.get_running_loop()
     answered_at = loop.time()
     leases.answer(1, alice.lease_id, request_id, True)
-    bob = await asking
+    bob = await asking.takeover
     assert loop.time() == answered_at  # the answer, not the ask time, ends the wait
 
     assert bob.holder == "pilot · bob"
@@ -159,14 +171,13 @@ async def test_a_granted_takeover_hands_the_lease_over() -> None:
 
 @pytest.mark.looptime
 async def test_a_denied_takeover_leaves_the_holder_in_control() -> None:
-    leases = _leases()
-    events = _watched(leases)
-    alice = leases.acquire(1, "pilot · alice", session="ws")
-    asking = asyncio.ensure_future(leases.take_over(1, "pilot · bob", session="ws", ask_s=10.0))
-    leases.answer(1, alice.lease_id, await _asked(leases), False)
+    leases, events = _watched_leases()
+    asking = await _bob_asks_alice(leases)
+    alice = asking.alice
+    leases.answer(1, alice.lease_id, asking.request_id, False)
     answered_at = asyncio.get_running_loop().time()
     with pytest.raises(TakeoverRefused) as refused:
-        await asking
+        await asking.takeover
     assert asyncio.get_running_loop().time() == answered_at
     assert str(refused.value) == "denied by pilot · alice"
     assert refused.value.holder == "pilot · alice"
@@ -177,8 +188,7 @@ async def test_a_denied_takeover_leaves_the_holder_in_control() -> None:
 
 @pytest.mark.looptime
 async def test_an_unanswered_takeover_is_refused_after_the_ask_time() -> None:
-    leases = _leases()
-    events = _watched(leases)
+    leases, events = _watched_leases()
     alice = leases.acquire(1, "pilot · alice", session="rest")
     loop = asyncio.get_running_loop()
     start = loop.time()
@@ -196,12 +206,10 @@ async def test_an_unanswered_takeover_is_refused_after_the_ask_time() -> None:
 @pytest.mark.looptime
 async def test_a_holder_letting_go_while_asked_lets_the_asker_in() -> None:
     leases = _leases()
-    alice = leases.acquire(1, "pilot · alice", session="ws")
-    asking = asyncio.ensure_future(leases.take_over(1, "pilot · bob", session="ws", ask_s=10.0))
-    await _asked(leases)
-    leases.release(1, alice.lease_id, LeaseEnd.CLOSED)
+    asking = await _bob_asks_alice(leases)
+    leases.release(1, asking.alice.lease_id, LeaseEnd.CLOSED)
     released_at = asyncio.get_running_loop().time()
-    bob = await asking
+    bob = await asking.takeover
     assert asyncio.get_running_loop().time() == released_at
     assert leases.current(1) is bob
     assert bob.taken_from is None  # nobody held it any more when bob got it
@@ -209,11 +217,9 @@ async def test_a_holder_letting_go_while_asked_lets_the_asker_in() -> None:
 
 @pytest.mark.looptime
 async def test_forced_takeover_needs_no_answer_and_one_ask_at_a_time() -> None:
-    leases = _leases()
-    events = _watched(leases)
-    alice = leases.acquire(1, "pilot · alice", session="ws")
-    asking = asyncio.ensure_future(leases.take_over(1, "pilot · bob", session="ws", ask_s=10.0))
-    await _asked(leases)
+    leases, events = _watched_leases()
+    asking = await _bob_asks_alice(leases)
+    alice = asking.alice
     with pytest.raises(TakeoverRefused, match="pilot · bob is already asking pilot · alice"):
         await leases.take_over(1, "pilot · carol", session="rest", ask_s=10.0)
     carol = await leases.take_over(1, "pilot · carol", session="rest", ask_s=10.0, force=True)
@@ -224,43 +230,37 @@ async def test_forced_takeover_needs_no_answer_and_one_ask_at_a_time() -> None:
     )
     # bob was asking alice, who no longer holds it; carol does now, so bob is refused
     with pytest.raises(TakeoverRefused):
-        await asking
+        await asking.takeover
     assert leases.current(1) is carol
     assert [e["action"] for e in events.control()][-2:] == ["taken_over", "acquired"]
 
 
 @pytest.mark.looptime
 async def test_an_asker_that_goes_away_withdraws_its_request() -> None:
-    leases = _leases()
-    events = _watched(leases)
-    alice = leases.acquire(1, "pilot · alice", session="ws")
-    asking = asyncio.ensure_future(leases.take_over(1, "pilot · bob", session="ws", ask_s=10.0))
-    request_id = await _asked(leases)
-    asking.cancel()
+    leases, events = _watched_leases()
+    asking = await _bob_asks_alice(leases)
+    asking.takeover.cancel()
     with pytest.raises(asyncio.CancelledError):
-        await asking
-    assert alice.request is None
+        await asking.takeover
+    assert asking.alice.request is None
     assert events.control()[-1]["action"] == "takeover_withdrawn"
     with pytest.raises(UnknownRequest):
-        leases.answer(1, alice.lease_id, request_id, True)
+        leases.answer(1, asking.alice.lease_id, asking.request_id, True)
 
 
 @pytest.mark.looptime
 async def test_only_the_holder_answers_a_takeover_request() -> None:
     leases = _leases()
-    leases.acquire(1, "pilot · alice", session="ws")
-    asking = asyncio.ensure_future(leases.take_over(1, "pilot · bob", session="ws", ask_s=1.0))
-    request_id = await _asked(leases)
+    asking = await _bob_asks_alice(leases, ask_s=1.0)
     with pytest.raises(LeaseInvalid):
-        leases.answer(1, "not-the-holders-lease", request_id, True)
+        leases.answer(1, "not-the-holders-lease", asking.request_id, True)
     with pytest.raises(TakeoverRefused):
-        await asking
+        await asking.takeover
 
 
 @pytest.mark.looptime
 async def test_control_events_say_who_holds_it_and_for_how_long() -> None:
-    leases = _leases()
-    events = _watched(leases)
+    leases, events = _watched_leases()
     lease = leases.acquire(1, "pilot · alice", session="rest")
     await asyncio.sleep(2.5)
     leases.rename(1, lease.lease_id, "pilot · alice's laptop")

@@ -13,7 +13,7 @@ from typing import Any
 import httpx
 import pytest
 
-from server.link import StreamStats, Vehicle
+from server.link import StreamStats
 from tests.api.conftest import OBSERVER, Api, api_for, auth, sim_cluster
 from tests.waiting import eventually, holds_for, wait_for
 
@@ -32,12 +32,6 @@ async def api() -> AsyncIterator[Api]:
     ):
         await served.wait_ready()
         yield served
-
-
-def _vehicle(api: Api) -> Vehicle:
-    vehicle: Vehicle | None = api.app.state.api.registry.get(1)
-    assert vehicle is not None
-    return vehicle
 
 
 async def _take(api: Api, name: str, **body: Any) -> dict[str, str]:
@@ -103,7 +97,7 @@ async def test_a_granted_takeover_starts_from_the_flown_setpoint_without_a_gap(a
     alice = await _take(api, "alice")
     flown = await client.put("/api/v1/vehicles/1/setpoint", json=HERE, headers=alice)
     assert flown.status_code == 200, flown.text
-    vehicle = _vehicle(api)
+    vehicle = api.vehicle()
     await wait_for(lambda: vehicle.stream_stats().sent >= 10, 5.0, "the stream to run")
 
     asking = asyncio.ensure_future(
@@ -196,7 +190,7 @@ async def test_a_denied_or_unanswered_takeover_is_a_409_naming_the_holder(api: A
 async def test_a_silent_live_setpoint_brakes_and_a_script_setpoint_waits(api: Api) -> None:
     client = api.client
     headers = await _take(api, "keys")
-    vehicle = _vehicle(api)
+    vehicle = api.vehicle()
     live = await client.put(
         "/api/v1/vehicles/1/setpoint", params={"live": "true"}, json=NORTH, headers=headers
     )

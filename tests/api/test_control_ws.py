@@ -14,7 +14,6 @@ from typing import Any
 import pytest
 from websockets.asyncio.client import connect
 
-from server.link import Vehicle
 from tests.api.test_ws import (
     Served,
     close_code,
@@ -35,12 +34,6 @@ async def quad() -> AsyncIterator[Served]:
         yield s
 
 
-def _vehicle(quad: Served) -> Vehicle:
-    vehicle: Vehicle | None = quad.api.app.state.api.registry.get(1)
-    assert vehicle is not None
-    return vehicle
-
-
 def _speed(state: dict[str, Any]) -> float:
     velocity = state["velocity_ned"]
     return math.hypot(velocity["north_m_s"], velocity["east_m_s"])
@@ -54,7 +47,7 @@ async def _control_events(telemetry: Any, count: int) -> list[dict[str, Any]]:
 
 
 async def test_a_holder_grants_a_takeover_on_its_socket(quad: Served) -> None:
-    vehicle = _vehicle(quad)
+    vehicle = quad.api.vehicle()
     async with (
         connect(quad.url("telemetry", vehicle=1, rate_hz=1)) as telemetry,
         connect(quad.url("control", vehicle=1, client_name="tab-1", ttl_s=30)) as first,

@@ -3,11 +3,12 @@ renew, inspect, answer a takeover request, release; and the audit log of control
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Body, Query, Request, Response
+from fastapi import APIRouter, Body, Depends, Query, Request, Response
 
-from server.api.deps import Context, KnownVehicle, LeaseIdHeader, Pilot, Reader
+from server.api.deps import ApiContext, Context, KnownVehicle, LeaseIdHeader, Pilot, Reader
 from server.api.errors import CONTROL_RESPONSES, READ_RESPONSES, ApiError
 from server.api.lease import Lease, LeaseHeld, TakeoverRefused, TtlOutOfBounds, UnknownRequest
 from server.api.schemas import ErrorOut, setpoint_body
@@ -32,7 +33,7 @@ _REFUSED: dict[int | str, dict[str, Any]] = {
 }
 
 
-def lease_out(lease: Lease, context: Context, vehicle: Vehicle | None) -> LeaseOut:
+def lease_out(lease: Lease, context: ApiContext, vehicle: Vehicle | None) -> LeaseOut:
     """The lease as its holder sees it, with the setpoint being flown so it starts from it."""
     now = context.leases.now()
     flying = vehicle.offboard.setpoint if vehicle is not None and vehicle.streamer_active else None
@@ -48,7 +49,25 @@ def lease_out(lease: Lease, context: Context, vehicle: Vehicle | None) -> LeaseO
     )
 
 
-def ttl_checked(context: Context, ttl_s: float | None) -> float:
+@dataclass
+class _LeaseCall:
+    """What every lease change needs: the pilot's vehicle, the context, the caller's lease id."""
+
+    vehicle: Vehicle
+    context: ApiContext
+    lease_id: str | None
+
+
+async def _lease_call(
+    _: Pilot, vehicle: KnownVehicle, context: Context, x_lease_id: LeaseIdHeader = None
+) -> _LeaseCall:
+    return _LeaseCall(vehicle, context, x_lease_id)
+
+
+LeaseCall = Annotated[_LeaseCall, Depends(_lease_call)]
+
+
+def ttl_checked(context: ApiContext, ttl_s: float | None) -> float:
     """The TTL to grant, or a 422 naming the bound it broke."""
     try:
         return context.leases.ttl_for(ttl_s)
@@ -58,18 +77,14 @@ def ttl_checked(context: Context, ttl_s: float | None) -> float:
 
 @_lease_router.post("", response_model=LeaseOut, responses={**CONTROL_RESPONSES, **_REFUSED})
 async def acquire_control(
-    request: Request,
-    _: Pilot,
-    vehicle: KnownVehicle,
-    context: Context,
-    body: Annotated[ControlBody | None, Body()] = None,
-    x_lease_id: LeaseIdHeader = None,
+    request: Request, call: LeaseCall, body: Annotated[ControlBody | None, Body()] = None
 ) -> LeaseOut:
     """Take the control lease (409 while another pilot holds it). With `takeover` the
     holder is asked first and has takeover_ask_s to grant it (409 when denied or
     unanswered); with `takeover` and `force` it is taken at once. Sending the current
     X-Lease-Id renews it instead."""
     body = body or ControlBody()
+    vehicle, context, x_lease_id = call.vehicle, call.context, call.lease_id
     ttl_s = ttl_checked(context, body.ttl_s)
     held = context.leases.current(vehicle.sysid)
     if held is not None and x_lease_id is not None and x_lease_id == held.lease_id:
@@ -98,14 +113,11 @@ async def acquire_control(
 
 @_lease_router.put("", response_model=LeaseOut, responses=CONTROL_RESPONSES)
 async def renew_control(
-    _: Pilot,
-    vehicle: KnownVehicle,
-    context: Context,
-    body: Annotated[RenewBody | None, Body()] = None,
-    x_lease_id: LeaseIdHeader = None,
+    call: LeaseCall, body: Annotated[RenewBody | None, Body()] = None
 ) -> LeaseOut:
     """Renew the lease; optionally change its TTL and the client's label."""
     body = body or RenewBody()
+    vehicle, context, x_lease_id = call.vehicle, call.context, call.lease_id
     ttl_s = ttl_checked(context, body.ttl_s) if body.ttl_s is not None else None
     lease = context.leases.renew(vehicle.sysid, x_lease_id, ttl_s=ttl_s)
     if body.client_name is not None:
@@ -140,11 +152,9 @@ async def control_status(vehicle: KnownVehicle, context: Context, _: Reader) -> 
 
 
 @_lease_router.delete("", status_code=204, response_class=Response, responses=CONTROL_RESPONSES)
-async def release_control(
-    _: Pilot, vehicle: KnownVehicle, context: Context, x_lease_id: LeaseIdHeader = None
-) -> Response:
+async def release_control(call: LeaseCall) -> Response:
     """Give control back. While the streamer runs, this applies on_operator_loss."""
-    context.leases.release(vehicle.sysid, x_lease_id)
+    call.context.leases.release(call.vehicle.sysid, call.lease_id)
     return Response(status_code=204)
 
 
@@ -154,16 +164,13 @@ async def release_control(
     responses={**CONTROL_RESPONSES, 404: {"model": ErrorOut, "description": "no such request"}},
 )
 async def answer_takeover(
-    request_id: str,
-    body: TakeoverAnswerBody,
-    _: Pilot,
-    vehicle: KnownVehicle,
-    context: Context,
-    x_lease_id: LeaseIdHeader = None,
+    request_id: str, body: TakeoverAnswerBody, call: LeaseCall
 ) -> TakeoverAnswerOut:
     """The holder grants or denies a takeover request (its X-Lease-Id proves it holds it)."""
     try:
-        asked = context.leases.answer(vehicle.sysid, x_lease_id, request_id, body.grant)
+        asked = call.context.leases.answer(
+            call.vehicle.sysid, call.lease_id, request_id, body.grant
+        )
     except UnknownRequest as exc:
         raise ApiError(404, str(exc)) from None
     return TakeoverAnswerOut(request_id=asked.request_id, grant=body.grant, by=asked.by)

@@ -75,12 +75,16 @@ class ControlStatusOut(BaseModel):
     """GET /control: who holds it, since when, and a pending takeover request; all null
     while nobody holds it."""
 
-    holder: str | None = None
+    holder: str | None = Field(default=None, description='"<token name> · <client label>"')
     session: Session | None = None
-    since_s: float | None = None
-    expires_in_s: float | None = None
+    since_s: float | None = Field(default=None, description="how long the holder has held it")
+    expires_in_s: float | None = Field(
+        default=None, description="left of the TTL without a renewal"
+    )
     ttl_s: float | None = None
-    request: TakeoverRequestOut | None = None
+    request: TakeoverRequestOut | None = Field(
+        default=None, description="a pending takeover request"
+    )
 
 
 class TakeoverAnswerBody(StrictBody):
