@@ -7,6 +7,8 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
@@ -23,7 +25,7 @@ from server.api.lease import (
     TtlOutOfBounds,
     UnknownRequest,
 )
-from server.api.operations import OPERATIONS
+from server.api.operations import INTENT_NAMES, OPERATIONS, run_intent
 from server.api.routes.control import lease_out
 from server.api.routes.setpoint import sent_out
 from server.api.schemas import SetpointBody
@@ -233,22 +235,40 @@ class _ControlSession:
         self._track(asyncio.create_task(self._command(request_id, name, args)))
 
     async def _command(self, request_id: Any, name: Any, args: Any) -> None:
+        """A command or an intent, run from the same tables as the REST routes."""
         try:
-            operation = OPERATIONS.get(name) if isinstance(name, str) else None
-            if operation is None:
-                raise ApiError(
-                    422, f"unknown command; one of {', '.join(OPERATIONS)}", field="name"
-                )
-            body = operation.body.model_validate(args if args is not None else {})
-            with self._context.leases.hold(self._vehicle.sysid, self._lease.lease_id):
-                if not self._vehicle.connected:
-                    raise ApiError(503, f"vehicle {self._vehicle.sysid} is not connected")
-                result = await operation.run(self._vehicle, body)
+            if isinstance(name, str) and name in INTENT_NAMES:
+                status, out = await self._intent(name, args)
+            else:
+                status, out = await self._operation(name, args)
         except Exception as exc:
             await self._reply_error(request_id, "command", exc)
             return
-        out = command_out(result).model_dump(mode="json")
-        await self._reply(request_id, "command", COMMAND_STATUS[result.outcome], out)
+        await self._reply(request_id, "command", status, out)
+
+    async def _operation(self, name: Any, args: Any) -> tuple[int, dict[str, Any]]:
+        operation = OPERATIONS.get(name) if isinstance(name, str) else None
+        if operation is None:
+            known = ", ".join([*OPERATIONS, *sorted(INTENT_NAMES)])
+            raise ApiError(422, f"unknown command; one of {known}", field="name")
+        body = operation.body.model_validate(args if args is not None else {})
+        with self._held():
+            result = await operation.run(self._vehicle, body)
+        return COMMAND_STATUS[result.outcome], command_out(result).model_dump(mode="json")
+
+    async def _intent(self, name: str, args: Any) -> tuple[int, dict[str, Any]]:
+        with self._held():
+            answer = await run_intent(name, self._vehicle, args)
+        self._context.deadman.watch_live(self._vehicle.sysid, live=answer.live)
+        return answer.status, answer.body
+
+    @contextmanager
+    def _held(self) -> Iterator[None]:
+        """The lease held (and renewed) for one call, on a connected vehicle."""
+        with self._context.leases.hold(self._vehicle.sysid, self._lease.lease_id):
+            if not self._vehicle.connected:
+                raise ApiError(503, f"vehicle {self._vehicle.sysid} is not connected")
+            yield
 
     async def _reply(
         self, request_id: Any, request: str, status: int, body: dict[str, Any]
