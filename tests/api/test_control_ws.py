@@ -22,7 +22,7 @@ from tests.api.test_ws import (
     receive_until,
     served,
 )
-from tests.waiting import eventually, wait_for
+from tests.waiting import eventually, holds_for, wait_for
 
 DEADMAN_S = 0.5
 HERE = {"type": "position_ned", "north_m": 0.0, "east_m": 0.0, "down_m": -2.0, "yaw_deg": 0.0}
@@ -147,3 +147,29 @@ async def test_a_silent_live_input_brakes_while_the_lease_stays(quad: Served) ->
         event = await receive_until(telemetry, {"type": "event", "kind": "deadman"})
         assert (event["data"]["action"], event["data"]["cause"]) == ("brake", "live_timeout")
         await ws.close()
+
+
+async def test_the_velocity_intent_on_the_socket_is_live_by_default(quad: Served) -> None:
+    async with (
+        connect(quad.url("telemetry", vehicle=1, rate_hz=1)) as telemetry,
+        connect(quad.url("control", vehicle=1, ttl_s=30)) as ws,
+    ):
+        await receive(ws)
+        velocity = {"frame": "ned", "north_m_s": 1.0, "east_m_s": 0.0}
+        command = {"type": "command", "id": 1, "name": "velocity", "args": velocity}
+        await ws.send(json.dumps(command))
+        answer = await receive_until(ws, {"id": 1})
+        assert answer["status"] == 200, answer
+        assert answer["body"]["live"] is True
+        event = await receive_until(telemetry, {"type": "event", "kind": "deadman"})
+        assert (event["data"]["action"], event["data"]["cause"]) == ("brake", "live_timeout")
+
+        # not live: the deadman leaves it alone, however long the socket waits
+        await ws.send(json.dumps({**command, "id": 2, "args": {**velocity, "live": False}}))
+        assert (await receive_until(ws, {"id": 2}))["body"]["live"] is False
+        assert not quad.api.app.state.api.deadman.live_watched(1)
+        vehicle = quad.api.vehicle()
+        flown = vehicle.offboard.setpoint
+        await holds_for(
+            lambda: vehicle.offboard.setpoint == flown, 3 * DEADMAN_S, "the velocity flown on"
+        )
