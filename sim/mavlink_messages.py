@@ -4,12 +4,19 @@ after PX4's mavlink_messages: heartbeat, attitude, positions, status, home, vers
 from __future__ import annotations
 
 import math
-import struct
 from collections.abc import Callable
-from typing import Any
 
 from pymavlink.dialects.v20 import development as mavlink
 
+from sim.mavlink_custom import MAVLINK_MSG_ID_LINK_NODE_STATUS as MAVLINK_MSG_ID_LINK_NODE_STATUS
+from sim.mavlink_custom import (
+    MAVLINK_MSG_ID_PROTOCOL_VERSION as MAVLINK_MSG_ID_PROTOCOL_VERSION,
+)
+from sim.mavlink_custom import (
+    MAVLINK_MSG_ID_TIME_ESTIMATE_TO_TARGET as MAVLINK_MSG_ID_TIME_ESTIMATE_TO_TARGET,
+)
+from sim.mavlink_custom import ProtocolVersionMessage as ProtocolVersionMessage
+from sim.mavlink_telemetry import TelemetryMessages
 from sim.quat import euler_from_quat, yaw_from_quat
 from sim.vehicle_interface import Message, VehicleInterface
 
@@ -35,21 +42,31 @@ _SENSORS_BEFORE_GPS_FIX = _SENSORS & ~(
     mavlink.MAV_SYS_STATUS_SENSOR_GPS | mavlink.MAV_SYS_STATUS_PREARM_CHECK
 )
 
-_CAPABILITIES = (
+# mavlink_main.cpp send_autopilot_capabilities() of PX4 v1.16 (0xE8FF, as its SITL
+# reports): no SET_POSITION_TARGET_GLOBAL_INT bit although PX4 takes that message; the
+# gimbal manager bit only with MNT_MODE_IN = 4, which SIH vehicles do not set.
+PX4_CAPABILITIES = (
     mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT
-    | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
     | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT
+    | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
     | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
     | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
+    | mavlink.MAV_PROTOCOL_CAPABILITY_FTP
     | mavlink.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET
     | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
-    | mavlink.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
+    | mavlink.MAV_PROTOCOL_CAPABILITY_FLIGHT_TERMINATION
     | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2
     | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE
     | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY
 )
-# PX4 v1.16.0, FIRMWARE_VERSION_TYPE_OFFICIAL.
+# PX4 v1.16.0, FIRMWARE_VERSION_TYPE_OFFICIAL (flight and middleware version alike).
 PX4_FLIGHT_SW_VERSION = (1 << 24) | (16 << 16) | (0 << 8) | 255
+# the first five bytes of the v1.16.0 tag's git hash (PX4_GIT_VERSION_BINARY
+# 0x6ea3539157ca358c), little-endian after three zero vendor-version bytes, as PX4 packs them
+PX4_FLIGHT_CUSTOM_VERSION = [0, 0, 0, 0x57, 0x91, 0x53, 0xA3, 0x6E]
+# SITL's os_sw_version and board_version
+PX4_OS_SW_VERSION = 101854463
+PX4_BOARD_VERSION = 1
 MAV_AUTOPILOT_PX4 = 12
 MAV_STATE_STANDBY = 3
 MAV_STATE_ACTIVE = 4
@@ -58,35 +75,9 @@ MAV_STATE_CRITICAL = 5
 STATUSTEXT_MAX_LEN = 50
 
 
-MAVLINK_MSG_ID_PROTOCOL_VERSION = 300
 # MAVLink 2 spoken, MAVLink 1 and 2 understood (PROTOCOL_VERSION.version = 100 * major).
 MAVLINK_VERSION_2 = 200
 MAVLINK_VERSION_1 = 100
-
-
-class ProtocolVersionMessage(mavlink.MAVLink_message):  # type: ignore[misc]
-    """PROTOCOL_VERSION (300) from common.xml, which pymavlink's generated dialect lacks."""
-
-    id = MAVLINK_MSG_ID_PROTOCOL_VERSION
-    msgname = "PROTOCOL_VERSION"
-    crc_extra = 217
-    _wire = struct.Struct("<HHH8s8s")
-
-    def __init__(self, version: int, min_version: int, max_version: int) -> None:
-        super().__init__(self.id, self.msgname)
-        self._fieldnames = ["version", "min_version", "max_version", "spec_version_hash",
-                            "library_version_hash"]
-        self.version = version
-        self.min_version = min_version
-        self.max_version = max_version
-        self.spec_version_hash = bytes(8)
-        self.library_version_hash = bytes(8)
-
-    def pack(self, mav: Any, force_mavlink1: bool = False) -> bytes:
-        payload = self._wire.pack(self.version, self.min_version, self.max_version,
-                                  self.spec_version_hash, self.library_version_hash)
-        packed: bytes = self._pack(mav, self.crc_extra, payload, force_mavlink1=force_mavlink1)
-        return packed
 
 
 def _pwm(output: float) -> int:
@@ -99,6 +90,9 @@ class MessageFactory:
     def __init__(self, vehicle: VehicleInterface) -> None:
         self._v = vehicle
         self._statustext_id = 0
+        # what was built at this sim time: a message due on both links is built once
+        self._built: dict[int, tuple[float, Message | None]] = {}
+        sensors = TelemetryMessages(vehicle)
         self.builders: dict[int, Callable[[], Message | None]] = {
             mavlink.MAVLINK_MSG_ID_HEARTBEAT: self.heartbeat,
             mavlink.MAVLINK_MSG_ID_SYS_STATUS: self.sys_status,
@@ -118,11 +112,37 @@ class MessageFactory:
             mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION: self.autopilot_version,
             mavlink.MAVLINK_MSG_ID_CURRENT_MODE: self.current_mode,
             MAVLINK_MSG_ID_PROTOCOL_VERSION: self.protocol_version,
+            mavlink.MAVLINK_MSG_ID_ALTITUDE: sensors.altitude,
+            mavlink.MAVLINK_MSG_ID_HIGHRES_IMU: sensors.highres_imu,
+            mavlink.MAVLINK_MSG_ID_ODOMETRY: sensors.odometry,
+            mavlink.MAVLINK_MSG_ID_ESTIMATOR_STATUS: sensors.estimator_status,
+            mavlink.MAVLINK_MSG_ID_VIBRATION: sensors.vibration,
+            mavlink.MAVLINK_MSG_ID_SCALED_PRESSURE: sensors.scaled_pressure,
+            mavlink.MAVLINK_MSG_ID_TIMESYNC: sensors.timesync,
+            mavlink.MAVLINK_MSG_ID_PING: sensors.ping,
+            mavlink.MAVLINK_MSG_ID_SYSTEM_TIME: sensors.system_time,
+            mavlink.MAVLINK_MSG_ID_DISTANCE_SENSOR: sensors.distance_sensor,
+            mavlink.MAVLINK_MSG_ID_ATTITUDE_TARGET: sensors.attitude_target,
+            mavlink.MAVLINK_MSG_ID_MISSION_CURRENT: sensors.mission_current,
+            mavlink.MAVLINK_MSG_ID_OPEN_DRONE_ID_LOCATION: sensors.open_drone_id_location,
+            mavlink.MAVLINK_MSG_ID_OPEN_DRONE_ID_SYSTEM: sensors.open_drone_id_system,
+            MAVLINK_MSG_ID_LINK_NODE_STATUS: sensors.link_node_status,
+            MAVLINK_MSG_ID_TIME_ESTIMATE_TO_TARGET: sensors.time_estimate_to_target,
         }
 
     def build(self, msg_id: int) -> Message | None:
+        """msg_id's message from the current state; the same object for every link that
+        asks at the same sim time."""
+        now_s = self._v.now_s
+        built = self._built.get(msg_id)
+        if built is not None and built[0] == now_s:
+            return built[1]
         builder = self.builders.get(msg_id)
-        return builder() if builder is not None else None
+        if builder is None:
+            return None
+        msg = builder()
+        self._built[msg_id] = (now_s, msg)
+        return msg
 
     def statustexts(self, severity: int, text: str) -> list[Message]:
         data = text.encode()
@@ -283,12 +303,14 @@ class MessageFactory:
     def autopilot_version(self) -> Message:
         sysid = self._v.sysid
         return mavlink.MAVLink_autopilot_version_message(
-            _CAPABILITIES, PX4_FLIGHT_SW_VERSION, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8,
-            0, 0, 0x5348_0000 + sysid, [0] * 18,
+            PX4_CAPABILITIES, PX4_FLIGHT_SW_VERSION, PX4_FLIGHT_SW_VERSION, PX4_OS_SW_VERSION,
+            PX4_BOARD_VERSION, PX4_FLIGHT_CUSTOM_VERSION, PX4_FLIGHT_CUSTOM_VERSION, [0] * 8,
+            0, 0, 0x5348_0000 + sysid, [sysid] + [0] * 17,
         )
 
     def protocol_version(self) -> Message:
-        return ProtocolVersionMessage(MAVLINK_VERSION_2, MAVLINK_VERSION_1, MAVLINK_VERSION_2)
+        return ProtocolVersionMessage(MAVLINK_VERSION_2, MAVLINK_VERSION_1, MAVLINK_VERSION_2,
+                                      bytes(8), bytes(8))
 
     def current_mode(self) -> Message:
         commander = self._v.commander

@@ -1,9 +1,10 @@
 """Telemetry streams of the simulated vehicle: per-link message rates.
 
-Each link (onboard/API, normal/GCS) has its own set of streams at PX4's default rates
-(mavlink_main.cpp's configure_streams for the ONBOARD and NORMAL modes), changed by
-SET_MESSAGE_INTERVAL. Messages (`sim.mavlink_messages`) are built only when a stream is
-due and the link has someone to send to.
+Each link (onboard/API, normal/GCS) has its own set of streams at the rates PX4 v1.16 SITL
+runs them (mavlink_main.cpp's configure_streams for the ONBOARD and NORMAL modes, plus the
+rates SITL's start script raises on the GCS link), changed by SET_MESSAGE_INTERVAL.
+Messages (`sim.mavlink_messages`) are built only when a stream is due and the link has
+someone to send to, and once per sim time for all links.
 """
 
 from __future__ import annotations
@@ -13,35 +14,78 @@ from typing import Protocol
 
 from pymavlink.dialects.v20 import development as mavlink
 
+from sim.mavlink_custom import (
+    MAVLINK_MSG_ID_LINK_NODE_STATUS,
+    MAVLINK_MSG_ID_TIME_ESTIMATE_TO_TARGET,
+)
 from sim.mavlink_messages import MessageFactory
 from sim.vehicle_interface import Message
 
+_M = mavlink
+# PX4 v1.16 SITL's onboard link (mavlink_main.cpp configure_streams, MAVLINK_MODE_ONBOARD),
+# as measured by a census of a SIH quad (../shared/PX4_NOTES.md)
 ONBOARD_RATES_HZ: dict[int, float] = {
-    mavlink.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
-    mavlink.MAVLINK_MSG_ID_ATTITUDE: 100.0,
-    mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: 50.0,
-    mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 50.0,
-    mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 30.0,
-    mavlink.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED: 10.0,
-    mavlink.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: 10.0,
-    mavlink.MAVLINK_MSG_ID_SYS_STATUS: 5.0,
-    mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 5.0,
-    mavlink.MAVLINK_MSG_ID_HOME_POSITION: 0.5,
+    _M.MAVLINK_MSG_ID_ATTITUDE: 100.0,
+    _M.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: 50.0,
+    _M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 50.0,
+    _M.MAVLINK_MSG_ID_HIGHRES_IMU: 50.0,
+    _M.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 30.0,
+    _M.MAVLINK_MSG_ID_ODOMETRY: 30.0,
+    _M.MAVLINK_MSG_ID_ALTITUDE: 10.0,
+    _M.MAVLINK_MSG_ID_ATTITUDE_TARGET: 10.0,
+    _M.MAVLINK_MSG_ID_DISTANCE_SENSOR: 10.0,
+    _M.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED: 10.0,
+    _M.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: 10.0,
+    _M.MAVLINK_MSG_ID_TIMESYNC: 10.0,
+    _M.MAVLINK_MSG_ID_VFR_HUD: 10.0,
+    _M.MAVLINK_MSG_ID_GPS_RAW_INT: 8.0,
+    _M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 5.0,
+    _M.MAVLINK_MSG_ID_SYS_STATUS: 5.0,
+    _M.MAVLINK_MSG_ID_ESTIMATOR_STATUS: 1.0,
+    _M.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
+    _M.MAVLINK_MSG_ID_MISSION_CURRENT: 1.0,
+    _M.MAVLINK_MSG_ID_OPEN_DRONE_ID_LOCATION: 1.0,
+    _M.MAVLINK_MSG_ID_OPEN_DRONE_ID_SYSTEM: 1.0,
+    _M.MAVLINK_MSG_ID_PING: 1.0,
+    _M.MAVLINK_MSG_ID_SCALED_PRESSURE: 1.0,
+    _M.MAVLINK_MSG_ID_SYSTEM_TIME: 1.0,
+    MAVLINK_MSG_ID_LINK_NODE_STATUS: 1.0,
+    _M.MAVLINK_MSG_ID_BATTERY_STATUS: 0.5,
+    _M.MAVLINK_MSG_ID_CURRENT_MODE: 0.5,
+    _M.MAVLINK_MSG_ID_HOME_POSITION: 0.5,
+    _M.MAVLINK_MSG_ID_VIBRATION: 0.5,
+    MAVLINK_MSG_ID_TIME_ESTIMATE_TO_TARGET: 0.5,
 }
 
+# PX4 v1.16 SITL's GCS link: MAVLINK_MODE_NORMAL with the streams px4-rc.mavlink raises
+# for SITL (50 Hz attitude, positions, targets and outputs), as measured by a census
 NORMAL_RATES_HZ: dict[int, float] = {
-    mavlink.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
-    mavlink.MAVLINK_MSG_ID_ATTITUDE: 15.0,
-    mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 5.0,
-    mavlink.MAVLINK_MSG_ID_VFR_HUD: 4.0,
-    mavlink.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
-    mavlink.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 1.0,
-    mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 1.0,
-    mavlink.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED: 1.5,
-    mavlink.MAVLINK_MSG_ID_HOME_POSITION: 0.5,
-    mavlink.MAVLINK_MSG_ID_BATTERY_STATUS: 0.5,
-    mavlink.MAVLINK_MSG_ID_GPS_RAW_INT: 1.0,
-    mavlink.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: 1.0,
+    _M.MAVLINK_MSG_ID_ATTITUDE: 50.0,
+    _M.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: 50.0,
+    _M.MAVLINK_MSG_ID_ATTITUDE_TARGET: 50.0,
+    _M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 50.0,
+    _M.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 50.0,
+    _M.MAVLINK_MSG_ID_POSITION_TARGET_LOCAL_NED: 50.0,
+    _M.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: 50.0,
+    _M.MAVLINK_MSG_ID_GPS_RAW_INT: 5.0,
+    _M.MAVLINK_MSG_ID_VFR_HUD: 4.0,
+    _M.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
+    _M.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
+    _M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 1.0,
+    _M.MAVLINK_MSG_ID_ALTITUDE: 1.0,
+    _M.MAVLINK_MSG_ID_SCALED_PRESSURE: 1.0,
+    _M.MAVLINK_MSG_ID_MISSION_CURRENT: 1.0,
+    _M.MAVLINK_MSG_ID_OPEN_DRONE_ID_LOCATION: 1.0,
+    _M.MAVLINK_MSG_ID_OPEN_DRONE_ID_SYSTEM: 1.0,
+    MAVLINK_MSG_ID_LINK_NODE_STATUS: 1.0,
+    _M.MAVLINK_MSG_ID_BATTERY_STATUS: 0.5,
+    _M.MAVLINK_MSG_ID_CURRENT_MODE: 0.5,
+    _M.MAVLINK_MSG_ID_DISTANCE_SENSOR: 0.5,
+    MAVLINK_MSG_ID_TIME_ESTIMATE_TO_TARGET: 0.5,
+    _M.MAVLINK_MSG_ID_ESTIMATOR_STATUS: 0.5,
+    _M.MAVLINK_MSG_ID_HOME_POSITION: 0.5,
+    _M.MAVLINK_MSG_ID_PING: 0.1,
+    _M.MAVLINK_MSG_ID_VIBRATION: 0.1,
 }
 
 

@@ -236,6 +236,7 @@ def test_request_message_acks_then_sends_the_message(harness: Harness, msg_type:
 
 def test_current_mode_shows_current_and_intended_mode(harness: Harness) -> None:
     harness.set_mode(modes.AUTO_RTL)
+    harness.api.clear()  # CURRENT_MODE also streams (0.5 Hz): keep only the answer
     harness.command_long(mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAVLINK_MSG_ID_CURRENT_MODE)
     (current,) = harness.api.of_type("CURRENT_MODE")
     assert current.custom_mode == modes.AUTO_RTL.custom_mode

@@ -1,0 +1,86 @@
+"""MAVLink messages PX4 v1.16 sends that pymavlink's generated dialect lacks.
+
+PX4 builds with a newer common.xml than pymavlink ships: PROTOCOL_VERSION (300),
+LINK_NODE_STATUS (8), TIME_ESTIMATE_TO_TARGET (380) and CURRENT_EVENT_SEQUENCE (411) are
+packed here from their wire layout (fields ordered by size, as MAVLink 2 sends them) and the
+CRC extra of PX4's generated headers. A receiver with the older dialect sees them as
+UNKNOWN_<id>, as it would from PX4.
+"""
+
+from __future__ import annotations
+
+import struct
+from typing import Any
+
+from pymavlink.dialects.v20 import development as mavlink
+
+MAVLINK_MSG_ID_LINK_NODE_STATUS = 8
+MAVLINK_MSG_ID_PROTOCOL_VERSION = 300
+MAVLINK_MSG_ID_TIME_ESTIMATE_TO_TARGET = 380
+MAVLINK_MSG_ID_CURRENT_EVENT_SEQUENCE = 411
+
+
+class CustomMessage(mavlink.MAVLink_message):  # type: ignore[misc]
+    """A message packed from its wire layout; subclasses give id, name, CRC and fields."""
+
+    id = 0
+    msgname = ""
+    crc_extra = 0
+    fieldnames: tuple[str, ...] = ()
+    _wire = struct.Struct("<")
+
+    def __init__(self, *values: Any) -> None:
+        super().__init__(self.id, self.msgname)
+        self._fieldnames = list(self.fieldnames)
+        self._values = values
+        for name, value in zip(self.fieldnames, values, strict=True):
+            setattr(self, name, value)
+
+    def pack(self, mav: Any, force_mavlink1: bool = False) -> bytes:
+        payload = self._wire.pack(*self._values)
+        packed: bytes = self._pack(mav, self.crc_extra, payload, force_mavlink1=force_mavlink1)
+        return packed
+
+
+class ProtocolVersionMessage(CustomMessage):
+    """PROTOCOL_VERSION: the MAVLink versions spoken (100 × major)."""
+
+    id = MAVLINK_MSG_ID_PROTOCOL_VERSION
+    msgname = "PROTOCOL_VERSION"
+    crc_extra = 217
+    fieldnames = ("version", "min_version", "max_version", "spec_version_hash",
+                  "library_version_hash")
+    _wire = struct.Struct("<HHH8s8s")
+
+
+class LinkNodeStatusMessage(CustomMessage):
+    """LINK_NODE_STATUS: the link's own traffic counters."""
+
+    id = MAVLINK_MSG_ID_LINK_NODE_STATUS
+    msgname = "LINK_NODE_STATUS"
+    crc_extra = 117
+    fieldnames = ("timestamp", "tx_rate", "rx_rate", "messages_sent", "messages_received",
+                  "messages_lost", "rx_parse_err", "tx_overflows", "rx_overflows", "tx_buf",
+                  "rx_buf")
+    _wire = struct.Struct("<QIIIIIHHHBB")
+
+
+class TimeEstimateToTargetMessage(CustomMessage):
+    """TIME_ESTIMATE_TO_TARGET: seconds to return, land, mission item/end, command (-1 = none)."""
+
+    id = MAVLINK_MSG_ID_TIME_ESTIMATE_TO_TARGET
+    msgname = "TIME_ESTIMATE_TO_TARGET"
+    crc_extra = 232
+    fieldnames = ("safe_return", "land", "mission_next_item", "mission_end",
+                  "commanded_action")
+    _wire = struct.Struct("<iiiii")
+
+
+class CurrentEventSequenceMessage(CustomMessage):
+    """CURRENT_EVENT_SEQUENCE: the newest event's sequence number."""
+
+    id = MAVLINK_MSG_ID_CURRENT_EVENT_SEQUENCE
+    msgname = "CURRENT_EVENT_SEQUENCE"
+    crc_extra = 106
+    fieldnames = ("sequence", "flags")
+    _wire = struct.Struct("<HB")
