@@ -110,3 +110,24 @@ async def test_vtol_transitions_to_fixed_wing_and_back(mavsdk_drone: MavsdkFacto
     await first(drone.telemetry.vtol_state(), lambda s: str(s) == "FW", 30.0)
     await drone.action.transition_to_multicopter()
     await first(drone.telemetry.vtol_state(), lambda s: str(s) == "MC", 30.0)
+
+
+async def test_every_telemetry_subscription_delivers_on_a_vtol(
+    mavsdk_drone: MavsdkFactory,
+) -> None:
+    # MAVSDK reads gps_info from GPS_RAW_INT and the VTOL state from EXTENDED_SYS_STATE on
+    # the onboard link, as PX4 sends them there
+    drone, _sim = await mavsdk_drone(airframe="vtol", speed=2.0)
+    telemetry = drone.telemetry
+    assert await first(telemetry.health_all_ok(), bool, 20.0)
+    gps = await first(telemetry.gps_info(), lambda g: True, 5.0)
+    assert str(gps.fix_type) == "FIX_3D"
+    assert gps.num_satellites > 6
+    health = await first(telemetry.health(), lambda h: True, 5.0)
+    assert health.is_global_position_ok and health.is_home_position_ok
+    assert str(await first(telemetry.vtol_state(), lambda s: True, 5.0)) == "MC"
+    await first(telemetry.position(), lambda p: True, 5.0)
+    await first(telemetry.attitude_quaternion(), lambda q: True, 5.0)
+    assert (await first(telemetry.battery(), lambda b: True, 5.0)).remaining_percent > 50
+    assert str(await first(telemetry.flight_mode(), lambda m: True, 5.0)) == "HOLD"
+    assert str(await first(telemetry.landed_state(), lambda s: True, 5.0)) == "ON_GROUND"
