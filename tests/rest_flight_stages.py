@@ -267,12 +267,23 @@ def lease_ttl_lapses(flight: RestFlight) -> None:
 
 
 def _holding_after_operator_loss(flight: RestFlight) -> None:
-    """on_operator_loss default `hold`: still streaming, still OFFBOARD, not moving."""
-    flight.wait_state("holding in OFFBOARD after the operator left",
-                      lambda s: in_offboard(s) and speed_xy(s) < 0.3, 5.0)
+    """on_operator_loss default `hold`: still streaming and in OFFBOARD, a position hold where
+    the vehicle was. (Real PX4's estimate wanders by decimetres while it holds: the check is
+    that it stays near, not that it stands still.)"""
+    where = flight.state()["position_ned"]
+    held = flight.wait_state(
+        "a position hold in OFFBOARD after the operator left",
+        lambda s: in_offboard(s) and (s.get("setpoint") or {}).get("type") == "position_ned",
+        5.0,
+    )["setpoint"]
+    assert distance_ned({"position_ned": where}, held["north_m"], held["east_m"]) < 1.5, (
+        f"the hold {held} is not where the vehicle was: {where}"
+    )
     flight.hold_state(
-        "holding with the stream on",
-        lambda s: in_offboard(s) and speed_xy(s) < 0.5 and (s.get("stream") or {}).get("active"),
+        "holding there with the stream on",
+        lambda s: in_offboard(s) and s.get("setpoint") == held
+        and (s.get("stream") or {}).get("active")
+        and distance_ned(s, held["north_m"], held["east_m"]) < 2.0,
         2.0,
     )
 
