@@ -70,18 +70,18 @@ class Action:
         return await self._core.requests.command_long(command, *params, timeout_s=confirm_timeout_s)
 
     async def arm(self, force: bool = False) -> CommandResult:
-        result = await self.command_long(
-            MAV_CMD_COMPONENT_ARM_DISARM, 1, PX4_ARM_DISARM_FORCE if force else 0
-        )
-        if result.ok:
-            self._arm_accepted_s = self._core.now()
-        return result
+        return await self._arm_disarm(True, force)
 
     async def disarm(self, force: bool = False) -> CommandResult:
+        return await self._arm_disarm(False, force)
+
+    async def _arm_disarm(self, arm: bool, force: bool) -> CommandResult:
         result = await self.command_long(
-            MAV_CMD_COMPONENT_ARM_DISARM, 0, PX4_ARM_DISARM_FORCE if force else 0
+            MAV_CMD_COMPONENT_ARM_DISARM, 1 if arm else 0, PX4_ARM_DISARM_FORCE if force else 0
         )
-        if result.ok:
+        if result.ok and arm:
+            self._arm_accepted_s = self._core.now()
+        elif result.ok:
             self._disarm_accepted_s = self._core.now()
         return result
 

@@ -8,7 +8,7 @@ import math
 
 from pymavlink.dialects.v20 import development as mavlink
 
-from server.link.commands import CommandOutcome
+from server.link.commands import CommandOutcome, CommandResult
 from server.link.setpoints import PositionNed
 from tests.link.conftest import ScriptedSession, open_sim, wait_for
 
@@ -73,37 +73,38 @@ async def test_vtol_transition_goes_out_once_the_vehicle_says_it_is_a_vtol(
     assert scripted.peer.commands(mavlink.MAV_CMD_DO_VTOL_TRANSITION)
 
 
-async def test_offboard_accepted_but_not_entered_is_asked_for_once_more() -> None:
+async def _start_offboard_losing(requests_lost: int) -> tuple[CommandResult, bool]:
+    """start_offboard on the sim while it loses the next OFFBOARD requests (acked, yet the
+    vehicle stays in Hold): the result, and whether the stream still runs."""
     async with open_sim(speed=5.0) as session:
         vehicle = session.vehicle
         vehicle.mode_confirm_timeout_s = 1.0
         vehicle.offboard_prestream_s = 0.2
         commander = session.sim.instances[0].vehicle.commander
-        commander.offboard_requests_lost = 1
+        commander.offboard_requests_lost = requests_lost
 
         result = await vehicle.start_offboard()
 
-        assert result.ok, result
         assert commander.offboard_requests_lost == 0
-        assert vehicle.snapshot().mode == "OFFBOARD"
+        assert (vehicle.snapshot().mode == "OFFBOARD") is result.ok
+        return result, vehicle.streamer_active
+
+
+async def test_offboard_accepted_but_not_entered_is_asked_for_once_more() -> None:
+    result, streaming = await _start_offboard_losing(1)
+
+    assert result.ok, result
+    assert streaming
 
 
 async def test_offboard_lost_twice_is_not_confirmed_with_the_mode_observed() -> None:
-    async with open_sim(speed=5.0) as session:
-        vehicle = session.vehicle
-        vehicle.mode_confirm_timeout_s = 1.0
-        vehicle.offboard_prestream_s = 0.2
-        commander = session.sim.instances[0].vehicle.commander
-        commander.offboard_requests_lost = 2
+    result, streaming = await _start_offboard_losing(2)
 
-        result = await vehicle.start_offboard()
-
-        assert result.outcome is CommandOutcome.NOT_CONFIRMED
-        assert result.reason == "accepted twice, but the vehicle still reports HOLD"
-        assert result.result_code == mavlink.MAV_RESULT_ACCEPTED
-        assert result.elapsed_ms >= 2000
-        assert commander.offboard_requests_lost == 0
-        assert not vehicle.streamer_active
+    assert result.outcome is CommandOutcome.NOT_CONFIRMED
+    assert result.reason == "accepted twice, but the vehicle still reports HOLD"
+    assert result.result_code == mavlink.MAV_RESULT_ACCEPTED
+    assert result.elapsed_ms >= 2000
+    assert not streaming
 
 
 async def test_takeoff_after_px4_disarmed_itself_is_not_confirmed_and_says_why() -> None:
