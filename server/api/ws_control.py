@@ -7,7 +7,7 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
-from collections.abc import Iterator
+from collections.abc import Awaitable, Iterator
 from contextlib import contextmanager
 from typing import Any
 
@@ -96,7 +96,7 @@ async def _acquire(
     holder = context.holder_name(client_name, "ws", websocket.client)
     try:
         if takeover:
-            return await context.leases.take_over(
+            asking = context.leases.take_over(
                 vehicle.sysid,
                 holder,
                 session="ws",
@@ -104,7 +104,10 @@ async def _acquire(
                 force=force,
                 ttl_s=ttl_s,
             )
+            return await _unless_gone(websocket, asking)
         return context.leases.acquire(vehicle.sysid, holder, session="ws", ttl_s=ttl_s)
+    except WebSocketDisconnect:
+        return None  # gone while the holder was asked: the request is withdrawn
     except TtlOutOfBounds as exc:
         await websocket.send_json(
             {"type": "error", "reason": str(exc), "field": "ttl_s", "limit": exc.limit}
@@ -115,6 +118,29 @@ async def _acquire(
         await websocket.send_json({"type": "error", "reason": str(refused), "holder": holder_now})
         await close_socket(websocket, CLOSE_LEASE_HELD, "control held by another pilot")
     return None
+
+
+async def _unless_gone(websocket: WebSocket, asking: Awaitable[Lease]) -> Lease:
+    """The lease once the holder answers; WebSocketDisconnect (and the ask withdrawn) if the
+    client leaves first, so control is never granted to a closed socket. Messages sent
+    before the lease message are not read as requests."""
+    answer = asyncio.ensure_future(asking)
+    gone = asyncio.ensure_future(_disconnected(websocket))
+    try:
+        await asyncio.wait({answer, gone}, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        gone.cancel()
+        if not answer.done():
+            answer.cancel()
+        await asyncio.gather(answer, gone, return_exceptions=True)
+    if answer.cancelled():
+        raise WebSocketDisconnect(1001)
+    return answer.result()
+
+
+async def _disconnected(websocket: WebSocket) -> None:
+    while (await websocket.receive())["type"] != "websocket.disconnect":
+        pass
 
 
 class _ControlSession:

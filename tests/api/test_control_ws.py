@@ -173,3 +173,24 @@ async def test_the_velocity_intent_on_the_socket_is_live_by_default(quad: Served
         await holds_for(
             lambda: vehicle.offboard.setpoint == flown, 3 * DEADMAN_S, "the velocity flown on"
         )
+
+
+async def test_an_asker_that_closes_its_socket_withdraws_the_request(quad: Served) -> None:
+    async with (
+        connect(quad.url("telemetry", vehicle=1, rate_hz=1)) as telemetry,
+        connect(quad.url("control", vehicle=1, client_name="tab-1", ttl_s=30)) as first,
+    ):
+        await receive(first)
+        async with connect(quad.url("control", vehicle=1, takeover="true")):
+            asked = await receive_until(first, {"type": "takeover_requested"})
+        withdrawn = await receive_until(
+            telemetry, {"type": "event", "kind": "control"}, timeout_s=5.0
+        )
+        while withdrawn["data"]["action"] != "takeover_withdrawn":
+            withdrawn = await receive_until(telemetry, {"type": "event", "kind": "control"})
+        grant = {"type": "takeover_answer", "id": 3, "request_id": asked["request_id"]}
+        await first.send(json.dumps({**grant, "grant": True}))
+        assert (await receive_until(first, {"id": 3}))["status"] == 404
+        assert (await quad.api.client.get("/api/v1/vehicles/1/control")).json()[
+            "holder"
+        ] == "pilot · tab-1"
