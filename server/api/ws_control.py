@@ -7,7 +7,7 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
-from collections.abc import Awaitable, Iterator
+from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
@@ -26,7 +26,7 @@ from server.api.lease import (
     UnknownRequest,
 )
 from server.api.operations import INTENT_NAMES, OPERATIONS, run_intent
-from server.api.routes.control import lease_out
+from server.api.routes.control import AskerGone, lease_out, unless_gone
 from server.api.routes.setpoint import sent_out
 from server.api.schemas import SetpointBody
 from server.api.ws_common import (
@@ -104,10 +104,11 @@ async def _acquire(
                 force=force,
                 ttl_s=ttl_s,
             )
-            return await _unless_gone(websocket, asking)
+            # what the client sends before its lease is not read as requests
+            return await unless_gone(asking, _disconnected(websocket))
         return context.leases.acquire(vehicle.sysid, holder, session="ws", ttl_s=ttl_s)
-    except WebSocketDisconnect:
-        return None  # gone while the holder was asked: the request is withdrawn
+    except AskerGone:
+        return None
     except TtlOutOfBounds as exc:
         await websocket.send_json(
             {"type": "error", "reason": str(exc), "field": "ttl_s", "limit": exc.limit}
@@ -118,24 +119,6 @@ async def _acquire(
         await websocket.send_json({"type": "error", "reason": str(refused), "holder": holder_now})
         await close_socket(websocket, CLOSE_LEASE_HELD, "control held by another pilot")
     return None
-
-
-async def _unless_gone(websocket: WebSocket, asking: Awaitable[Lease]) -> Lease:
-    """The lease once the holder answers; WebSocketDisconnect (and the ask withdrawn) if the
-    client leaves first, so control is never granted to a closed socket. Messages sent
-    before the lease message are not read as requests."""
-    answer = asyncio.ensure_future(asking)
-    gone = asyncio.ensure_future(_disconnected(websocket))
-    try:
-        await asyncio.wait({answer, gone}, return_when=asyncio.FIRST_COMPLETED)
-    finally:
-        gone.cancel()
-        if not answer.done():
-            answer.cancel()
-        await asyncio.gather(answer, gone, return_exceptions=True)
-    if answer.cancelled():
-        raise WebSocketDisconnect(1001)
-    return answer.result()
 
 
 async def _disconnected(websocket: WebSocket) -> None:

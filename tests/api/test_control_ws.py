@@ -11,9 +11,11 @@ import time
 from collections.abc import AsyncIterator
 from typing import Any
 
+import httpx
 import pytest
 from websockets.asyncio.client import connect
 
+from tests.api.conftest import PILOT
 from tests.api.test_ws import (
     Served,
     close_code,
@@ -194,3 +196,20 @@ async def test_an_asker_that_closes_its_socket_withdraws_the_request(quad: Serve
         assert (await quad.api.client.get("/api/v1/vehicles/1/control")).json()[
             "holder"
         ] == "pilot · tab-1"
+
+
+async def test_a_rest_asker_that_gives_up_withdraws_the_request(quad: Served) -> None:
+    control = f"http://{quad.host}/api/v1/vehicles/1/control"
+    async with httpx.AsyncClient(headers={"Authorization": f"Bearer {PILOT}"}) as client:
+        holder = await client.post(control, json={"client_name": "script"})
+        assert holder.status_code == 200
+        with pytest.raises(httpx.ReadTimeout):
+            await client.post(control, json={"takeover": True}, timeout=0.3)
+
+        async def withdrawn() -> bool:
+            return (await client.get(control)).json()["request"] is None
+
+        await eventually(withdrawn, 5.0, "the request withdrawn", poll_s=0.05)
+        assert (await client.get(control)).json()["holder"] == "pilot · script"
+        audit = await client.get(f"http://{quad.host}/api/v1/control/audit")
+        assert audit.json()[-1]["data"]["action"] == "takeover_withdrawn"

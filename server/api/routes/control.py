@@ -3,6 +3,8 @@ renew, inspect, answer a takeover request, release; and the audit log of control
 
 from __future__ import annotations
 
+import asyncio
+from collections.abc import Awaitable
 from dataclasses import dataclass
 from typing import Annotated, Any
 
@@ -28,6 +30,7 @@ router = APIRouter(tags=["control"])
 _lease_router = APIRouter(prefix="/vehicles/{vehicle_id}/control")
 
 AUDIT_LIMIT_MAX = 1000
+DISCONNECT_POLL_S = 0.1
 _REFUSED: dict[int | str, dict[str, Any]] = {
     409: {"model": ErrorOut, "description": "held by another, or the takeover refused"}
 }
@@ -67,6 +70,35 @@ async def _lease_call(
 LeaseCall = Annotated[_LeaseCall, Depends(_lease_call)]
 
 
+class AskerGone(Exception):
+    """The client asking for control went away before the holder answered."""
+
+
+async def unless_gone(asking: Awaitable[Lease], gone: Awaitable[None]) -> Lease:
+    """The lease once the holder answers, or AskerGone (and the request withdrawn) when the
+    asking client leaves first, so control is never handed to nobody."""
+    answer = asyncio.ensure_future(asking)
+    left = asyncio.ensure_future(gone)
+    try:
+        await asyncio.wait({answer, left}, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        left.cancel()
+        if not answer.done():
+            answer.cancel()
+        await asyncio.gather(answer, left, return_exceptions=True)
+    if answer.cancelled():
+        raise AskerGone
+    return answer.result()
+
+
+async def _request_gone(request: Request) -> None:
+    # HTTP has no disconnect event to wait on: look at the connection now and then
+    while True:
+        if await request.is_disconnected():
+            return
+        await asyncio.sleep(DISCONNECT_POLL_S)
+
+
 def ttl_checked(context: ApiContext, ttl_s: float | None) -> float:
     """The TTL to grant, or a 422 naming the bound it broke."""
     try:
@@ -94,7 +126,7 @@ async def acquire_control(
     holder = context.holder_name(body.client_name, "rest", request.client)
     try:
         if body.takeover:
-            lease = await context.leases.take_over(
+            asking = context.leases.take_over(
                 vehicle.sysid,
                 holder,
                 session="rest",
@@ -102,12 +134,16 @@ async def acquire_control(
                 force=body.force,
                 ttl_s=ttl_s,
             )
+            lease = await unless_gone(asking, _request_gone(request))
         else:
             lease = context.leases.acquire(vehicle.sysid, holder, session="rest", ttl_s=ttl_s)
     except LeaseHeld as held_by:
         raise ApiError(409, str(held_by), holder=held_by.lease.holder) from None
     except TakeoverRefused as refused:
         raise ApiError(409, str(refused), holder=refused.holder) from None
+    except AskerGone:
+        # nobody reads this answer; 499 is what proxies log for a client that left
+        raise ApiError(499, "the client asking for control went away") from None
     return lease_out(lease, context, vehicle)
 
 
