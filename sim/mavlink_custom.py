@@ -42,45 +42,28 @@ class CustomMessage(mavlink.MAVLink_message):  # type: ignore[misc]
         return packed
 
 
-class ProtocolVersionMessage(CustomMessage):
-    """PROTOCOL_VERSION: the MAVLink versions spoken (100 × major)."""
-
-    id = MAVLINK_MSG_ID_PROTOCOL_VERSION
-    msgname = "PROTOCOL_VERSION"
-    crc_extra = 217
-    fieldnames = ("version", "min_version", "max_version", "spec_version_hash",
-                  "library_version_hash")
-    _wire = struct.Struct("<HHH8s8s")
+def _message_type(name: str, msg_id: int, crc_extra: int, wire_format: str,
+                  fieldnames: str) -> type[CustomMessage]:
+    """A CustomMessage subclass for one message of common.xml (fields in wire order)."""
+    attributes = {"id": msg_id, "msgname": name, "crc_extra": crc_extra,
+                  "fieldnames": tuple(fieldnames.split()), "_wire": struct.Struct(wire_format)}
+    return type(f"{name.title().replace('_', '')}Message", (CustomMessage,), attributes)
 
 
-class LinkNodeStatusMessage(CustomMessage):
-    """LINK_NODE_STATUS: the link's own traffic counters."""
-
-    id = MAVLINK_MSG_ID_LINK_NODE_STATUS
-    msgname = "LINK_NODE_STATUS"
-    crc_extra = 117
-    fieldnames = ("timestamp", "tx_rate", "rx_rate", "messages_sent", "messages_received",
-                  "messages_lost", "rx_parse_err", "tx_overflows", "rx_overflows", "tx_buf",
-                  "rx_buf")
-    _wire = struct.Struct("<QIIIIIHHHBB")
-
-
-class TimeEstimateToTargetMessage(CustomMessage):
-    """TIME_ESTIMATE_TO_TARGET: seconds to return, land, mission item/end, command (-1 = none)."""
-
-    id = MAVLINK_MSG_ID_TIME_ESTIMATE_TO_TARGET
-    msgname = "TIME_ESTIMATE_TO_TARGET"
-    crc_extra = 232
-    fieldnames = ("safe_return", "land", "mission_next_item", "mission_end",
-                  "commanded_action")
-    _wire = struct.Struct("<iiiii")
-
-
-class CurrentEventSequenceMessage(CustomMessage):
-    """CURRENT_EVENT_SEQUENCE: the newest event's sequence number."""
-
-    id = MAVLINK_MSG_ID_CURRENT_EVENT_SEQUENCE
-    msgname = "CURRENT_EVENT_SEQUENCE"
-    crc_extra = 106
-    fieldnames = ("sequence", "flags")
-    _wire = struct.Struct("<HB")
+# the MAVLink versions spoken (100 × major) and the spec's and library's git hashes
+ProtocolVersionMessage = _message_type(
+    "PROTOCOL_VERSION", MAVLINK_MSG_ID_PROTOCOL_VERSION, 217, "<HHH8s8s",
+    "version min_version max_version spec_version_hash library_version_hash")
+# the link's own traffic counters
+LinkNodeStatusMessage = _message_type(
+    "LINK_NODE_STATUS", MAVLINK_MSG_ID_LINK_NODE_STATUS, 117, "<QIIIIIHHHBB",
+    "timestamp tx_rate rx_rate messages_sent messages_received messages_lost rx_parse_err "
+    "tx_overflows rx_overflows tx_buf rx_buf")
+# seconds to return, to land, to the mission item and end, to the command's end (-1 = none)
+TimeEstimateToTargetMessage = _message_type(
+    "TIME_ESTIMATE_TO_TARGET", MAVLINK_MSG_ID_TIME_ESTIMATE_TO_TARGET, 232, "<iiiii",
+    "safe_return land mission_next_item mission_end commanded_action")
+# the newest event's sequence number
+CurrentEventSequenceMessage = _message_type(
+    "CURRENT_EVENT_SEQUENCE", MAVLINK_MSG_ID_CURRENT_EVENT_SEQUENCE, 106, "<HB",
+    "sequence flags")

@@ -16,7 +16,7 @@ from sim.mavlink_custom import (
     MAVLINK_MSG_ID_TIME_ESTIMATE_TO_TARGET as MAVLINK_MSG_ID_TIME_ESTIMATE_TO_TARGET,
 )
 from sim.mavlink_custom import ProtocolVersionMessage as ProtocolVersionMessage
-from sim.mavlink_telemetry import TelemetryMessages
+from sim.mavlink_telemetry import TelemetryMessages, centidegrees
 from sim.quat import euler_from_quat, yaw_from_quat
 from sim.vehicle_interface import Message, VehicleInterface
 
@@ -211,7 +211,7 @@ class MessageFactory:
         geo = v.geodetic()
         vn, ve, vd = v.truth.velocity_ned_m_s
         relative_alt_m = v.commander.home.position_ned_m[2] - v.truth.position_ned_m[2]
-        heading_cdeg = round(math.degrees(yaw_from_quat(v.truth.q_wxyz)) % 360.0 * 100.0) % 36000
+        heading_cdeg = centidegrees(yaw_from_quat(v.truth.q_wxyz))
         return mavlink.MAVLink_global_position_int_message(
             self._boot_ms, round(geo.lat_deg * 1e7), round(geo.lon_deg * 1e7),
             round(geo.alt_m * 1000.0), round(relative_alt_m * 1000.0),
@@ -236,7 +236,7 @@ class MessageFactory:
             )
         geo = v.geodetic()
         vn, ve, _ = v.truth.velocity_ned_m_s
-        cog_cdeg = round(math.degrees(math.atan2(ve, vn)) % 360.0 * 100.0) % 36000
+        cog_cdeg = centidegrees(math.atan2(ve, vn))
         return mavlink.MAVLink_gps_raw_int_message(
             int(v.now_s * 1e6), 3, round(geo.lat_deg * 1e7), round(geo.lon_deg * 1e7),
             round(geo.alt_m * 1000.0), 70, 100, round(math.hypot(vn, ve) * 100.0), cog_cdeg, 16,

@@ -51,6 +51,11 @@ def pressure_pa(alt_amsl_m: float) -> float:
     return _P0_PA * float(max(1.0 - _LAPSE_K_M * alt_amsl_m / _T0_K, 0.01) ** _BARO_EXPONENT)
 
 
+def centidegrees(angle_rad: float) -> int:
+    """An angle as MAVLink's headings carry it: 0..35999 cdeg."""
+    return round(math.degrees(angle_rad) % 360.0 * 100.0) % 36000
+
+
 def _covariance(variance: float) -> list[float]:
     """PX4's upper-triangular 6×6 covariance with only the diagonal known."""
     values = [0.0] * 21
@@ -182,13 +187,12 @@ class TelemetryMessages:
         v = self._v
         if not v.ready:
             return None
-        geo = v.geodetic()
         vn, ve, vd = v.truth.velocity_ned_m_s
-        direction_cdeg = round(math.degrees(math.atan2(ve, vn)) % 360.0 * 100.0) % 36000
-        airborne = not v.commander.landed
+        geo = v.geodetic()
+        status = MAV_ODID_STATUS_GROUND if v.commander.landed else MAV_ODID_STATUS_AIRBORNE
         return mavlink.MAVLink_open_drone_id_location_message(
-            0, 0, bytes(20), MAV_ODID_STATUS_AIRBORNE if airborne else MAV_ODID_STATUS_GROUND,
-            direction_cdeg, round(math.hypot(vn, ve) * 100.0), round(-vd * 100.0),
+            0, 0, bytes(20), status, centidegrees(math.atan2(ve, vn)),
+            round(math.hypot(vn, ve) * 100.0), round(-vd * 100.0),
             round(geo.lat_deg * 1e7), round(geo.lon_deg * 1e7), geo.alt_m, geo.alt_m,
             MAV_ODID_HEIGHT_REF_OVER_TAKEOFF,
             v.commander.home.position_ned_m[2] - v.truth.position_ned_m[2],
