@@ -210,3 +210,17 @@ async def test_intents_on_the_control_socket() -> None:
                 braked = await receive_until(ws, {"id": 2})
                 assert braked["body"]["intent"] == "brake"
                 assert braked["body"]["via"] == "hold_mode"
+
+                # a live velocity on the socket: the deadman brakes it when updates stop
+                await ws.send(json.dumps({"type": "command", "id": 3, "name": "velocity",
+                                          "args": {"forward_m_s": 0.5}}))  # fmt: skip
+                flying = await receive_until(ws, {"id": 3})
+                assert flying["status"] == 200, flying
+                assert flying["body"]["live"] is True
+                assert flying["body"]["setpoint"]["setpoint"]["type"] == "velocity_body"
+                await api.wait_state(
+                    lambda s: (s["setpoint"] or {}).get("type") == "position_ned",
+                    10.0,
+                    "braked and held",
+                    renew=False,
+                )
