@@ -64,6 +64,9 @@ PX4_FLIGHT_SW_VERSION = (1 << 24) | (16 << 16) | (0 << 8) | 255
 # the first five bytes of the v1.16.0 tag's git hash (PX4_GIT_VERSION_BINARY
 # 0x6ea3539157ca358c), little-endian after three zero vendor-version bytes, as PX4 packs them
 PX4_FLIGHT_CUSTOM_VERSION = [0, 0, 0, 0x57, 0x91, 0x53, 0xA3, 0x6E]
+# PROTOCOL_VERSION.library_version_hash: the c_library's git hash PX4 v1.16.0 was built with
+# (MAVLINK_LIB_GIT_VERSION_BINARY 0x5bfd76d80281f602, little-endian); its spec hash is zero
+MAVLINK_LIB_GIT_VERSION = (0x5BFD76D80281F602).to_bytes(8, "little")
 # SITL's os_sw_version and board_version
 PX4_OS_SW_VERSION = 101854463
 PX4_BOARD_VERSION = 1
@@ -124,6 +127,7 @@ class MessageFactory:
             mavlink.MAVLINK_MSG_ID_DISTANCE_SENSOR: sensors.distance_sensor,
             mavlink.MAVLINK_MSG_ID_ATTITUDE_TARGET: sensors.attitude_target,
             mavlink.MAVLINK_MSG_ID_MISSION_CURRENT: sensors.mission_current,
+            mavlink.MAVLINK_MSG_ID_NAV_CONTROLLER_OUTPUT: sensors.nav_controller_output,
             mavlink.MAVLINK_MSG_ID_OPEN_DRONE_ID_LOCATION: sensors.open_drone_id_location,
             mavlink.MAVLINK_MSG_ID_OPEN_DRONE_ID_SYSTEM: sensors.open_drone_id_system,
             MAVLINK_MSG_ID_LINK_NODE_STATUS: sensors.link_node_status,
@@ -310,7 +314,7 @@ class MessageFactory:
 
     def protocol_version(self) -> Message:
         return ProtocolVersionMessage(MAVLINK_VERSION_2, MAVLINK_VERSION_1, MAVLINK_VERSION_2,
-                                      bytes(8), bytes(8))
+                                      bytes(8), MAVLINK_LIB_GIT_VERSION)
 
     def current_mode(self) -> Message:
         commander = self._v.commander

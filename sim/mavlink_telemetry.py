@@ -12,7 +12,7 @@ import time
 from pymavlink.dialects.v20 import development as mavlink
 
 from sim.mavlink_custom import LinkNodeStatusMessage, TimeEstimateToTargetMessage
-from sim.quat import rotate_ned_to_body
+from sim.quat import euler_from_quat, rotate_ned_to_body
 from sim.vehicle_interface import Message, VehicleInterface
 
 GRAVITY_M_S2 = 9.80665
@@ -178,6 +178,28 @@ class TelemetryMessages:
         thrust = v.model.power_fraction if v.commander.armed else 0.0
         return mavlink.MAVLink_attitude_target_message(
             int(v.now_s * 1000.0), 0, list(truth.q_wxyz), *truth.rates_body_rad_s, thrust
+        )
+
+    def nav_controller_output(self) -> Message | None:
+        """Only while the fixed-wing position controller runs (a plane, a VTOL in FW), whose
+        status PX4 streams: attitude, bearing and distance to the target, altitude error."""
+        v = self._v
+        if not v.model.in_fixed_wing_flight:
+            return None
+        truth = v.truth
+        roll, pitch, yaw = euler_from_quat(truth.q_wxyz)
+        sp = v.last_trajectory_setpoint
+        target = sp.position_ned_m if sp is not None else [math.nan] * 3
+        here = truth.position_ned_m
+        dn, de = target[0] - here[0], target[1] - here[1]
+        has_target = math.isfinite(dn) and math.isfinite(de)
+        bearing_deg = round(math.degrees(yaw))
+        target_deg = round(math.degrees(math.atan2(de, dn))) if has_target else bearing_deg
+        distance_m = min(round(math.hypot(dn, de)), 65535) if has_target else 0
+        alt_error_m = here[2] - target[2] if math.isfinite(target[2]) else 0.0
+        return mavlink.MAVLink_nav_controller_output_message(
+            math.degrees(roll), math.degrees(pitch), bearing_deg, target_deg, distance_m,
+            alt_error_m, 0.0, 0.0,
         )
 
     def mission_current(self) -> Message:

@@ -22,6 +22,8 @@ from sim.mavlink_messages import MessageFactory
 from sim.vehicle_interface import Message
 
 _M = mavlink
+# streamed only while the fixed-wing position controller runs (a plane; a VTOL in FW)
+FIXED_WING_ONLY = frozenset({_M.MAVLINK_MSG_ID_NAV_CONTROLLER_OUTPUT})
 # PX4 v1.16 SITL's onboard link (mavlink_main.cpp configure_streams, MAVLINK_MODE_ONBOARD),
 # as measured by a census of a SIH quad (../shared/PX4_NOTES.md)
 ONBOARD_RATES_HZ: dict[int, float] = {
@@ -38,6 +40,7 @@ ONBOARD_RATES_HZ: dict[int, float] = {
     _M.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: 10.0,
     _M.MAVLINK_MSG_ID_TIMESYNC: 10.0,
     _M.MAVLINK_MSG_ID_VFR_HUD: 10.0,
+    _M.MAVLINK_MSG_ID_NAV_CONTROLLER_OUTPUT: 10.0,
     _M.MAVLINK_MSG_ID_GPS_RAW_INT: 8.0,
     _M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 5.0,
     _M.MAVLINK_MSG_ID_SYS_STATUS: 5.0,
@@ -75,6 +78,7 @@ NORMAL_RATES_HZ: dict[int, float] = {
     _M.MAVLINK_MSG_ID_ALTITUDE: 1.0,
     _M.MAVLINK_MSG_ID_SCALED_PRESSURE: 1.0,
     _M.MAVLINK_MSG_ID_MISSION_CURRENT: 1.0,
+    _M.MAVLINK_MSG_ID_NAV_CONTROLLER_OUTPUT: 1.0,
     _M.MAVLINK_MSG_ID_OPEN_DRONE_ID_LOCATION: 1.0,
     _M.MAVLINK_MSG_ID_OPEN_DRONE_ID_SYSTEM: 1.0,
     MAVLINK_MSG_ID_LINK_NODE_STATUS: 1.0,

@@ -1,8 +1,8 @@
 """A census of the simulated vehicle's telemetry held to PX4 v1.16 SITL's.
 
 Every message id the sim sends on each link over a window of sim time, rate = count / time,
-compared with the census of a real PX4 v1.16 SITL (SIH quad and standard VTOL, on the ground,
-ready to arm; ../shared/PX4_NOTES.md "Telemetry PX4 sends", docs/sim.md). A message type
+compared with the census of a real PX4 v1.16 SITL (SIH quad, standard VTOL and airplane, on
+the ground, ready to arm; ../shared/PX4_NOTES.md "Telemetry PX4 sends", docs/sim.md). A type
 agrees when it is there and its rate is within ±25%; at least 90% of PX4's types must agree
 on each link. The sim runs its real airframe models, stepped in sim time (no wall clock).
 """
@@ -87,6 +87,18 @@ PX4_GCS_HZ: dict[int, float] = {
 }
 
 
+# A fixed-wing PX4 (SIH airplane) adds the fixed-wing position controller's status
+NAV_CONTROLLER_OUTPUT = 62
+PX4_HZ_BY_AIRFRAME: dict[str, tuple[dict[int, float], dict[int, float]]] = {
+    "quad": (PX4_ONBOARD_HZ, PX4_GCS_HZ),
+    "vtol": (PX4_ONBOARD_HZ, PX4_GCS_HZ),
+    "plane": ({**PX4_ONBOARD_HZ, NAV_CONTROLLER_OUTPUT: 10.0},
+              {**PX4_GCS_HZ, NAV_CONTROLLER_OUTPUT: 1.0}),
+}
+
+Census = tuple[str, dict[int, float], dict[int, float]]
+
+
 def message_id(msg: object) -> int:
     """The id of a decoded message; pymavlink names ids outside its dialect UNKNOWN_<id>."""
     name: str = msg.get_type()  # type: ignore[attr-defined]
@@ -110,9 +122,10 @@ def disagreements(measured: dict[int, float], px4: dict[int, float]) -> dict[int
     return wrong
 
 
-@pytest.fixture(scope="module", params=["quad", "vtol"])
-def sim_census(request: pytest.FixtureRequest) -> tuple[dict[int, float], dict[int, float]]:
-    """(onboard, GCS) census of a ready vehicle on the ground with its real airframe model."""
+@pytest.fixture(scope="module", params=list(PX4_HZ_BY_AIRFRAME))
+def sim_census(request: pytest.FixtureRequest) -> Census:
+    """(airframe, onboard, GCS census) of a ready vehicle on the ground with its real
+    airframe model."""
     harness = Harness(SimVehicle(request.param))
     harness.run_until(lambda: harness.vehicle.ready, READY_TIME_S + 2.0)
     harness.run(2.0)  # settled: home set, every stream past its first slot
@@ -120,22 +133,19 @@ def sim_census(request: pytest.FixtureRequest) -> tuple[dict[int, float], dict[i
     harness.gcs.clear()
     for _ in range(round(WINDOW_S / PHYSICS_DT_S)):
         harness.vehicle.step(PHYSICS_DT_S)
-    return census(harness.api.sent, WINDOW_S), census(harness.gcs.sent, WINDOW_S)
+    return request.param, census(harness.api.sent, WINDOW_S), census(harness.gcs.sent, WINDOW_S)
 
 
-@pytest.mark.parametrize(("link", "px4"), [(0, PX4_ONBOARD_HZ), (1, PX4_GCS_HZ)],
-                         ids=["onboard", "gcs"])
-def test_census_agrees_with_px4_for_nine_in_ten_types(
-    sim_census: tuple[dict[int, float], dict[int, float]], link: int, px4: dict[int, float]
-) -> None:
-    wrong = disagreements(sim_census[link], px4)
+@pytest.mark.parametrize("link", [0, 1], ids=["onboard", "gcs"])
+def test_census_agrees_with_px4_for_nine_in_ten_types(sim_census: Census, link: int) -> None:
+    airframe, *measured = sim_census
+    px4 = PX4_HZ_BY_AIRFRAME[airframe][link]
+    wrong = disagreements(measured[link], px4)
     agreeing = 1.0 - len(wrong) / len(px4)
     assert agreeing >= AGREEMENT_NEEDED, wrong
 
 
-@pytest.mark.parametrize(("link", "px4"), [(0, PX4_ONBOARD_HZ), (1, PX4_GCS_HZ)],
-                         ids=["onboard", "gcs"])
-def test_census_sends_nothing_px4_does_not(
-    sim_census: tuple[dict[int, float], dict[int, float]], link: int, px4: dict[int, float]
-) -> None:
-    assert set(sim_census[link]) - set(px4) == set()
+@pytest.mark.parametrize("link", [0, 1], ids=["onboard", "gcs"])
+def test_census_sends_nothing_px4_does_not(sim_census: Census, link: int) -> None:
+    airframe, *measured = sim_census
+    assert set(measured[link]) - set(PX4_HZ_BY_AIRFRAME[airframe][link]) == set()

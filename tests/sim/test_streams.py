@@ -9,7 +9,7 @@ import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
 from sim import modes
-from sim.streams import NORMAL_RATES_HZ, ONBOARD_RATES_HZ
+from sim.streams import FIXED_WING_ONLY, NORMAL_RATES_HZ, ONBOARD_RATES_HZ
 from tests.sim.conftest import Harness, HarnessFactory
 
 WINDOW_S = 10.0
@@ -34,6 +34,7 @@ def test_each_link_streams_at_px4_default_rates(harness: Harness, link_name: str
     link.clear()
     harness.run(WINDOW_S)
     measured = rates_hz(link.sent, WINDOW_S)
+    table = {msg_id: hz for msg_id, hz in table.items() if msg_id not in FIXED_WING_ONLY}
     for msg_id, hz in table.items():
         name = type_name(msg_id)
         assert measured.get(name, 0.0) == pytest.approx(hz, rel=0.1, abs=0.11), name
@@ -184,3 +185,13 @@ def test_every_streamed_message_has_plausible_contents(make_harness: HarnessFact
     assert location.latitude == h.api.of_type("GLOBAL_POSITION_INT")[-1].lat
     timesync = h.api.of_type("TIMESYNC")[-1]
     assert (timesync.tc1, timesync.ts1) == (0, pytest.approx(h.vehicle.now_s * 1e9, abs=2e8))
+
+
+def test_nav_controller_output_only_in_fixed_wing_flight(make_harness: HarnessFactory) -> None:
+    h = make_harness("vtol")
+    h.run(1.0)
+    assert h.api.of_type("NAV_CONTROLLER_OUTPUT") == []
+    h.model.request_transition(to_fixed_wing=True, immediate=True)
+    h.api.clear()
+    h.run(1.0)
+    assert len(h.api.of_type("NAV_CONTROLLER_OUTPUT")) == pytest.approx(10, abs=1)
