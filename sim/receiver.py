@@ -77,6 +77,7 @@ class Receiver:
             mavlink.MAVLINK_MSG_ID_PARAM_SET: parameters.handle_set,
             mavlink.MAVLINK_MSG_ID_SET_GPS_GLOBAL_ORIGIN: self._on_set_gps_global_origin,
             mavlink.MAVLINK_MSG_ID_MISSION_REQUEST_LIST: self._on_mission_request_list,
+            mavlink.MAVLINK_MSG_ID_TIMESYNC: self._on_timesync,
         }
         self._commands: dict[int, CommandHandler] = {
             **self._vehicle_commands.handlers,
@@ -196,6 +197,12 @@ class Receiver:
         origin = self._v.messages.gps_global_origin()
         if origin is not None:
             self._v.broadcast(origin)
+
+    def _on_timesync(self, link: Link, msg: Message) -> None:
+        # a request (tc1 = 0) is answered with this clock in tc1 and the asker's ts1, as
+        # PX4's timesync does; answers to the vehicle's own requests need nothing
+        if msg.tc1 == 0:
+            link.send(mavlink.MAVLink_timesync_message(int(self._v.now_s * 1e9), msg.ts1))
 
     def _on_mission_request_list(self, link: Link, msg: Message) -> None:
         link.send(mavlink.MAVLink_mission_count_message(

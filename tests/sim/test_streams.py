@@ -195,3 +195,13 @@ def test_nav_controller_output_only_in_fixed_wing_flight(make_harness: HarnessFa
     h.api.clear()
     h.run(1.0)
     assert len(h.api.of_type("NAV_CONTROLLER_OUTPUT")) == pytest.approx(10, abs=1)
+
+
+def test_timesync_request_is_answered_with_the_vehicle_clock(harness: Harness) -> None:
+    harness.api.clear()
+    harness.deliver(mavlink.MAVLink_timesync_message(0, 123_456_789))
+    (answer,) = harness.api.of_type("TIMESYNC")
+    assert answer.ts1 == 123_456_789
+    assert answer.tc1 == pytest.approx(harness.vehicle.now_s * 1e9, abs=1e7)
+    harness.deliver(mavlink.MAVLink_timesync_message(5, 6))  # an answer: nothing more
+    assert len(harness.api.of_type("TIMESYNC")) == 1
