@@ -205,7 +205,7 @@ def sent_out(sent: SentSetpoint) -> schemas.SentSetpointOut:
 def intent_out(result: IntentResult, *, live: bool) -> IntentOut:
     target = result.target
     return IntentOut(
-        intent=result.intent,  # type: ignore[arg-type]
+        intent=result.intent,
         via=result.via,
         setpoint=sent_out(result.sent) if result.sent is not None else None,
         command=command_out(result.command) if result.command is not None else None,

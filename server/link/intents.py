@@ -67,6 +67,7 @@ _ALTITUDE_HOLD_MASK = (
 )
 _YAW_BITS = POSITION_TARGET_TYPEMASK_YAW_IGNORE | POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE
 
+IntentName = Literal["brake", "velocity", "offset", "goto"]
 Via = Literal["setpoint", "reposition", "hold_mode"]
 VelocityFrame = Literal["body", "ned"]
 
@@ -76,7 +77,7 @@ class IntentResult:
     """What an intent came to: the setpoint streamed or the command the vehicle answered,
     and for a move, where it goes."""
 
-    intent: str
+    intent: IntentName
     via: Via
     sent: SentSetpoint | None = None
     command: CommandResult | None = None
@@ -240,14 +241,14 @@ def _check(
 
 
 async def _stream_move(
-    vehicle: Vehicle, intent: str, sp: Setpoint, target: GeoTarget
+    vehicle: Vehicle, intent: IntentName, sp: Setpoint, target: GeoTarget
 ) -> IntentResult:
     await _cancel_brake(vehicle)
     return IntentResult(intent, "setpoint", sent=await vehicle.set_setpoint(sp), target=target)
 
 
 async def _reposition(
-    vehicle: Vehicle, intent: str, target: GeoTarget, yaw_deg: float | None
+    vehicle: Vehicle, intent: IntentName, target: GeoTarget, yaw_deg: float | None
 ) -> IntentResult:
     await _cancel_brake(vehicle)
     result = await vehicle.reposition(

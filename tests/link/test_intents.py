@@ -11,6 +11,7 @@ import pytest
 
 from server.link import intents
 from server.link.envelope import Envelope, SetpointRejected, check_takeoff_altitude
+from server.link.setpoint_checks import Reference, check
 from server.link.setpoints import PositionNed, RawLocal, VelocityNed
 from server.link.state import GlobalState, HomeState
 from server.link.vehicle import Vehicle
@@ -233,3 +234,14 @@ def test_takeoff_altitude_is_held_to_the_envelope() -> None:
         "altitude_m",
         120.0,
     )
+
+
+def test_an_altitude_hold_is_checked_on_the_axes_px4_reads() -> None:
+    # x/y position, z velocity, acceleration and yaw rate ignored: velocity x/y at a height
+    mask = 1 | 2 | 32 | 64 | 128 | 256 | 2048
+    home = Reference((0.0, 0.0, 0.0), None)
+    far_x = RawLocal(frame=1, type_mask=mask, x=900.0, z=-10.0, vx=2.0)
+    check(far_x, "multicopter", Envelope(), home)  # the ignored x is no distance from home
+    with pytest.raises(SetpointRejected) as high:
+        check(RawLocal(frame=1, type_mask=mask, z=-130.0, vx=2.0), "multicopter", Envelope(), home)
+    assert (high.value.field, high.value.limit) == ("max_alt_rel_m", 120.0)

@@ -9,14 +9,13 @@ from pydantic import BaseModel, Field, model_validator
 from server.api.schemas.commands import CommandResultOut
 from server.api.schemas.common import LatDeg, LonDeg, StrictBody, YawDeg, limits_of
 from server.api.schemas.setpoints import SentSetpointOut
+from server.link.intents import IntentName
 from server.link.setpoint_kinds import AltitudeM, DegreesPerSecond, Metres, MetresPerSecond
 
 SpeedMS = Annotated[float, limits_of(MetresPerSecond)]
 DistanceM = Annotated[float, limits_of(Metres)]
 YawRateDegS = Annotated[float | None, limits_of(DegreesPerSecond)]
 AltRelM = Annotated[float | None, limits_of(AltitudeM)]
-
-IntentName = Literal["brake", "velocity", "offset", "goto"]
 
 
 class BrakeBody(StrictBody):
