@@ -82,6 +82,7 @@ class Receiver:
         self._commands: dict[int, CommandHandler] = {
             **self._vehicle_commands.handlers,
             mavlink.MAV_CMD_SET_MESSAGE_INTERVAL: self._cmd_set_message_interval,
+            mavlink.MAV_CMD_GET_MESSAGE_INTERVAL: self._cmd_get_message_interval,
             mavlink.MAV_CMD_REQUEST_MESSAGE: self._cmd_request_message,
             mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: self._cmd_request_capabilities,
             mavlink.MAV_CMD_REQUEST_PROTOCOL_VERSION: self._cmd_request_protocol_version,
@@ -157,6 +158,14 @@ class Receiver:
         streams = self._v.streams_of(link)
         ok = streams.set_interval(as_int(cmd.params[0]), cmd.params[1], self._v.now_s)
         return MAV_RESULT_ACCEPTED if ok else MAV_RESULT_FAILED
+
+    def _cmd_get_message_interval(self, cmd: Command, link: Link) -> int:
+        # PX4 answers with MESSAGE_INTERVAL (0 µs: not streamed on this link), then the ack
+        msg_id = as_int(cmd.params[0])
+        interval_s = self._v.streams_of(link).interval_s(msg_id)
+        interval_us = 0 if interval_s is None else round(interval_s * 1e6)
+        link.send(mavlink.MAVLink_message_interval_message(msg_id, interval_us))
+        return MAV_RESULT_ACCEPTED
 
     def _cmd_request_message(self, cmd: Command, link: Link) -> int | None:
         msg = self._v.messages.build(as_int(cmd.params[0]))

@@ -205,3 +205,17 @@ def test_timesync_request_is_answered_with_the_vehicle_clock(harness: Harness) -
     assert answer.tc1 == pytest.approx(harness.vehicle.now_s * 1e9, abs=1e7)
     harness.deliver(mavlink.MAVLink_timesync_message(5, 6))  # an answer: nothing more
     assert len(harness.api.of_type("TIMESYNC")) == 1
+
+
+def test_get_message_interval_reports_this_links_interval(harness: Harness) -> None:
+    harness.command_long(mavlink.MAV_CMD_GET_MESSAGE_INTERVAL, mavlink.MAVLINK_MSG_ID_ATTITUDE)
+    harness.command_long(mavlink.MAV_CMD_GET_MESSAGE_INTERVAL, mavlink.MAVLINK_MSG_ID_ATTITUDE,
+                         link=harness.gcs)
+    harness.command_long(mavlink.MAV_CMD_GET_MESSAGE_INTERVAL,
+                         mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN)
+    api = [(m.message_id, m.interval_us) for m in harness.api.of_type("MESSAGE_INTERVAL")]
+    assert api == [(mavlink.MAVLINK_MSG_ID_ATTITUDE, 10_000),
+                   (mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN, 0)]  # 100 Hz; not streamed
+    (gcs,) = harness.gcs.of_type("MESSAGE_INTERVAL")
+    assert gcs.interval_us == 20_000  # 50 Hz on SITL's GCS link
+    assert harness.last_ack(mavlink.MAV_CMD_GET_MESSAGE_INTERVAL) == mavlink.MAV_RESULT_ACCEPTED
