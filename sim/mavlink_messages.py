@@ -71,6 +71,8 @@ MAVLINK_LIB_GIT_VERSION = (0x5BFD76D80281F602).to_bytes(8, "little")
 PX4_OS_SW_VERSION = 101854463
 PX4_BOARD_VERSION = 1
 MAV_AUTOPILOT_PX4 = 12
+# what PX4's SIH GPS reports (MAVSDK's gps_info shows it on PX4 v1.16 SITL)
+SIH_SATELLITES_VISIBLE = 10
 MAV_STATE_STANDBY = 3
 MAV_STATE_ACTIVE = 4
 MAV_STATE_CRITICAL = 5
@@ -243,7 +245,8 @@ class MessageFactory:
         cog_cdeg = centidegrees(math.atan2(ve, vn))
         return mavlink.MAVLink_gps_raw_int_message(
             int(v.now_s * 1e6), 3, round(geo.lat_deg * 1e7), round(geo.lon_deg * 1e7),
-            round(geo.alt_m * 1000.0), 70, 100, round(math.hypot(vn, ve) * 100.0), cog_cdeg, 16,
+            round(geo.alt_m * 1000.0), 70, 100, round(math.hypot(vn, ve) * 100.0), cog_cdeg,
+            SIH_SATELLITES_VISIBLE,
         )
 
     def battery_status(self) -> Message:
