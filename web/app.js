@@ -4,7 +4,7 @@
 
 import { TelemetrySocket, onTokenRejected, reconnectDelayMs, request, token } from "./api.js";
 import {
-  brake, confirmThen, goByOffset, goTo, panel, runCommand, showResult, showSetpointType,
+  brake, confirmThen, goByOffset, goTo, keyboard, panel, runCommand, showResult, showSetpointType,
   startOffboard,
 } from "./control.js";
 import {
@@ -316,4 +316,4 @@ async function main() {
 main();
 
 // The page's state, for the browser console and the browser tests.
-window.skyhelm = { page, SETPOINT_TYPES, modesFor, reconnectDelayMs };
+window.skyhelm = { page, SETPOINT_TYPES, keyboard, modesFor, reconnectDelayMs };

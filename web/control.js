@@ -146,7 +146,7 @@ export async function startOffboard(button) {
 
 // ---- keyboard: velocity intents, brake ------------------------------------------------------
 
-const keyboard = new KeyboardPilot({
+export const keyboard = new KeyboardPilot({
   enabled: () => $("kbd-enable").checked && inControl(),
   speed: () => parseFloat($("kbd-speed").value) || 1,
   onKeys: (text) => setText("kbd-state", `keys: ${text}`),

@@ -258,6 +258,23 @@ def test_keyboard_velocity_moves_the_vehicle_and_space_holds_it(
     holds_for_blocking("the vehicle within 0.5 m of where it stopped", near_the_hold, 1.0)
 
 
+def test_keys_that_fall_silent_are_braked_by_the_servers_deadman(
+    flying: None, page: Any, api: httpx.Client
+) -> None:
+    start_offboard_here(page, api)
+    page.click("#kbd-state")
+    page.keyboard.down("d")
+    wait_for("sideways speed above 1 m/s", lambda: speed_m_s(vehicle_state(api)) > 1.0, 15.0)
+    # the page stops sending (as a frozen page would) without a brake of its own
+    page.evaluate("window.skyhelm.keyboard.stop()")
+    wait_position_hold(api)
+    page.wait_for_function(
+        "document.getElementById('log').textContent.includes('deadman')", timeout=10_000
+    )
+    assert page.text_content("#holder").startswith("you")
+    page.keyboard.up("d")
+
+
 def test_reposition_by_offset_from_the_form(flying: None, page: Any, api: httpx.Client) -> None:
     start = vehicle_state(api)
     before = start["position_ned"]
