@@ -55,10 +55,13 @@ def connected(flight: RestFlight) -> None:
 def observer_reads_but_cannot_control(flight: RestFlight) -> None:
     observer = flight.served.observer_token
     flight.expect(flight.call("GET", "", token=observer, lease=False), 200, "observer reads")
-    flight.expect(flight.call("POST", "control", {}, token=observer, lease=False), 403,
-                  "observer takes control")
-    flight.expect(flight.call("POST", "arm", {}, token=observer, lease=False), 403,
-                  "observer arms")
+    flight.expect(flight.call("GET", "control", token=observer, lease=False), 200,
+                  "observer sees who controls")
+    for method, path, body in (("POST", "control", {}), ("POST", "arm", {}),
+                               ("PUT", "setpoint", velocity_ned(1.0)),
+                               ("POST", "intents/brake", {})):
+        flight.expect(flight.call(method, path, body, token=observer, lease=False), 403,
+                      f"observer {method} {path}")
 
 
 def take_control(flight: RestFlight) -> None:
