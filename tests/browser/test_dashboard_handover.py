@@ -14,15 +14,7 @@ import pytest
 
 from tests.waiting import holds_for_blocking
 
-from .flows import (
-    arm_and_take_off,
-    click_and_wait_result,
-    open_dashboard,
-    settle_vehicle,
-    start_offboard_here,
-    take_control,
-    wait_position_hold,
-)
+from . import flows
 from .harness import Serve, altitude_m, speed_m_s, vehicle_state, wait_for
 
 SERVE_ARGS = ["--sim-speed", "3"]
@@ -61,8 +53,8 @@ def _name(tab: Any) -> str:
 
 def _first_tab_in_control(first: Any, second_page: Any, api: httpx.Client) -> str:
     """The vehicle on the ground, the first tab in control as the second tab shows; its name."""
-    settle_vehicle(api, flying=False)
-    take_control(first)
+    flows.settle_vehicle(api, flying=False)
+    flows.take_control(first)
     name = _name(first)
     _wait_holder(second_page, name)
     return name
@@ -78,8 +70,8 @@ def test_pilot_flies_then_a_second_tab_asks_and_the_first_grants(
 ) -> None:
     first_name = _first_tab_in_control(page, second_page, api)
     assert "since" in (second_page.text_content("#holder-since") or "")
-    arm_and_take_off(page, api, 5.0)
-    start_offboard_here(page, api)
+    flows.arm_and_take_off(page, api, 5.0)
+    flows.start_offboard_here(page, api)
 
     # keys: a live body-frame velocity intent while W is held, a brake when it is let go
     start = vehicle_state(api)["position_ned"]
@@ -96,7 +88,7 @@ def test_pilot_flies_then_a_second_tab_asks_and_the_first_grants(
     )
     wait_for("forward speed above 1 m/s", lambda: speed_m_s(vehicle_state(api)) > 1.0, 15.0)
     page.keyboard.up("w")
-    held = wait_position_hold(api)
+    held = flows.wait_position_hold(api)
     p = held["position_ned"]
     assert math.hypot(p["north_m"] - start["north_m"], p["east_m"] - start["east_m"]) > 0.5
 
@@ -130,7 +122,7 @@ def test_pilot_flies_then_a_second_tab_asks_and_the_first_grants(
     assert float(second_page.input_value("#sp-alt_m")) == pytest.approx(altitude_m(state), abs=0.8)
 
     # return from the new holder's tab
-    click_and_wait_result(second_page, "#btn-rtl")
+    flows.click_and_wait_result(second_page, "#btn-rtl")
     wait_for(
         "landed and disarmed",
         lambda: (s := vehicle_state(api))["landed_state"] == "ON_GROUND" and not s["armed"],
@@ -177,13 +169,13 @@ def test_force_takes_control_only_after_a_confirmation(
 def test_every_tab_shows_who_controls_and_the_label_is_editable(
     page: Any, second_page: Any, api: httpx.Client
 ) -> None:
-    settle_vehicle(api, flying=False)
+    flows.settle_vehicle(api, flying=False)
     _wait_holder(page, "nobody")
     page.fill("#client-label", "Ground station A")
     page.press("#client-label", "Enter")
     page.click("#kbd-state")
     assert page.evaluate("localStorage.getItem('skyhelm.clientLabel')") == "Ground station A"
-    take_control(page)
+    flows.take_control(page)
     name = _name(page)
     assert "Ground station A" in name
     _wait_holder(second_page, name)
@@ -196,7 +188,7 @@ def test_every_tab_shows_who_controls_and_the_label_is_editable(
 def test_mode_menu_lists_this_vehicles_modes_and_follows_the_mode(
     page: Any, api: httpx.Client
 ) -> None:
-    settle_vehicle(api, flying=True)
+    flows.settle_vehicle(api, flying=True)
     modes = page.eval_on_selector_all("#mode-select option", "os => os.map(o => o.value)")
     assert "VTOL_TAKEOFF" not in modes
     assert "TERMINATION" not in modes
@@ -215,21 +207,21 @@ def test_mode_menu_lists_this_vehicles_modes_and_follows_the_mode(
 
 
 def test_refusals_show_their_reason_and_field(page: Any, api: httpx.Client) -> None:
-    settle_vehicle(api, flying=True)
-    take_control(page)
+    flows.settle_vehicle(api, flying=True)
+    flows.take_control(page)
     page.fill("#repo-north", "5000")
-    text = click_and_wait_result(page, "#btn-repo-offset", expect="422")
+    text = flows.click_and_wait_result(page, "#btn-repo-offset", expect="422")
     assert "north_m" in text, text
     assert "envelope" in text, text
     page.fill("#takeoff-alt", "500")
-    text = click_and_wait_result(page, "#btn-takeoff", expect="422")
+    text = flows.click_and_wait_result(page, "#btn-takeoff", expect="422")
     assert "altitude_m" in text, text
 
 
 def test_reconnects_with_a_bounded_backoff_after_the_server_stops(
     browser: Any, serve: Serve
 ) -> None:
-    tab = open_dashboard(browser, serve.url, scene=False, init_script=COUNT_SOCKETS)
+    tab = flows.open_dashboard(browser, serve.url, scene=False, init_script=COUNT_SOCKETS)
     try:
         assert tab.evaluate("window.__sockets.length") >= 1
         delays = tab.evaluate(
