@@ -16,7 +16,14 @@ from pydantic import TypeAdapter
 
 from server.api.auth import Role
 from server.api.deps import ApiContext
-from server.api.errors import COMMAND_STATUS, ApiError, command_out, error_status
+from server.api.errors import (
+    COMMAND_STATUS,
+    ApiError,
+    command_out,
+    error_status,
+    non_finite_field,
+    refuse_non_finite,
+)
 from server.api.lease import (
     Lease,
     LeaseEnd,
@@ -190,8 +197,12 @@ class _ControlSession:
             message = json.loads(text)
             if not isinstance(message, dict):
                 raise ApiError(422, "a message is a JSON object with a type", field="type")
+            # json.loads takes NaN and Infinity: an id holding one could not be answered
             request_id = message.get("id")
+            if non_finite_field(request_id) is not None:
+                request_id = None
             self._context.leases.renew(self._vehicle.sysid, self._lease.lease_id)
+            refuse_non_finite(message)
             kind = message.get("type")
             if kind == "heartbeat":
                 await self._reply(request_id, "heartbeat", 200, {"ttl_s": self._lease.ttl_s})

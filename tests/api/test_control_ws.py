@@ -213,3 +213,21 @@ async def test_a_rest_asker_that_gives_up_withdraws_the_request(quad: Served) ->
         assert (await client.get(control)).json()["holder"] == "pilot · script"
         audit = await client.get(f"http://{quad.host}/api/v1/control/audit")
         assert audit.json()[-1]["data"]["action"] == "takeover_withdrawn"
+
+
+async def test_nan_in_a_socket_message_is_a_422_naming_the_field(quad: Served) -> None:
+    async with connect(quad.url("control", vehicle=1, ttl_s=30)) as ws:
+        await receive(ws)
+        await ws.send(
+            '{"type": "setpoint", "id": 1, "setpoint": {"type": "velocity_ned",'
+            ' "north_m_s": NaN, "east_m_s": 0, "down_m_s": 0}}'
+        )
+        refused = await receive_until(ws, {"id": 1})
+        assert refused["status"] == 422
+        assert refused["body"]["detail"]["field"] == "setpoint.north_m_s"
+        await ws.send('{"type": "heartbeat", "id": Infinity}')
+        unanswerable = await receive(ws)
+        assert (unanswerable["id"], unanswerable["status"]) == (None, 422)
+        assert unanswerable["body"]["detail"]["field"] == "id"
+        await ws.send(json.dumps({"type": "heartbeat", "id": 2}))
+        assert (await receive_until(ws, {"id": 2}))["status"] == 200
