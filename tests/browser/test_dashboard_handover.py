@@ -171,18 +171,27 @@ def test_every_tab_shows_who_controls_and_the_label_is_editable(
 ) -> None:
     flows.settle_vehicle(api, flying=False)
     _wait_holder(page, "nobody")
-    page.fill("#client-label", "Ground station A")
-    page.press("#client-label", "Enter")
-    page.click("#kbd-state")
-    assert page.evaluate("localStorage.getItem('skyhelm.clientLabel')") == "Ground station A"
-    flows.take_control(page)
-    name = _name(page)
-    assert "Ground station A" in name
-    _wait_holder(second_page, name)
-    page.click("#release")
-    _wait_holder(page, "nobody")
-    _wait_holder(second_page, "nobody")
-    page.evaluate("localStorage.removeItem('skyhelm.clientLabel')")
+
+    def label(text: str) -> None:
+        page.fill("#client-label", text)
+        page.press("#client-label", "Enter")
+        page.click("#kbd-state")
+
+    try:
+        label("Ground station A")
+        assert page.evaluate("localStorage.getItem('skyhelm.clientLabel')") == "Ground station A"
+        flows.take_control(page)
+        name = _name(page)
+        assert "Ground station A" in name
+        _wait_holder(second_page, name)
+        label("Ground station B")  # in control: the session is renamed at once
+        _wait_holder(second_page, name.replace("Ground station A", "Ground station B"))
+        _wait_holder(page, "you (" + name.replace("Ground station A", "Ground station B"))
+        page.click("#release")
+        _wait_holder(page, "nobody")
+        _wait_holder(second_page, "nobody")
+    finally:
+        page.evaluate("localStorage.removeItem('skyhelm.clientLabel')")
 
 
 def test_mode_menu_lists_this_vehicles_modes_and_follows_the_mode(
