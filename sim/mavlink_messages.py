@@ -73,6 +73,8 @@ PX4_BOARD_VERSION = 1
 MAV_AUTOPILOT_PX4 = 12
 # what PX4's SIH GPS reports (MAVSDK's gps_info shows it on PX4 v1.16 SITL)
 SIH_SATELLITES_VISIBLE = 10
+# GPS_RAW_INT h_acc, v_acc (mm) and vel_acc (mm/s) of SIH's GPS
+_SIH_GPS_ACCURACY_MM = (900, 1780, 400)
 MAV_STATE_STANDBY = 3
 MAV_STATE_ACTIVE = 4
 MAV_STATE_CRITICAL = 5
@@ -83,6 +85,17 @@ STATUSTEXT_MAX_LEN = 50
 # MAVLink 2 spoken, MAVLink 1 and 2 understood (PROTOCOL_VERSION.version = 100 * major).
 MAVLINK_VERSION_2 = 200
 MAVLINK_VERSION_1 = 100
+
+
+def _charge_state(remaining_percent: int) -> int:
+    """MAV_BATTERY_CHARGE_STATE by PX4's default BAT_LOW_THR, BAT_CRIT_THR, BAT_EMERGEN_THR."""
+    if remaining_percent > 15:
+        return int(mavlink.MAV_BATTERY_CHARGE_STATE_OK)
+    if remaining_percent > 7:
+        return int(mavlink.MAV_BATTERY_CHARGE_STATE_LOW)
+    if remaining_percent > 5:
+        return int(mavlink.MAV_BATTERY_CHARGE_STATE_CRITICAL)
+    return int(mavlink.MAV_BATTERY_CHARGE_STATE_EMERGENCY)
 
 
 def _pwm(output: float) -> int:
@@ -246,7 +259,7 @@ class MessageFactory:
         return mavlink.MAVLink_gps_raw_int_message(
             int(v.now_s * 1e6), 3, round(geo.lat_deg * 1e7), round(geo.lon_deg * 1e7),
             round(geo.alt_m * 1000.0), 70, 100, round(math.hypot(vn, ve) * 100.0), cog_cdeg,
-            SIH_SATELLITES_VISIBLE,
+            SIH_SATELLITES_VISIBLE, round(geo.alt_m * 1000.0), *_SIH_GPS_ACCURACY_MM,
         )
 
     def battery_status(self) -> Message:
@@ -256,7 +269,7 @@ class MessageFactory:
         return mavlink.MAVLink_battery_status_message(
             0, mavlink.MAV_BATTERY_FUNCTION_ALL, mavlink.MAV_BATTERY_TYPE_LIPO, 32767,
             voltages[:10], round(battery.current_a * 100.0), round(battery.consumed_mah),
-            -1, battery.remaining_percent,
+            -1, battery.remaining_percent, 0, _charge_state(battery.remaining_percent),
         )
 
     def extended_sys_state(self) -> Message:

@@ -23,6 +23,7 @@ _P0_PA = 101325.0
 _T0_K = 288.15
 _LAPSE_K_M = 0.0065
 _BARO_EXPONENT = 5.25588
+SIH_AMBIENT_TEMPERATURE_C = 15.0
 # SIH's downward range finder (SIH_DISTSNSR_MIN / _MAX)
 DISTANCE_SENSOR_MIN_M = 0.0
 DISTANCE_SENSOR_MAX_M = 100.0
@@ -37,7 +38,7 @@ _EKF_OK = (
     | mavlink.ESTIMATOR_PRED_POS_HORIZ_ABS
 )
 _EKF_BEFORE_GPS = mavlink.ESTIMATOR_ATTITUDE | mavlink.ESTIMATOR_VELOCITY_VERT
-MISSION_STATE_NO_MISSION = 1
+NO_MISSION_TOTAL = 0xFFFF
 MAV_ODID_ID_TYPE_SERIAL_NUMBER = 1
 MAV_ODID_STATUS_GROUND = 1
 MAV_ODID_STATUS_AIRBORNE = 2
@@ -105,10 +106,11 @@ class TelemetryMessages:
         mag = rotate_ned_to_body(q, _MAG_NED_GAUSS)
         p, r_pitch, r_yaw = truth.rates_body_rad_s
         amsl = self._alt_amsl_m()
-        temperature_c = _T0_K - _LAPSE_K_M * amsl - 273.15
+        # PX4 fills abs_pressure in Pa (the spec says hPa) and the temperature with
+        # air_data's ambient temperature, which SIH leaves at 15 °C
         return mavlink.MAVLink_highres_imu_message(
-            self._time_us, *acc, p, r_pitch, r_yaw, *mag, pressure_pa(amsl) / 100.0, 0.0, amsl,
-            temperature_c, _HIGHRES_FIELDS, 0,
+            self._time_us, *acc, p, r_pitch, r_yaw, *mag, pressure_pa(amsl), 0.0, amsl,
+            SIH_AMBIENT_TEMPERATURE_C, _HIGHRES_FIELDS, 0,
         )
 
     def odometry(self) -> Message | None:
@@ -116,11 +118,10 @@ class TelemetryMessages:
         if not v.ready:
             return None
         truth = v.truth
-        # PX4 sends the velocity in body axes (child frame BODY_FRD)
-        velocity_body = rotate_ned_to_body(truth.q_wxyz, truth.velocity_ned_m_s)
+        # EKF2's odometry has its velocity in NED, so PX4 names LOCAL_NED as child frame too
         return mavlink.MAVLink_odometry_message(
-            self._time_us, mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_BODY_FRD,
-            *truth.position_ned_m, list(truth.q_wxyz), *velocity_body,
+            self._time_us, mavlink.MAV_FRAME_LOCAL_NED, mavlink.MAV_FRAME_LOCAL_NED,
+            *truth.position_ned_m, list(truth.q_wxyz), *truth.velocity_ned_m_s,
             *truth.rates_body_rad_s, _POSE_COVARIANCE, _VELOCITY_COVARIANCE, 0,
             mavlink.MAV_ESTIMATOR_TYPE_AUTOPILOT, 100,
         )
@@ -129,7 +130,7 @@ class TelemetryMessages:
         ready = self._v.ready
         return mavlink.MAVLink_estimator_status_message(
             self._time_us, _EKF_OK if ready else _EKF_BEFORE_GPS, 0.05, 0.02, 0.03, 0.04,
-            0.0, 0.0, 0.3 if ready else math.inf, 0.5 if ready else math.inf,
+            0.0, math.nan, 0.3 if ready else math.inf, 0.5 if ready else math.inf,
         )
 
     def vibration(self) -> Message:
@@ -203,7 +204,8 @@ class TelemetryMessages:
         )
 
     def mission_current(self) -> Message:
-        return mavlink.MAVLink_mission_current_message(0, 0, MISSION_STATE_NO_MISSION, 0)
+        # PX4 without a mission: total UINT16_MAX, mission_state left unknown
+        return mavlink.MAVLink_mission_current_message(0, NO_MISSION_TOTAL, 0, 0)
 
     def open_drone_id_location(self) -> Message | None:
         v = self._v

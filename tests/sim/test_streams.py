@@ -141,6 +141,7 @@ def test_battery_drains_with_power_while_flying(harness: Harness) -> None:
     assert status.voltages[0] == pytest.approx(harness.vehicle.battery.cell_voltage_v * 1000,
                                                abs=20)
     assert status.voltages[4] == 65535  # four cells
+    assert status.charge_state == mavlink.MAV_BATTERY_CHARGE_STATE_OK
 
 
 def test_statustext_longer_than_50_bytes_is_chunked(harness: Harness) -> None:
@@ -170,15 +171,15 @@ def test_every_streamed_message_has_plausible_contents(make_harness: HarnessFact
     h.run(2.5)
     imu = h.api.of_type("HIGHRES_IMU")[-1]
     assert imu.zacc == pytest.approx(-9.81, abs=0.1)  # at rest: the ground pushes up
-    assert 900.0 < imu.abs_pressure < 1020.0
+    assert 90_000.0 < imu.abs_pressure < 102_000.0  # Pa, as PX4 fills it
     altitude = h.api.of_type("ALTITUDE")[-1]
     assert altitude.altitude_amsl == pytest.approx(h.vehicle.origin.alt_m, abs=0.5)
     assert altitude.altitude_relative == pytest.approx(0.0, abs=0.5)
     odometry = h.api.of_type("ODOMETRY")[-1]
-    assert odometry.child_frame_id == mavlink.MAV_FRAME_BODY_FRD
+    assert odometry.child_frame_id == mavlink.MAV_FRAME_LOCAL_NED
     assert h.api.of_type("ESTIMATOR_STATUS")[-1].flags & mavlink.ESTIMATOR_POS_HORIZ_ABS
     assert h.api.of_type("DISTANCE_SENSOR")[-1].current_distance < 50
-    assert h.api.of_type("MISSION_CURRENT")[-1].mission_state == 1  # no mission
+    assert h.api.of_type("MISSION_CURRENT")[-1].total == 0xFFFF  # no mission
     pings = h.api.of_type("PING")
     assert pings[-1].seq > pings[0].seq
     location = h.gcs.of_type("OPEN_DRONE_ID_LOCATION")[-1]
