@@ -150,16 +150,18 @@ class MessageFactory:
         }
 
     def build(self, msg_id: int) -> Message | None:
-        """msg_id's message from the current state; the same object for every link that
-        asks at the same sim time."""
+        """msg_id's message from the current state (None: unknown or not available yet)."""
+        builder = self.builders.get(msg_id)
+        return builder() if builder is not None else None
+
+    def build_streamed(self, msg_id: int) -> Message | None:
+        """build(), but one object for every link whose stream is due at this sim time
+        (streams are all sent from one step, where the state does not change)."""
         now_s = self._v.now_s
         built = self._built.get(msg_id)
         if built is not None and built[0] == now_s:
             return built[1]
-        builder = self.builders.get(msg_id)
-        if builder is None:
-            return None
-        msg = builder()
+        msg = self.build(msg_id)
         self._built[msg_id] = (now_s, msg)
         return msg
 

@@ -152,7 +152,7 @@ class StreamSet:
                     due = now_s + interval
                 self._due_s[msg_id] = due
                 if send:
-                    msg = self._factory.build(msg_id)
+                    msg = self._factory.build_streamed(msg_id)
                     if msg is not None:
                         sink.send(msg)
             next_due = min(next_due, due)

@@ -220,3 +220,14 @@ def test_get_message_interval_reports_this_links_interval(harness: Harness) -> N
     (gcs,) = harness.gcs.of_type("MESSAGE_INTERVAL")
     assert gcs.interval_us == 20_000  # 50 Hz on SITL's GCS link
     assert harness.last_ack(mavlink.MAV_CMD_GET_MESSAGE_INTERVAL) == mavlink.MAV_RESULT_ACCEPTED
+
+
+def test_a_message_due_on_both_links_is_built_once_and_requests_are_fresh(
+    harness: Harness,
+) -> None:
+    factory = harness.vehicle.messages
+    streamed = factory.build_streamed(mavlink.MAVLINK_MSG_ID_CURRENT_MODE)
+    assert factory.build_streamed(mavlink.MAVLINK_MSG_ID_CURRENT_MODE) is streamed
+    harness.set_mode(modes.AUTO_RTL)  # same sim time: a request sees the new mode
+    requested = factory.build(mavlink.MAVLINK_MSG_ID_CURRENT_MODE)
+    assert requested.custom_mode == modes.AUTO_RTL.custom_mode != streamed.custom_mode
