@@ -78,7 +78,7 @@ def take_control(flight: RestFlight) -> None:
     assert (status.get("expires_in_s") or 0.0) > LEASE_SURVIVES_WAIT_S, status
     other = flight.expect(flight.call("POST", "control", {}, lease=False), 409,
                           "a second session takes control without takeover")
-    assert CLIENT_NAME in json_text(other), f"the 409 should name the holder: {other}"
+    assert CLIENT_NAME in str(other), f"the 409 should name the holder: {other}"
 
 
 def control_needs_the_lease(flight: RestFlight) -> None:
@@ -176,12 +176,12 @@ def bad_input_is_422(flight: RestFlight) -> None:
     too_fast = flight.expect(
         flight.call("PUT", "setpoint", velocity_ned(2 * MAX_SPEED_XY_M_S)), 422, "20+ m/s"
     )
-    assert "max_speed_xy_m_s" in json_text(too_fast), f"the 422 names no limit: {too_fast}"
+    assert "max_speed_xy_m_s" in str(too_fast), f"the 422 names no limit: {too_fast}"
     nan = flight.expect(
         flight.call("PUT", "setpoint", content='{"type": "velocity_ned", "north_m_s": NaN, '
                     '"east_m_s": 0, "down_m_s": 0}'), 422, "NaN velocity",
     )
-    assert "north_m_s" in json_text(nan), f"the 422 does not name the NaN field: {nan}"
+    assert "north_m_s" in str(nan), f"the 422 does not name the NaN field: {nan}"
     flight.expect(flight.call("PUT", "setpoint", {"type": "velocity_ned", "north_m_s": 1}), 422,
                   "missing fields")
     flight.expect(flight.call("PUT", "setpoint", {"type": "warp", "factor": 9}), 422,
@@ -217,6 +217,9 @@ def live_setpoint_and_deadman(flight: RestFlight) -> None:
     moving = flight.state()
     assert in_offboard(moving), f"a held live setpoint left OFFBOARD: {moving.get('mode')}"
     assert speed_xy(moving) >= 0.8, f"a held live setpoint must keep flying: {speed_xy(moving):.2f}"
+    assert (moving.get("setpoint") or {}).get("north_m_s") == live["north_m_s"], (
+        f"braked although the live input kept coming: {moving.get('setpoint')}"
+    )
 
     def braked(state: Json) -> bool:
         setpoint = state.get("setpoint") or {}
@@ -293,7 +296,8 @@ def _holding_after_operator_loss(flight: RestFlight) -> None:
 
 def intents(flight: RestFlight) -> None:
     """Moves decided in the server: offset and go-to stay in OFFBOARD, brake stops there."""
-    here = flight.state()["position_ned"]
+    start = flight.state()
+    here, start_alt_m = start["position_ned"], alt_rel(start)
     moved = flight.expect(flight.call("POST", "intents/offset", {"north_m": 5.0}), 200, "offset")
     assert moved.get("via") == "setpoint", f"an offset in OFFBOARD stays in OFFBOARD: {moved}"
     flight.wait_state(
@@ -314,13 +318,16 @@ def intents(flight: RestFlight) -> None:
         here["north_m"], here["east_m"], here["down_m"], origin["lat_deg"], origin["lon_deg"],
         origin["alt_amsl_m"],
     )
-    back = flight.expect(flight.call("POST", "intents/goto", {"lat_deg": lat, "lon_deg": lon}),
-                         200, "goto")
+    back = flight.expect(
+        flight.call("POST", "intents/goto",
+                    {"lat_deg": lat, "lon_deg": lon, "alt_rel_m": start_alt_m}),
+        200, "goto",
+    )
     assert back.get("via") == "setpoint", f"goto in OFFBOARD: {back}"
     flight.wait_state(
         "back where the intents started (1 m, < 0.5 m/s), still OFFBOARD",
         lambda s: in_offboard(s) and distance_ned(s, here["north_m"], here["east_m"]) < 1.0
-        and speed_xy(s) < 0.5 and abs(s["position_ned"]["down_m"] - here["down_m"]) < 1.0,
+        and speed_xy(s) < 0.5 and abs(alt_rel(s) - start_alt_m) < 1.0,
         20.0,
     )
 
@@ -359,10 +366,6 @@ def rtl(flight: RestFlight) -> None:
 def release_control(flight: RestFlight) -> None:
     flight.expect(flight.call("DELETE", "control"), 204, "DELETE /control")
     assert flight.control().get("holder") is None
-
-
-def json_text(body: object) -> str:
-    return str(body)
 
 
 STAGES: dict[str, Callable[[RestFlight], None]] = {
