@@ -12,6 +12,7 @@ from pymavlink.dialects.v20 import development as mavlink
 from sim import modes
 from sim.endpoint import MavlinkCodec
 from sim.frames import pack_frame
+from sim.streams import FIXED_WING_ONLY
 from sim.vehicle import SimVehicle
 
 
@@ -35,9 +36,10 @@ def flying_vehicle() -> SimVehicle:
 
 def test_every_telemetry_message_packs_like_pymavlink() -> None:
     v = flying_vehicle()
-    built = [v.messages.build(msg_id) for msg_id in v.messages.builders]
-    messages = [m for m in built if m is not None]
-    assert len(messages) == len(v.messages.builders)
+    # a quad sends no fixed-wing controller status
+    wanted = [msg_id for msg_id in v.messages.builders if msg_id not in FIXED_WING_ONLY]
+    messages = [m for m in map(v.messages.build, wanted) if m is not None]
+    assert len(messages) == len(wanted)
     for seq, msg in enumerate(messages):
         frame = pack_frame(msg, seq, 7, 1)
         if frame is None:  # a message type pymavlink's dialect lacks: pymavlink packs it
