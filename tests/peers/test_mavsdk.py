@@ -124,7 +124,8 @@ async def test_every_telemetry_subscription_delivers_on_a_vtol(
     assert str(gps.fix_type) == "FIX_3D"
     assert gps.num_satellites > 6
     health = await first(telemetry.health(), lambda h: True, 5.0)
-    assert health.is_global_position_ok and health.is_home_position_ok
+    assert health.is_global_position_ok
+    assert health.is_home_position_ok
     assert str(await first(telemetry.vtol_state(), lambda s: True, 5.0)) == "MC"
     await first(telemetry.position(), lambda p: True, 5.0)
     await first(telemetry.attitude_quaternion(), lambda q: True, 5.0)
