@@ -70,14 +70,10 @@ MAVLINK_LIB_GIT_VERSION = (0x5BFD76D80281F602).to_bytes(8, "little")
 # SITL's os_sw_version and board_version
 PX4_OS_SW_VERSION = 101854463
 PX4_BOARD_VERSION = 1
-MAV_AUTOPILOT_PX4 = 12
 # what PX4's SIH GPS reports (MAVSDK's gps_info shows it on PX4 v1.16 SITL)
 SIH_SATELLITES_VISIBLE = 10
 # GPS_RAW_INT h_acc, v_acc (mm) and vel_acc (mm/s) of SIH's GPS
 _SIH_GPS_ACCURACY_MM = (900, 1780, 400)
-MAV_STATE_STANDBY = 3
-MAV_STATE_ACTIVE = 4
-MAV_STATE_CRITICAL = 5
 # STATUSTEXT.text is 50 bytes; a longer text goes out in chunks (MAVLink 2's id and seq)
 STATUSTEXT_MAX_LEN = 50
 
@@ -184,15 +180,15 @@ class MessageFactory:
         v = self._v
         commander = v.commander
         if not commander.armed:
-            status = MAV_STATE_STANDBY
+            status = mavlink.MAV_STATE_STANDBY
         elif commander.failsafe:
-            status = MAV_STATE_CRITICAL
+            status = mavlink.MAV_STATE_CRITICAL
         else:
-            status = MAV_STATE_ACTIVE
+            status = mavlink.MAV_STATE_ACTIVE
         mode = commander.nav_mode
         return mavlink.MAVLink_heartbeat_message(
-            v.mav_type, MAV_AUTOPILOT_PX4, mode.base_mode(commander.armed), mode.custom_mode,
-            status, 3,
+            v.mav_type, mavlink.MAV_AUTOPILOT_PX4, mode.base_mode(commander.armed),
+            mode.custom_mode, status, 3,
         )
 
     def sys_status(self) -> Message:
