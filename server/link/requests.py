@@ -18,7 +18,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import math
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import development as mavlink
@@ -42,6 +42,9 @@ _EXPLAINED = frozenset(set(CommandOutcome) - {
 })  # fmt: skip
 
 Publish = Callable[[str, dict[str, object]], None]
+# given when the command started and the STATUSTEXT reason found (if any), a better reason
+# (PX4's decoded EVENT that follows its COMMAND_ACK) or the one given
+Explainer = Callable[[float, str | None], Awaitable[str | None]]
 
 
 def _never() -> bool:
@@ -104,6 +107,7 @@ class Requester:
         self._locks: dict[int, asyncio.Lock] = {}
         self._awaiting_ack: dict[int, _Pending] = {}
         self._in_flight: set[_Pending] = set()
+        self.explainers: list[Explainer] = []
 
     # -- incoming -----------------------------------------------------------------
     def changed(self) -> None:
@@ -209,6 +213,8 @@ class Requester:
             reason = await self._texts.wait_warning_since(
                 started - self.timeout_s, self.reason_wait_s
             )
+            for explain in self.explainers:
+                reason = await explain(started, reason)
         return self._finish(pending, command, outcome, started, reason)
 
     async def message(

@@ -10,6 +10,7 @@ the ``Sender`` it was given (the Link). Like MAVSDK's plugins:
 - ``offboard``: setpoints, their envelope and stream, OFFBOARD mode
 - ``params``: parameters (``server.link.params``)
 - ``telemetry``: what the vehicle reported; ``telemetry_requests``: asking for it
+- ``px4_events``: PX4's EVENTs decoded with the metadata it serves (``server.link.px4_events``)
 
 Every operation of a plugin is also callable on the vehicle itself (``vehicle.arm()``).
 """
@@ -25,6 +26,7 @@ from server.link.action import Action
 from server.link.core import Sender, VehicleCore
 from server.link.offboard import Offboard
 from server.link.params import ParamClient
+from server.link.px4_events import Px4Events
 from server.link.requests import Requester
 from server.link.setpoint_checks import Envelope
 from server.link.setpoints import Setpoint, describe
@@ -102,6 +104,7 @@ class Vehicle:
         self.action = Action(core, self.telemetry)
         self.offboard = Offboard(core, self.telemetry, self.action, stream_rate_hz=stream_rate_hz)
         self.telemetry_requests = TelemetryRequests(core, self.telemetry, telemetry_rates_hz)
+        self.px4_events = Px4Events(core, self.telemetry)
 
         # the plugins' operations, callable on the vehicle itself
         self.handle_message = core.handle_message
@@ -134,6 +137,7 @@ class Vehicle:
     async def close(self) -> None:
         self.offboard.close()
         await self.telemetry_requests.close()
+        await self.px4_events.close()
         self.core.hub.close_all()
 
     def check_setpoint(self, sp: Setpoint) -> None:
