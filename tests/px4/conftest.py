@@ -1,7 +1,8 @@
 """Real PX4 v1.16 SITL (the kit in shared/px4-sitl: SIH, headless), opt-in with `make test-px4`.
 
 The kit is found in $SKYHELM_PX4_SITL_DIR (default /root/px4sitl); without a build every test
-here is skipped. The instance number comes from $SKYHELM_PX4_INSTANCE (default 0). Its MAVLink
+here is skipped. The instance number comes from $SKYHELM_PX4_INSTANCE (default: the first one
+whose ports are free, as other PX4 instances may run on the machine). Its MAVLink
 ports are not written here: they follow the layout the kit's run.sh documents
 ("API/offboard:  PX4 127.0.0.1:(A+N) -> 127.0.0.1:(B+N)"), read from that file, so a kit with
 another layout still works; $SKYHELM_PX4_API_PORT overrides the port SkyHelm listens on.
@@ -12,6 +13,7 @@ from __future__ import annotations
 import os
 import re
 import signal
+import socket
 import subprocess
 import time
 from collections.abc import Iterator
@@ -24,6 +26,8 @@ from tests.serve_process import Served, skyhelm_serve
 
 DEFAULT_SITL_DIR = Path("/root/px4sitl")
 MODEL = "sihsim_quadx"
+# Instances tried when SKYHELM_PX4_INSTANCE does not name one.
+_INSTANCES = 10
 _API_LAYOUT = re.compile(r"API/offboard:\s*PX4 [\d.]+:\((\d+)\+N\)\s*->\s*([\d.]+):\((\d+)\+N\)")
 
 
@@ -59,13 +63,30 @@ def find_sitl() -> Px4Sitl:
             f"no PX4 SITL build in {root} (set SKYHELM_PX4_SITL_DIR to the kit built by "
             "shared/px4-sitl/build.sh)"
         )
-    instance = int(os.environ.get("SKYHELM_PX4_INSTANCE", "0"))
     layout = _API_LAYOUT.search(run_sh.read_text())
     if layout is None:
         pytest.skip(f"{run_sh} does not document its API port layout")
-    _, host, client_base = layout.groups()
+    px4_base, host, client_base = layout.groups()
+    chosen = os.environ.get("SKYHELM_PX4_INSTANCE")
+    # Without a choice: the first instance whose two ports nobody uses (others may fly PX4 here).
+    instance = int(chosen) if chosen is not None else next(
+        (n for n in range(_INSTANCES)
+         if _udp_free(host, int(px4_base) + n) and _udp_free(host, int(client_base) + n)),
+        -1,
+    )
+    if instance < 0:
+        pytest.skip(f"all of PX4 instances 0..{_INSTANCES - 1} are in use")
     port = int(os.environ.get("SKYHELM_PX4_API_PORT") or int(client_base) + instance)
     return Px4Sitl(root, instance, host, port)
+
+
+def _udp_free(host: str, port: int) -> bool:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        try:
+            probe.bind((host, port))
+        except OSError:
+            return False
+        return True
 
 
 @pytest.fixture(scope="module")
