@@ -68,7 +68,7 @@ def mftp_path(uri: str) -> str | None:
     dropped: the autopilot serves its own); None for any other scheme."""
     if not uri.startswith(_MFTP):
         return None
-    path = uri[len(_MFTP):]
+    path = uri[len(_MFTP) :]
     if path.startswith("[;comp="):
         path = path.partition("]")[2]
     return path
@@ -105,8 +105,10 @@ class ComponentMetadata:
 
     async def events(self) -> dict[str, Any]:
         """The vehicle's events definitions (PX4's events JSON), from cache or the vehicle."""
-        await self._ask(mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION,
-                        lambda: self.flight_sw_version is not None)
+        await self._ask(
+            mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION, lambda: self.flight_sw_version is not None
+        )
+
         def known() -> bool:
             return self._general is not None
 
@@ -123,8 +125,14 @@ class ComponentMetadata:
             except (OSError, ValueError):
                 log.warning("events metadata cache %s unreadable: fetching again", cached)
         general = json.loads(await self._fetch(uri, general_crc))
-        entry = next((t for t in general.get("metadataTypes", [])
-                      if t.get("type") == COMP_METADATA_TYPE_EVENTS), None)
+        entry = next(
+            (
+                t
+                for t in general.get("metadataTypes", [])
+                if t.get("type") == COMP_METADATA_TYPE_EVENTS
+            ),
+            None,
+        )
         if entry is None:
             raise MetadataError("the general metadata lists no events file")
         text = await self._fetch(str(entry.get("uri", "")), int(entry.get("fileCrc", 0)))

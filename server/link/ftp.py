@@ -61,8 +61,9 @@ class FtpReply:
         return self.data[0] if self.opcode == kRspNak and self.data else 0
 
 
-def encode_payload(seq: int, session: int, opcode: int, offset: int, data: bytes = b"",
-                   size: int | None = None) -> list[int]:
+def encode_payload(
+    seq: int, session: int, opcode: int, offset: int, data: bytes = b"", size: int | None = None
+) -> list[int]:
     """The 251 payload bytes of one FTP message."""
     size = len(data) if size is None else size
     header = _HEADER.pack(seq & 0xFFFF, session, opcode, size, 0, 0, 0, offset)
@@ -82,8 +83,13 @@ class FtpClient:
     timeout_s = 0.5  # per try
     retries = 5
 
-    def __init__(self, *, send: Callable[[mavlink.MAVLink_message], None],
-                 mav: mavlink.MAVLink, target: tuple[int, int]) -> None:
+    def __init__(
+        self,
+        *,
+        send: Callable[[mavlink.MAVLink_message], None],
+        mav: mavlink.MAVLink,
+        target: tuple[int, int],
+    ) -> None:
         self._send = send
         self._mav = mav
         self._target = target
@@ -119,17 +125,26 @@ class FtpClient:
         chunks: list[bytes] = []
         offset = 0
         while offset < size:
-            reply = await self._request(kCmdReadFile, session=session, offset=offset,
-                                        size=FTP_DATA_LEN, eof_ok=True)
+            reply = await self._request(
+                kCmdReadFile, session=session, offset=offset, size=FTP_DATA_LEN, eof_ok=True
+            )
             if reply.opcode == kRspNak or not reply.data:
                 break  # EOF: the file is shorter than announced
             chunks.append(reply.data)
             offset += len(reply.data)
         return b"".join(chunks)
 
-    async def _request(self, opcode: int, *, session: int = 0, offset: int = 0,
-                       data: bytes = b"", size: int | None = None, eof_ok: bool = False,
-                       tolerant: bool = False) -> FtpReply:
+    async def _request(
+        self,
+        opcode: int,
+        *,
+        session: int = 0,
+        offset: int = 0,
+        data: bytes = b"",
+        size: int | None = None,
+        eof_ok: bool = False,
+        tolerant: bool = False,
+    ) -> FtpReply:
         """Send until answered; a retry keeps the sequence number so PX4 re-sends its
         answer instead of acting twice."""
         self._seq = (self._seq + 1) & 0xFFFF

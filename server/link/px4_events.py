@@ -99,8 +99,10 @@ class EventDecoder:
             for group in component.get("event_groups", {}).values():
                 for sub_id, event in group.get("events", {}).items():
                     event_id = int(component_id) << 24 | int(sub_id)
-                    names = [str(a.get("name", i)) for i, a in
-                             enumerate(event.get("arguments", []), start=1)]
+                    names = [
+                        str(a.get("name", i))
+                        for i, a in enumerate(event.get("arguments", []), start=1)
+                    ]
                     self._argument_names[event_id] = names
 
     def decode(self, event_id: int, arguments: bytes) -> DecodedEvent | None:
@@ -114,8 +116,12 @@ class EventDecoder:
             return None
         names = self._argument_names.get(event_id, [])
         values = [parsed.argument_value(i) for i in range(parsed.num_arguments())]
-        return DecodedEvent(str(parsed.name()), str(parsed.group()), str(parsed.message()),
-                            dict(zip(names, values, strict=False)))
+        return DecodedEvent(
+            str(parsed.name()),
+            str(parsed.group()),
+            str(parsed.message()),
+            dict(zip(names, values, strict=False)),
+        )
 
 
 class Px4Events:
@@ -123,8 +129,9 @@ class Px4Events:
 
     reason_wait_s = 0.2  # PX4 sends the EVENT a few ms after the COMMAND_ACK
 
-    def __init__(self, core: VehicleCore, telemetry: Telemetry,
-                 cache_dir: Path | None = None) -> None:
+    def __init__(
+        self, core: VehicleCore, telemetry: Telemetry, cache_dir: Path | None = None
+    ) -> None:
         self._core = core
         self._telemetry = telemetry
         self.ftp = FtpClient(send=core.send, mav=core.mav, target=(core.sysid, core.compid))
@@ -257,8 +264,11 @@ class Px4Events:
     def failing_checks(self) -> list[str]:
         """The texts of the arming checks that fail in the vehicle's current mode."""
         nav_state = NAV_STATES.get(self._telemetry.mode)
-        return [text for text, modes in self._checks.values()
-                if modes is None or nav_state is None or modes & (1 << nav_state)]
+        return [
+            text
+            for text, modes in self._checks.values()
+            if modes is None or nav_state is None or modes & (1 << nav_state)
+        ]
 
     async def _explain(self, started_s: float, reason: str | None) -> str | None:
         """A refused command's reason: PX4's event that follows the COMMAND_ACK; when it

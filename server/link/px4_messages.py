@@ -50,8 +50,9 @@ class _WireMessage(mavlink.MAVLink_message):  # type: ignore[misc]
         return packed
 
 
-def _message_type(name: str, msg_id: int, crc_extra: int, wire_format: str,
-                  fieldnames: str) -> type[_WireMessage]:
+def _message_type(
+    name: str, msg_id: int, crc_extra: int, wire_format: str, fieldnames: str
+) -> type[_WireMessage]:
     names = fieldnames.split()
     unpacker = struct.Struct(wire_format)
     attributes: dict[str, object] = {
@@ -69,28 +70,52 @@ def _message_type(name: str, msg_id: int, crc_extra: int, wire_format: str,
 
 
 ComponentInformationMessage = _message_type(
-    "COMPONENT_INFORMATION", MAVLINK_MSG_ID_COMPONENT_INFORMATION, 0, "<III100s100s",
+    "COMPONENT_INFORMATION",
+    MAVLINK_MSG_ID_COMPONENT_INFORMATION,
+    0,
+    "<III100s100s",
     "time_boot_ms general_metadata_file_crc peripherals_metadata_file_crc "
-    "general_metadata_uri peripherals_metadata_uri")
+    "general_metadata_uri peripherals_metadata_uri",
+)
 ComponentMetadataMessage = _message_type(
-    "COMPONENT_METADATA", MAVLINK_MSG_ID_COMPONENT_METADATA, 182, "<II100s",
-    "time_boot_ms file_crc uri")
+    "COMPONENT_METADATA",
+    MAVLINK_MSG_ID_COMPONENT_METADATA,
+    182,
+    "<II100s",
+    "time_boot_ms file_crc uri",
+)
 EventMessage = _message_type(
-    "EVENT", MAVLINK_MSG_ID_EVENT, 160, "<IIHBBB40s",
-    "id event_time_boot_ms sequence destination_component destination_system log_levels "
-    "arguments")
+    "EVENT",
+    MAVLINK_MSG_ID_EVENT,
+    160,
+    "<IIHBBB40s",
+    "id event_time_boot_ms sequence destination_component destination_system log_levels arguments",
+)
 CurrentEventSequenceMessage = _message_type(
-    "CURRENT_EVENT_SEQUENCE", MAVLINK_MSG_ID_CURRENT_EVENT_SEQUENCE, 106, "<HB",
-    "sequence flags")
+    "CURRENT_EVENT_SEQUENCE", MAVLINK_MSG_ID_CURRENT_EVENT_SEQUENCE, 106, "<HB", "sequence flags"
+)
 RequestEventMessage = _message_type(
-    "REQUEST_EVENT", MAVLINK_MSG_ID_REQUEST_EVENT, 33, "<HHBB",
-    "first_sequence last_sequence target_system target_component")
+    "REQUEST_EVENT",
+    MAVLINK_MSG_ID_REQUEST_EVENT,
+    33,
+    "<HHBB",
+    "first_sequence last_sequence target_system target_component",
+)
 ResponseEventErrorMessage = _message_type(
-    "RESPONSE_EVENT_ERROR", MAVLINK_MSG_ID_RESPONSE_EVENT_ERROR, 77, "<HHBBB",
-    "sequence sequence_oldest_available target_system target_component reason")
+    "RESPONSE_EVENT_ERROR",
+    MAVLINK_MSG_ID_RESPONSE_EVENT_ERROR,
+    77,
+    "<HHBBB",
+    "sequence sequence_oldest_available target_system target_component reason",
+)
 
-for _received in (ComponentInformationMessage, ComponentMetadataMessage, EventMessage,
-                  CurrentEventSequenceMessage, ResponseEventErrorMessage):
+for _received in (
+    ComponentInformationMessage,
+    ComponentMetadataMessage,
+    EventMessage,
+    CurrentEventSequenceMessage,
+    ResponseEventErrorMessage,
+):
     mavlink.mavlink_map.setdefault(_received.id, _received)
 
 
