@@ -23,6 +23,7 @@ kCmdTerminateSession = 1
 kCmdResetSessions = 2
 kCmdOpenFileRO = 4
 kCmdReadFile = 5
+kCmdBurstReadFile = 15
 kRspAck = 128
 kRspNak = 129
 # PX4's MavlinkFTP::ErrorCode
@@ -32,6 +33,7 @@ FTP_ERROR_NAMES = (
 )  # fmt: skip
 kErrNoSessionsAvailable = 5
 kErrEOF = 6
+kErrUnknownCommand = 7
 
 _HEADER = struct.Struct("<HBBBBBBI")  # seq_number session opcode size req_opcode burst pad offset
 FTP_PAYLOAD_LEN = 251
@@ -55,6 +57,7 @@ class FtpReply:
     req_opcode: int
     offset: int
     data: bytes
+    burst_complete: bool = False
 
     @property
     def error(self) -> int:
@@ -72,9 +75,9 @@ def encode_payload(
 
 def decode_payload(payload: bytes | list[int]) -> FtpReply:
     raw = bytes(payload).ljust(FTP_PAYLOAD_LEN, b"\0")
-    seq, session, opcode, size, req_opcode, _burst, _pad, offset = _HEADER.unpack_from(raw)
+    seq, session, opcode, size, req_opcode, burst, _pad, offset = _HEADER.unpack_from(raw)
     data = raw[_HEADER.size : _HEADER.size + min(size, FTP_DATA_LEN)]
-    return FtpReply(seq, session, opcode, req_opcode, offset, data)
+    return FtpReply(seq, session, opcode, req_opcode, offset, data, bool(burst))
 
 
 class FtpClient:
@@ -96,11 +99,17 @@ class FtpClient:
         self._seq = 0
         self._lock = asyncio.Lock()
         self._waiting: tuple[int, asyncio.Future[FtpReply]] | None = None
+        self._burst: asyncio.Queue[FtpReply] | None = None
 
     def handle_message(self, msg: mavlink.MAVLink_file_transfer_protocol_message) -> None:
-        if msg.target_system not in (0, self._mav.srcSystem) or self._waiting is None:
+        if msg.target_system not in (0, self._mav.srcSystem):
             return
         reply = decode_payload(msg.payload)
+        if self._burst is not None and reply.req_opcode == kCmdBurstReadFile:
+            self._burst.put_nowait(reply)
+            return
+        if self._waiting is None:
+            return
         expected_seq, future = self._waiting
         if reply.seq_number == expected_seq and not future.done():
             future.set_result(reply)
@@ -117,7 +126,8 @@ class FtpClient:
                 opened = await self._request(kCmdOpenFileRO, data=path.encode())
             (size,) = struct.unpack_from("<I", opened.data.ljust(4, b"\0"))
             try:
-                return await self._read(opened.session, size)
+                burst = await self._burst_read(opened.session, size)
+                return burst if burst is not None else await self._read(opened.session, size)
             finally:
                 await self._request(kCmdTerminateSession, session=opened.session, tolerant=True)
 
@@ -133,6 +143,45 @@ class FtpClient:
             chunks.append(reply.data)
             offset += len(reply.data)
         return b"".join(chunks)
+
+    async def _burst_read(self, session: int, size: int) -> bytes | None:
+        """BurstReadFile: PX4 streams the file as ACKs (up to ~35 kB per burst) without a
+        request each. A burst that ends early, or a packet lost, is followed by a new burst
+        from the first byte missing. None when the vehicle does not know the command."""
+        chunks: dict[int, bytes] = {}
+        tries = 0
+        while (start := _contiguous(chunks)) < size:
+            self._seq = (self._seq + 1) & 0xFFFF
+            payload = encode_payload(self._seq, session, kCmdBurstReadFile, start, b"", 0)
+            self._burst = queue = asyncio.Queue[FtpReply]()
+            try:
+                self._send(self._mav.file_transfer_protocol_encode(0, *self._target, payload))
+                while True:
+                    try:
+                        reply = await asyncio.wait_for(queue.get(), self.timeout_s)
+                    except TimeoutError:
+                        tries += 1
+                        if tries > self.retries:
+                            raise FtpError(kCmdBurstReadFile, "no answer") from None
+                        break
+                    if reply.opcode == kRspNak:
+                        if reply.error == kErrUnknownCommand:
+                            return None
+                        if reply.error != kErrEOF:
+                            raise FtpError(kCmdBurstReadFile, _error_name(reply.error))
+                        # the end of the file is where the stream stopped (its offset)
+                        size = min(size, max(reply.offset, _contiguous(chunks)))
+                        break
+                    if reply.data:
+                        chunks[reply.offset] = reply.data
+                    if reply.burst_complete or _contiguous(chunks) >= size:
+                        break
+            finally:
+                self._burst = None
+        data = bytearray()
+        while chunks.get(len(data)):
+            data += chunks[len(data)]
+        return bytes(data[:size])
 
     async def _request(
         self,
@@ -167,7 +216,17 @@ class FtpClient:
         finally:
             self._waiting = None
         if reply.opcode == kRspNak and not tolerant and not (eof_ok and reply.error == kErrEOF):
-            error = reply.error
-            name = FTP_ERROR_NAMES[error] if error < len(FTP_ERROR_NAMES) else str(error)
-            raise FtpError(opcode, name)
+            raise FtpError(opcode, _error_name(reply.error))
         return reply
+
+
+def _error_name(error: int) -> str:
+    return FTP_ERROR_NAMES[error] if error < len(FTP_ERROR_NAMES) else str(error)
+
+
+def _contiguous(chunks: dict[int, bytes]) -> int:
+    """How many bytes from the start of the file have arrived without a hole."""
+    end = 0
+    while chunks.get(end):
+        end += len(chunks[end])
+    return end

@@ -12,6 +12,7 @@ from server.link.ftp import (
     FTP_DATA_LEN,
     decode_payload,
     encode_payload,
+    kCmdBurstReadFile,
     kCmdOpenFileRO,
     kCmdReadFile,
     kCmdResetSessions,
@@ -36,6 +37,8 @@ class FtpServer:
         self.reads = 0  # ReadFile requests executed (not re-sent answers)
         self.requests = 0
         self.drop_every = 0
+        self.burst_packets = 0  # packets per BurstReadFile; 0: the command is unknown
+        self.bursts = 0
         self._file = b""
         self._last: tuple[int, list[int]] | None = None  # (request seq, reply payload)
         self._replies = 0
@@ -45,6 +48,9 @@ class FtpServer:
             return
         self.requests += 1
         req = decode_payload(msg.payload)
+        if req.opcode == kCmdBurstReadFile and self.burst_packets and self.session_open:
+            self._stream(req.seq_number, req.offset)
+            return
         if self._last is not None and self._last[0] == req.seq_number:
             self._send(self._last[1])  # its answer got lost: the same answer again
             return
@@ -77,6 +83,24 @@ class FtpServer:
             self.session_open = False
             return kRspAck, b"", session, 0
         return kRspNak, bytes([kErrUnknownCommand]), session, offset
+
+    def _stream(self, seq: int, offset: int) -> None:
+        """PX4's _workBurst: ACKs from offset, the last of a burst flagged complete; NAK
+        EOF past the end."""
+        self.bursts += 1
+        for i in range(self.burst_packets):
+            seq = (seq + 1) & 0xFFFF
+            if offset >= len(self._file):
+                payload = encode_payload(seq, 0, kRspNak, offset, bytes([kErrEOF]))
+                payload[5] = kCmdBurstReadFile
+                self._send(payload)
+                return
+            chunk = self._file[offset : offset + FTP_DATA_LEN]
+            payload = encode_payload(seq, 0, kRspAck, offset, chunk)
+            payload[5] = kCmdBurstReadFile
+            payload[6] = int(i == self.burst_packets - 1)  # burst_complete
+            self._send(payload)
+            offset += len(chunk)
 
     def _send(self, payload: list[int]) -> None:
         self._replies += 1

@@ -44,6 +44,22 @@ async def test_lost_replies_are_asked_again_and_never_executed_twice(
     assert server.requests > 7
 
 
+async def test_burst_read_streams_the_file(scripted: ScriptedSession) -> None:
+    client, server = _client(scripted, {"f": FILE})
+    server.burst_packets = 3  # a burst ends before the file does: the next one goes on
+    assert await client.download("f") == FILE
+    assert server.reads == 0
+    assert server.bursts == 2
+
+
+async def test_burst_read_fills_what_got_lost(scripted: ScriptedSession) -> None:
+    client, server = _client(scripted, {"f": FILE})
+    server.burst_packets = 10
+    server.drop_every = 3
+    assert await client.download("f") == FILE
+    assert server.bursts > 1
+
+
 async def test_nak_names_px4s_error(scripted: ScriptedSession) -> None:
     client, _ = _client(scripted, {})
     with pytest.raises(FtpError, match="FileNotFound"):

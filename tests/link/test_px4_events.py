@@ -79,6 +79,7 @@ class FakePx4:
         self.ftp = FtpServer(self.peer, {"etc/extras/all_events.json.xz": events_xz,
                                          "etc/extras/component_general.json.xz":
                                          lzma.compress(general)})  # fmt: skip
+        self.ftp.burst_packets = 20
         self.component_metadata = component_metadata
         self.seq = 0
         self.sent: dict[int, EventMessage] = {}
@@ -170,16 +171,16 @@ async def test_metadata_is_fetched_once_and_cached(
     scripted: ScriptedSession, tmp_path: Path
 ) -> None:
     px4 = await _loaded(scripted, tmp_path)
-    assert px4.ftp.reads > 0
+    assert px4.ftp.bursts > 0
     (cached,) = (tmp_path / "px4_events").iterdir()
     assert cached.name == f"011000ff_{px4.general_crc:08x}.json"
     plugin = scripted.vehicle.px4_events
     plugin.decoder = None
     plugin._load_task = None
-    reads = px4.ftp.reads
+    bursts = px4.ftp.bursts
     px4.current_sequence()
     await wait_for(lambda: plugin.decoder is not None, 5.0, "metadata from the cache")
-    assert px4.ftp.reads == reads
+    assert px4.ftp.bursts == bursts
 
 
 async def test_component_information_when_metadata_is_refused(
