@@ -13,7 +13,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import IntEnum
 
+from sim import commander_events as ev
 from sim import modes
+from sim.events import EventLog
 from sim.modes import Px4Mode
 from sim.params import ParamReader
 from sim.topics import ControlSetpoint
@@ -146,6 +148,8 @@ class Commander:
         # as AUTO.TAKEOFF completes, OFFBOARD is acked ACCEPTED, yet the vehicle ends in Hold
         self.offboard_requests_lost = 0
         self._arm_listeners: list[Callable[[bool], None]] = []
+        self.events = EventLog()
+        self._reported_checks: tuple[ev.ArmingCheck, ...] | None = None
 
     # -- queries -----------------------------------------------------------------------
 
@@ -167,9 +171,9 @@ class Commander:
 
     def request_mode(self, mode: Px4Mode) -> int:
         """DO_SET_MODE / SET_MODE: the MAV_RESULT of the second (real) ack."""
-        if mode not in modes.MODE_NAMES or mode in _UNSUPPORTED_MODES:
-            return MAV_RESULT_TEMPORARILY_REJECTED
-        if self.armed and not self.mode_can_run(mode):
+        if (mode not in modes.MODE_NAMES or mode in _UNSUPPORTED_MODES
+                or (self.armed and not self.mode_can_run(mode))):
+            ev.send_mode_not_available(self.events, mode)
             return MAV_RESULT_TEMPORARILY_REJECTED
         if mode == modes.OFFBOARD and self.offboard_requests_lost > 0:
             self.offboard_requests_lost -= 1
@@ -192,11 +196,13 @@ class Commander:
         reason = self._arming_denial()
         if reason is not None:
             self._announce(MAV_SEVERITY_CRITICAL, f"Arming denied: {reason}")
+            ev.send_arm_denied(self.events)
             return MAV_RESULT_TEMPORARILY_REJECTED
         self.armed = True
         self.armed_at_s = now_s
         self.took_off_since_arming = not self.landed
         self._landed_since_s = now_s if self.landed else None
+        ev.send_armed(self.events, True, ev.ARM_REASON_COMMAND_EXTERNAL)
         self._arm_listeners_notify()
         return MAV_RESULT_ACCEPTED
 
@@ -205,6 +211,7 @@ class Commander:
             return MAV_RESULT_ACCEPTED
         if not force and not self.landed:
             self._announce(MAV_SEVERITY_CRITICAL, "Disarming denied: not landed")
+            ev.send_disarm_denied(self.events)
             return MAV_RESULT_TEMPORARILY_REJECTED
         self._disarm("Disarmed by external command")
         return MAV_RESULT_ACCEPTED
@@ -235,6 +242,11 @@ class Commander:
         self._check_offboard(now_s)
         self._check_datalink(now_s)
         self._check_auto_disarm(now_s)
+        self.events.update(now_s)
+        checks = self._failing_checks()
+        if checks != self._reported_checks:
+            self._reported_checks = checks
+            ev.send_arming_report(self.events, checks)
 
     def _check_datalink(self, now_s: float) -> None:
         last = self.gcs_heartbeat_s
@@ -248,14 +260,18 @@ class Commander:
         if not self.armed or action == DllAction.DISABLED:
             return
         self.failsafe = True
+        mode = _failsafe_mode(DllAction, action)
+        ev.send_failsafe(self.events, mode)
         if action == DllAction.DISARM:
-            self._disarm("Failsafe: disarming")
-        elif (mode := _failsafe_mode(DllAction, action)) is not None:
+            self._disarm("Failsafe: disarming", ev.ARM_REASON_FAILSAFE)
+        elif mode is not None:
             self._set_nav_mode(mode)
 
     def _track_landing(self, now_s: float, landed: bool) -> None:
         if not landed and self.armed:
             self.took_off_since_arming = True
+        if landed != self.landed and self.armed:
+            ev.send_flight_change(self.events, landed)
         if landed and not self.landed:
             self._landed_since_s = now_s
         elif not landed:
@@ -286,10 +302,12 @@ class Commander:
         action = int(self._params.get("COM_OBL_RC_ACT"))
         self._announce(MAV_SEVERITY_WARNING, "Failsafe: offboard control lost")
         self.failsafe = True
-        if action == ObLossAction.DISARM:
-            self._disarm("Failsafe: disarming")
-            return
         mode = _failsafe_mode(ObLossAction, action)
+        if action == ObLossAction.DISARM:
+            ev.send_failsafe(self.events, None)
+            self._disarm("Failsafe: disarming", ev.ARM_REASON_FAILSAFE)
+            return
+        ev.send_failsafe(self.events, modes.POSCTL if mode is None else mode)
         self._set_nav_mode(modes.POSCTL if mode is None else mode)
 
     def _check_auto_disarm(self, now_s: float) -> None:
@@ -298,11 +316,13 @@ class Commander:
         if self.took_off_since_arming:
             timeout = self._params.get("COM_DISARM_LAND")
             reason = "Disarmed after landing"
+            cause = ev.ARM_REASON_AUTO_DISARM_LAND
         else:
             timeout = self._params.get("COM_DISARM_PRFLT")
             reason = "Disarmed: no takeoff"
+            cause = ev.ARM_REASON_AUTO_DISARM_PREFLIGHT
         if timeout > 0 and now_s - self._landed_since_s >= timeout:
-            self._disarm(reason)
+            self._disarm(reason, cause)
 
     # -- internals ---------------------------------------------------------------------
 
@@ -317,11 +337,22 @@ class Commander:
             return "flight termination active"
         return None
 
-    def _disarm(self, reason: str) -> None:
+    def _failing_checks(self) -> tuple[ev.ArmingCheck, ...]:
+        """The arming checks failing now, in the order PX4's report lists them."""
+        failing = (
+            (not self.ready, ev.NO_GLOBAL_POSITION),
+            (not self._mode_available[modes.AUTO_MISSION], ev.NO_MISSION),
+            (not self.offboard_signal_fresh(), ev.OFFBOARD_SIGNAL),
+            (self.gcs_heartbeat_s is None or self.datalink_lost, ev.NO_DATALINK),
+        )
+        return tuple(check for fails, check in failing if fails)
+
+    def _disarm(self, reason: str, cause: int = ev.ARM_REASON_COMMAND_EXTERNAL) -> None:
         self.armed = False
         self.took_off_since_arming = False
         self._landed_since_s = None
         self._announce(MAV_SEVERITY_INFO, reason)
+        ev.send_armed(self.events, False, cause)
         self._arm_listeners_notify()
 
     def _set_nav_mode(self, mode: Px4Mode) -> None:

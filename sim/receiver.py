@@ -17,6 +17,7 @@ from pymavlink.dialects.v20 import development as mavlink
 from sim import modes
 from sim.commander import MAV_RESULT_ACCEPTED, MAV_RESULT_FAILED, MAV_RESULT_UNSUPPORTED
 from sim.geo import is_valid_lat_lon
+from sim.mavlink_event_services import EventServices
 from sim.mavlink_messages import MAVLINK_MSG_ID_PROTOCOL_VERSION, MessageFactory
 from sim.mavlink_parameters import MavlinkParameters
 from sim.offboard_setpoints import OffboardSetpoints
@@ -64,6 +65,7 @@ class Receiver:
         self._vehicle_commands = VehicleCommands(vehicle)
         setpoints = OffboardSetpoints(vehicle)
         parameters = MavlinkParameters(vehicle.params, vehicle.broadcast)
+        self._event_services = EventServices(vehicle)
         self._handlers: dict[int, Callable[[Link, Message], None]] = {
             mavlink.MAVLINK_MSG_ID_HEARTBEAT: self._on_heartbeat,
             mavlink.MAVLINK_MSG_ID_COMMAND_LONG: self._on_command_long,
@@ -78,6 +80,8 @@ class Receiver:
             mavlink.MAVLINK_MSG_ID_SET_GPS_GLOBAL_ORIGIN: self._on_set_gps_global_origin,
             mavlink.MAVLINK_MSG_ID_MISSION_REQUEST_LIST: self._on_mission_request_list,
             mavlink.MAVLINK_MSG_ID_TIMESYNC: self._on_timesync,
+            mavlink.MAVLINK_MSG_ID_FILE_TRANSFER_PROTOCOL: self._event_services.handle_ftp,
+            mavlink.MAVLINK_MSG_ID_UNKNOWN: self._event_services.handle_unknown,
         }
         self._commands: dict[int, CommandHandler] = {
             **self._vehicle_commands.handlers,
@@ -168,7 +172,8 @@ class Receiver:
         return MAV_RESULT_ACCEPTED
 
     def _cmd_request_message(self, cmd: Command, link: Link) -> int | None:
-        msg = self._v.messages.build(as_int(cmd.params[0]))
+        msg_id = as_int(cmd.params[0])
+        msg = self._event_services.build(msg_id) or self._v.messages.build(msg_id)
         if msg is None:
             return MAV_RESULT_FAILED
         link.send(command_ack(cmd, MAV_RESULT_ACCEPTED))

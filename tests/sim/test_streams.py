@@ -9,6 +9,8 @@ import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
 from sim import modes
+from sim.events import CURRENT_SEQUENCE_INTERVAL_S
+from sim.mavlink_custom import MAVLINK_MSG_ID_CURRENT_EVENT_SEQUENCE as CURRENT_EVENT_SEQUENCE_ID
 from sim.streams import FIXED_WING_ONLY, NORMAL_RATES_HZ, ONBOARD_RATES_HZ
 from tests.sim.conftest import Harness, HarnessFactory
 
@@ -38,7 +40,11 @@ def test_each_link_streams_at_px4_default_rates(harness: Harness, link_name: str
     for msg_id, hz in table.items():
         name = type_name(msg_id)
         assert measured.get(name, 0.0) == pytest.approx(hz, rel=0.1, abs=0.11), name
-    unexpected = set(measured) - {type_name(i) for i in table}
+    # CURRENT_EVENT_SEQUENCE belongs to the events protocol, every 3 s on each link as PX4
+    events_protocol = {type_name(CURRENT_EVENT_SEQUENCE_ID): 1 / CURRENT_SEQUENCE_INTERVAL_S}
+    for name, hz in events_protocol.items():
+        assert measured.get(name, 0.0) == pytest.approx(hz, abs=0.11), name
+    unexpected = set(measured) - {type_name(i) for i in table} - set(events_protocol)
     assert unexpected == set()
 
 

@@ -1,0 +1,133 @@
+"""The events PX4's commander sends, with its arguments and log levels (PX4 v1.16).
+
+Arming checks are reported as PX4's health and arming check report does it: when the set of
+failing checks changes, a summary (commander_arming_check_summary), one event per failing
+check (navigation modes it blocks, health component index) and a health summary. A refused
+arm then only says "Arming denied: Resolve system health failures first"; the reason is the
+check reported before (what QGroundControl shows).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from sim import modes
+from sim.events import (
+    LOG_CRITICAL,
+    LOG_ERROR,
+    LOG_INFO,
+    LOG_PROTOCOL,
+    LOG_WARNING,
+    EventLog,
+    log_levels,
+)
+from sim.modes import Px4Mode
+
+# navigation_mode_group_t bits (one per vehicle_status nav_state)
+NAV_GROUP_MISSION = 1 << 3
+NAV_GROUP_OFFBOARD = 1 << 14
+NAV_GROUP_ALL = 0xFFFFFFFF
+# the modes the simulated vehicle flies: manual, altctl, posctl, mission, loiter, rtl, acro,
+# offboard, stab, takeoff, land
+NAV_GROUPS_SUPPORTED = sum(1 << bit for bit in (0, 1, 2, 3, 4, 5, 10, 14, 15, 17, 18))
+# health_component_t bits as indices (the uint8 argument of a check event)
+HEALTH_COMMUNICATION_LINKS = 12
+HEALTH_GLOBAL_POSITION = 24
+HEALTH_SYSTEM = 20
+# health components PX4's SIH quad reports present
+HEALTH_PRESENT_SIH = 0x38020C0A
+
+# arm_disarm_reason_t
+ARM_REASON_COMMAND_EXTERNAL = 4
+ARM_REASON_AUTO_DISARM_LAND = 6
+ARM_REASON_AUTO_DISARM_PREFLIGHT = 7
+ARM_REASON_FAILSAFE = 14
+
+# failsafe_action_t by the mode a failsafe flies
+_FAILSAFE_ACTIONS = {
+    modes.POSCTL: 2, modes.ALTCTL: 3, modes.STABILIZED: 4, modes.AUTO_LOITER: 5,
+    modes.AUTO_RTL: 6, modes.AUTO_LAND: 7, modes.TERMINATION: 10,
+}
+FAILSAFE_ACTION_DISARM = 9
+
+# navigation_mode_t (vehicle_status nav_state) of each mode
+_NAVIGATION_MODES = {
+    modes.MANUAL: 0, modes.ALTCTL: 1, modes.POSCTL: 2, modes.AUTO_MISSION: 3,
+    modes.AUTO_LOITER: 4, modes.AUTO_RTL: 5, modes.ACRO: 6, modes.OFFBOARD: 7,
+    modes.STABILIZED: 8, modes.AUTO_TAKEOFF: 10, modes.AUTO_LAND: 11,
+    modes.AUTO_FOLLOW_TARGET: 12, modes.AUTO_PRECLAND: 13, modes.ORBIT: 14,
+    modes.AUTO_VTOL_TAKEOFF: 15,
+}
+NAVIGATION_MODE_UNKNOWN = 255
+
+
+@dataclass(frozen=True)
+class ArmingCheck:
+    """One failing check: its event, the modes it names, its component and level, and
+    whether it keeps those modes from arming (PX4 names all modes for a mere notice)."""
+
+    name: str
+    nav_groups: int
+    health_index: int
+    level: int
+    blocks: bool = True
+
+
+OFFBOARD_SIGNAL = ArmingCheck("check_modes_offboard_signal", NAV_GROUP_OFFBOARD,
+                              HEALTH_SYSTEM, LOG_ERROR)
+NO_MISSION = ArmingCheck("check_modes_mission", NAV_GROUP_MISSION, HEALTH_SYSTEM, LOG_INFO)
+NO_GLOBAL_POSITION = ArmingCheck("check_modes_global_pos", NAV_GROUP_ALL,
+                                 HEALTH_GLOBAL_POSITION, LOG_ERROR)
+# without a GCS link required (NAV_DLL_ACT 0) only a notice
+NO_DATALINK = ArmingCheck("check_rc_dl_no_dllink", NAV_GROUP_ALL, HEALTH_COMMUNICATION_LINKS,
+                          LOG_INFO, blocks=False)
+
+
+def send_arming_report(events: EventLog, checks: tuple[ArmingCheck, ...]) -> None:
+    error = warning = 0
+    blocked = 0
+    for check in checks:
+        if check.level <= LOG_ERROR:
+            error |= 1 << check.health_index
+        elif check.level == LOG_WARNING:
+            warning |= 1 << check.health_index
+        if check.blocks:
+            blocked |= check.nav_groups
+    can_arm = NAV_GROUPS_SUPPORTED & ~blocked
+    events.send("commander_arming_check_summary", log_levels(LOG_PROTOCOL), 0, error, warning,
+                can_arm, can_arm)
+    for check in checks:
+        events.send(check.name, log_levels(check.level), check.nav_groups, check.health_index)
+    events.send("commander_health_summary", log_levels(LOG_PROTOCOL), 0, HEALTH_PRESENT_SIH,
+                error, warning)
+
+
+def send_arm_denied(events: EventLog) -> None:
+    events.send("commander_arm_denied_resolve_failures", log_levels(LOG_CRITICAL, LOG_INFO))
+
+
+def send_disarm_denied(events: EventLog) -> None:
+    events.send("commander_disarm_denied_not_landed", log_levels(LOG_CRITICAL, LOG_INFO))
+
+
+def send_mode_not_available(events: EventLog, mode: Px4Mode) -> None:
+    events.send("commander_modeswitch_not_avail", log_levels(LOG_CRITICAL, LOG_INFO),
+                mode.custom_mode, _NAVIGATION_MODES.get(mode, NAVIGATION_MODE_UNKNOWN))
+
+
+def send_armed(events: EventLog, armed: bool, reason: int) -> None:
+    name = "commander_armed_by" if armed else "commander_disarmed_by"
+    events.send(name, log_levels(LOG_INFO), reason)
+
+
+def send_failsafe(events: EventLog, mode: Px4Mode | None) -> None:
+    """commander_failsafe_enter_generic: the mode switched to and the action (None: disarm)."""
+    action = FAILSAFE_ACTION_DISARM if mode is None else _FAILSAFE_ACTIONS.get(mode, 2)
+    custom_mode = 0 if mode is None else mode.custom_mode
+    events.send("commander_failsafe_enter_generic", log_levels(LOG_CRITICAL, LOG_WARNING),
+                custom_mode, action)
+
+
+def send_flight_change(events: EventLog, landed: bool) -> None:
+    name = "commander_landing_detected" if landed else "commander_takeoff_detected"
+    events.send(name, log_levels(LOG_INFO))

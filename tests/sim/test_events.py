@@ -1,0 +1,166 @@
+"""PX4's events from the simulated vehicle: ids, arguments, log levels and the sequence
+protocol (CURRENT_EVENT_SEQUENCE, REQUEST_EVENT, RESPONSE_EVENT_ERROR) as mavlink_events.cpp."""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+from typing import Any
+
+from pymavlink.dialects.v20 import development as mavlink
+
+from sim import modes
+from sim.commander import MAV_RESULT_TEMPORARILY_REJECTED
+from sim.events import EVENT_BUFFER_CAPACITY, CustomMessage
+from tests.sim.conftest import Harness, RecordingLink
+
+# ids from PX4 v1.16's all_events.json (component 1 << 24 | sub id)
+ARM_DENIED_RESOLVE_FAILURES = 1 << 24 | 133277
+CHECK_MODES_OFFBOARD_SIGNAL = 1 << 24 | 3087815
+ARMING_CHECK_SUMMARY = 1 << 24 | 11047904
+MODESWITCH_NOT_AVAIL = 1 << 24 | 10503063
+FAILSAFE_ENTER_GENERIC = 1 << 24 | 14605264
+DISARMED_BY = 1 << 24 | 16017271
+
+
+class RequestEvent(CustomMessage):
+    id = 412
+    msgname = "REQUEST_EVENT"
+    crc_extra = 33
+    fieldnames = ("first_sequence", "last_sequence", "target_system", "target_component")
+    _wire = struct.Struct("<HHBB")
+
+
+@dataclass
+class Received:
+    event_id: int
+    time_boot_ms: int
+    sequence: int
+    log_levels: int
+    arguments: bytes
+
+
+def _payload(msg: Any, msg_id: int) -> bytes | None:
+    """The payload of a message pymavlink's dialect lacks (UNKNOWN_<id>, raw frame bytes)."""
+    if msg.get_type() != f"UNKNOWN_{msg_id}":
+        return None
+    data = bytes(msg.data)
+    return data[10:10 + data[1]]
+
+
+def events_of(link: RecordingLink) -> list[Received]:
+    found = []
+    for msg in link.sent:
+        payload = _payload(msg, 410)
+        if payload is not None:
+            fields = struct.unpack("<IIHBBB40s", payload.ljust(53, b"\0"))
+            found.append(Received(fields[0], fields[1], fields[2], fields[5], fields[6]))
+    return found
+
+
+def unpacked(link: RecordingLink, msg_id: int, wire: str) -> list[tuple[Any, ...]]:
+    size = struct.calcsize(wire)
+    return [struct.unpack(wire, p.ljust(size, b"\0")) for m in link.sent
+            if (p := _payload(m, msg_id)) is not None]
+
+
+def test_arming_in_offboard_without_setpoints_is_refused_with_px4s_events(
+        harness: Harness) -> None:
+    harness.set_mode(modes.OFFBOARD)
+    harness.api.clear()
+    harness.arm()
+    assert harness.last_ack(mavlink.MAV_CMD_COMPONENT_ARM_DISARM) == (
+        MAV_RESULT_TEMPORARILY_REJECTED)
+    denied = events_of(harness.api)
+    assert [e.event_id for e in denied] == [ARM_DENIED_RESOLVE_FAILURES]
+    assert denied[0].log_levels == 0x62  # Critical, internally Info
+    assert denied[0].arguments == bytes(40)
+    # the reason is the arming check PX4 reported before: No offboard signal, blocking the
+    # offboard navigation mode group (bit 14), health component index 20 (system)
+    log = harness.vehicle.commander.events
+    check = [e for e in log.buffered() if e.event_id == CHECK_MODES_OFFBOARD_SIGNAL]
+    assert check
+    assert check[-1].log_levels == 0x33
+    assert check[-1].arguments[:5] == struct.pack("<IB", 1 << 14, 20)
+
+
+def test_setpoints_clear_the_offboard_check_with_a_new_report(harness: Harness) -> None:
+    harness.api.clear()
+    for _ in range(3):
+        harness.local_ned(type_mask=0b110111111000)
+        harness.run(0.1)
+    ids = [e.event_id for e in events_of(harness.api)]
+    assert ids[0] == ARMING_CHECK_SUMMARY
+    assert CHECK_MODES_OFFBOARD_SIGNAL not in ids
+    summary = events_of(harness.api)[0]
+    can_arm = struct.unpack_from("<BIIII", summary.arguments)[3]
+    assert can_arm & 1 << 14
+
+
+def test_mode_refused_when_armed_names_the_mode(harness: Harness) -> None:
+    harness.set_mode(modes.POSCTL)
+    harness.arm()
+    harness.api.clear()
+    harness.set_mode(modes.OFFBOARD)
+    refused = [e for e in events_of(harness.api) if e.event_id == MODESWITCH_NOT_AVAIL]
+    assert len(refused) == 1
+    assert refused[0].log_levels == 0x62
+    assert refused[0].arguments[:5] == struct.pack("<IB", modes.OFFBOARD.custom_mode, 7)
+
+
+def test_offboard_loss_failsafe_and_preflight_auto_disarm(harness: Harness) -> None:
+    harness.local_ned(type_mask=0b110111111000)
+    harness.set_mode(modes.OFFBOARD)
+    harness.arm()
+    harness.api.clear()
+    harness.run(2.0)
+    failsafe = [e for e in events_of(harness.api) if e.event_id == FAILSAFE_ENTER_GENERIC]
+    assert failsafe
+    assert failsafe[0].log_levels == 0x42
+    # switching to Position (custom mode 0x30000), action fallback_posctrl (2)
+    assert failsafe[0].arguments[:5] == struct.pack("<IB", modes.POSCTL.custom_mode, 2)
+    harness.run(10.0)
+    disarmed = [e for e in events_of(harness.api) if e.event_id == DISARMED_BY]
+    assert disarmed
+    assert disarmed[0].arguments[0] == 7  # auto_disarm_preflight
+
+
+def test_sequence_counts_up_and_current_sequence_goes_out_every_3_s(harness: Harness) -> None:
+    harness.api.clear()
+    harness.run(7.0)
+    current = unpacked(harness.api, 411, "<HB")
+    assert len(current) == 2
+    harness.set_mode(modes.OFFBOARD)
+    harness.arm()
+    harness.arm()
+    sequences = [e.sequence for e in events_of(harness.api)]
+    assert sequences == [current[-1][0] + 1, current[-1][0] + 2]
+    harness.run(3.1)
+    assert unpacked(harness.api, 411, "<HB")[-1] == (sequences[-1], 0)
+
+
+def test_first_current_sequence_has_the_reset_flag(make_harness: Any) -> None:
+    h = make_harness(ready=False)
+    h.run(2.0)
+    assert unpacked(h.api, 411, "<HB")[0][1] == 1
+
+
+def test_request_event_resends_from_the_buffer_or_answers_an_error(harness: Harness) -> None:
+    harness.set_mode(modes.OFFBOARD)
+    for _ in range(EVENT_BUFFER_CAPACITY + 5):
+        harness.arm()
+    latest = harness.vehicle.commander.events.latest_sequence
+    oldest = (latest - EVENT_BUFFER_CAPACITY + 1) & 0xFFFF
+    harness.gcs.clear()
+    harness.deliver(RequestEvent(latest - 1, latest, 1, 1), harness.gcs)
+    assert [e.sequence for e in events_of(harness.gcs)] == [latest - 1, latest]
+    assert all(e.event_id == ARM_DENIED_RESOLVE_FAILURES for e in events_of(harness.gcs))
+    harness.gcs.clear()
+    harness.deliver(RequestEvent(oldest - 1, oldest, 1, 1), harness.gcs)
+    errors = unpacked(harness.gcs, 413, "<HHBBB")
+    # sequence, oldest available after it, target = the requester, reason UNAVAILABLE
+    assert errors == [(oldest - 1, oldest, 255, 190, 0)]
+    assert [e.sequence for e in events_of(harness.gcs)] == [oldest]
+    harness.gcs.clear()
+    harness.deliver(RequestEvent(latest, latest, 2, 1), harness.gcs)
+    assert not harness.gcs.sent
