@@ -58,6 +58,7 @@ MAV_SEVERITY_ERROR = 3
 # PX4's event names of the arming-check report and of the refusal that points at it
 ARMING_CHECK_SUMMARY = "commander_arming_check_summary"
 ARM_DENIED_RESOLVE_FAILURES = "commander_arm_denied_resolve_failures"
+APPEND_CHECKS = "append_health_and_arming_messages"
 # PX4's navigation states by mode name: a check's "modes" argument has bit 1 << nav_state
 # set for each mode it blocks (navigation_mode_group_t maps group == mode)
 NAV_STATES = {
@@ -85,6 +86,9 @@ class DecodedEvent:
     group: str  # "default", "arming_check", "health"
     text: str
     arguments: dict[str, object]  # by the argument names of the metadata
+    # "append_health_and_arming_messages": a refusal whose first argument is the custom
+    # mode asked for, to be read with the checks failing in that mode (as QGroundControl)
+    type: str = ""
 
 
 class EventDecoder:
@@ -95,7 +99,12 @@ class EventDecoder:
         self._parser.load_definitions(definitions)
         self._parser.set_profile("normal")
         self._argument_names: dict[int, list[str]] = {}
+        # PX4's custom_mode → navigation state, from its "navigation_mode_groups"
+        self.nav_states: dict[int, int] = {}
         for component_id, component in definitions.get("components", {}).items():
+            groups = component.get("navigation_mode_groups", {}).get("groups", {})
+            for nav_state, custom_modes in groups.items():
+                self.nav_states.update((int(mode), int(nav_state)) for mode in custom_modes)
             for group in component.get("event_groups", {}).values():
                 for sub_id, event in group.get("events", {}).items():
                     event_id = int(component_id) << 24 | int(sub_id)
@@ -121,6 +130,7 @@ class EventDecoder:
             str(parsed.group()),
             str(parsed.message()),
             dict(zip(names, values, strict=False)),
+            str(parsed.type() or ""),
         )
 
 
@@ -261,9 +271,11 @@ class Px4Events:
             modes = event.arguments.get("modes")
             self._checks[event.name] = (event.text, modes if isinstance(modes, int) else None)
 
-    def failing_checks(self) -> list[str]:
-        """The texts of the arming checks that fail in the vehicle's current mode."""
-        nav_state = NAV_STATES.get(self._telemetry.mode)
+    def failing_checks(self, nav_state: int | None = None) -> list[str]:
+        """The texts of the arming checks that fail in a mode (PX4's navigation state;
+        by default the vehicle's current mode)."""
+        if nav_state is None:
+            nav_state = NAV_STATES.get(self._telemetry.mode)
         return [
             text
             for text, modes in self._checks.values()
@@ -271,8 +283,9 @@ class Px4Events:
         ]
 
     async def _explain(self, started_s: float, reason: str | None) -> str | None:
-        """A refused command's reason: PX4's event that follows the COMMAND_ACK; when it
-        says to resolve the arming checks, the texts of the checks that fail."""
+        """A refused command's reason: PX4's event that follows the COMMAND_ACK. When it
+        says to resolve the arming checks, the texts of the checks that fail; when a mode
+        is not available, that and the checks that fail in the mode asked for."""
         if self.decoder is None:
             return reason
 
@@ -284,7 +297,14 @@ class Px4Events:
         if self._refusal is None or not refused():
             return reason
         event = self._refusal[1]
-        checks = self.failing_checks()
-        if event.name == ARM_DENIED_RESOLVE_FAILURES and checks:
+        if event.name == ARM_DENIED_RESOLVE_FAILURES and (checks := self.failing_checks()):
             return "; ".join(checks)
+        custom_mode = next(iter(event.arguments.values()), None)
+        nav_state = self.decoder.nav_states.get(custom_mode if isinstance(custom_mode, int) else -1)
+        if (
+            event.type == APPEND_CHECKS
+            and nav_state is not None
+            and (checks := self.failing_checks(nav_state))
+        ):
+            return f"{event.text}: {'; '.join(checks)}"
         return event.text

@@ -32,7 +32,10 @@ _BITFIELD = {"type": "uint32_t", "is_bitfield": True}
 # PX4's definitions (ids, names, texts, argument layouts) of the events used here
 EVENTS_JSON: dict[str, Any] = {"version": 2, "components": {"1": {
     "namespace": "px4",
+    "navigation_mode_groups": {"groups": {"2": [196608], "14": [393216]}},
     "enums": {
+        "navigation_mode_t": {"type": "uint8_t", "entries": {
+            "7": {"name": "offboard", "description": "Offboard"}}},
         "navigation_mode_group_t": {**_BITFIELD, "entries": {
             "4": {"name": "posctl"}, "16384": {"name": "offboard"}}},
     },
@@ -44,6 +47,11 @@ EVENTS_JSON: dict[str, Any] = {"version": 2, "components": {"1": {
                          "message": "Mission rejected: takeoff altitude too low! "
                                     "Minimum: {1:.1m_v}",
                          "arguments": [{"name": "arg0", "type": "float"}]},
+            "10503063": {"name": "commander_modeswitch_not_avail",
+                         "type": "append_health_and_arming_messages",
+                         "message": "Switching to mode '{2}' is currently not possible",
+                         "arguments": [{"name": "arg0", "type": "uint32_t"},
+                                       {"name": "arg1", "type": "px4::navigation_mode_t"}]},
             "7000": {"name": "param_marked", "message": "Check <param>COM_ARM_WO_GPS</param>"},
         }},
         "arming_check": {"events": {
@@ -57,6 +65,7 @@ EVENTS_JSON: dict[str, Any] = {"version": 2, "components": {"1": {
     },
 }}}  # fmt: skip
 ARM_DENIED = 1 << 24 | 133277
+MODE_NOT_AVAILABLE = 1 << 24 | 10503063
 TAKEOFF_TOO_LOW = 1 << 24 | 12208749
 PARAM_MARKED = 1 << 24 | 7000
 CHECK_SUMMARY = 1 << 24 | 11047904
@@ -120,6 +129,11 @@ class FakePx4:
         if msg.command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM:
             peer.ack(msg.command, mavlink.MAV_RESULT_TEMPORARILY_REJECTED)
             self.event(ARM_DENIED, CRITICAL)
+            return
+        if msg.command == mavlink.MAV_CMD_DO_SET_MODE:
+            peer.ack(msg.command, mavlink.MAV_RESULT_TEMPORARILY_REJECTED)
+            custom_mode = int(msg.param2) << 16 | int(msg.param3) << 24
+            self.event(MODE_NOT_AVAILABLE, CRITICAL, struct.pack("<IB", custom_mode, 7))
             return
         requested = int(msg.param1)
         if requested == MAVLINK_MSG_ID_COMPONENT_METADATA and not self.component_metadata:
@@ -242,3 +256,16 @@ async def test_arm_refusal_names_the_failing_check(
     await scripted.vehicle_heard_all()
     result = await scripted.vehicle.arm()
     assert result.reason == "Arming denied: Resolve system health failures first"
+
+
+async def test_mode_refusal_names_the_checks_failing_in_that_mode(
+    scripted: ScriptedSession, tmp_path: Path
+) -> None:
+    px4 = await _loaded(scripted, tmp_path)
+    px4.check_report(OFFBOARD_MODE_GROUP)
+    await scripted.vehicle_heard_all()
+    result = await scripted.vehicle.set_mode("OFFBOARD")
+    assert result.outcome.value == "TEMPORARILY_REJECTED"
+    assert result.reason == (
+        "Switching to mode 'Offboard' is currently not possible: No offboard signal"
+    )
