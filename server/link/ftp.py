@@ -58,10 +58,7 @@ class FtpReply:
     offset: int
     data: bytes
     burst_complete: bool = False
-
-    @property
-    def error(self) -> int:
-        return self.data[0] if self.opcode == kRspNak and self.data else 0
+    error: int = 0  # a NAK's error code (PX4's ErrorCode)
 
 
 def encode_payload(
@@ -77,7 +74,8 @@ def decode_payload(payload: bytes | list[int]) -> FtpReply:
     raw = bytes(payload).ljust(FTP_PAYLOAD_LEN, b"\0")
     seq, session, opcode, size, req_opcode, burst, _pad, offset = _HEADER.unpack_from(raw)
     data = raw[_HEADER.size : _HEADER.size + min(size, FTP_DATA_LEN)]
-    return FtpReply(seq, session, opcode, req_opcode, offset, data, bool(burst))
+    error = data[0] if opcode == kRspNak and data else 0
+    return FtpReply(seq, session, opcode, req_opcode, offset, data, bool(burst), error)
 
 
 class FtpClient:

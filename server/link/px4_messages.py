@@ -30,11 +30,12 @@ EVENT_ARGUMENTS_LEN = 40
 class _WireMessage(mavlink.MAVLink_message):  # type: ignore[misc]
     """A message decoded and packed from its wire layout (fields listed in wire order)."""
 
-    id = 0
-    msgname = ""
-    crc_extra = 0
-    fieldnames: ClassVar[list[str]] = []
-    unpacker = struct.Struct("<")
+    # set by _message_type for each message
+    id: ClassVar[int]
+    msgname: ClassVar[str]
+    crc_extra: ClassVar[int]
+    fieldnames: ClassVar[list[str]]
+    unpacker: ClassVar[struct.Struct]
 
     def __init__(self, *values: Any) -> None:
         super().__init__(self.id, self.msgname)

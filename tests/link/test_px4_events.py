@@ -64,12 +64,24 @@ EVENTS_JSON: dict[str, Any] = {"version": 2, "components": {"1": {
         }},
     },
 }}}  # fmt: skip
-ARM_DENIED = 1 << 24 | 133277
-MODE_NOT_AVAILABLE = 1 << 24 | 10503063
-TAKEOFF_TOO_LOW = 1 << 24 | 12208749
-PARAM_MARKED = 1 << 24 | 7000
-CHECK_SUMMARY = 1 << 24 | 11047904
-OFFBOARD_SIGNAL = 1 << 24 | 3087815
+
+
+def _event_id(name: str) -> int:
+    """The id of an event of EVENTS_JSON: its component << 24 | its sub id."""
+    for component_id, component in EVENTS_JSON["components"].items():
+        for group in component["event_groups"].values():
+            for sub_id, event in group["events"].items():
+                if event["name"] == name:
+                    return int(component_id) << 24 | int(sub_id)
+    raise KeyError(name)
+
+
+(ARM_DENIED, MODE_NOT_AVAILABLE, TAKEOFF_TOO_LOW, PARAM_MARKED, CHECK_SUMMARY,
+ OFFBOARD_SIGNAL) = map(_event_id, (
+    "commander_arm_denied_resolve_failures", "commander_modeswitch_not_avail",
+    "navigator_mis_takeoff_too_low", "param_marked", "commander_arming_check_summary",
+    "check_modes_offboard_signal",
+))  # fmt: skip
 OFFBOARD_MODE_GROUP = 1 << 14
 # log_levels: external | internal << 4
 CRITICAL, ERROR, WARNING, INFO, PROTOCOL = 0x22, 0x33, 0x44, 0x66, 0x88
@@ -240,12 +252,18 @@ async def test_lost_events_the_vehicle_no_longer_has(
     assert not scripted.vehicle.px4_events._missing
 
 
-async def test_arm_refusal_names_the_failing_check(
-    scripted: ScriptedSession, tmp_path: Path
-) -> None:
+async def _offboard_blocked(scripted: ScriptedSession, tmp_path: Path) -> FakePx4:
+    """A loaded vehicle whose arming checks report no offboard signal."""
     px4 = await _loaded(scripted, tmp_path)
     px4.check_report(OFFBOARD_MODE_GROUP)
     await scripted.vehicle_heard_all()
+    return px4
+
+
+async def test_arm_refusal_names_the_failing_check(
+    scripted: ScriptedSession, tmp_path: Path
+) -> None:
+    await _offboard_blocked(scripted, tmp_path)
     scripted.peer.report_mode(0x60000, 0x60000)  # OFFBOARD
     await scripted.vehicle_heard_all()
     result = await scripted.vehicle.arm()
@@ -261,9 +279,7 @@ async def test_arm_refusal_names_the_failing_check(
 async def test_mode_refusal_names_the_checks_failing_in_that_mode(
     scripted: ScriptedSession, tmp_path: Path
 ) -> None:
-    px4 = await _loaded(scripted, tmp_path)
-    px4.check_report(OFFBOARD_MODE_GROUP)
-    await scripted.vehicle_heard_all()
+    await _offboard_blocked(scripted, tmp_path)
     result = await scripted.vehicle.set_mode("OFFBOARD")
     assert result.outcome.value == "TEMPORARILY_REJECTED"
     assert result.reason == (
