@@ -162,7 +162,8 @@ class MessageFactory:
         return msg
 
     def statustexts(self, severity: int, text: str) -> list[Message]:
-        data = text.encode()
+        # PX4's texts end with a tab (mavlink_log_critical(..., "...\t")); it is chunked too
+        data = text.removesuffix("\t").encode() + b"\t"
         if len(data) <= STATUSTEXT_MAX_LEN:
             return [mavlink.MAVLink_statustext_message(severity, data)]
         self._statustext_id = self._statustext_id % 65535 + 1

@@ -146,7 +146,12 @@ class RecordingLink:
         return [m for m in self.of_type("COMMAND_ACK") if command is None or m.command == command]
 
     def texts(self) -> list[str]:
-        """STATUSTEXTs, chunked ones (same non-zero id) joined again."""
+        """STATUSTEXTs, chunked ones (same non-zero id) joined again, without PX4's
+        trailing tab (as a client shows them)."""
+        return [text.removesuffix("\t") for text in self.raw_texts()]
+
+    def raw_texts(self) -> list[str]:
+        """STATUSTEXTs, chunked ones (same non-zero id) joined again, as sent."""
         texts: list[str] = []
         chunk_index: dict[int, int] = {}
         for m in self.of_type("STATUSTEXT"):

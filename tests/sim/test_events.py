@@ -164,3 +164,18 @@ def test_request_event_resends_from_the_buffer_or_answers_an_error(harness: Harn
     harness.gcs.clear()
     harness.deliver(RequestEvent(latest, latest, 2, 1), harness.gcs)
     assert not harness.gcs.sent
+
+
+def test_statustext_ends_with_a_tab_and_is_chunked_with_it(harness: Harness) -> None:
+    # the text PX4 v1.16 SITL sends on a refused arm, seen as "...firs" + "t\t"
+    text = "Arming denied: Resolve system health failures first"
+    harness.api.clear()
+    harness.vehicle.announce(mavlink.MAV_SEVERITY_CRITICAL, text)
+    chunks = harness.api.of_type("STATUSTEXT")
+    assert [c.text for c in chunks] == [text[:50], "t\t"]
+    assert harness.api.raw_texts() == [text + "\t"]
+    harness.api.clear()
+    harness.vehicle.announce(mavlink.MAV_SEVERITY_INFO, "Landing detected")
+    (single,) = harness.api.of_type("STATUSTEXT")
+    assert single.text == "Landing detected\t"
+    assert harness.api.texts() == ["Landing detected"]
