@@ -19,6 +19,7 @@ from typing import Any
 import httpx
 
 from tests.serve_process import Served
+from tests.waiting import holds_for_blocking, wait_for_blocking
 
 Json = dict[str, Any]
 
@@ -98,29 +99,42 @@ class RestFlight:
         return body
 
     def wait_state(self, what: str, predicate: Callable[[Json], object], timeout_s: float) -> Json:
-        """Poll the state until ``predicate`` holds; the failure names what was last seen."""
+        """Poll the state until ``predicate`` holds; the transcript shows each change and the
+        failure names the state last seen."""
         start = time.monotonic()
-        last: Json = {}
-        shown = ""
-        while time.monotonic() - start < timeout_s:
-            last = self.state()
-            summary = summarize(last)
-            if summary != shown:
+        seen: list[Json] = [{}]
+        shown: list[str] = [""]
+
+        def check() -> Json | None:
+            seen[0] = state = self.state()
+            if (summary := summarize(state)) != shown[0]:
                 self.log(f"  state: {summary}")
-                shown = summary
-            if predicate(last):
-                self.log(f"  {what}: after {time.monotonic() - start:.1f} s")
-                return last
-            time.sleep(0.1)
-        raise AssertionError(f"{what}: not within {timeout_s} s; last state {summarize(last)}")
+                shown[0] = summary
+            return state if predicate(state) else None
+
+        try:
+            wait_for_blocking(what, check, timeout_s)
+        except AssertionError:
+            raise AssertionError(
+                f"{what}: not within {timeout_s} s; last state {summarize(seen[0])}"
+            ) from None
+        self.log(f"  {what}: after {time.monotonic() - start:.1f} s")
+        return seen[0]
 
     def hold_state(self, what: str, predicate: Callable[[Json], object], duration_s: float) -> None:
         """``predicate`` stays true for ``duration_s`` (a "nothing changes" claim)."""
-        end = time.monotonic() + duration_s
-        while time.monotonic() < end:
-            now = self.state()
-            assert predicate(now), f"{what}: stopped holding; state {summarize(now)}"
-            time.sleep(0.1)
+        seen: list[Json] = [{}]
+
+        def check() -> object:
+            seen[0] = self.state()
+            return predicate(seen[0])
+
+        try:
+            holds_for_blocking(what, check, duration_s)
+        except AssertionError:
+            raise AssertionError(
+                f"{what}: stopped holding; state {summarize(seen[0])}"
+            ) from None
 
     def command(self, path: str, body: Any = None) -> Json:
         """A command the docs promise answers 200 ACCEPTED."""

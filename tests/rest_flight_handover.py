@@ -10,6 +10,7 @@ from concurrent.futures import ThreadPoolExecutor
 import httpx
 
 from tests.rest_flight import CLIENT_NAME, Json, RestFlight, in_offboard
+from tests.waiting import wait_for_blocking
 
 SECOND_NAME = "second pilot"
 
@@ -74,10 +75,11 @@ def _asked_and_granted(flight: RestFlight, second_lease: str) -> None:
 
 
 def _pending_request(flight: RestFlight) -> Json:
-    start = time.monotonic()
-    while not (request := flight.control().get("request")):
-        assert time.monotonic() - start < 5.0, "GET /control shows no takeover request"
-        time.sleep(0.1)
+    def asked() -> Json | None:
+        request: Json | None = flight.control().get("request")
+        return request
+
+    request = wait_for_blocking("GET /control to show the takeover request", asked, 5.0)
+    assert request is not None
     assert CLIENT_NAME in str(request.get("by")), request
-    pending: Json = request
-    return pending
+    return request

@@ -27,6 +27,7 @@ from tests.rest_flight import (
     velocity_ned,
 )
 from tests.rest_flight_handover import handover
+from tests.waiting import wait_for_blocking
 
 # PX4 SITL passes its pre-arm checks a few seconds after boot; the sim at once.
 ARM_READY_WITHIN_S = 20.0
@@ -37,10 +38,11 @@ def connected(flight: RestFlight) -> None:
     assert health.get("status") == "ok", health
     refused = flight.http.get("/vehicles")
     assert refused.status_code == 401, f"no token must be 401, got {refused.status_code}"
-    start = time.monotonic()
-    while not (vehicles := flight.expect(flight.call("GET", "/vehicles"), 200, "GET /vehicles")):
-        assert time.monotonic() - start < 30.0, "no vehicle listed within 30 s"
-        time.sleep(0.5)
+    vehicles = wait_for_blocking(
+        "a vehicle listed",
+        lambda: flight.expect(flight.call("GET", "/vehicles"), 200, "GET /vehicles"),
+        30.0, every_s=0.5,
+    )
     listed = [int(vehicle["id"]) for vehicle in vehicles]
     if flight.vehicle_id is None:
         flight.vehicle_id = listed[0]
@@ -259,9 +261,8 @@ def lease_ttl_lapses(flight: RestFlight) -> None:
     assert lease["ttl_s"] == ttl_s, f"asked ttl_s {ttl_s}, got {lease}"
     flight.lease_id = lease["lease_id"]
     start = time.monotonic()
-    while flight.control().get("holder") is not None:
-        assert time.monotonic() - start < ttl_s + 1.5, f"the {ttl_s} s lease did not lapse"
-        time.sleep(0.1)
+    wait_for_blocking(f"the {ttl_s} s lease to lapse",
+                      lambda: flight.control().get("holder") is None, ttl_s + 1.5)
     flight.log(f"  lapsed after {time.monotonic() - start:.1f} s")
     flight.expect(flight.call("PUT", "setpoint", velocity_ned(1.0)), 423, "a lapsed lease")
     _holding_after_operator_loss(flight)
