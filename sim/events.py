@@ -143,6 +143,7 @@ class EventLog:
         self._active: Callable[[], bool] = lambda: False
         self._buffer: deque[Event] = deque(maxlen=EVENT_BUFFER_CAPACITY)
         self._latest_sequence = 0xFFFF
+        self._sent_sequence = 0xFFFF
         self._now_s = 0.0
         self._last_current_sequence_s: float | None = None
 
@@ -165,15 +166,20 @@ class EventLog:
         event = Event(definition.event_id, round(self._now_s * 1000), self._latest_sequence,
                       levels, packed.ljust(EVENT_ARGUMENTS_LEN, b"\0"))
         self._buffer.append(event)
-        if self._send is not None and self._active():
-            self._send(event.message())
         return event
 
     def update(self, now_s: float) -> None:
+        """Send what was published since the last update (PX4's mavlink thread does it on
+        its next cycle, so an event follows the COMMAND_ACK of the command that caused it)."""
         self._now_s = now_s
         last = self._last_current_sequence_s
         if self._send is None or not self._active():
+            self._sent_sequence = self._latest_sequence
             return
+        for event in self._buffer:
+            if 0 < (event.sequence - self._sent_sequence) & 0xFFFF <= len(self._buffer):
+                self._send(event.message())
+        self._sent_sequence = self._latest_sequence
         if last is None or now_s - last > CURRENT_SEQUENCE_INTERVAL_S:
             # SITL starts with the reset flag so receivers drop what they knew.
             self._send(self.current_sequence(force_reset=last is None))

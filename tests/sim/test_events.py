@@ -3,6 +3,7 @@ protocol (CURRENT_EVENT_SEQUENCE, REQUEST_EVENT, RESPONSE_EVENT_ERROR) as mavlin
 
 from __future__ import annotations
 
+import asyncio
 import struct
 from dataclasses import dataclass
 from typing import Any
@@ -13,6 +14,7 @@ from sim import modes
 from sim.commander import MAV_RESULT_TEMPORARILY_REJECTED
 from sim.events import EVENT_BUFFER_CAPACITY, CustomMessage
 from tests.sim.conftest import Harness, RecordingLink
+from tests.sim.test_endpoint import cluster, heartbeat, open_peer
 
 # ids from PX4 v1.16's all_events.json (component 1 << 24 | sub id)
 ARM_DENIED_RESOLVE_FAILURES = 1 << 24 | 133277
@@ -64,11 +66,19 @@ def unpacked(link: RecordingLink, msg_id: int, wire: str) -> list[tuple[Any, ...
             if (p := _payload(m, msg_id)) is not None]
 
 
+def settle(h: Harness) -> None:
+    """One MAVLink cycle: events go out on the cycle after they happen, as from PX4."""
+    h.run(0.02)
+
+
 def test_arming_in_offboard_without_setpoints_is_refused_with_px4s_events(
         harness: Harness) -> None:
     harness.set_mode(modes.OFFBOARD)
+    settle(harness)
     harness.api.clear()
     harness.arm()
+    assert events_of(harness.api) == []  # the ack goes first
+    settle(harness)
     assert harness.last_ack(mavlink.MAV_CMD_COMPONENT_ARM_DISARM) == (
         MAV_RESULT_TEMPORARILY_REJECTED)
     denied = events_of(harness.api)
@@ -85,6 +95,7 @@ def test_arming_in_offboard_without_setpoints_is_refused_with_px4s_events(
 
 
 def test_setpoints_clear_the_offboard_check_with_a_new_report(harness: Harness) -> None:
+    settle(harness)
     harness.api.clear()
     for _ in range(3):
         harness.local_ned(type_mask=0b110111111000)
@@ -100,8 +111,10 @@ def test_setpoints_clear_the_offboard_check_with_a_new_report(harness: Harness) 
 def test_mode_refused_when_armed_names_the_mode(harness: Harness) -> None:
     harness.set_mode(modes.POSCTL)
     harness.arm()
+    settle(harness)
     harness.api.clear()
     harness.set_mode(modes.OFFBOARD)
+    settle(harness)
     refused = [e for e in events_of(harness.api) if e.event_id == MODESWITCH_NOT_AVAIL]
     assert len(refused) == 1
     assert refused[0].log_levels == 0x62
@@ -126,6 +139,7 @@ def test_offboard_loss_failsafe_and_preflight_auto_disarm(harness: Harness) -> N
 
 
 def test_sequence_counts_up_and_current_sequence_goes_out_every_3_s(harness: Harness) -> None:
+    settle(harness)
     harness.api.clear()
     harness.run(7.0)
     current = unpacked(harness.api, 411, "<HB")
@@ -133,6 +147,7 @@ def test_sequence_counts_up_and_current_sequence_goes_out_every_3_s(harness: Har
     harness.set_mode(modes.OFFBOARD)
     harness.arm()
     harness.arm()
+    settle(harness)
     sequences = [e.sequence for e in events_of(harness.api)]
     assert sequences == [current[-1][0] + 1, current[-1][0] + 2]
     harness.run(3.1)
@@ -179,3 +194,35 @@ def test_statustext_ends_with_a_tab_and_is_chunked_with_it(harness: Harness) -> 
     (single,) = harness.api.of_type("STATUSTEXT")
     assert single.text == "Landing detected\t"
     assert harness.api.texts() == ["Landing detected"]
+
+
+async def test_over_udp_a_refused_arm_and_the_check_it_names() -> None:
+    """Through the sim's UDP socket as a pymavlink client sees it (EVENT is UNKNOWN_410)."""
+    peer = await open_peer()
+    async with cluster(speed=5.0) as sim:
+        await sim.wait_ready(timeout_s=5.0)
+        await asyncio.sleep(0.2)  # the check report made at ready has gone out
+        port = sim.instances[0].api_local_port
+        peer.send(heartbeat(), port)
+        peer.send(mavlink.MAVLink_command_long_message(
+            1, 1, mavlink.MAV_CMD_DO_SET_MODE, 0, 1, modes.OFFBOARD.main, 0, 0, 0, 0, 0), port)
+        peer.received.clear()
+        peer.send(mavlink.MAVLink_command_long_message(
+            1, 1, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0), port)
+        event = await peer.wait_for("UNKNOWN_410")
+        acks = [m for m in peer.received if m.get_type() == "COMMAND_ACK" and m.command == 400]
+        assert [a.result for a in acks] == [MAV_RESULT_TEMPORARILY_REJECTED]
+        link = RecordingLink()
+        link.sent = [event]
+        (denied,) = events_of(link)
+        assert denied.event_id == ARM_DENIED_RESOLVE_FAILURES
+        peer.received.clear()
+        peer.send(RequestEvent(0, denied.sequence, 1, 1), port)
+        await peer.wait_for("HEARTBEAT")  # the answers came before the next heartbeat
+        link.sent = list(peer.received)
+        # (a new check report follows our first heartbeat: no datalink check cleared)
+        resent = [e for e in events_of(link) if e.sequence <= denied.sequence]
+        assert [e.sequence for e in resent] == list(range(denied.sequence + 1))
+        check = [e for e in resent if e.event_id == CHECK_MODES_OFFBOARD_SIGNAL]
+        assert check[-1].arguments[:5] == struct.pack("<IB", 1 << 14, 20)
+    peer.close()
