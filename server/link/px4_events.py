@@ -283,9 +283,10 @@ class Px4Events:
         ]
 
     async def _explain(self, started_s: float, reason: str | None) -> str | None:
-        """A refused command's reason: PX4's event that follows the COMMAND_ACK. When it
-        says to resolve the arming checks, the texts of the checks that fail; when a mode
-        is not available, that and the checks that fail in the mode asked for."""
+        """A refused command's reason: PX4's event that follows the COMMAND_ACK, followed
+        by the checks that fail when it points at them: in the current mode for "Arming
+        denied: Resolve system health failures first", in the mode asked for when PX4
+        marks the event so (a mode not available)."""
         if self.decoder is None:
             return reason
 
@@ -297,14 +298,12 @@ class Px4Events:
         if self._refusal is None or not refused():
             return reason
         event = self._refusal[1]
-        if event.name == ARM_DENIED_RESOLVE_FAILURES and (checks := self.failing_checks()):
-            return "; ".join(checks)
-        custom_mode = next(iter(event.arguments.values()), None)
-        nav_state = self.decoder.nav_states.get(custom_mode if isinstance(custom_mode, int) else -1)
-        if (
-            event.type == APPEND_CHECKS
-            and nav_state is not None
-            and (checks := self.failing_checks(nav_state))
-        ):
-            return f"{event.text}: {'; '.join(checks)}"
-        return event.text
+        checks: list[str] = []
+        if event.name == ARM_DENIED_RESOLVE_FAILURES:
+            checks = self.failing_checks()
+        elif event.type == APPEND_CHECKS:
+            custom_mode = next(iter(event.arguments.values()), None)
+            if isinstance(custom_mode, int) and custom_mode in self.decoder.nav_states:
+                checks = self.failing_checks(self.decoder.nav_states[custom_mode])
+        # both texts, as QGroundControl shows the refusal with the checks that fail
+        return f"{event.text}: {'; '.join(checks)}" if checks else event.text

@@ -268,7 +268,9 @@ async def test_arm_refusal_names_the_failing_check(
     await scripted.vehicle_heard_all()
     result = await scripted.vehicle.arm()
     assert result.outcome.value == "TEMPORARILY_REJECTED"
-    assert result.reason == "No offboard signal"
+    assert result.reason == (
+        "Arming denied: Resolve system health failures first: No offboard signal"
+    )
     # in a mode the check does not block, PX4's refusal text itself
     scripted.peer.report_mode(0x30000, 0x30000)  # POSCTL
     await scripted.vehicle_heard_all()
