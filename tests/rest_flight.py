@@ -76,8 +76,12 @@ class RestFlight:
         if content is not None:
             headers["Content-Type"] = "application/json"
         response = self.http.request(
-            method, url, json=body if content is None else None, content=content,
-            headers=headers, params=params,
+            method,
+            url,
+            json=body if content is None else None,
+            content=content,
+            headers=headers,
+            params=params,
         )
         shown = response.text if len(response.text) < 400 else response.text[:400] + "..."
         query = f"?{params}" if params else ""
@@ -132,9 +136,7 @@ class RestFlight:
         try:
             holds_for_blocking(what, check, duration_s)
         except AssertionError:
-            raise AssertionError(
-                f"{what}: stopped holding; state {summarize(seen[0])}"
-            ) from None
+            raise AssertionError(f"{what}: stopped holding; state {summarize(seen[0])}") from None
 
     def command(self, path: str, body: Any = None) -> Json:
         """A command the docs promise answers 200 ACCEPTED."""
@@ -193,8 +195,12 @@ def position_ned(north_m: float, east_m: float, down_m: float) -> Json:
 
 
 def velocity_ned(north_m_s: float, east_m_s: float = 0.0, down_m_s: float = 0.0) -> Json:
-    return {"type": "velocity_ned", "north_m_s": north_m_s, "east_m_s": east_m_s,
-            "down_m_s": down_m_s}
+    return {
+        "type": "velocity_ned",
+        "north_m_s": north_m_s,
+        "east_m_s": east_m_s,
+        "down_m_s": down_m_s,
+    }
 
 
 def in_offboard(state: Json) -> bool:

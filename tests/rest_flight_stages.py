@@ -13,7 +13,6 @@ from tests.rest_flight import (
     CLIENT_NAME,
     DEADMAN_TIMEOUT_S,
     LEASE_SURVIVES_WAIT_S,
-    LIVE_REPEAT_S,
     MAX_SPEED_XY_M_S,
     TAKEOFF_ALT_M,
     Json,
@@ -26,7 +25,12 @@ from tests.rest_flight import (
     speed_xy,
     velocity_ned,
 )
-from tests.rest_flight_handover import handover
+from tests.rest_flight_control import (
+    handover,
+    lease_released_holds,
+    lease_ttl_lapses,
+    live_setpoint_and_deadman,
+)
 from tests.waiting import wait_for_blocking
 
 # PX4 SITL passes its pre-arm checks a few seconds after boot; the sim at once.
@@ -41,7 +45,8 @@ def connected(flight: RestFlight) -> None:
     vehicles = wait_for_blocking(
         "a vehicle listed",
         lambda: flight.expect(flight.call("GET", "/vehicles"), 200, "GET /vehicles"),
-        30.0, every_s=0.5,
+        30.0,
+        every_s=0.5,
     )
     listed = [int(vehicle["id"]) for vehicle in vehicles]
     if flight.vehicle_id is None:
@@ -57,18 +62,28 @@ def connected(flight: RestFlight) -> None:
 def observer_reads_but_cannot_control(flight: RestFlight) -> None:
     observer = flight.served.observer_token
     flight.expect(flight.call("GET", "", token=observer, lease=False), 200, "observer reads")
-    flight.expect(flight.call("GET", "control", token=observer, lease=False), 200,
-                  "observer sees who controls")
-    for method, path, body in (("POST", "control", {}), ("POST", "arm", {}),
-                               ("PUT", "setpoint", velocity_ned(1.0)),
-                               ("POST", "intents/brake", {})):
-        flight.expect(flight.call(method, path, body, token=observer, lease=False), 403,
-                      f"observer {method} {path}")
+    flight.expect(
+        flight.call("GET", "control", token=observer, lease=False),
+        200,
+        "observer sees who controls",
+    )
+    for method, path, body in (
+        ("POST", "control", {}),
+        ("POST", "arm", {}),
+        ("PUT", "setpoint", velocity_ned(1.0)),
+        ("POST", "intents/brake", {}),
+    ):
+        flight.expect(
+            flight.call(method, path, body, token=observer, lease=False),
+            403,
+            f"observer {method} {path}",
+        )
 
 
 def take_control(flight: RestFlight) -> None:
     lease = flight.expect(
-        flight.call("POST", "control", {"client_name": CLIENT_NAME}, lease=False), 200,
+        flight.call("POST", "control", {"client_name": CLIENT_NAME}, lease=False),
+        200,
         "POST /control",
     )
     flight.lease_id = lease["lease_id"]
@@ -78,15 +93,19 @@ def take_control(flight: RestFlight) -> None:
     status = flight.control()
     assert CLIENT_NAME in (status.get("holder") or ""), f"holder does not name the client: {status}"
     assert (status.get("expires_in_s") or 0.0) > LEASE_SURVIVES_WAIT_S, status
-    other = flight.expect(flight.call("POST", "control", {}, lease=False), 409,
-                          "a second session takes control without takeover")
+    other = flight.expect(
+        flight.call("POST", "control", {}, lease=False),
+        409,
+        "a second session takes control without takeover",
+    )
     assert CLIENT_NAME in str(other), f"the 409 should name the holder: {other}"
 
 
 def control_needs_the_lease(flight: RestFlight) -> None:
     flight.expect(flight.call("POST", "arm", {}, lease=False), 423, "arm without X-Lease-Id")
     wrong = flight.http.post(
-        f"/vehicles/{flight.vehicle_id}/arm", json={},
+        f"/vehicles/{flight.vehicle_id}/arm",
+        json={},
         headers={**flight.headers(lease=False), "X-Lease-Id": "not-the-lease"},
     )
     assert wrong.status_code == 423, f"arm with a wrong lease: {wrong.status_code} {wrong.text}"
@@ -120,9 +139,13 @@ def takeoff(flight: RestFlight) -> None:
 def offboard_start(flight: RestFlight) -> None:
     here = flight.state()["position_ned"]
     answer = flight.expect(
-        flight.call("POST", "offboard/start",
-                    {"setpoint": position_ned(here["north_m"], here["east_m"], -TAKEOFF_ALT_M)}),
-        200, "offboard/start",
+        flight.call(
+            "POST",
+            "offboard/start",
+            {"setpoint": position_ned(here["north_m"], here["east_m"], -TAKEOFF_ALT_M)},
+        ),
+        200,
+        "offboard/start",
     )
     flight.log(f"  offboard/start answered {answer}")
     state = flight.wait_state("in OFFBOARD", in_offboard, 5.0)
@@ -133,15 +156,20 @@ def position_setpoint(flight: RestFlight) -> None:
     here = flight.state()["position_ned"]
     north_m, east_m = here["north_m"] + 10.0, here["east_m"]
     sent = flight.expect(
-        flight.call("PUT", "setpoint", position_ned(north_m, east_m, -TAKEOFF_ALT_M)), 200,
+        flight.call("PUT", "setpoint", position_ned(north_m, east_m, -TAKEOFF_ALT_M)),
+        200,
         "PUT position setpoint",
     )
     for key in ("setpoint", "message", "frame", "type_mask"):
         assert key in sent, f"the setpoint answer lacks {key!r}: {sent}"
     flight.wait_state(
         "reached the position setpoint (1 m, < 0.5 m/s)",
-        lambda s: in_offboard(s) and distance_ned(s, north_m, east_m) < 1.0 and speed_xy(s) < 0.5
-        and abs(s["position_ned"]["down_m"] + TAKEOFF_ALT_M) < 1.0,
+        lambda s: (
+            in_offboard(s)
+            and distance_ned(s, north_m, east_m) < 1.0
+            and speed_xy(s) < 0.5
+            and abs(s["position_ned"]["down_m"] + TAKEOFF_ALT_M) < 1.0
+        ),
         30.0,
     )
 
@@ -153,13 +181,15 @@ def waiting_keeps_a_position_setpoint(flight: RestFlight) -> None:
 
     def flying_it(state: Json) -> bool:
         return bool(
-            in_offboard(state) and state.get("setpoint") == target
+            in_offboard(state)
+            and state.get("setpoint") == target
             and distance_ned(state, target["north_m"], target["east_m"]) < 1.0
         )
 
     flight.hold_state(
         f"OFFBOARD at the position setpoint for {3 * DEADMAN_TIMEOUT_S} s without calls",
-        flying_it, 3 * DEADMAN_TIMEOUT_S,
+        flying_it,
+        3 * DEADMAN_TIMEOUT_S,
     )
 
 
@@ -180,24 +210,38 @@ def bad_input_is_422(flight: RestFlight) -> None:
     )
     assert "max_speed_xy_m_s" in str(too_fast), f"the 422 names no limit: {too_fast}"
     nan = flight.expect(
-        flight.call("PUT", "setpoint", content='{"type": "velocity_ned", "north_m_s": NaN, '
-                    '"east_m_s": 0, "down_m_s": 0}'), 422, "NaN velocity",
+        flight.call(
+            "PUT",
+            "setpoint",
+            content='{"type": "velocity_ned", "north_m_s": NaN, "east_m_s": 0, "down_m_s": 0}',
+        ),
+        422,
+        "NaN velocity",
     )
     assert "north_m_s" in str(nan), f"the 422 does not name the NaN field: {nan}"
-    flight.expect(flight.call("PUT", "setpoint", {"type": "velocity_ned", "north_m_s": 1}), 422,
-                  "missing fields")
-    flight.expect(flight.call("PUT", "setpoint", {"type": "warp", "factor": 9}), 422,
-                  "unknown setpoint type")
-    flight.expect(flight.call("POST", "takeoff", {"altitude_m": 10_000}), 422,
-                  "takeoff above the envelope")
+    flight.expect(
+        flight.call("PUT", "setpoint", {"type": "velocity_ned", "north_m_s": 1}),
+        422,
+        "missing fields",
+    )
+    flight.expect(
+        flight.call("PUT", "setpoint", {"type": "warp", "factor": 9}), 422, "unknown setpoint type"
+    )
+    flight.expect(
+        flight.call("POST", "takeoff", {"altitude_m": 10_000}), 422, "takeoff above the envelope"
+    )
     origin = flight.state()["origin"]
     far_lat, far_lon, _ = pymap3d.ned2geodetic(
         50_000.0, 0.0, -TAKEOFF_ALT_M, origin["lat_deg"], origin["lon_deg"], origin["alt_amsl_m"]
     )
     flight.expect(
-        flight.call("POST", "reposition",
-                    {"lat_deg": far_lat, "lon_deg": far_lon, "alt_rel_m": TAKEOFF_ALT_M}),
-        422, "reposition 50 km away",
+        flight.call(
+            "POST",
+            "reposition",
+            {"lat_deg": far_lat, "lon_deg": far_lon, "alt_rel_m": TAKEOFF_ALT_M},
+        ),
+        422,
+        "reposition 50 km away",
     )
     state = flight.state()
     setpoint = state.get("setpoint") or {}
@@ -205,93 +249,6 @@ def bad_input_is_422(flight: RestFlight) -> None:
     assert setpoint.get("type") == "velocity_ned", f"a refusal replaced the setpoint: {setpoint}"
     assert not any(setpoint.get(k) for k in ("north_m_s", "east_m_s", "down_m_s")), (
         f"a refused call changed what is flown: {setpoint}"
-    )
-
-
-def live_setpoint_and_deadman(flight: RestFlight) -> None:
-    live = velocity_ned(1.5)
-    last_sent = time.monotonic()
-    for _ in range(int(3.0 / LIVE_REPEAT_S)):  # a key held for 3 s
-        flight.expect(flight.call("PUT", "setpoint", live, params={"live": "true"}), 200,
-                      "live velocity")
-        last_sent = time.monotonic()
-        time.sleep(LIVE_REPEAT_S)
-    moving = flight.state()
-    assert in_offboard(moving), f"a held live setpoint left OFFBOARD: {moving.get('mode')}"
-    assert speed_xy(moving) >= 0.8, f"a held live setpoint must keep flying: {speed_xy(moving):.2f}"
-    assert (moving.get("setpoint") or {}).get("north_m_s") == live["north_m_s"], (
-        f"braked although the live input kept coming: {moving.get('setpoint')}"
-    )
-
-    def braked(state: Json) -> bool:
-        setpoint = state.get("setpoint") or {}
-        return setpoint.get("type") != "velocity_ned" or not setpoint.get("north_m_s")
-
-    flight.wait_state("the deadman replaced the silent live setpoint", braked,
-                      DEADMAN_TIMEOUT_S + 3.0)
-    braked_after_s = time.monotonic() - last_sent
-    assert braked_after_s <= DEADMAN_TIMEOUT_S + 1.0, (
-        f"braked {braked_after_s:.2f} s after the last live setpoint, deadman {DEADMAN_TIMEOUT_S} s"
-    )
-    flight.wait_state(
-        "holding a position after braking (< 0.3 m/s, OFFBOARD)",
-        lambda s: in_offboard(s) and speed_xy(s) < 0.3
-        and (s.get("setpoint") or {}).get("type") == "position_ned",
-        10.0,
-    )
-    status = flight.control()
-    assert CLIENT_NAME in (status.get("holder") or ""), f"the deadman ended the lease: {status}"
-
-
-def lease_released_holds(flight: RestFlight) -> None:
-    old = flight.lease_id
-    flight.expect(flight.call("DELETE", "control"), 204, "DELETE /control")
-    assert flight.control().get("holder") is None, "released but still held"
-    _holding_after_operator_loss(flight)
-    flight.expect(flight.call("PUT", "setpoint", velocity_ned(1.0)), 423,
-                  f"a setpoint with the released lease {old}")
-
-
-def lease_ttl_lapses(flight: RestFlight) -> None:
-    ttl_s = 2.0
-    lease = flight.expect(
-        flight.call("POST", "control", {"client_name": CLIENT_NAME, "ttl_s": ttl_s}, lease=False),
-        200, "POST /control with ttl_s",
-    )
-    assert lease["ttl_s"] == ttl_s, f"asked ttl_s {ttl_s}, got {lease}"
-    flight.lease_id = lease["lease_id"]
-    start = time.monotonic()
-    wait_for_blocking(f"the {ttl_s} s lease to lapse",
-                      lambda: flight.control().get("holder") is None, ttl_s + 1.5)
-    flight.log(f"  lapsed after {time.monotonic() - start:.1f} s")
-    flight.expect(flight.call("PUT", "setpoint", velocity_ned(1.0)), 423, "a lapsed lease")
-    _holding_after_operator_loss(flight)
-    lease = flight.expect(
-        flight.call("POST", "control", {"client_name": CLIENT_NAME}, lease=False), 200,
-        "POST /control again",
-    )
-    flight.lease_id = lease["lease_id"]
-
-
-def _holding_after_operator_loss(flight: RestFlight) -> None:
-    """on_operator_loss default `hold`: still streaming and in OFFBOARD, a position hold where
-    the vehicle was. (Real PX4's estimate wanders by decimetres while it holds: the check is
-    that it stays near, not that it stands still.)"""
-    where = flight.state()["position_ned"]
-    held = flight.wait_state(
-        "a position hold in OFFBOARD after the operator left",
-        lambda s: in_offboard(s) and (s.get("setpoint") or {}).get("type") == "position_ned",
-        5.0,
-    )["setpoint"]
-    assert distance_ned({"position_ned": where}, held["north_m"], held["east_m"]) < 1.5, (
-        f"the hold {held} is not where the vehicle was: {where}"
-    )
-    flight.hold_state(
-        "holding there with the stream on",
-        lambda s: in_offboard(s) and s.get("setpoint") == held
-        and (s.get("stream") or {}).get("active")
-        and distance_ned(s, held["north_m"], held["east_m"]) < 2.0,
-        2.0,
     )
 
 
@@ -303,32 +260,49 @@ def intents(flight: RestFlight) -> None:
     assert moved.get("via") == "setpoint", f"an offset in OFFBOARD stays in OFFBOARD: {moved}"
     flight.wait_state(
         "5 m north by the offset intent (1 m, < 0.5 m/s), still OFFBOARD",
-        lambda s: in_offboard(s) and distance_ned(s, here["north_m"] + 5.0, here["east_m"]) < 1.0
-        and speed_xy(s) < 0.5,
+        lambda s: (
+            in_offboard(s)
+            and distance_ned(s, here["north_m"] + 5.0, here["east_m"]) < 1.0
+            and speed_xy(s) < 0.5
+        ),
         20.0,
     )
-    flight.expect(flight.call("PUT", "intents/velocity",
-                              {"frame": "ned", "north_m_s": 1.5, "live": False}), 200, "velocity")
+    flight.expect(
+        flight.call("PUT", "intents/velocity", {"frame": "ned", "north_m_s": 1.5, "live": False}),
+        200,
+        "velocity",
+    )
     flight.wait_state("flying at 1.5 m/s (1.0 reached)", lambda s: speed_xy(s) >= 1.0, 10.0)
     braked = flight.expect(flight.call("POST", "intents/brake"), 200, "brake")
     assert braked.get("via") == "setpoint", f"brake in OFFBOARD streams a stop: {braked}"
-    flight.wait_state("braked and holding in OFFBOARD",
-                      lambda s: in_offboard(s) and speed_xy(s) < 0.3, 10.0)
+    flight.wait_state(
+        "braked and holding in OFFBOARD", lambda s: in_offboard(s) and speed_xy(s) < 0.3, 10.0
+    )
     origin = flight.state()["origin"]
     lat, lon, _ = pymap3d.ned2geodetic(
-        here["north_m"], here["east_m"], here["down_m"], origin["lat_deg"], origin["lon_deg"],
+        here["north_m"],
+        here["east_m"],
+        here["down_m"],
+        origin["lat_deg"],
+        origin["lon_deg"],
         origin["alt_amsl_m"],
     )
     back = flight.expect(
-        flight.call("POST", "intents/goto",
-                    {"lat_deg": lat, "lon_deg": lon, "alt_rel_m": start_alt_m}),
-        200, "goto",
+        flight.call(
+            "POST", "intents/goto", {"lat_deg": lat, "lon_deg": lon, "alt_rel_m": start_alt_m}
+        ),
+        200,
+        "goto",
     )
     assert back.get("via") == "setpoint", f"goto in OFFBOARD: {back}"
     flight.wait_state(
         "back where the intents started (1 m, < 0.5 m/s), still OFFBOARD",
-        lambda s: in_offboard(s) and distance_ned(s, here["north_m"], here["east_m"]) < 1.0
-        and speed_xy(s) < 0.5 and abs(alt_rel(s) - start_alt_m) < 1.0,
+        lambda s: (
+            in_offboard(s)
+            and distance_ned(s, here["north_m"], here["east_m"]) < 1.0
+            and speed_xy(s) < 0.5
+            and abs(alt_rel(s) - start_alt_m) < 1.0
+        ),
         20.0,
     )
 
@@ -338,14 +312,19 @@ def reposition(flight: RestFlight) -> None:
     origin, here = state["origin"], state["position_ned"]
     north_m, east_m = here["north_m"], here["east_m"] + 10.0
     lat, lon, _ = pymap3d.ned2geodetic(
-        north_m, east_m, here["down_m"], origin["lat_deg"], origin["lon_deg"],
+        north_m,
+        east_m,
+        here["down_m"],
+        origin["lat_deg"],
+        origin["lon_deg"],
         origin["alt_amsl_m"],
     )
     flight.command("reposition", {"lat_deg": lat, "lon_deg": lon, "alt_rel_m": TAKEOFF_ALT_M})
     flight.wait_state(
         "at the reposition target (1.5 m, < 0.5 m/s), in HOLD",
-        lambda s: s.get("mode") == "HOLD" and distance_ned(s, north_m, east_m) < 1.5
-        and speed_xy(s) < 0.5,
+        lambda s: (
+            s.get("mode") == "HOLD" and distance_ned(s, north_m, east_m) < 1.5 and speed_xy(s) < 0.5
+        ),
         40.0,
     )
 
@@ -372,10 +351,25 @@ def release_control(flight: RestFlight) -> None:
 STAGES: dict[str, Callable[[RestFlight], None]] = {
     stage.__name__: stage
     for stage in (
-        connected, observer_reads_but_cannot_control, take_control, control_needs_the_lease,
-        arm, takeoff, offboard_start, position_setpoint, waiting_keeps_a_position_setpoint,
-        velocity_setpoint, bad_input_is_422, live_setpoint_and_deadman, lease_released_holds,
-        lease_ttl_lapses, handover, intents, reposition, rtl, release_control,
+        connected,
+        observer_reads_but_cannot_control,
+        take_control,
+        control_needs_the_lease,
+        arm,
+        takeoff,
+        offboard_start,
+        position_setpoint,
+        waiting_keeps_a_position_setpoint,
+        velocity_setpoint,
+        bad_input_is_422,
+        live_setpoint_and_deadman,
+        lease_released_holds,
+        lease_ttl_lapses,
+        handover,
+        intents,
+        reposition,
+        rtl,
+        release_control,
     )
 }
 STAGE_NAMES = list(STAGES)
@@ -394,4 +388,3 @@ def run_stage(flight: RestFlight, name: str) -> None:
         flight.log(f"== stage {name} FAILED: {error}")
         raise
     flight.log(f"== stage {name} passed")
-

@@ -33,9 +33,7 @@ class Served:
 
 
 @contextlib.contextmanager
-def skyhelm_serve(
-    log_dir: Path, *args: str, ready_timeout_s: float = 60.0
-) -> Iterator[Served]:
+def skyhelm_serve(log_dir: Path, *args: str, ready_timeout_s: float = 60.0) -> Iterator[Served]:
     """Run `skyhelm serve --port 0 ARGS` with an observer token; yield once it printed its URL."""
     observer = secrets.token_urlsafe(16)
     command = [str(SKYHELM), "serve", "--port", "0", "--observer-token", observer]

@@ -69,10 +69,17 @@ def find_sitl() -> Px4Sitl:
     px4_base, host, client_base = layout.groups()
     chosen = os.environ.get("SKYHELM_PX4_INSTANCE")
     # Without a choice: the first instance whose two ports nobody uses (others may fly PX4 here).
-    instance = int(chosen) if chosen is not None else next(
-        (n for n in range(_INSTANCES)
-         if _udp_free(host, int(px4_base) + n) and _udp_free(host, int(client_base) + n)),
-        -1,
+    instance = (
+        int(chosen)
+        if chosen is not None
+        else next(
+            (
+                n
+                for n in range(_INSTANCES)
+                if _udp_free(host, int(px4_base) + n) and _udp_free(host, int(client_base) + n)
+            ),
+            -1,
+        )
     )
     if instance < 0:
         pytest.skip(f"all of PX4 instances 0..{_INSTANCES - 1} are in use")
@@ -95,7 +102,10 @@ def px4() -> Iterator[Px4Sitl]:
     sitl = find_sitl()
     started = subprocess.run(
         [str(sitl.sitl_dir / "run.sh"), str(sitl.instance), MODEL],
-        env={**os.environ, "PX4_CLEAN": "1"}, capture_output=True, text=True, timeout=60,
+        env={**os.environ, "PX4_CLEAN": "1"},
+        capture_output=True,
+        text=True,
+        timeout=60,
     )
     assert started.returncode == 0, f"run.sh failed: {started.stdout}{started.stderr}"
     pid = int(started.stdout.strip().splitlines()[-1])
