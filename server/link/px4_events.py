@@ -296,7 +296,10 @@ class Px4Events:
         if not refused():
             await self._core.wait_until(refused, self.reason_wait_s)
         if self._refusal is None or not refused():
-            return reason
+            # PX4 explains after it got the command: a text from before is another story
+            # (the refusal of the command before, say)
+            earlier = [t for t, _, text in self._core.texts.items if text == reason]
+            return None if earlier and max(earlier) < started_s else reason
         event = self._refusal[1]
         checks: list[str] = []
         if event.name == ARM_DENIED_RESOLVE_FAILURES:

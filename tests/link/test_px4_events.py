@@ -287,3 +287,17 @@ async def test_mode_refusal_names_the_checks_failing_in_that_mode(
     assert result.reason == (
         "Switching to mode 'Offboard' is currently not possible: No offboard signal"
     )
+
+
+async def test_an_earlier_refusals_text_is_not_the_reason(
+    scripted: ScriptedSession, tmp_path: Path
+) -> None:
+    px4 = await _loaded(scripted, tmp_path)
+    scripted.peer.send(
+        mavlink.MAVLink_statustext_message(mavlink.MAV_SEVERITY_CRITICAL, b"Something else")
+    )
+    await scripted.vehicle_heard_all()
+    px4.peer.on_command = lambda m: px4.peer.ack(m.command, mavlink.MAV_RESULT_DENIED)
+    result = await scripted.vehicle.arm()
+    assert result.outcome.value == "DENIED"
+    assert result.reason is None
