@@ -261,7 +261,7 @@ class Commander:
             return
         self.failsafe = True
         mode = _failsafe_mode(DllAction, action)
-        ev.send_failsafe(self.events, mode)
+        ev.send_failsafe(self.events, self.user_mode, mode)
         if action == DllAction.DISARM:
             self._disarm("Failsafe: disarming", ev.ARM_REASON_FAILSAFE)
         elif mode is not None:
@@ -304,10 +304,10 @@ class Commander:
         self.failsafe = True
         mode = _failsafe_mode(ObLossAction, action)
         if action == ObLossAction.DISARM:
-            ev.send_failsafe(self.events, None)
+            ev.send_failsafe(self.events, self.user_mode, None)
             self._disarm("Failsafe: disarming", ev.ARM_REASON_FAILSAFE)
             return
-        ev.send_failsafe(self.events, modes.POSCTL if mode is None else mode)
+        ev.send_failsafe(self.events, self.user_mode, modes.POSCTL if mode is None else mode)
         self._set_nav_mode(modes.POSCTL if mode is None else mode)
 
     def _check_auto_disarm(self, now_s: float) -> None:

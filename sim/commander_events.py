@@ -48,6 +48,7 @@ _FAILSAFE_ACTIONS = {
     modes.POSCTL: 2, modes.ALTCTL: 3, modes.STABILIZED: 4, modes.AUTO_LOITER: 5,
     modes.AUTO_RTL: 6, modes.AUTO_LAND: 7, modes.TERMINATION: 10,
 }
+FAILSAFE_ACTION_POSCTRL = 2
 FAILSAFE_ACTION_DISARM = 9
 
 # navigation_mode_t (vehicle_status nav_state) of each mode
@@ -120,12 +121,19 @@ def send_armed(events: EventLog, armed: bool, reason: int) -> None:
     events.send(name, log_levels(LOG_INFO), reason)
 
 
-def send_failsafe(events: EventLog, mode: Px4Mode | None) -> None:
-    """commander_failsafe_enter_generic: the mode switched to and the action (None: disarm)."""
-    action = FAILSAFE_ACTION_DISARM if mode is None else _FAILSAFE_ACTIONS.get(mode, 2)
-    custom_mode = 0 if mode is None else mode.custom_mode
+def send_failsafe(events: EventLog, user_mode: Px4Mode, action_mode: Px4Mode | None) -> None:
+    """commander_failsafe_enter_generic: the custom mode of the user's mode it interrupts
+    (seen on PX4 v1.16: OFFBOARD for an offboard loss) and the action (None: disarm)."""
+    action = (FAILSAFE_ACTION_DISARM if action_mode is None
+              else _FAILSAFE_ACTIONS.get(action_mode, FAILSAFE_ACTION_POSCTRL))
     events.send("commander_failsafe_enter_generic", log_levels(LOG_CRITICAL, LOG_WARNING),
-                custom_mode, action)
+                user_mode.custom_mode, action)
+
+
+def send_command_decision(events: EventLog, name: str) -> None:
+    """What the commander says when it takes a command: commander_rtl,
+    commander_landing_current_pos (Info)."""
+    events.send(name, log_levels(LOG_INFO))
 
 
 def send_flight_change(events: EventLog, landed: bool) -> None:

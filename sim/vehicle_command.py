@@ -22,6 +22,7 @@ from sim.commander import (
     MAV_RESULT_UNSUPPORTED,
     MAV_SEVERITY_CRITICAL,
 )
+from sim.commander_events import send_command_decision
 from sim.geo import MAVLINK_ALT_LIMIT_M, is_valid_lat_lon
 from sim.modes import Px4Mode
 from sim.vehicle_interface import Link, Message, VehicleInterface
@@ -108,10 +109,14 @@ class VehicleCommands:
 
     def _land(self, cmd: Command, link: Link) -> int:
         self._v.commander.switch_mode(modes.AUTO_LAND)
+        send_command_decision(self._v.commander.events, "commander_landing_current_pos")
         return MAV_RESULT_ACCEPTED
 
     def _rtl(self, cmd: Command, link: Link) -> int:
-        return self._v.commander.request_mode(modes.AUTO_RTL)
+        result = self._v.commander.request_mode(modes.AUTO_RTL)
+        if result == MAV_RESULT_ACCEPTED:
+            send_command_decision(self._v.commander.events, "commander_rtl")
+        return result
 
     def _reposition(self, cmd: Command, link: Link) -> int:
         v = self._v

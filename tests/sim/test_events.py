@@ -23,6 +23,8 @@ ARMING_CHECK_SUMMARY = 1 << 24 | 11047904
 MODESWITCH_NOT_AVAIL = 1 << 24 | 10503063
 FAILSAFE_ENTER_GENERIC = 1 << 24 | 14605264
 DISARMED_BY = 1 << 24 | 16017271
+COMMANDER_RTL = 1 << 24 | 3484900
+LANDING_CURRENT_POS = 1 << 24 | 3322590
 
 
 class RequestEvent(CustomMessage):
@@ -130,8 +132,8 @@ def test_offboard_loss_failsafe_and_preflight_auto_disarm(harness: Harness) -> N
     failsafe = [e for e in events_of(harness.api) if e.event_id == FAILSAFE_ENTER_GENERIC]
     assert failsafe
     assert failsafe[0].log_levels == 0x42
-    # switching to Position (custom mode 0x30000), action fallback_posctrl (2)
-    assert failsafe[0].arguments[:5] == struct.pack("<IB", modes.POSCTL.custom_mode, 2)
+    # as PX4 v1.16 SITL: the user's mode (OFFBOARD, 0x60000), action fallback_posctrl (2)
+    assert failsafe[0].arguments[:5] == struct.pack("<IB", modes.OFFBOARD.custom_mode, 2)
     harness.run(10.0)
     disarmed = [e for e in events_of(harness.api) if e.event_id == DISARMED_BY]
     assert disarmed
@@ -226,3 +228,13 @@ async def test_over_udp_a_refused_arm_and_the_check_it_names() -> None:
         check = [e for e in resent if e.event_id == CHECK_MODES_OFFBOARD_SIGNAL]
         assert check[-1].arguments[:5] == struct.pack("<IB", 1 << 14, 20)
     peer.close()
+
+
+def test_land_and_return_commands_say_what_the_commander_does(harness: Harness) -> None:
+    settle(harness)
+    harness.api.clear()
+    harness.command_long(mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH)
+    harness.command_long(mavlink.MAV_CMD_NAV_LAND)
+    settle(harness)
+    infos = [(e.event_id, e.log_levels) for e in events_of(harness.api)]
+    assert infos == [(COMMANDER_RTL, 0x66), (LANDING_CURRENT_POS, 0x66)]
