@@ -12,6 +12,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import development as mavlink
 
+from server.api.ws_telemetry import event_message
 from server.link.component_metadata import mavlink_crc32
 from server.link.px4_events import EventDecoder
 from server.link.px4_messages import (
@@ -232,6 +233,10 @@ async def test_events_are_published_logged_and_gaps_filled(
     first = next(e for e in events if e.data["sequence"] == 1)
     assert first.data["log_level"] == "WARNING"
     assert first.data["arguments"] == {"arg0": 2.5}
+    assert event_message(1, first) == {
+        "type": "event", "vehicle": 1, "kind": "px4_event", "time_s": first.time_s,
+        "data": {**first.data},
+    }  # fmt: skip
     # a re-sent event nobody asked for is not shown twice
     scripted.peer.send(px4.sent[4])
     await scripted.vehicle_heard_all()
