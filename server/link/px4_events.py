@@ -14,8 +14,9 @@ it is. Decoding is pyulog's port of libevents' parser (argument unpacking, enums
 bitfields, "{1}" formatting, PX4's markup stripped).
 
 A decoded event goes three ways: a ``px4_event`` vehicle event (text, log level, id,
-arguments), the state's recent messages (the page's message log) and, when it is a warning
-or worse, the recent texts a refused command takes its reason from.
+arguments, group), the state's recent messages (the page's message log; not the arming and
+health check reports, which PX4 repeats with every change) and, when it is a warning or
+worse, the reason of a command refused just before.
 """
 
 from __future__ import annotations
@@ -253,12 +254,14 @@ class Px4Events:
             "log_level": log_level_name(level), "group": decoded.group,
             "arguments": decoded.arguments,
         })  # fmt: skip
+        if decoded.group != "default":
+            return  # the check reports repeat with every change: state, not log lines
         messages, now = self._telemetry.statustext, time.time()
         # PX4 sends some events also as STATUSTEXT (ending in a tab): the log shows one
         if not any(m.text == decoded.text and now - m.time_s < _SAME_TEXT_S for m in messages):
             messages.append(StatusText(now, log_level_name(level), decoded.text))
             del messages[:-STATUSTEXT_KEEP]
-        if decoded.name and decoded.group == "default" and level <= MAV_SEVERITY_WARNING:
+        if decoded.name and level <= MAV_SEVERITY_WARNING:
             self._refusal = (self._core.now(), decoded)
 
     # -- arming checks and refusal reasons ------------------------------------------------

@@ -269,6 +269,8 @@ async def test_arm_refusal_names_the_failing_check(
     scripted: ScriptedSession, tmp_path: Path
 ) -> None:
     await _offboard_blocked(scripted, tmp_path)
+    # the check report is state, not a line of the message log
+    assert not scripted.vehicle.snapshot().statustext
     scripted.peer.report_mode(0x60000, 0x60000)  # OFFBOARD
     await scripted.vehicle_heard_all()
     result = await scripted.vehicle.arm()
