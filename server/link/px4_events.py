@@ -139,6 +139,7 @@ class Px4Events:
     """The events protocol of one vehicle and the metadata it needs."""
 
     reason_wait_s = 0.2  # PX4 sends the EVENT a few ms after the COMMAND_ACK
+    retry_s = 30.0  # after the metadata could not be had, the next try
 
     def __init__(
         self, core: VehicleCore, telemetry: Telemetry, cache_dir: Path | None = None
@@ -150,6 +151,7 @@ class Px4Events:
         self.decoder: EventDecoder | None = None
         self.metadata_error: str | None = None
         self._load_task: asyncio.Task[None] | None = None
+        self._failed_s = 0.0
         self._undecoded: deque[Any] = deque(maxlen=_KEEP_UNDECODED)
         self._latest: int | None = None
         self._missing: set[int] = set()
@@ -214,7 +216,10 @@ class Px4Events:
 
     # -- metadata and decoding ------------------------------------------------------------
     def _start_loading(self) -> None:
-        if self._load_task is None and self.decoder is None:
+        if self.decoder is not None:
+            return
+        task = self._load_task
+        if task is None or (task.done() and self._core.now() - self._failed_s > self.retry_s):
             self._load_task = asyncio.get_running_loop().create_task(
                 self._load(), name=f"events-metadata:{self._core.sysid}"
             )
@@ -224,6 +229,7 @@ class Px4Events:
             self.decoder = EventDecoder(await self.metadata.events())
         except (MetadataError, ValueError) as e:
             self.metadata_error = str(e)
+            self._failed_s = self._core.now()
             log.warning("vehicle %d: no events metadata: %s", self._core.sysid, e)
             self._core.publish_event("px4_events_metadata", {"loaded": False, "error": str(e)})
             return

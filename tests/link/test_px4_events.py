@@ -308,3 +308,21 @@ async def test_an_earlier_refusals_text_is_not_the_reason(
     result = await scripted.vehicle.arm()
     assert result.outcome.value == "DENIED"
     assert result.reason is None
+
+
+async def test_metadata_is_tried_again_after_a_failure(
+    scripted: ScriptedSession, tmp_path: Path
+) -> None:
+    px4 = FakePx4(scripted)
+    served = dict(px4.ftp.files)
+    px4.ftp.files.clear()  # not there (yet)
+    plugin = scripted.vehicle.px4_events
+    plugin.metadata.cache_dir = tmp_path
+    plugin.ftp.timeout_s = plugin.metadata.answer_timeout_s = 0.1
+    plugin.retry_s = 0.0
+    px4.current_sequence()
+    await wait_for(lambda: plugin.metadata_error, 5.0, "the failure")
+    assert "FileNotFound" in str(plugin.metadata_error)
+    px4.ftp.files.update(served)
+    px4.current_sequence()
+    await wait_for(lambda: plugin.decoder is not None, 5.0, "metadata on the next try")
