@@ -37,6 +37,8 @@ ARM_DISARM_FORCE_MAGIC = 21196
 # user's OFFBOARD a moment after the stream resumes (observed 1.1-1.3 s and ~0.1 s).
 FAILSAFE_ACTION_DELAY_S = 0.15
 OFFBOARD_RESUME_DELAY_S = 0.1
+# PX4's commander runs its checks every COMMANDER_MONITORING_INTERVAL (10 ms)
+COMMANDER_MONITORING_INTERVAL_S = 0.01
 
 Announce = Callable[[int, str], None]
 
@@ -150,6 +152,7 @@ class Commander:
         self._arm_listeners: list[Callable[[bool], None]] = []
         self.events = EventLog()
         self._reported_checks: tuple[ev.ArmingCheck, ...] | None = None
+        self._checked_s = -math.inf
 
     # -- queries -----------------------------------------------------------------------
 
@@ -243,10 +246,12 @@ class Commander:
         self._check_datalink(now_s)
         self._check_auto_disarm(now_s)
         self.events.update(now_s)
-        checks = self._failing_checks()
-        if checks != self._reported_checks:
-            self._reported_checks = checks
-            ev.send_arming_report(self.events, checks)
+        if now_s - self._checked_s >= COMMANDER_MONITORING_INTERVAL_S:
+            self._checked_s = now_s
+            checks = self._failing_checks()
+            if checks != self._reported_checks:
+                self._reported_checks = checks
+                ev.send_arming_report(self.events, checks)
 
     def _check_datalink(self, now_s: float) -> None:
         last = self.gcs_heartbeat_s
