@@ -36,7 +36,7 @@ class Served:
 def skyhelm_serve(log_dir: Path, *args: str, ready_timeout_s: float = 60.0) -> Iterator[Served]:
     """Run `skyhelm serve --port 0 ARGS` with an observer token; yield once it printed its URL."""
     observer = secrets.token_urlsafe(16)
-    command = [str(SKYHELM), "serve", "--port", "0", "--observer-token", observer]
+    command = [str(SKYHELM), "serve", "--port", "0", f"--observer-token={observer}"]
     command += ["--log-dir", str(log_dir), *args]
     stderr_path = log_dir / "serve.stderr.log"
     with stderr_path.open("w") as stderr:

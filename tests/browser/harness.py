@@ -61,7 +61,7 @@ class Serve:
         self._log = tempfile.NamedTemporaryFile(  # noqa: SIM115
             "w+", prefix="skyhelm-serve-", suffix=".log", delete=False
         )
-        args = [*skyhelm_command(), "serve", "--port", str(self.port), "--token", self.token,
+        args = [*skyhelm_command(), "serve", "--port", str(self.port), f"--token={self.token}",
                 "--no-tlog", *self.extra_args]
         self._process = subprocess.Popen(
             args, cwd=REPO, stdout=subprocess.PIPE, stderr=self._log, text=True,
