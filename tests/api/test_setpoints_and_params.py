@@ -172,7 +172,8 @@ async def test_lease_is_renewed_by_control_calls_and_released_by_delete(quad_api
 
 
 async def test_unrenewed_lease_lapses_after_ttl() -> None:
-    async with sim_cluster("quad") as sim, api_for(sim, lease_ttl_s=0.4, lease_ttl_min_s=0.2) as api:
+    short_lease = {"lease_ttl_s": 0.4, "lease_ttl_min_s": 0.2}
+    async with sim_cluster("quad") as sim, api_for(sim, **short_lease) as api:
         headers = await api.take_control()
         await eventually(lambda: _lease_gone(api), 2.0, "the lease to lapse", poll_s=0.05)
         assert (
