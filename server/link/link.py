@@ -18,6 +18,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import development as mavlink
 
+from . import px4_messages
 from .aio import cancel_and_wait
 from .link_stats import LinkStats, SequenceGapCounter
 from .tlog import TlogWriter
@@ -211,6 +212,8 @@ class Link:
 
     def _frame_received(self, msg: mavlink.MAVLink_message) -> None:
         self._frames_in += 1
+        if isinstance(msg, mavlink.MAVLink_unknown):
+            msg = px4_messages.decode_unknown(msg) or msg
         if isinstance(msg, mavlink.MAVLink_unknown):
             # Not in our dialect: counted and recorded, but nobody can read it.
             self._gaps.observe(*_header_ids(msg.get_msgbuf()))

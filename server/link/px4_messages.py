@@ -1,13 +1,13 @@
 """MAVLink messages of the events and component-metadata protocols that pymavlink's
 generated dialect lacks, so the link can read them as PX4 v1.16 sends them.
 
-PX4 builds with a newer common.xml than pymavlink ships. The messages the vehicle sends
+PX4 builds with a newer common.xml than pymavlink ships, so the messages the vehicle sends
 (COMPONENT_INFORMATION 395, COMPONENT_METADATA 397, EVENT 410, CURRENT_EVENT_SEQUENCE 411,
-RESPONSE_EVENT_ERROR 413) are added to the dialect's decoder map on import, from their wire
-layout (fields ordered by size) and the CRC extra of PX4's generated headers; without that
-they arrive as UNKNOWN_<id>, which nobody reads. REQUEST_EVENT (412), which only the ground
-sends, is packed here but not registered: a vehicle in this process keeps seeing it as its
-own dialect would.
+RESPONSE_EVENT_ERROR 413) reach pymavlink's parser as UNKNOWN_<id>, whose checksum it cannot
+check. decode_unknown() reads them from their wire layout (fields ordered by size) once the
+checksum holds with the CRC extra of PX4's generated headers. pymavlink's own decoder map is
+left as it is: it is shared by everything in the process that parses MAVLink.
+REQUEST_EVENT (412), which only the ground sends, is packed here.
 """
 
 from __future__ import annotations
@@ -110,14 +110,46 @@ ResponseEventErrorMessage = _message_type(
     "sequence sequence_oldest_available target_system target_component reason",
 )
 
-for _received in (
-    ComponentInformationMessage,
-    ComponentMetadataMessage,
-    EventMessage,
-    CurrentEventSequenceMessage,
-    ResponseEventErrorMessage,
-):
-    mavlink.mavlink_map.setdefault(_received.id, _received)
+_RECEIVED: dict[int, type[_WireMessage]] = {
+    cls.id: cls
+    for cls in (
+        ComponentInformationMessage,
+        ComponentMetadataMessage,
+        EventMessage,
+        CurrentEventSequenceMessage,
+        ResponseEventErrorMessage,
+    )
+}
+_MAVLINK2_STX = 0xFD
+_MAVLINK2_HEADER_LEN = 10
+
+
+def decode_unknown(msg: mavlink.MAVLink_message) -> mavlink.MAVLink_message | None:
+    """The message an UNKNOWN_<id> frame holds, when it is one of the messages above and its
+    checksum holds with that message's CRC extra; None for anything else (a frame nobody
+    can vouch for)."""
+    frame = bytes(msg.get_msgbuf())
+    if len(frame) < _MAVLINK2_HEADER_LEN + 2 or frame[0] != _MAVLINK2_STX:
+        return None
+    length = frame[1]
+    msg_id = frame[7] | frame[8] << 8 | frame[9] << 16
+    cls = _RECEIVED.get(msg_id)
+    end = _MAVLINK2_HEADER_LEN + length
+    if cls is None or len(frame) < end + 2:
+        return None
+    crc = mavlink.x25crc(frame[1:end])
+    crc.accumulate(bytes([cls.crc_extra]))
+    if crc.crc != frame[end] | frame[end + 1] << 8:
+        return None
+    # MAVLink 2 trims trailing zero bytes off the payload
+    payload = frame[_MAVLINK2_HEADER_LEN:end].ljust(cls.unpacker.size, b"\0")
+    decoded = cls(*cls.unpacker.unpack(payload[: cls.unpacker.size]))
+    decoded._header = mavlink.MAVLink_header(
+        msg_id, frame[2], frame[3], length, frame[4], frame[5], frame[6]
+    )
+    decoded._msgbuf = bytearray(frame)
+    decoded._payload = payload
+    return decoded
 
 
 def event_arguments(msg: Any) -> bytes:
