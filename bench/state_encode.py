@@ -38,6 +38,7 @@ def full_state(north_m: float = 12.5) -> link.VehicleState:
     return link.VehicleState(
         sysid=1, compid=1, mav_type="QUADROTOR", autopilot="PX4", connected=True,
         last_heartbeat_age_s=0.21, mode="OFFBOARD", user_mode="OFFBOARD", armed=True,
+        ready_to_arm=True,
         system_status="ACTIVE", landed_state="IN_AIR", vtol_state="UNDEFINED",
         position_ned=link.PositionNedState(north_m, -3.25, -10.0),
         velocity_ned=link.VelocityNedState(1.5, -0.25, 0.05),

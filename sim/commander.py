@@ -331,6 +331,10 @@ class Commander:
 
     # -- internals ---------------------------------------------------------------------
 
+    def can_arm(self) -> bool:
+        """Arming would pass the checks in the current mode (PX4's can_arm_mode_flags bit)."""
+        return self._arming_denial() is None
+
     def _arming_denial(self) -> str | None:
         if not self.ready:
             return "system not ready (no valid position)"

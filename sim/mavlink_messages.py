@@ -195,9 +195,10 @@ class MessageFactory:
     def sys_status(self) -> Message:
         v = self._v
         sensors = _SENSORS if v.ready else _SENSORS_BEFORE_GPS_FIX
+        health = sensors if v.can_arm else sensors & ~mavlink.MAV_SYS_STATUS_PREARM_CHECK
         battery = v.battery
         return mavlink.MAVLink_sys_status_message(
-            sensors, sensors, sensors, 250, round(battery.voltage_v * 1000.0),
+            sensors, sensors, health, 250, round(battery.voltage_v * 1000.0),
             round(battery.current_a * 100.0), battery.remaining_percent, 0, 0, 0, 0, 0, 0,
         )
 

@@ -148,6 +148,10 @@ class SimVehicle:
         return self.commander.ready
 
     @property
+    def can_arm(self) -> bool:
+        return self.commander.can_arm()
+
+    @property
     def armed(self) -> bool:
         return self.commander.armed
 

@@ -52,6 +52,9 @@ class VehicleInterface(Protocol):
     def ready(self) -> bool: ...
 
     @property
+    def can_arm(self) -> bool: ...
+
+    @property
     def mav_type(self) -> int: ...
 
     @property

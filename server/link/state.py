@@ -146,6 +146,7 @@ class VehicleState:
     mode: str
     user_mode: str | None
     armed: bool
+    ready_to_arm: bool | None
     system_status: str
     landed_state: LandedState
     vtol_state: VtolState

@@ -85,6 +85,9 @@ class Telemetry:
     heading_deg: float | None = None
     # SERVO_OUTPUT_RAW or ACTUATOR_OUTPUT_STATUS, as 0..1
     actuator_outputs: tuple[float, ...] = ()
+    # SYS_STATUS: PX4 sets MAV_SYS_STATUS_PREARM_CHECK in the health bits while arming is
+    # possible in the current mode (streams/SYS_STATUS.hpp); None until a SYS_STATUS came
+    ready_to_arm: bool | None = None
     # SYS_STATUS or BATTERY_STATUS, GPS_RAW_INT, HOME_POSITION, GPS_GLOBAL_ORIGIN, STATUSTEXT
     battery: state.BatteryState | None = None
     gps: state.GpsState | None = None
@@ -219,6 +222,9 @@ class Telemetry:
         self.heading_deg = float(msg.heading)
 
     def _on_sys_status(self, msg: mavlink.MAVLink_sys_status_message) -> None:
+        self.ready_to_arm = bool(
+            msg.onboard_control_sensors_health & mavlink.MAV_SYS_STATUS_PREARM_CHECK
+        )
         voltage_v = None if msg.voltage_battery == 0xFFFF else msg.voltage_battery / 1000.0
         self.battery = _battery(voltage_v, msg.current_battery, msg.battery_remaining)
 

@@ -181,3 +181,17 @@ async def test_arming_refusal_in_offboard_without_signal_carries_the_reason() ->
         assert result.outcome is CommandOutcome.TEMPORARILY_REJECTED
         assert result.reason is not None
         assert "denied" in result.reason.lower()
+
+
+async def test_ready_to_arm_follows_px4s_prearm_bit_in_the_current_mode() -> None:
+    async with open_sim(speed=SPEED) as session:
+        vehicle = session.vehicle
+        await wait_for(lambda: vehicle.snapshot().ready_to_arm is True, 10.0, "ready to arm")
+        assert (await vehicle.set_mode("OFFBOARD")).ok  # disarmed: accepted, no stream yet
+        await wait_for(lambda: vehicle.snapshot().ready_to_arm is False, 5.0,
+                       "no pre-arm bit in OFFBOARD without a setpoint stream")  # fmt: skip
+        assert not (await vehicle.arm()).ok
+        await vehicle.set_setpoint(PositionNed(0.0, 0.0, -2.0))
+        await wait_for(lambda: vehicle.snapshot().ready_to_arm is True, 5.0,
+                       "the pre-arm bit back once setpoints stream")  # fmt: skip
+        assert (await vehicle.arm()).ok

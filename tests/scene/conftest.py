@@ -22,7 +22,7 @@ ORIGIN = OriginState(lat_deg=47.397742, lon_deg=8.545594, alt_amsl_m=488.0)
 def make_state(**changes: Any) -> VehicleState:
     state = VehicleState(
         sysid=1, compid=1, mav_type="QUADROTOR", autopilot="PX4", connected=True,
-        last_heartbeat_age_s=0.1, mode="HOLD", user_mode="HOLD", armed=False,
+        last_heartbeat_age_s=0.1, mode="HOLD", user_mode="HOLD", armed=False, ready_to_arm=True,
         system_status="STANDBY", landed_state="ON_GROUND", vtol_state="UNDEFINED",
         position_ned=PositionNedState(0.0, 0.0, 0.0), velocity_ned=None, global_position=None,
         attitude=AttitudeState(0.0, 0.0, 0.0, 0.0, 0.0, 0.0), ground_speed_m_s=0.0,

@@ -123,6 +123,9 @@ class VehicleStateOut(_Out):
     mode: str
     user_mode: str | None
     armed: bool
+    ready_to_arm: bool | None = Field(
+        description="PX4's pre-arm bit: arming would pass its checks in the current mode"
+    )
     system_status: str
     landed_state: Literal["UNDEFINED", "ON_GROUND", "IN_AIR", "TAKEOFF", "LANDING"]
     vtol_state: Literal["UNDEFINED", "MC", "FW", "TRANSITION_TO_FW", "TRANSITION_TO_MC"]
