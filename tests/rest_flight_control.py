@@ -34,7 +34,7 @@ def live_setpoint_and_deadman(flight: RestFlight) -> None:
             flight.call("PUT", "setpoint", live, params={"live": "true"}), 200, "live velocity"
         )
         last_sent = time.monotonic()
-        time.sleep(LIVE_REPEAT_S)
+        time.sleep(LIVE_REPEAT_S)  # the pace of a held key: live input repeats, it never waits
     moving = flight.state()
     assert in_offboard(moving), f"a held live setpoint left OFFBOARD: {moving.get('mode')}"
     assert speed_xy(moving) >= 0.8, f"a held live setpoint must keep flying: {speed_xy(moving):.2f}"

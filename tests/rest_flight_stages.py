@@ -112,14 +112,15 @@ def control_needs_the_lease(flight: RestFlight) -> None:
 
 
 def arm(flight: RestFlight) -> None:
-    # The state does not say when the vehicle passes its pre-arm checks (PX4 needs a few
-    # seconds after boot), so a script retries while the vehicle answers "not yet".
+    # The state's ready_to_arm (PX4's pre-arm bit) says when arming would pass; PX4 still
+    # refuses now and then just after it turned true, so a script retries "not yet" too.
+    flight.wait_state("ready to arm", lambda s: bool(s.get("ready_to_arm")), ARM_READY_WITHIN_S)
     start = time.monotonic()
     while (answer := flight.call("POST", "arm", {})).status_code == 409:
         refused = answer.json()
         assert refused.get("result") == "TEMPORARILY_REJECTED", f"arm refused: {refused}"
         assert time.monotonic() - start < ARM_READY_WITHIN_S, f"arm still refused: {refused}"
-        time.sleep(1.0)
+        time.sleep(1.0)  # the retry interval of a script, as the docs' curl loop does
     armed = flight.expect(answer, 200, "arm")
     assert armed.get("result") == "ACCEPTED", armed
     flight.wait_state("armed", lambda s: bool(s.get("armed")), 5.0)

@@ -126,7 +126,7 @@ def _stop(pid: int) -> None:
             os.kill(pid, 0)
         except ProcessLookupError:
             return
-        time.sleep(0.1)
+        time.sleep(0.1)  # polling a process that is not ours to wait() for
     os.kill(pid, signal.SIGKILL)
 
 
