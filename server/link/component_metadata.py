@@ -140,7 +140,11 @@ class ComponentMetadata:
         if cached is not None:
             try:
                 cached.parent.mkdir(parents=True, exist_ok=True)
-                cached.write_bytes(text)
+                # written whole under another name, then renamed: another process reading
+                # the cache never sees half a file
+                partial = cached.with_name(f"{cached.name}.{os.getpid()}.partial")
+                partial.write_bytes(text)
+                partial.replace(cached)
             except OSError:
                 log.warning("cannot cache events metadata in %s", cached.parent)
         return events
