@@ -43,11 +43,11 @@ lint: $(TSTAMP)
 	$(VENV)/bin/lint-imports
 
 ## Two workers: most tests wait on a real-time simulated vehicle, not on a core; the browser
-## tests share one worker (xdist_group). TEST_WORKERS=0 runs everything in one process.
+## tests share one worker (tests/conftest.py). TEST_WORKERS=0 runs everything in one process.
 TEST_WORKERS ?= 2
 
 test: $(TSTAMP) chromium lint
-	$(VENV)/bin/pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadgroup
+	$(VENV)/bin/pytest -q -p no:cacheprovider -n $(TEST_WORKERS)
 
 ## The REST flight against real PX4 v1.16 SITL (the kit of shared/px4-sitl, built into
 ## SKYHELM_PX4_SITL_DIR or /root/px4sitl); skipped with a message when there is no build.

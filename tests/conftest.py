@@ -1,19 +1,22 @@
-"""How `make test` spreads the suite over workers (pytest -n N --dist loadgroup): a test
-module stays on one worker, in order (module fixtures such as a served vehicle are made once,
-and the REST flight's stages run in sequence), and the browser tests share one worker, since
-a browser rendering WebGL in software takes a core."""
+"""How `make test` spreads the suite over workers (pytest -n N): a test module stays on one
+worker, in order (module fixtures such as a served vehicle are made once, and the REST
+flight's stages run in sequence), and the browser tests share one worker, since a browser
+rendering WebGL in software takes a core."""
 
 from __future__ import annotations
 
-from pathlib import Path
+from typing import Any
 
-import pytest
-
-_BROWSER_TESTS = Path(__file__).parent / "browser"
+_BROWSER_TESTS = "tests/browser/"
 
 
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    for item in items:
-        path = Path(str(item.fspath))
-        group = "browser" if path.is_relative_to(_BROWSER_TESTS) else str(path)
-        item.add_marker(pytest.mark.xdist_group(group))
+def pytest_xdist_make_scheduler(config: Any, log: Any) -> Any:
+    from xdist.scheduler import LoadFileScheduling
+
+    class _ModuleScheduling(LoadFileScheduling):  # type: ignore[misc]
+        def _split_scope(self, nodeid: str) -> str:
+            if nodeid.startswith(_BROWSER_TESTS):
+                return _BROWSER_TESTS
+            return str(super()._split_scope(nodeid))
+
+    return _ModuleScheduling(config, log)
