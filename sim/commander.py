@@ -11,11 +11,11 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from enum import IntEnum
 
 from sim import commander_events as ev
 from sim import modes
 from sim.events import EventLog
+from sim.failsafe_actions import DllAction, ObLossAction, failsafe_mode
 from sim.modes import Px4Mode
 from sim.params import ParamReader
 from sim.topics import ControlSetpoint
@@ -27,7 +27,6 @@ MAV_RESULT_UNSUPPORTED = 3
 MAV_RESULT_FAILED = 4
 
 MAV_SEVERITY_CRITICAL = 2
-MAV_SEVERITY_WARNING = 4
 MAV_SEVERITY_INFO = 6
 
 # param2 of MAV_CMD_COMPONENT_ARM_DISARM that skips the landed check on disarm.
@@ -43,51 +42,14 @@ COMMANDER_MONITORING_INTERVAL_S = 0.01
 Announce = Callable[[int, str], None]
 
 
-class ObLossAction(IntEnum):
-    """COM_OBL_RC_ACT values."""
-
-    POSITION = 0
-    ALTITUDE = 1
-    STABILIZED = 2
-    RETURN = 3
-    LAND = 4
-    HOLD = 5
-    TERMINATE = 6
-    DISARM = 7
-
-
-class DllAction(IntEnum):
-    """NAV_DLL_ACT values (GCS datalink loss)."""
-
-    DISABLED = 0
-    HOLD = 1
-    RETURN = 2
-    LAND = 3
-    TERMINATE = 5
-    DISARM = 6
-
-
-# The mode a failsafe action flies, by the action's name in COM_OBL_RC_ACT and NAV_DLL_ACT
-# (the two parameters name the same actions with different numbers).
-_FAILSAFE_ACTION_MODES: dict[str, Px4Mode] = {
-    "POSITION": modes.POSCTL,
-    "ALTITUDE": modes.ALTCTL,
-    "STABILIZED": modes.STABILIZED,
-    "RETURN": modes.AUTO_RTL,
-    "LAND": modes.AUTO_LAND,
-    "HOLD": modes.AUTO_LOITER,
-    "TERMINATE": modes.TERMINATION,
-}
-
-
-def _failsafe_mode(actions: type[IntEnum], value: int) -> Px4Mode | None:
-    """The mode of a parameter's action value; None for a value the parameter lacks."""
-    try:
-        name = actions(value).name
-    except ValueError:
-        return None
-    return _FAILSAFE_ACTION_MODES.get(name)
-
+# mode_requirements.cpp: modes with mode_req_prevent_arming, never kept as the mode to
+# return to after disarming
+_MODES_PREVENTING_ARMING = frozenset({
+    modes.AUTO_RTL, modes.AUTO_LAND, modes.TERMINATION, modes.AUTO_FOLLOW_TARGET,
+    modes.AUTO_PRECLAND, modes.ORBIT,
+})
+# Commander::printRejectMode says a refused mode switch at most once a second
+MODE_REJECT_PRINT_INTERVAL_S = 1.0
 
 # Known modes the simulated vehicle cannot run at all (nothing to follow, no beacon).
 _UNSUPPORTED_MODES = frozenset(
@@ -153,6 +115,8 @@ class Commander:
         self.events = EventLog()
         self._reported_checks: tuple[ev.ArmingCheck, ...] | None = None
         self._checked_s = -math.inf
+        self._mode_after_disarming: Px4Mode = modes.AUTO_LOITER
+        self._mode_rejected_s = -math.inf
 
     # -- queries -----------------------------------------------------------------------
 
@@ -176,35 +140,38 @@ class Commander:
         """DO_SET_MODE / SET_MODE: the MAV_RESULT of the second (real) ack."""
         if (mode not in modes.MODE_NAMES or mode in _UNSUPPORTED_MODES
                 or (self.armed and not self.mode_can_run(mode))):
-            ev.send_mode_not_available(self.events, mode)
+            self._print_reject_mode(mode)
             return MAV_RESULT_TEMPORARILY_REJECTED
         if mode == modes.OFFBOARD and self.offboard_requests_lost > 0:
             self.offboard_requests_lost -= 1
             self.switch_mode(modes.AUTO_LOITER)
             return MAV_RESULT_ACCEPTED
-        self.user_mode = mode
+        self._set_user_mode(mode)
         self._set_nav_mode(mode)
         self._clear_failsafe()
         return MAV_RESULT_ACCEPTED
 
     def switch_mode(self, mode: Px4Mode) -> None:
         """A mode change the vehicle makes itself and adopts as the user's (takeoff → Hold)."""
-        self.user_mode = mode
+        self._set_user_mode(mode)
         self._set_nav_mode(mode)
         self._clear_failsafe()
 
     def arm(self, now_s: float) -> int:
         if self.armed:
             return MAV_RESULT_ACCEPTED
-        reason = self._arming_denial()
-        if reason is not None:
-            self._announce(MAV_SEVERITY_CRITICAL, f"Arming denied: {reason}")
+        if not self.can_arm():
+            # PX4 names no check here: the failing ones went out before as events
+            self._announce(MAV_SEVERITY_CRITICAL,
+                           "Arming denied: Resolve system health failures first")
             ev.send_arm_denied(self.events)
             return MAV_RESULT_TEMPORARILY_REJECTED
         self.armed = True
         self.armed_at_s = now_s
         self.took_off_since_arming = not self.landed
         self._landed_since_s = now_s if self.landed else None
+        self._announce(MAV_SEVERITY_INFO,
+                       f"Armed by {ev.arm_reason_text(ev.ARM_REASON_COMMAND_EXTERNAL)}")
         ev.send_armed(self.events, True, ev.ARM_REASON_COMMAND_EXTERNAL)
         self._arm_listeners_notify()
         return MAV_RESULT_ACCEPTED
@@ -216,7 +183,7 @@ class Commander:
             self._announce(MAV_SEVERITY_CRITICAL, "Disarming denied: not landed")
             ev.send_disarm_denied(self.events)
             return MAV_RESULT_TEMPORARILY_REJECTED
-        self._disarm("Disarmed by external command")
+        self._disarm(ev.ARM_REASON_COMMAND_EXTERNAL)
         return MAV_RESULT_ACCEPTED
 
     def on_offboard_setpoint(self, setpoint: ControlSetpoint, now_s: float) -> None:
@@ -235,7 +202,7 @@ class Commander:
         self.gcs_heartbeat_s = now_s
         if self.datalink_lost:
             self.datalink_lost = False
-            self._announce(MAV_SEVERITY_INFO, "Data link regained")
+            self._announce(MAV_SEVERITY_INFO, "GCS connection regained")
 
     # -- periodic ----------------------------------------------------------------------
 
@@ -260,15 +227,16 @@ class Commander:
         if now_s - last <= self._params.get("COM_DL_LOSS_T"):
             return
         self.datalink_lost = True
-        self._announce(MAV_SEVERITY_CRITICAL, "Failsafe: no connection to ground control")
+        self._announce(MAV_SEVERITY_INFO, "Connection to ground station lost")
         action = int(self._params.get("NAV_DLL_ACT"))
         if not self.armed or action == DllAction.DISABLED:
             return
+        self._announce(MAV_SEVERITY_CRITICAL, "Failsafe activated")
         self.failsafe = True
-        mode = _failsafe_mode(DllAction, action)
+        mode = failsafe_mode(DllAction, action)
         ev.send_failsafe(self.events, self.user_mode, mode)
         if action == DllAction.DISARM:
-            self._disarm("Failsafe: disarming", ev.ARM_REASON_FAILSAFE)
+            self._disarm(ev.ARM_REASON_FAILSAFE)
         elif mode is not None:
             self._set_nav_mode(mode)
 
@@ -276,6 +244,7 @@ class Commander:
         if not landed and self.armed:
             self.took_off_since_arming = True
         if landed != self.landed and self.armed:
+            self._announce(MAV_SEVERITY_INFO, "Landing detected" if landed else "Takeoff detected")
             ev.send_flight_change(self.events, landed)
         if landed and not self.landed:
             self._landed_since_s = now_s
@@ -305,12 +274,12 @@ class Commander:
 
     def _apply_offboard_loss_action(self) -> None:
         action = int(self._params.get("COM_OBL_RC_ACT"))
-        self._announce(MAV_SEVERITY_WARNING, "Failsafe: offboard control lost")
+        self._announce(MAV_SEVERITY_CRITICAL, "Failsafe activated")
         self.failsafe = True
-        mode = _failsafe_mode(ObLossAction, action)
+        mode = failsafe_mode(ObLossAction, action)
         if action == ObLossAction.DISARM:
             ev.send_failsafe(self.events, self.user_mode, None)
-            self._disarm("Failsafe: disarming", ev.ARM_REASON_FAILSAFE)
+            self._disarm(ev.ARM_REASON_FAILSAFE)
             return
         ev.send_failsafe(self.events, self.user_mode, modes.POSCTL if mode is None else mode)
         self._set_nav_mode(modes.POSCTL if mode is None else mode)
@@ -320,31 +289,25 @@ class Commander:
             return
         if self.took_off_since_arming:
             timeout = self._params.get("COM_DISARM_LAND")
-            reason = "Disarmed after landing"
             cause = ev.ARM_REASON_AUTO_DISARM_LAND
         else:
             timeout = self._params.get("COM_DISARM_PRFLT")
-            reason = "Disarmed: no takeoff"
             cause = ev.ARM_REASON_AUTO_DISARM_PREFLIGHT
         if timeout > 0 and now_s - self._landed_since_s >= timeout:
-            self._disarm(reason, cause)
+            self._disarm(cause)
 
     # -- internals ---------------------------------------------------------------------
 
     def can_arm(self) -> bool:
-        """Arming would pass the checks in the current mode (PX4's can_arm_mode_flags bit)."""
-        return self._arming_denial() is None
-
-    def _arming_denial(self) -> str | None:
-        if not self.ready:
-            return "system not ready (no valid position)"
-        if self.nav_mode == modes.OFFBOARD and not self.offboard_signal_fresh():
-            return "no offboard signal"
-        if self.nav_mode == modes.AUTO_MISSION and not self._mode_available[modes.AUTO_MISSION]:
-            return "no valid mission"
-        if self.nav_mode == modes.TERMINATION:
-            return "flight termination active"
-        return None
+        """PX4's canArm for the mode flown now (its can_arm_mode_flags bit, the pre-arm bit
+        of SYS_STATUS)."""
+        return not (
+            not self.ready
+            or (self.nav_mode == modes.OFFBOARD and not self.offboard_signal_fresh())
+            or (self.nav_mode == modes.AUTO_MISSION
+                and not self._mode_available[modes.AUTO_MISSION])
+            or self.nav_mode == modes.TERMINATION
+        )
 
     def _failing_checks(self) -> tuple[ev.ArmingCheck, ...]:
         """The arming checks failing now, in the order PX4's report lists them."""
@@ -356,13 +319,32 @@ class Commander:
         )
         return tuple(check for fails, check in failing if fails)
 
-    def _disarm(self, reason: str, cause: int = ev.ARM_REASON_COMMAND_EXTERNAL) -> None:
+    def _disarm(self, cause: int) -> None:
         self.armed = False
         self.took_off_since_arming = False
         self._landed_since_s = None
-        self._announce(MAV_SEVERITY_INFO, reason)
+        # UserModeIntention::onDisarm: back to the last mode the user chose that does not
+        # keep the vehicle from arming (after RTL or Land: Hold, or what came before)
+        self.user_mode = self._mode_after_disarming
+        self._set_nav_mode(self.user_mode)
+        self._clear_failsafe()
+        self._announce(MAV_SEVERITY_INFO, f"Disarmed by {ev.arm_reason_text(cause)}")
         ev.send_armed(self.events, False, cause)
         self._arm_listeners_notify()
+
+    def _set_user_mode(self, mode: Px4Mode) -> None:
+        self.user_mode = mode
+        if mode not in _MODES_PREVENTING_ARMING or mode == modes.TERMINATION:
+            self._mode_after_disarming = mode
+
+    def _print_reject_mode(self, mode: Px4Mode) -> None:
+        """Commander::printRejectMode: the text and its event at most once a second."""
+        if self._now_s - self._mode_rejected_s <= MODE_REJECT_PRINT_INTERVAL_S:
+            return
+        self._mode_rejected_s = self._now_s
+        self._announce(MAV_SEVERITY_CRITICAL,
+                       f"Switching to {ev.mode_text(mode)} is currently not available")
+        ev.send_mode_not_available(self.events, mode)
 
     def _set_nav_mode(self, mode: Px4Mode) -> None:
         if mode != self.nav_mode:

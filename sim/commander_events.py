@@ -60,6 +60,23 @@ _NAVIGATION_MODES = {
     modes.AUTO_VTOL_TAKEOFF: 15,
 }
 NAVIGATION_MODE_UNKNOWN = 255
+# lib/modes/ui.hpp nav_state_names: how PX4's STATUSTEXT names a mode
+_NAV_STATE_NAMES = {
+    modes.MANUAL: "Manual", modes.ALTCTL: "Altitude", modes.POSCTL: "Position",
+    modes.AUTO_MISSION: "Mission", modes.AUTO_LOITER: "Hold", modes.AUTO_RTL: "Return",
+    modes.ACRO: "Acro", modes.OFFBOARD: "Offboard", modes.STABILIZED: "Stabilized",
+    modes.AUTO_TAKEOFF: "Takeoff", modes.AUTO_LAND: "Land",
+    modes.AUTO_FOLLOW_TARGET: "Follow Target", modes.AUTO_PRECLAND: "Precision Landing",
+    modes.ORBIT: "Orbit", modes.AUTO_VTOL_TAKEOFF: "VTOL Takeoff",
+    modes.TERMINATION: "Termination",
+}
+# Commander.cpp arm_disarm_reason_str, for "Armed by ..." / "Disarmed by ..."
+_ARM_REASON_TEXTS = {
+    ARM_REASON_COMMAND_EXTERNAL: "external command",
+    ARM_REASON_AUTO_DISARM_LAND: "landing",
+    ARM_REASON_AUTO_DISARM_PREFLIGHT: "auto preflight disarming",
+    ARM_REASON_FAILSAFE: "failsafe",
+}
 
 
 @dataclass(frozen=True)
@@ -139,3 +156,12 @@ def send_command_decision(events: EventLog, name: str) -> None:
 def send_flight_change(events: EventLog, landed: bool) -> None:
     name = "commander_landing_detected" if landed else "commander_takeoff_detected"
     events.send(name, log_levels(LOG_INFO))
+
+
+def mode_text(mode: Px4Mode) -> str:
+    """PX4's name of a mode in STATUSTEXT ("Switching to Offboard is ...")."""
+    return _NAV_STATE_NAMES.get(mode, mode.name)
+
+
+def arm_reason_text(reason: int) -> str:
+    return _ARM_REASON_TEXTS.get(reason, "")

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 
 from sim import modes
-from sim.commander import MAV_SEVERITY_INFO, Announce, Commander
+from sim.commander import Announce, Commander
 from sim.mission_block import MissionBlock, VtolAirframe
 from sim.modes import Px4Mode
 from sim.params import ParamReader
@@ -149,7 +149,6 @@ class Navigator:
         climb_m = self._takeoff_start_down_m - target[2]
         climbed_m = self._takeoff_start_down_m - truth.position_ned_m[2]
         if climb_m <= 0.0 or climbed_m >= TAKEOFF_DONE_FRACTION * climb_m:
-            self._block.announce(MAV_SEVERITY_INFO, "Takeoff complete, holding position")
             self._pending_hold = (list(target), self._hold_yaw_rad, math.nan)
             self._takeoff_alt_amsl_m = math.nan
             self._block.commander.switch_mode(modes.AUTO_LOITER)

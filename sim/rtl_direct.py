@@ -61,6 +61,7 @@ class RtlDirect:
         self._yaw_rad = yaw_from_quat(truth.q_wxyz)
         self._land_xy = [home.position_ned_m[0], home.position_ned_m[1]]
         self._climb_xy = [truth.position_ned_m[0], truth.position_ned_m[1]]
+        self._announce_start()
         if self._block.commander.landed:
             self._enter_phase(RtlPhase.IDLE, now_s)
         elif down > self._return_down_m + ALTITUDE_REACHED_M:
@@ -85,29 +86,20 @@ class RtlDirect:
         self.phase = phase
         self.phases_seen.append(phase)
         self._phase_started_s = now_s
-        text = self._phase_text(phase)
-        if text:
-            self._block.announce(MAV_SEVERITY_INFO, text)
+        # PX4's rtl_direct says only where it lands; the start is said on activation
+        if phase == RtlPhase.LAND:
+            self._block.announce(MAV_SEVERITY_INFO, "RTL: land at destination")
 
-    def _phase_text(self, phase: RtlPhase) -> str:
+    def _announce_start(self) -> None:
+        """RtlDirect::on_activation: the return altitude, AMSL and above the destination
+        (home), rounded up as PX4 does."""
         home_down = self._block.commander.home.position_ned_m[2]
-        home_alt = self._block.commander.home.alt_m
-
-        def altitude(down: float) -> str:
-            return f"{home_alt + home_down - down:.0f} m ({home_down - down:.0f} m above home)"
-
-        texts = {
-            RtlPhase.CLIMBING: f"RTL: climb to {altitude(self._return_down_m)}",
-            RtlPhase.MOVE_TO_LOITER: f"RTL: return at {altitude(self._return_down_m)}",
-            RtlPhase.LOITER_DOWN: f"RTL: descend to {altitude(self._descend_down_m)}",
-            RtlPhase.LOITER_HOLD: f"RTL: loiter {self._block.params.get('RTL_LAND_DELAY'):.1f}s",
-            RtlPhase.MOVE_TO_LAND: "RTL: move to land approach",
-            RtlPhase.TRANSITION_TO_MC: "RTL: transition to multicopter",
-            RtlPhase.MOVE_TO_LAND_HOVER: "RTL: move to land position",
-            RtlPhase.LAND: "RTL: land at home",
-            RtlPhase.IDLE: "RTL: landed",
-        }
-        return texts[phase]
+        above = home_down - self._return_down_m
+        above_m = math.ceil(round(above, 3))
+        amsl_m = math.ceil(round(self._block.commander.home.alt_m + above, 3))
+        self._block.announce(
+            MAV_SEVERITY_INFO, f"RTL: start return at {amsl_m} m ({above_m} m above destination)"
+        )
 
     def _next_phase(
         self, phase: RtlPhase, now_s: float, truth: VehicleStateTruth

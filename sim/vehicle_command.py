@@ -21,6 +21,7 @@ from sim.commander import (
     MAV_RESULT_TEMPORARILY_REJECTED,
     MAV_RESULT_UNSUPPORTED,
     MAV_SEVERITY_CRITICAL,
+    MAV_SEVERITY_INFO,
 )
 from sim.commander_events import send_command_decision
 from sim.geo import MAVLINK_ALT_LIMIT_M, is_valid_lat_lon
@@ -109,12 +110,14 @@ class VehicleCommands:
 
     def _land(self, cmd: Command, link: Link) -> int:
         self._v.commander.switch_mode(modes.AUTO_LAND)
+        self._v.announce(MAV_SEVERITY_INFO, "Landing at current position")
         send_command_decision(self._v.commander.events, "commander_landing_current_pos")
         return MAV_RESULT_ACCEPTED
 
     def _rtl(self, cmd: Command, link: Link) -> int:
         result = self._v.commander.request_mode(modes.AUTO_RTL)
         if result == MAV_RESULT_ACCEPTED:
+            self._v.announce(MAV_SEVERITY_INFO, "Returning to launch")
             send_command_decision(self._v.commander.events, "commander_rtl")
         return result
 

@@ -16,6 +16,7 @@ from server.link import modes, state
 from server.link.statustext import RecentTexts, StatusTextAssembler, severity_name
 
 STATUSTEXT_KEEP = 20
+MAV_LANDED_STATE_ON_GROUND = 1
 # HEARTBEAT (1 Hz) shows failsafe mode changes late, so while CURRENT_MODE keeps coming it
 # alone says the mode; HEARTBEAT takes over when it has been silent this long.
 CURRENT_MODE_FRESH_S = 2.0
@@ -193,6 +194,11 @@ class Telemetry:
     def _on_extended_sys_state(self, msg: mavlink.MAVLink_extended_sys_state_message) -> None:
         if 0 <= msg.landed_state < len(state.LANDED_STATE_NAMES):
             self.landed_state = msg.landed_state
+        # PX4 v1.16's RTL says nothing once down (its last text is "RTL: land at
+        # destination"): touching down while returning is the end of the return
+        touched_down = msg.landed_state == MAV_LANDED_STATE_ON_GROUND
+        if self.mode == "RTL" and self.rtl_phase is not None and touched_down:
+            self._set_rtl_phase("LANDED")
         if 0 <= msg.vtol_state < len(state.VTOL_STATE_NAMES) and msg.vtol_state != self.vtol_state:
             self.vtol_state = msg.vtol_state
             self._publish("vtol", {"vtol_state": state.VTOL_STATE_NAMES[msg.vtol_state]})
@@ -294,10 +300,12 @@ class Telemetry:
         self._publish("statustext", {"severity": entry.severity, "text": text})
         lowered = text.lower()
         if lowered.startswith("rtl"):
-            phase = next((p for k, p in _RTL_PHASES if k in lowered), self.rtl_phase)
-            if phase != self.rtl_phase:
-                self.rtl_phase = phase
-                self._publish("rtl", {"phase": phase})
+            self._set_rtl_phase(next((p for k, p in _RTL_PHASES if k in lowered), self.rtl_phase))
+
+    def _set_rtl_phase(self, phase: str | None) -> None:
+        if phase != self.rtl_phase:
+            self.rtl_phase = phase
+            self._publish("rtl", {"phase": phase})
 
 
 # what reported() copies as it is (the others it names or freezes)

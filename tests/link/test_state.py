@@ -123,6 +123,10 @@ async def test_rtl_phase_follows_the_vehicle_rtl_statustexts(scripted: ScriptedS
     await wait_for(lambda: scripted.vehicle.snapshot().rtl_phase == "RETURNING")
     peer.send(mavlink.MAVLink_statustext_message(6, b"RTL: land at destination"))
     await wait_for(lambda: scripted.vehicle.snapshot().rtl_phase == "LANDING")
+    # PX4 v1.16 says nothing more: touching down (ON_GROUND) ends the return
+    peer.send(mavlink.MAVLink_extended_sys_state_message(0, mavlink.MAV_LANDED_STATE_ON_GROUND))
+    await wait_for(lambda: scripted.vehicle.snapshot().rtl_phase == "LANDED")
+    # disarmed, PX4 goes back to the mode chosen before RTL
     peer.custom_mode = HOLD
     peer.heartbeat()
 

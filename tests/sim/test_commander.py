@@ -8,7 +8,7 @@ import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
 from sim import modes
-from sim.commander import ObLossAction
+from sim.failsafe_actions import ObLossAction
 from tests.sim.conftest import Harness, HarnessFactory
 
 POSITION_AND_YAW = 0b0000_1011_1111_1000
@@ -128,7 +128,7 @@ def test_auto_disarm_after_com_disarm_prflt_without_takeoff(harness: Harness) ->
     harness.arm()
     took = harness.run_until(lambda: not harness.vehicle.armed, 15.0)
     assert took == pytest.approx(10.0, abs=0.1)
-    assert "Disarmed: no takeoff" in harness.api.texts()
+    assert "Disarmed by auto preflight disarming" in harness.api.texts()
 
 
 def test_auto_disarm_after_landing_takes_com_disarm_land(harness: Harness) -> None:
@@ -171,11 +171,12 @@ def test_datalink_loss_is_only_reported_with_nav_dll_act_disabled(harness: Harne
     harness.command_long(mavlink.MAV_CMD_NAV_TAKEOFF, *([math.nan] * 7))
     harness.arm()
     harness.run(11.0)
-    assert "Failsafe: no connection to ground control" in harness.api.texts()
+    assert "Connection to ground station lost" in harness.api.texts()
+    assert "Failsafe activated" not in harness.api.texts()
     assert harness.vehicle.mode_name == "AUTO_LOITER"
     assert not harness.vehicle.commander.failsafe
     gcs_heartbeat(harness)
-    assert "Data link regained" in harness.api.texts()
+    assert "GCS connection regained" in harness.api.texts()
 
 
 def test_datalink_loss_action_follows_nav_dll_act_after_com_dl_loss_t(harness: Harness) -> None:

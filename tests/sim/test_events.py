@@ -123,6 +123,23 @@ def test_mode_refused_when_armed_names_the_mode(harness: Harness) -> None:
     assert refused[0].arguments[:5] == struct.pack("<IB", modes.OFFBOARD.custom_mode, 7)
 
 
+def test_mode_refusal_text_and_event_at_most_once_a_second(harness: Harness) -> None:
+    harness.set_mode(modes.POSCTL)
+    harness.arm()
+    settle(harness)
+    harness.api.clear()
+    for _ in range(2):  # Commander::printRejectMode: once within a second
+        harness.set_mode(modes.OFFBOARD)
+        settle(harness)
+    refused = [e for e in events_of(harness.api) if e.event_id == MODESWITCH_NOT_AVAIL]
+    assert len(refused) == 1
+    assert harness.api.texts() == ["Switching to Offboard is currently not available"]
+    harness.run(1.0)
+    harness.set_mode(modes.OFFBOARD)
+    settle(harness)
+    assert len([e for e in events_of(harness.api) if e.event_id == MODESWITCH_NOT_AVAIL]) == 2
+
+
 def test_offboard_loss_failsafe_and_preflight_auto_disarm(harness: Harness) -> None:
     harness.local_ned(type_mask=0b110111111000)
     harness.set_mode(modes.OFFBOARD)

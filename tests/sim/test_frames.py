@@ -48,7 +48,7 @@ def test_every_telemetry_message_packs_like_pymavlink() -> None:
 
 
 @pytest.mark.parametrize("msg", [
-    mavlink.MAVLink_statustext_message(6, b"RTL: land at home", 3, 1),
+    mavlink.MAVLink_statustext_message(6, b"RTL: land at destination", 3, 1),
     mavlink.MAVLink_command_ack_message(mavlink.MAV_CMD_DO_SET_MODE, 0, 0, 0, 255, 190),
     mavlink.MAVLink_param_value_message(b"MIS_TAKEOFF_ALT", 2.5, 9, 412, 17),
     mavlink.MAVLink_heartbeat_message(2, 12, 0, 0, 0, 3),  # all-zero tail: one byte kept

@@ -61,7 +61,9 @@ def test_land_descends_at_land_speed_below_alt2_then_disarms(harness: Harness) -
     harness.run(1.5)
     assert harness.vehicle.truth.velocity_ned_m_s[2] == pytest.approx(0.7, abs=0.05)
     harness.run_until(lambda: not harness.vehicle.armed, 15.0)
-    assert harness.vehicle.mode_name == "AUTO_LAND"
+    # UserModeIntention::onDisarm: Land keeps a vehicle from arming, so once disarmed PX4
+    # goes back to the mode chosen before it (Hold, after the takeoff)
+    assert harness.vehicle.mode_name == "AUTO_LOITER"
 
 
 def test_land_speed_profile_between_land_altitudes(harness: Harness) -> None:
@@ -109,10 +111,14 @@ def test_rtl_phases_in_rtl_direct_order_with_statustext_and_disarm(harness: Harn
         RtlPhase.CLIMBING, RtlPhase.MOVE_TO_LOITER, RtlPhase.LOITER_DOWN,
         RtlPhase.LOITER_HOLD, RtlPhase.MOVE_TO_LAND_HOVER, RtlPhase.LAND, RtlPhase.IDLE,
     ]
+    # SIH_LOC_H0 489.4 m + RTL_RETURN_ALT 30 m, rounded up as PX4 does
     texts = [t for t in harness.api.texts() if t.startswith("RTL")]
-    assert texts[0] == "RTL: climb to 519 m (30 m above home)"
-    assert texts[1].startswith("RTL: return at 519 m")
-    assert "RTL: land at home" in texts
+    assert texts == ["RTL: start return at 520 m (30 m above destination)",
+                     "RTL: land at destination"]
+    assert "Returning to launch" in harness.api.texts()
+    assert "Disarmed by landing" in harness.api.texts()
+    # once disarmed PX4 reports the mode chosen before RTL (Hold, after the takeoff)
+    assert harness.vehicle.mode_name == "AUTO_LOITER"
     north, east, _ = harness.vehicle.truth.position_ned_m
     assert math.hypot(north, east) < 1.0
 

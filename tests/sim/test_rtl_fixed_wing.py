@@ -54,7 +54,7 @@ def test_plane_rtl_loiters_down_then_lands_on_its_circle_and_disarms() -> None:
         RtlPhase.LOITER_HOLD, RtlPhase.MOVE_TO_LAND_HOVER, RtlPhase.LAND, RtlPhase.IDLE,
     ]
     texts = [t for t in h.api.texts() if t.startswith("RTL")]
-    assert texts[-2:] == ["RTL: land at home", "RTL: landed"]
+    assert texts[-1] == "RTL: land at destination"
     assert disarmed_s - landed_s == pytest.approx(
         h.vehicle.params.get("COM_DISARM_LAND"), abs=0.05)
     truth = h.vehicle.truth
