@@ -186,6 +186,13 @@ class Commander:
         self._disarm(ev.ARM_REASON_COMMAND_EXTERNAL)
         return MAV_RESULT_ACCEPTED
 
+    def report_checks(self) -> int:
+        """MAV_CMD_RUN_PREARM_CHECKS: the check report again, changed or not (a ground
+        station that came late asks for it, as QGroundControl does)."""
+        self._reported_checks = self._failing_checks()
+        ev.send_arming_report(self.events, self._reported_checks)
+        return MAV_RESULT_ACCEPTED
+
     def on_offboard_setpoint(self, setpoint: ControlSetpoint, now_s: float) -> None:
         """An accepted setpoint message: proof of life in any mode."""
         was_fresh = self.offboard_signal_fresh(now_s)

@@ -77,6 +77,7 @@ class VehicleCommands:
             mavlink.MAV_CMD_DO_REPOSITION: self._reposition,
             mavlink.MAV_CMD_DO_VTOL_TRANSITION: self._vtol_transition,
             mavlink.MAV_CMD_DO_SET_HOME: self._set_home,
+            mavlink.MAV_CMD_RUN_PREARM_CHECKS: self._run_prearm_checks,
         }
 
     def set_mode(self, base_mode: int, main_mode: int, sub_mode: int) -> int:
@@ -107,6 +108,9 @@ class VehicleCommands:
             return MAV_RESULT_TEMPORARILY_REJECTED
         v.navigator.request_takeoff(cmd.params[6])
         return v.commander.request_mode(modes.AUTO_TAKEOFF)
+
+    def _run_prearm_checks(self, cmd: Command, link: Link) -> int:
+        return self._v.commander.report_checks()
 
     def _land(self, cmd: Command, link: Link) -> int:
         self._v.commander.switch_mode(modes.AUTO_LAND)

@@ -140,6 +140,17 @@ def test_mode_refusal_text_and_event_at_most_once_a_second(harness: Harness) -> 
     assert len([e for e in events_of(harness.api) if e.event_id == MODESWITCH_NOT_AVAIL]) == 2
 
 
+def test_run_prearm_checks_sends_the_check_report_again(harness: Harness) -> None:
+    settle(harness)
+    harness.api.clear()
+    harness.command_long(mavlink.MAV_CMD_RUN_PREARM_CHECKS)
+    assert harness.last_ack(mavlink.MAV_CMD_RUN_PREARM_CHECKS) == mavlink.MAV_RESULT_ACCEPTED
+    settle(harness)
+    ids = [e.event_id for e in events_of(harness.api)]
+    assert ids[0] == ARMING_CHECK_SUMMARY  # the report though nothing changed
+    assert CHECK_MODES_OFFBOARD_SIGNAL in ids
+
+
 def test_offboard_loss_failsafe_and_preflight_auto_disarm(harness: Harness) -> None:
     harness.local_ned(type_mask=0b110111111000)
     harness.set_mode(modes.OFFBOARD)
