@@ -20,7 +20,7 @@ WINDOW_S = 12.0
 RATE_TOLERANCE = 0.25
 AGREEMENT_NEEDED = 0.9
 
-# PX4 v1.16 SITL's onboard link (14580 + i → 14540 + i), Hz by message id
+# PX4 v1.16 SITL's onboard link (its API port pair), Hz by message id
 PX4_ONBOARD_HZ: dict[int, float] = {
     30: 100.0,  # ATTITUDE
     31: 50.0,  # ATTITUDE_QUATERNION
@@ -55,7 +55,7 @@ PX4_ONBOARD_HZ: dict[int, float] = {
     411: 0.35,  # CURRENT_EVENT_SEQUENCE
 }
 
-# PX4 v1.16 SITL's GCS link (18570 + i → 14550): normal mode with SITL's raised rates
+# PX4 v1.16 SITL's GCS link (its shared GCS port): normal mode with SITL's raised rates
 PX4_GCS_HZ: dict[int, float] = {
     30: 50.0,  # ATTITUDE
     31: 50.0,  # ATTITUDE_QUATERNION
