@@ -13,7 +13,6 @@ Both are announced as "deadman" events; lease changes as "control" events (contr
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
@@ -24,6 +23,7 @@ from server.api.lease import OPERATOR_LOST, Lease, LeaseManager
 from server.api.registry import VehicleRegistry
 from server.api.schemas import setpoint_as_dict
 from server.link import CommandResult, SentSetpoint, Vehicle
+from server.link.aio import cancel_and_wait
 from server.link.intents import brake_then_hold
 from server.settings import OperatorLossAction, Settings
 
@@ -91,12 +91,8 @@ class Deadman:
         self._checker = asyncio.create_task(self._check(), name="deadman-checker")
 
     async def stop(self) -> None:
-        tasks = [t for t in (self._checker, *self._actions) if t is not None]
-        for task in tasks:
-            task.cancel()
-        for task in tasks:
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
+        for task in (self._checker, *self._actions):
+            await cancel_and_wait(task)
 
     # -- live inputs ----------------------------------------------------------------------
     def feed_live(self, vehicle_id: int) -> None:

@@ -32,9 +32,8 @@ from server.api.lease import (
     TtlOutOfBounds,
     UnknownRequest,
 )
-from server.api.operations import INTENT_NAMES, OPERATIONS, run_intent
+from server.api.operations import INTENT_NAMES, OPERATIONS, run_intent, sent_out
 from server.api.routes.control import AskerGone, lease_out, unless_gone
-from server.api.routes.setpoint import sent_out
 from server.api.schemas import SetpointBody
 from server.api.ws_common import (
     CLOSE_BAD_REQUEST,

@@ -2,13 +2,10 @@
 
 from __future__ import annotations
 
-import itertools
-
 import pytest
 
 from server.scene.models import model_kind, rotor_count, rotor_positions_flu
 from server.scene.styling import STATE_COLOURS, blend, rotor_colour, state_category, state_colour
-from server.scene.throttle import Throttle
 from server.scene.trail import Trail
 
 
@@ -61,23 +58,6 @@ def test_trail_skips_samples_closer_than_its_spacing() -> None:
     assert not trail.add(0.05, (1.0, 0.0, 0.0))
     assert not trail.add(1.0, (0.0, 0.0, 0.01))
     assert trail.add(1.0, (0.0, 0.0, 1.0))
-
-
-def test_throttle_never_exceeds_its_rate_for_any_call_pattern() -> None:
-    throttle = Throttle(30.0)
-    accepted = [t / 1000 for t in range(0, 2000, 3) if throttle.ready("a", t / 1000)]
-    assert 58 <= len(accepted) <= 61
-    gaps = [b - a for a, b in itertools.pairwise(accepted)]
-    assert min(gaps) >= 1 / 30 - 0.004
-
-
-def test_throttle_keys_are_independent_and_a_pause_gives_no_burst() -> None:
-    throttle = Throttle(10.0)
-    assert throttle.ready(1, 0.0)
-    assert throttle.ready(2, 0.0)
-    assert not throttle.ready(1, 0.05)
-    assert throttle.ready(1, 5.0)
-    assert not throttle.ready(1, 5.05)
 
 
 def test_model_kind_and_rotor_layout_follow_mav_type() -> None:

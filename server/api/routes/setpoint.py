@@ -9,19 +9,10 @@ from fastapi import APIRouter, Body, Query
 from server.api.deadman import LIVE_DESCRIPTION
 from server.api.deps import Context, ControlledVehicle
 from server.api.errors import CONTROL_RESPONSES
-from server.api.schemas import SentSetpointOut, SetpointBody, setpoint_body
-from server.link import SentSetpoint
+from server.api.operations import sent_out
+from server.api.schemas import SentSetpointOut, SetpointBody
 
 router = APIRouter(prefix="/vehicles/{vehicle_id}", tags=["setpoint"])
-
-
-def sent_out(sent: SentSetpoint) -> SentSetpointOut:
-    return SentSetpointOut(
-        setpoint=setpoint_body(sent.setpoint),
-        message=sent.message,
-        frame=sent.frame,
-        type_mask=sent.type_mask,
-    )
 
 
 @router.put("/setpoint", response_model=SentSetpointOut, responses=CONTROL_RESPONSES)
