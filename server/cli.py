@@ -52,6 +52,7 @@ def _server_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--observer-token", help="read-only token")
     parser.add_argument("--cors-origin", action="append", dest="cors_origins", metavar="ORIGIN")
     parser.add_argument("--no-scene", action="store_true", help="do not start the 3D scene")
+    parser.add_argument("--map-tile-url", help="2D map tiles ({z}/{x}/{y}); default: a grid")
     parser.add_argument("--log-level", default="info", help="debug|info|warning|error")
 
 

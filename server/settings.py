@@ -25,6 +25,7 @@ from pydantic_settings import (
 
 from server.link.streamer import DEFAULT_RATE_HZ, MAX_RATE_HZ, MIN_RATE_HZ
 from server.link.urls import LinkUrlError, parse_link_url
+from server.settings_map import check_tile_url
 
 OperatorLossAction = Literal["hold", "land", "rtl", "hold-mode", "continue"]
 Airframe = Literal["quad", "hexa", "octo", "plane", "vtol", "rover"]
@@ -82,6 +83,12 @@ class Settings(BaseSettings):
         20.0, ge=0.0, description="how long startup waits for each simulated vehicle"
     )
     scene: bool = True
+    map_tile_url: str | None = Field(
+        None,
+        description="2D map tiles, e.g. https://tile.openstreetmap.org/{z}/{x}/{y}.png; "
+        "none = an offline metre grid",
+    )
+    map_tile_attribution: str = Field("", max_length=200, description="shown on the map")
     web_dir: Path | None = Field(default_factory=_default_web_dir)
 
     @field_validator("connect", "cors_origins", mode="before")
@@ -100,6 +107,13 @@ class Settings(BaseSettings):
             except LinkUrlError as exc:
                 raise ValueError(str(exc)) from None
         return urls
+
+    @field_validator("map_tile_url")
+    @classmethod
+    def _check_tile_url(cls, url: str | None) -> str | None:
+        if url is None or not url.strip():
+            return None
+        return check_tile_url(url.strip())
 
     @field_validator("token", "observer_token")
     @classmethod

@@ -19,6 +19,7 @@ from fastapi import FastAPI
 
 from server.link.aio import cancel_and_wait
 
+from .compass import CompassRose
 from .frames import Vec3, enu_to_geodetic, geodetic_offset_enu, ray_hits_plane_z
 from .proxy import SceneProxy
 from .vehicle_view import VehicleView
@@ -98,6 +99,7 @@ class SceneHub:
         self._placed_clients: set[int] = set()
         self._grid_at: Vec3 | None = None
         self._grid: viser.GridHandle | None = None
+        self._compass: CompassRose | None = None
         self._proxy: SceneProxy | None = None
         self.updates_applied = 0
         # Told of every click (in viser's thread), after it is stored.
@@ -165,6 +167,7 @@ class SceneHub:
             "/ground", width=200.0, height=200.0, cell_size=1.0, section_size=10.0,
             cell_color=(70, 74, 82), section_color=(110, 116, 128), plane="xy",
         )
+        self._compass = CompassRose(server.scene)
         self._click_marker = server.scene.add_icosphere(
             "/click", radius=0.3, color=(255, 255, 255), opacity=0.6, visible=False
         )
@@ -253,6 +256,8 @@ class SceneHub:
             return
         self._grid_at = point
         self._grid.position = point
+        if self._compass is not None:
+            self._compass.place(point)
         self._ground_z = point[2]
 
     def _refresh_follow_options(self) -> None:

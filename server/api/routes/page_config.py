@@ -1,0 +1,27 @@
+"""What the page needs to know of the server's settings: the 2D map's tiles. Behind the
+token, since a tile URL may carry the tile provider's key."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter
+from pydantic import BaseModel, Field
+
+from server.api.deps import Context, Reader
+
+router = APIRouter(tags=["health"])
+
+
+class PageConfigOut(BaseModel):
+    map_tile_url: str | None = Field(
+        description="Leaflet tile template ({z}/{x}/{y}); null: the map draws a metre grid"
+    )
+    map_tile_attribution: str
+
+
+@router.get("/config", response_model=PageConfigOut)
+async def page_config(context: Context, _role: Reader) -> PageConfigOut:
+    settings = context.settings
+    return PageConfigOut(
+        map_tile_url=settings.map_tile_url,
+        map_tile_attribution=settings.map_tile_attribution,
+    )
