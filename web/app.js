@@ -11,6 +11,8 @@ import {
   answerPrompt, clientLabel, clientName, inControl, onControlEvent, releaseControl, renderHolder,
   setClientLabel, tabId, takeControl, takeControlClicked, updateControls,
 } from "./handover.js";
+import { wireLayout } from "./layout.js";
+import { VehicleMap } from "./map.js";
 import { modeMenu, modesFor } from "./modes.js";
 import { SETPOINT_TYPES } from "./offboard.js";
 import { page, plots } from "./page.js";
@@ -21,6 +23,8 @@ const OFFBOARD_PARAMS = [
   "COM_OF_LOSS_T", "COM_OBL_RC_ACT", "COM_RC_IN_MODE", "MIS_TAKEOFF_ALT", "RTL_RETURN_ALT",
   "RTL_DESCEND_ALT", "RTL_LAND_DELAY",
 ];
+const map = new VehicleMap($("map"));
+
 // ---- telemetry ----------------------------------------------------------------------------
 
 function onTelemetry(message) {
@@ -29,6 +33,7 @@ function onTelemetry(message) {
   } else if (message.type === "event") {
     onEvent(message);
   } else if (message.type === "state") {
+    map.onState(message);
     if (message.vehicle !== page.vehicleId) return; // a socket for every vehicle, before one is chosen
     render(message);
     renderHolder(message.lease);
@@ -132,6 +137,7 @@ function tokenRejected(reason) {
   page.wantControl = false;
   page.telemetry?.close();
   page.control?.close();
+  map.stop();
   page.connected = false;
   $("scene").src = "about:blank";
   setText("conn-status", "token rejected", "bad");
@@ -142,6 +148,7 @@ function tokenRejected(reason) {
 
 function showVehicles(vehicles) {
   page.vehicles = vehicles;
+  map.showVehicles(vehicles);
   const select = $("vehicle-select");
   const previous = page.vehicleId;
   select.replaceChildren(...vehicles.map((v) => {
@@ -173,6 +180,7 @@ function selectVehicle(id) {
   page.vehicleId = Number(id);
   page.vehicleType = page.vehicles.find((v) => v.id === page.vehicleId)?.type || "";
   page.state = null;
+  map.vehicleChanged();
   plots.alt.clear();
   plots.speed.clear();
   watchTelemetry(page.vehicleId);
@@ -303,10 +311,12 @@ async function main() {
   }
   if (new URLSearchParams(location.search).get("scene") === "off") $("scene-enable").checked = false;
   wire();
+  wireLayout(map);
   showSetpointType("position");
   updateControls();
   showScene($("scene-enable").checked);
   await loadServerMode();
+  await map.loadConfig();
   await modeMenu.load();
   await loadVehicles();
   drawLoop();
@@ -316,4 +326,4 @@ async function main() {
 main();
 
 // The page's state, for the browser console and the browser tests.
-window.skyhelm = { page, SETPOINT_TYPES, keyboard, modesFor, reconnectDelayMs };
+window.skyhelm = { page, SETPOINT_TYPES, keyboard, modesFor, reconnectDelayMs, map };
