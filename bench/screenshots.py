@@ -1,9 +1,12 @@
-"""Screenshots of the dashboard in flight (quad in offboard, VTOL in fixed-wing flight) for
-docs/img/, taken in headless Chromium against `skyhelm serve` with the simulated vehicle.
+"""Screenshots of the dashboard in flight for docs/dashboard.md, taken in headless Chromium
+against `skyhelm serve` with the simulated vehicle: the quad in offboard and the VTOL in
+fixed-wing flight with the 3D scene (1600x1000); the quad flying to a point clicked on the
+2D map at 1280x800, dark and light; and each panel on its own (map, instruments, sticks,
+alerts, plots).
 
-Run: .venv/bin/python -m bench.screenshots
-Writes docs/img/dashboard-quad.png, docs/img/dashboard-vtol.png and
-bench/results/screenshots.json (how long each flight took to set up).
+Run: .venv/bin/python -m bench.screenshots (also `make bench`)
+Writes docs/img/dashboard-*.png, docs/img/panel-*.png and bench/results/screenshots.json
+(how long each flight took to set up).
 """
 
 from __future__ import annotations
@@ -28,6 +31,12 @@ from tests.browser.harness import CHROMIUM, CHROMIUM_ARGS, Serve, vehicle_state,
 ROOT = Path(__file__).resolve().parents[1]
 IMG_DIR = ROOT / "docs" / "img"
 WIDTH, HEIGHT = 1600, 1000
+COCKPIT_SIZE = (1280, 800)
+# Each panel's picture: docs/img/panel-<name>.png of the element the selector finds.
+PANEL_SHOTS = {
+    "map": ".views-panel",
+    "plots": ".plots",
+}
 
 
 def fly_quad(page: Any, serve: Serve) -> None:
@@ -50,6 +59,62 @@ def fly_vtol(page: Any, serve: Serve) -> None:
         click_and_wait_result(page, "#btn-to-fw")
         wait_for("fixed-wing flight", lambda: vehicle_state(api)["vtol_state"] == "FW", 30.0)
         time.sleep(4.0)
+
+
+def fly_by_map_click(page: Any, serve: Serve) -> None:
+    """Takes off, then clicks a point 25 m north-east on the map and flies there."""
+    import pymap3d
+
+    with serve.client() as api:
+        take_control(page)
+        arm_and_take_off(page, api, 6.0)
+        page.wait_for_selector(".map-vehicle", timeout=30_000)
+        here = vehicle_state(api)["global"]
+        lat, lon, _ = pymap3d.ned2geodetic(18.0, 18.0, 0.0, here["lat_deg"], here["lon_deg"], 0.0)
+        point = page.evaluate("([a, b]) => window.skyhelm.map.pagePoint(a, b)", [lat, lon])
+        page.mouse.click(point["x"], point["y"])
+        page.fill("#map-goto-alt", "9")
+        click_and_wait_result(page, "#map-goto-go")
+        wait_for("the quad on its way", lambda: vehicle_state(api)["position_ned"]["north_m"] > 5,
+                 30.0)
+
+
+def shoot_cockpit(browser: Any) -> list[dict[str, Any]]:
+    """The page at 1280x800, map and no 3D scene, dark then light; then each panel."""
+    serve = Serve(extra_args=["--sim-speed", "2", "--lease-ttl-s", "10"])
+    started = time.monotonic()
+    serve.start()
+    shots: list[dict[str, Any]] = []
+    context = browser.new_context(
+        viewport={"width": COCKPIT_SIZE[0], "height": COCKPIT_SIZE[1]}, color_scheme="dark"
+    )
+    try:
+        page = open_dashboard(context, serve.url, scene=False)
+        fly_by_map_click(page, serve)
+        for scheme in ("dark", "light"):
+            page.emulate_media(color_scheme=scheme)
+            page.wait_for_timeout(300)
+            path = IMG_DIR / f"dashboard-{COCKPIT_SIZE[0]}-{scheme}.png"
+            page.screenshot(path=str(path))
+            shots.append({"image": str(path.relative_to(ROOT)), "scheme": scheme})
+        page.emulate_media(color_scheme="dark")
+        for name, selector in PANEL_SHOTS.items():
+            element = page.locator(selector).first
+            if element.count() == 0 or not element.is_visible():
+                print(f"panel {name}: {selector} not on the page", file=sys.stderr)
+                continue
+            path = IMG_DIR / f"panel-{name}.png"
+            element.screenshot(path=str(path))
+            shots.append({"image": str(path.relative_to(ROOT)), "panel": name})
+    finally:
+        context.close()
+        serve.stop()
+        serve.discard_log()
+    seconds = time.monotonic() - started
+    print(f"cockpit: {len(shots)} pictures after {seconds:.1f} s")
+    for shot in shots:
+        shot["wall_s"] = round(seconds, 1)
+    return shots
 
 
 def dismiss_scene_notifications(page: Any) -> None:
@@ -103,6 +168,13 @@ def main() -> int:
             shots = [shoot(context, "quad", fly_quad), shoot(context, "vtol", fly_vtol)]
         finally:
             context.close()
+        browser = playwright.chromium.launch(
+            executable_path=str(CHROMIUM), args=CHROMIUM_ARGS, headless=True
+        )
+        try:
+            shots += shoot_cockpit(browser)
+        finally:
+            browser.close()
     write_results("screenshots", {"viewport": [WIDTH, HEIGHT], "screenshots": shots})
     return 0
 
