@@ -6,6 +6,7 @@ import secrets
 from contextvars import ContextVar
 from pathlib import Path
 from typing import Annotated, Any, Literal
+from urllib.parse import urlsplit
 
 from pydantic import (
     Field,
@@ -25,13 +26,40 @@ from pydantic_settings import (
 
 from server.link.streamer import DEFAULT_RATE_HZ, MAX_RATE_HZ, MIN_RATE_HZ
 from server.link.urls import LinkUrlError, parse_link_url
-from server.settings_map import check_tile_url
 
 OperatorLossAction = Literal["hold", "land", "rtl", "hold-mode", "continue"]
 Airframe = Literal["quad", "hexa", "octo", "plane", "vtol", "rover"]
 
 # The TOML path is only known at load time; pydantic-settings builds sources per class.
 _CONFIG_FILE: ContextVar[Path | None] = ContextVar("skyhelm_config_file", default=None)
+
+
+# The 2D map's tiles: one URL template, also the one host the page's CSP lets images come
+# from (tile_origin).
+_PLACEHOLDERS = ("{z}", "{x}", "{y}")
+
+
+def check_tile_url(url: str) -> str:
+    """A Leaflet tile template: http(s), a host, and the {z}/{x}/{y} placeholders."""
+    parts = urlsplit(url.replace("{s}", "a"))
+    if parts.scheme not in ("http", "https") or not parts.hostname:
+        raise ValueError("map_tile_url must be an http(s) URL with a host")
+    missing = [p for p in _PLACEHOLDERS if p not in url]
+    if missing:
+        raise ValueError(f"map_tile_url lacks {', '.join(missing)}")
+    return url
+
+
+def tile_origin(url: str | None) -> str | None:
+    """The origin tiles come from, for the CSP's img-src ("https://*.tile.example.org" when
+    the template spreads over {s} subdomains); None without tiles."""
+    if url is None:
+        return None
+    parts = urlsplit(url.replace("{s}", "a"))
+    host = parts.netloc
+    if "{s}" in url:
+        host = "*." + host.split(".", 1)[1] if "." in host else host
+    return f"{parts.scheme}://{host}"
 
 
 def _default_web_dir() -> Path | None:

@@ -5,8 +5,7 @@ from __future__ import annotations
 import httpx
 import pytest
 
-from server.settings import SettingsError, load_settings
-from server.settings_map import tile_origin
+from server.settings import SettingsError, load_settings, tile_origin
 from tests.api.conftest import OBSERVER, api_for, auth
 
 TILES = "https://{s}.tile.example.org/{z}/{x}/{y}.png"
