@@ -46,7 +46,11 @@
       }
     }
     if (r.left < -EPS || r.right > vw + EPS) problems.push(`${name(el)} outside the window sideways`);
-    if (!inScroller && (r.top < -EPS || r.bottom > vh + EPS)) problems.push(`${name(el)} below the window`);
+    // the page itself may scroll (a tablet); test_layout checks it does not on a desktop
+    const pageBottom = Math.max(vh, document.documentElement.scrollHeight) - window.scrollY;
+    if (!inScroller && (r.top < -window.scrollY - EPS || r.bottom > pageBottom + EPS)) {
+      problems.push(`${name(el)} below the page`);
+    }
     if (el.tagName === "BUTTON" && el.scrollWidth > el.clientWidth + EPS) problems.push(`${name(el)} label cut`);
   }
   const controls = [...document.querySelectorAll(CONTROLS)].filter(shown);
@@ -60,5 +64,6 @@
       if (w > EPS && h > EPS) problems.push(`${name(a)} overlaps ${name(b)}`);
     }
   }
-  return { problems, controls: controls.length };
+  const pageScrolls = document.documentElement.scrollHeight > vh + EPS;
+  return { problems, controls: controls.length, pageScrolls };
 }

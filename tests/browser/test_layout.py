@@ -51,10 +51,12 @@ def _open(chromium: Any, url: str, size: tuple[int, int], scheme: str) -> Any:
     return page
 
 
-def _problems(page: Any) -> list[str]:
+def _problems(page: Any, page_may_scroll: bool = False) -> list[str]:
     found = page.evaluate(LAYOUT_PROBLEMS)
     assert found["controls"] > 30, "the page's controls were not found"
     problems: list[str] = found["problems"]
+    if found["pageScrolls"] and not page_may_scroll:
+        problems.append("the whole page scrolls: its columns should")
     return problems
 
 
@@ -83,6 +85,31 @@ def test_no_control_is_cut_or_overlaps_another(
         assert box["y"] + box["height"] <= size[1]
     finally:
         page.context.close()
+
+
+@pytest.mark.parametrize("size", [(1024, 768), (768, 1024)], ids=["landscape", "portrait"])
+def test_on_a_tablet_the_page_scrolls_and_nothing_is_cut_or_overlaps(
+    chromium: Any, serve: Any, size: tuple[int, int]
+) -> None:
+    context = chromium.new_context(
+        viewport={"width": size[0], "height": size[1]}, has_touch=True, color_scheme="dark"
+    )
+    page = context.new_page()
+    try:
+        page.goto(f"{serve.url}&scene=off")
+        page.wait_for_selector(".map-vehicle", timeout=30_000)
+        assert _problems(page, page_may_scroll=True) == []
+        # fingers get bigger targets
+        arm = page.locator("#btn-arm").bounding_box()
+        assert arm is not None
+        assert arm["height"] >= 34
+        # the views are in sight at the top in portrait, beside the commands in landscape
+        views = page.locator(".views-panel").bounding_box()
+        assert views is not None
+        assert views["y"] < size[1] / 2
+        assert views["height"] > 300
+    finally:
+        context.close()
 
 
 def test_shortcut_keys_toggle_views_and_list_themselves(chromium: Any, serve: Any) -> None:

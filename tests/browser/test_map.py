@@ -114,7 +114,7 @@ def tiled_page(browser: Any, serve: Any) -> Any:
         "**/api/v1/config",
         lambda route: route.fulfill(
             json={
-                "map_tile_url": "http://tiles.skyhelm.invalid/{z}/{x}/{y}.png",
+                "map_tile_url": "https://tiles.skyhelm.invalid/{z}/{x}/{y}.png",
                 "map_tile_attribution": "Test tiles",
             }
         ),
@@ -124,7 +124,7 @@ def tiled_page(browser: Any, serve: Any) -> Any:
         tiles.append(route.request.url)
         route.fulfill(body=PNG_1PX, content_type="image/png")
 
-    tab.route("http://tiles.skyhelm.invalid/**", tile)
+    tab.route("https://tiles.skyhelm.invalid/**", tile)
     tab.goto(f"{serve.url}&scene=off")
     try:
         yield tab, tiles
