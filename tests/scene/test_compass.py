@@ -13,6 +13,8 @@ import numpy as np
 import pytest
 import viser
 
+from server.link.state import HomeState
+from server.scene import SceneHub
 from server.scene.compass import (
     CARDINALS,
     RING_RADIUS_M,
@@ -21,6 +23,10 @@ from server.scene.compass import (
     north_arrow_segments,
     rose_segments,
 )
+from tests.api.state_fakes import pushing, scene_fed_by
+from tests.waiting import wait_for
+
+from .conftest import ORIGIN, FakeVehicle
 
 
 @pytest.fixture(scope="module")
@@ -86,3 +92,22 @@ def test_rose_labels_the_cardinal_points_and_moves_to_home(scene: viser.SceneApi
     assert abs(east[1]) < 1e-6
     rose.place((3.0, -4.0, 0.5))
     np.testing.assert_allclose(rose.root.position, (3.0, -4.0, 0.5))
+
+
+async def test_hub_puts_the_rose_on_home_with_the_ground_grid() -> None:
+    fake = FakeVehicle(1)
+    fake.overrides["home"] = HomeState(
+        ORIGIN.lat_deg, ORIGIN.lon_deg, ORIGIN.alt_amsl_m, 4.0, -3.0, 0.5
+    )
+    hub = SceneHub(max_rate_hz=20.0)
+    async with scene_fed_by(hub, [pushing(fake)]):
+        compass = hub._compass
+        assert compass is not None
+
+        def on_home() -> bool:
+            return bool(np.allclose(compass.root.position, (-3.0, 4.0, -0.5), atol=1e-3))
+
+        await wait_for(on_home, 5.0, "the compass rose on home (ENU)")
+        grid = hub._grid
+        assert grid is not None
+        np.testing.assert_allclose(grid.position, compass.root.position)
