@@ -141,7 +141,8 @@ class AttitudeIndicator {
     el("path", { d: "M -48 0 L -16 0 L -8 8 M 48 0 L 16 0 L 8 8" }, plane);
     el("circle", { r: 2.5 }, plane);
     el("circle", { r: 92, class: "adi-rim" }, svg);
-    this.readout = text(svg, 0, 82, UNKNOWN, { class: "adi-readout", "text-anchor": "middle" });
+    el("rect", { x: -34, y: 64, width: 68, height: 14, rx: 2, class: "adi-readout-box" }, svg);
+    this.readout = text(svg, 0, 75, UNKNOWN, { class: "adi-readout", "text-anchor": "middle" });
   }
 
   show(attitude) {

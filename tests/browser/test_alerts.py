@@ -23,7 +23,9 @@ SPEECH_STUB = """
 window.__spoken = [];
 window.__alertEvents = [];
 class StubUtterance { constructor(text) { this.text = text; } }
-Object.defineProperty(window, "SpeechSynthesisUtterance", { value: StubUtterance, configurable: true });
+Object.defineProperty(window, "SpeechSynthesisUtterance", {
+  value: StubUtterance, configurable: true,
+});
 Object.defineProperty(window, "speechSynthesis", {
   value: { speak: (u) => window.__spoken.push(u.text), cancel: () => {} }, configurable: true,
 });
@@ -61,11 +63,14 @@ def test_link_lost_is_shown_spoken_and_recorded_and_a_muted_tab_only_shows_it(
             banner = loud.text_content('.alert[data-kind="link"] span') or ""
             assert banner.startswith("Link lost with vehicle 1"), banner
             heard = _events(loud, "link")
-            assert len(heard) == 1 and heard[0]["spoken"] and heard[0]["level"] == "critical"
+            assert len(heard) == 1
+            assert heard[0]["spoken"]
+            assert heard[0]["level"] == "critical"
             assert loud.evaluate("window.__spoken") == [heard[0]["text"]]
             assert loud.evaluate("window.skyhelm.alertLog.map((a) => a.kind)") == ["link"]
             muted = _events(quiet, "link")
-            assert len(muted) == 1 and not muted[0]["spoken"]
+            assert len(muted) == 1
+            assert not muted[0]["spoken"]
             assert quiet.evaluate("window.__spoken") == []
 
         for page in (loud, quiet):
@@ -95,7 +100,8 @@ def test_a_tab_hears_that_its_control_was_taken_after_the_taker_confirmed(
         taker.click("#force-control")
         pilot.wait_for_selector('.alert[data-kind="control"]', timeout=PAGE_TIMEOUT_MS)
         heard = _events(pilot, "control")
-        assert len(heard) == 1 and heard[0]["text"].startswith("Control taken by ")
+        assert len(heard) == 1
+        assert heard[0]["text"].startswith("Control taken by ")
         assert pilot.evaluate("window.__spoken") == [heard[0]["text"]]
         assert _events(taker, "control") == []
     finally:

@@ -66,8 +66,10 @@ def test_instruments_show_the_vehicles_attitude_heading_and_altitude(
     gps = page.text_content("#inst-gps .inst-big")
     assert gps == "3D fix", gps
     assert page.text_content("#inst-ekf .inst-big") == "OK"
+    assert page.is_hidden("#inst-vtol")  # a quad has no VTOL state
     battery = page.text_content("#inst-battery .inst-big") or ""
-    assert battery.endswith(" %") and 0 < _number(battery) <= 100, battery
+    assert battery.endswith(" %"), battery
+    assert 0 < _number(battery) <= 100, battery
     assert "-0.0" not in (page.inner_text("body") or "")
 
 
@@ -143,3 +145,37 @@ def test_kill_asks_first_then_disarms_at_once(api: httpx.Client, page: Any) -> N
         timeout=PAGE_TIMEOUT_MS,
     )
     wait_for("disarmed", lambda: not vehicle_state(api)["armed"], 10.0)
+
+
+def test_numbers_ages_and_battery_time_are_written_for_people(page: Any) -> None:
+    """The page's own formatting and battery clock, run in the page's modules."""
+    shown = page.evaluate("""async () => {
+        const f = await import("./format.js");
+        const { BatteryClock } = await import("./instruments.js");
+        const clock = new BatteryClock();
+        const byCurrent = clock.estimate(
+            { remaining_pct: 50, current_a: 10, consumed_mah: 1000 }, 0);
+        const rate = new BatteryClock();
+        rate.estimate({ remaining_pct: 80 }, 0);
+        const byRate = rate.estimate({ remaining_pct: 79 }, 30);
+        const own = rate.estimate({ remaining_pct: 79, time_remaining_s: 615 }, 31);
+        return {
+            zero: [f.num(-0.04, 1), f.num(-0.0, 2), f.num(-0.06, 1), f.num(null), f.num(NaN)],
+            units: [f.withUnit(12.345, "m"), f.withUnit(undefined, "m"), f.signed(1.25)],
+            ages: [f.age(0.42), f.age(12.7), f.age(154.753), f.age(7300)],
+            millis: [f.millis(17.4), f.millis(154753)],
+            durations: [f.duration(45), f.duration(720), f.duration(3900)],
+            battery: [byCurrent, byRate, own],
+        };
+    }""")
+    assert shown["zero"] == ["0.0", "0.00", "-0.1", "–", "–"]
+    assert shown["units"] == ["12.3 m", "–", "+1.3"]
+    assert shown["ages"] == ["0.4 s", "12 s", "2 min 34 s", "2 h 01 min"]
+    assert shown["millis"] == ["17 ms", "2 min 34 s"]
+    assert shown["durations"] == ["45 s", "12 min", "1 h 05 min"]
+    by_current, by_rate, own = shown["battery"]
+    # 1000 mAh used for half the charge: 1000 mAh left at 10 A is 6 minutes
+    assert by_current == {"seconds": pytest.approx(360.0), "how": "current"}
+    # 1 % in 30 s with 79 % left
+    assert by_rate == {"seconds": pytest.approx(79 * 30.0), "how": "rate"}
+    assert own == {"seconds": 615, "how": "vehicle"}
