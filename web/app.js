@@ -2,6 +2,7 @@
 // answer shown is the one the API returned. The page polls nothing: state, events, the
 // vehicle list and clicks in the 3D scene all come on the telemetry socket.
 
+import { Alerts, alertLog } from "./alerts.js";
 import { TelemetrySocket, onTokenRejected, reconnectDelayMs, request, token } from "./api.js";
 import {
   brake, confirmThen, goByOffset, goTo, keyboard, panel, runCommand, showResult, showSetpointType,
@@ -11,12 +12,13 @@ import {
   answerPrompt, clientLabel, clientName, inControl, onControlEvent, releaseControl, renderHolder,
   setClientLabel, tabId, takeControl, takeControlClicked, updateControls,
 } from "./handover.js";
+import { confirmAction, wireConfirm } from "./confirm.js";
 import { wireLayout } from "./layout.js";
 import { VehicleMap } from "./map.js";
 import { modeMenu, modesFor } from "./modes.js";
 import { SETPOINT_TYPES } from "./offboard.js";
-import { page, plots } from "./page.js";
-import { render } from "./render.js";
+import { freshness, page, plots } from "./page.js";
+import { instruments, render } from "./render.js";
 import { $, banner, log, nowS, num, setText } from "./ui.js";
 
 const OFFBOARD_PARAMS = [
@@ -24,18 +26,22 @@ const OFFBOARD_PARAMS = [
   "RTL_DESCEND_ALT", "RTL_LAND_DELAY",
 ];
 const map = new VehicleMap($("map"));
+const alerts = new Alerts($("alerts"), $("alerts-mute"));
+const IN_AIR = new Set(["IN_AIR", "TAKEOFF", "LANDING"]);
 
 // ---- telemetry ----------------------------------------------------------------------------
 
 function onTelemetry(message) {
   if (message.type === "statustext") {
     log(message.severity || "INFO", message.text || "");
+    alerts.fromText(message.severity || "INFO", message.text || "");
   } else if (message.type === "event") {
     onEvent(message);
   } else if (message.type === "state") {
     map.onState(message);
     if (message.vehicle !== page.vehicleId) return; // a socket for every vehicle, before one is chosen
     render(message);
+    alerts.fromState(message);
     renderHolder(message.lease);
     modeMenu.follow(message.vehicle_type || page.vehicleType, message.mode);
   } else if (message.type === "vehicles") {
@@ -78,6 +84,8 @@ function controlText(data) {
 
 function onTelemetryStatus(status) {
   page.connected = status.state === "connected";
+  if (page.connected) page.everConnected = true;
+  if (page.everConnected) alerts.fromServer(page.connected);
   if (page.connected) {
     setText("conn-status", "connected", "ok");
     if (status.reconnected) {
@@ -181,8 +189,9 @@ function selectVehicle(id) {
   page.vehicleType = page.vehicles.find((v) => v.id === page.vehicleId)?.type || "";
   page.state = null;
   map.vehicleChanged();
-  plots.alt.clear();
-  plots.speed.clear();
+  plots.clear();
+  instruments.reset();
+  alerts.clearAll();
   watchTelemetry(page.vehicleId);
   loadParams();
 }
@@ -262,7 +271,27 @@ function wire() {
   setText("tab-id", `tab ${tabId()}`);
   $("client-label").title = `this tab is "${clientName()}" to the others`;
   $("client-label").addEventListener("change", (e) => setClientLabel(e.target.value));
+  // in the air a slip would be costly: a dialog that says so, instead of the second click
+  $("btn-arm").addEventListener("click", (e) => {
+    const landed = page.state?.landed_state;
+    if (!IN_AIR.has(landed)) return;
+    e.stopImmediatePropagation();
+    confirmAction({
+      title: "Arm in the air?",
+      text: `The vehicle reports ${landed.replace("_", " ").toLowerCase()}. Arm it anyway?`,
+      confirm: "Arm in the air",
+    }).then((ok) => { if (ok) runCommand("Arm", "arm", {}, $("btn-arm")); });
+  });
   confirmThen($("btn-arm"), () => runCommand("Arm", "arm", {}, $("btn-arm")));
+  $("btn-kill").addEventListener("click", async (e) => {
+    const flying = IN_AIR.has(page.state?.landed_state);
+    const ok = await confirmAction({
+      title: "Kill the motors?",
+      text: `The motors stop at once${flying ? " and the vehicle falls: it is in the air" : ""}. This is PX4's forced disarm.`,
+      confirm: "Kill",
+    });
+    if (ok) runCommand("Kill", "disarm", { force: true }, e.target);
+  });
   confirmThen($("btn-disarm"), () => runCommand("Disarm", "disarm", {}, $("btn-disarm")));
   $("btn-takeoff").addEventListener("click", (e) => {
     const alt = parseFloat($("takeoff-alt").value);
@@ -299,8 +328,7 @@ function wire() {
 
 function drawLoop() {
   const t = nowS();
-  plots.alt.draw(t);
-  plots.speed.draw(t);
+  plots.draw(t);
   setTimeout(() => requestAnimationFrame(drawLoop), 200);
 }
 
@@ -310,6 +338,8 @@ async function main() {
     banner("Open the URL printed by `skyhelm serve` (it carries ?token=…)");
   }
   if (new URLSearchParams(location.search).get("scene") === "off") $("scene-enable").checked = false;
+  wireConfirm();
+  document.addEventListener("skyhelm-control-taken", (e) => alerts.controlTaken(e.detail.by));
   wire();
   wireLayout(map);
   showSetpointType("position");
@@ -326,4 +356,7 @@ async function main() {
 main();
 
 // The page's state, for the browser console and the browser tests.
-window.skyhelm = { page, SETPOINT_TYPES, keyboard, modesFor, reconnectDelayMs, map };
+window.skyhelm = {
+  page, SETPOINT_TYPES, keyboard, modesFor, reconnectDelayMs, alerts, alertLog, plots, freshness,
+  map,
+};
