@@ -35,8 +35,11 @@ COCKPIT_SIZE = (1280, 800)
 # Each panel's picture: docs/img/panel-<name>.png of the element the selector finds.
 PANEL_SHOTS = {
     "map": ".views-panel",
+    "instruments": ".panel:has(#instruments)",
     "plots": ".plots",
 }
+# Shot after another client takes control from the page (a real alert).
+ALERT_SHOT = ("alerts", "#alerts")
 
 
 def fly_quad(page: Any, serve: Serve) -> None:
@@ -62,7 +65,7 @@ def fly_vtol(page: Any, serve: Serve) -> None:
 
 
 def fly_by_map_click(page: Any, serve: Serve) -> None:
-    """Takes off, then clicks a point 25 m north-east on the map and flies there."""
+    """Takes off, then clicks a point 64 m north-east on the map and flies there."""
     import pymap3d
 
     with serve.client() as api:
@@ -70,13 +73,24 @@ def fly_by_map_click(page: Any, serve: Serve) -> None:
         arm_and_take_off(page, api, 6.0)
         page.wait_for_selector(".map-vehicle", timeout=30_000)
         here = vehicle_state(api)["global"]
-        lat, lon, _ = pymap3d.ned2geodetic(18.0, 18.0, 0.0, here["lat_deg"], here["lon_deg"], 0.0)
+        lat, lon, _ = pymap3d.ned2geodetic(45.0, 45.0, 0.0, here["lat_deg"], here["lon_deg"], 0.0)
         point = page.evaluate("([a, b]) => window.skyhelm.map.pagePoint(a, b)", [lat, lon])
         page.mouse.click(point["x"], point["y"])
         page.fill("#map-goto-alt", "9")
         click_and_wait_result(page, "#map-goto-go")
         wait_for("the quad on its way", lambda: vehicle_state(api)["position_ned"]["north_m"] > 5,
                  30.0)
+
+
+def shoot_panel(page: Any, name: str, selector: str) -> list[dict[str, Any]]:
+    """docs/img/panel-<name>.png of the element, or nothing when it is not on the page."""
+    element = page.locator(selector).first
+    if element.count() == 0 or not element.is_visible():
+        print(f"panel {name}: {selector} not on the page", file=sys.stderr)
+        return []
+    path = IMG_DIR / f"panel-{name}.png"
+    element.screenshot(path=str(path))
+    return [{"image": str(path.relative_to(ROOT)), "panel": name}]
 
 
 def shoot_cockpit(browser: Any) -> list[dict[str, Any]]:
@@ -99,13 +113,12 @@ def shoot_cockpit(browser: Any) -> list[dict[str, Any]]:
             shots.append({"image": str(path.relative_to(ROOT)), "scheme": scheme})
         page.emulate_media(color_scheme="dark")
         for name, selector in PANEL_SHOTS.items():
-            element = page.locator(selector).first
-            if element.count() == 0 or not element.is_visible():
-                print(f"panel {name}: {selector} not on the page", file=sys.stderr)
-                continue
-            path = IMG_DIR / f"panel-{name}.png"
-            element.screenshot(path=str(path))
-            shots.append({"image": str(path.relative_to(ROOT)), "panel": name})
+            shots += shoot_panel(page, name, selector)
+        with serve.client() as api:
+            api.post("/vehicles/1/control",
+                     json={"takeover": True, "force": True, "client_name": "ground crew"})
+        page.wait_for_selector("#alerts .alert", timeout=15_000)
+        shots += shoot_panel(page, *ALERT_SHOT)
     finally:
         context.close()
         serve.stop()

@@ -125,7 +125,7 @@ class VehicleLayer {
       const el = this.marker.getElement();
       if (el) {
         const heading = Number.isFinite(state.heading_deg) ? state.heading_deg : state.attitude?.yaw_deg;
-        el.querySelector("svg").style.transform = `rotate(${Number.isFinite(heading) ? heading : 0}deg)`;
+        el.querySelector("svg").style.transform = `rotate(${this.turnTo(heading)}deg)`;
         el.dataset.category = category(state);
         el.classList.toggle("selected", selected);
         el.classList.toggle("stale", !state.connected);
@@ -149,6 +149,15 @@ class VehicleLayer {
     }
     this.aimLatLon = point;
     this.aimKind = aim?.kind ?? null;
+  }
+
+  /** The arrow's angle for a heading: turned the short way from the last one (359° to 1°
+   * is 2°, not a spin back through 180° while the CSS transition runs). */
+  turnTo(headingDeg) {
+    if (!Number.isFinite(headingDeg)) return this.arrowDeg ?? 0;
+    if (this.arrowDeg === undefined) this.arrowDeg = headingDeg;
+    else this.arrowDeg += ((headingDeg - this.arrowDeg + 540) % 360) - 180;
+    return this.arrowDeg;
   }
 
   addToTrail(here, nowS) {

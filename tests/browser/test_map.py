@@ -48,6 +48,12 @@ def test_map_shows_the_vehicle_with_its_heading_home_grid_scale_and_north(
     shown = float(page.get_attribute(".map-vehicle", "data-heading-deg") or "nan")
     assert abs((shown - heading + 180.0) % 360.0 - 180.0) < 5.0
     assert page.get_attribute(".map-vehicle", "data-category") == "disarmed"
+    # the arrow turns the short way across north (359° -> 1° is +2°, not a spin back)
+    turned = page.evaluate(
+        "() => { const l = window.skyhelm.map.layers.get(1); const kept = l.arrowDeg;"
+        " l.arrowDeg = 359; const a = [l.turnTo(1), l.turnTo(350)]; l.arrowDeg = kept; return a; }"
+    )
+    assert turned == [361, 350]
     assert page.is_visible(".map-home")
     assert page.is_visible(".map-north")
     assert page.is_visible(".leaflet-control-scale-line")
