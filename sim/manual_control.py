@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from enum import IntEnum
-from typing import TYPE_CHECKING
+from typing import Any, Protocol
 
 from sim import modes
 from sim.modes import Px4Mode
@@ -25,9 +25,6 @@ from sim.params import ParamReader
 from sim.quat import quat_from_euler, wrap_pi, yaw_from_quat
 from sim.rigid_body import GRAVITY_M_S2
 from sim.topics import AttitudeSetpoint, ControlSetpoint, TrajectorySetpoint, VehicleStateTruth
-
-if TYPE_CHECKING:  # the vehicle's interface imports the commander, which imports this
-    from sim.vehicle_interface import Link, Message, VehicleInterface
 
 # manual_control_setpoint_s data sources
 SOURCE_UNKNOWN = 0
@@ -76,14 +73,29 @@ def stick_sample(
     return StickSample(roll, pitch, yaw, throttle, received_s, data_source)
 
 
+class _StickTaker(Protocol):
+    def on_manual_control(self, sample: StickSample, now_s: float) -> None: ...
+
+
+class _Vehicle(Protocol):
+    """What the receiver needs of the vehicle (the commander imports this module)."""
+
+    @property
+    def sysid(self) -> int: ...
+    @property
+    def now_s(self) -> float: ...
+    @property
+    def commander(self) -> _StickTaker: ...
+
+
 class ManualControlReceiver:
     """MANUAL_CONTROL in: each link is its own MAVLink instance (SOURCE_MAVLINK_0 + i)."""
 
-    def __init__(self, vehicle: VehicleInterface) -> None:
+    def __init__(self, vehicle: _Vehicle) -> None:
         self._v = vehicle
         self._instances: dict[int, int] = {}
 
-    def handle(self, link: Link, msg: Message) -> None:
+    def handle(self, link: object, msg: Any) -> None:
         if msg.target not in (0, self._v.sysid):
             return
         instance = self._instances.setdefault(id(link), len(self._instances))

@@ -99,7 +99,8 @@ def test_posctl_throttle_is_climb_rate_up_and_down_limits() -> None:
     flight = ManualFlight(p)
     up = flight.setpoint(modes.POSCTL, sample(throttle=1.0), truth, 0.004, landed=False)
     down = flight.setpoint(modes.POSCTL, sample(throttle=-1.0), truth, 0.004, landed=False)
-    assert isinstance(up, TrajectorySetpoint) and isinstance(down, TrajectorySetpoint)
+    assert isinstance(up, TrajectorySetpoint)
+    assert isinstance(down, TrajectorySetpoint)
     assert up.velocity_ned_m_s[2] == pytest.approx(-p.get("MPC_Z_VEL_MAX_UP"))
     assert down.velocity_ned_m_s[2] == pytest.approx(p.get("MPC_Z_VEL_MAX_DN"))
 
