@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import itertools
 import statistics
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
@@ -103,7 +104,7 @@ async def next_event(queue: asyncio.Queue[VehicleEvent], kind: str, timeout_s: f
 def rate_of(samples: list[tuple[float, StickSample]]) -> tuple[float, float]:
     """(mean rate Hz, median interval s) of the arrivals."""
     times = [t for t, _ in samples]
-    intervals = [b - a for a, b in zip(times, times[1:], strict=False)]
+    intervals = [b - a for a, b in itertools.pairwise(times)]
     return (len(intervals) / (times[-1] - times[0]), statistics.median(intervals))
 
 
