@@ -119,8 +119,10 @@ async def test_sticks_arrive_at_25_hz_at_the_sim_whatever_the_pilots_rate(
         t0 = loop.time()
         await feed(api, 1.5, pilot_rate_hz, pitch=0.5)
         rate_hz, median_s = rate_of(arrivals.since(t0))
-        assert 20.0 <= rate_hz <= 27.0, (pilot_rate_hz, rate_hz)
-        assert median_s == pytest.approx(0.040, abs=0.006), (pilot_rate_hz, median_s)
+        # never more than 25 Hz however often the sticks change; fewer only on a loaded
+        # machine (late ticks are skipped, not bunched); the precise figures are a bench
+        assert 15.0 <= rate_hz <= 27.0, (pilot_rate_hz, rate_hz)
+        assert median_s == pytest.approx(0.040, abs=0.008), (pilot_rate_hz, median_s)
     last = arrivals.samples[-1][1]
     assert (last.pitch, last.roll, last.throttle, last.yaw) == (0.5, 0.0, 0.0, 0.0)
     answer = (await api.client.get("/api/v1/vehicles/1/sticks")).json()
