@@ -31,6 +31,7 @@ from server.api.routes import (
     page_config,
     params,
     setpoint,
+    sticks,
     vehicles,
 )
 from server.link import Envelope, Link
@@ -117,7 +118,17 @@ def create_app(settings: Settings) -> FastAPI:
             allow_headers=["Authorization", "Content-Type", "X-Lease-Id"],
         )
     api = APIRouter(prefix=API_PREFIX)
-    for module in (health, page_config, vehicles, control, commands, intents, setpoint, params):
+    for module in (
+        health,
+        page_config,
+        vehicles,
+        control,
+        commands,
+        intents,
+        setpoint,
+        sticks,
+        params,
+    ):
         api.include_router(module.router)
     api.include_router(ws.router)
     app.include_router(api)

@@ -15,7 +15,8 @@ from dataclasses import dataclass, field
 from sim import commander_events as ev
 from sim import modes
 from sim.events import EventLog
-from sim.failsafe_actions import DllAction, ObLossAction, failsafe_mode
+from sim.failsafe_actions import DllAction, ObLossAction, RclAction, failsafe_mode
+from sim.manual_control import MANUAL_CONTROL_MODES, ManualControlSelector, RcInMode, StickSample
 from sim.modes import Px4Mode
 from sim.params import ParamReader
 from sim.topics import ControlSetpoint
@@ -117,6 +118,11 @@ class Commander:
         self._checked_s = -math.inf
         self._mode_after_disarming: Px4Mode = modes.AUTO_LOITER
         self._mode_rejected_s = -math.inf
+        self.manual_control = ManualControlSelector(params)
+        self._manual_control_lost = True
+        self._manual_control_lost_at_arming = True
+        self._rc_loss_action_at_s: float | None = None
+        self._rc_lost_s: float | None = None
 
     # -- queries -----------------------------------------------------------------------
 
@@ -125,9 +131,17 @@ class Commander:
         age = now - self.offboard.received_s
         return self.offboard.setpoint is not None and age <= self._params.get("COM_OF_LOSS_T")
 
+    def manual_control_lost(self, now_s: float | None = None) -> bool:
+        """No stick input in use (none yet, too old, or from a source COM_RC_IN_MODE
+        does not take)."""
+        return self.manual_control.current(self._now_s if now_s is None else now_s) is None
+
     def mode_can_run(self, mode: Px4Mode) -> bool:
         if mode == modes.OFFBOARD:
             return self.offboard_signal_fresh()
+        if mode in MANUAL_CONTROL_MODES:
+            # modeCheck: a mode needing manual control cannot run without it
+            return not self.manual_control_lost()
         if mode in self._mode_available:
             return self._mode_available[mode]
         if mode in (modes.AUTO_RTL, modes.AUTO_TAKEOFF):
@@ -168,6 +182,7 @@ class Commander:
             return MAV_RESULT_TEMPORARILY_REJECTED
         self.armed = True
         self.armed_at_s = now_s
+        self._manual_control_lost_at_arming = self.manual_control_lost(now_s)
         self.took_off_since_arming = not self.landed
         self._landed_since_s = now_s if self.landed else None
         self._announce(MAV_SEVERITY_INFO,
@@ -201,6 +216,10 @@ class Commander:
         if not was_fresh and self.user_mode == modes.OFFBOARD and self.nav_mode != modes.OFFBOARD:
             self._offboard_resumed_at_s = now_s
 
+    def on_manual_control(self, sample: StickSample, now_s: float) -> None:
+        """A MANUAL_CONTROL message, for the selector to take or leave."""
+        self.manual_control.take(sample, now_s)
+
     def on_heartbeat(self, is_gcs: bool, now_s: float) -> None:
         """GCS and onboard-controller heartbeats are tracked apart, as in PX4."""
         if not is_gcs:
@@ -217,6 +236,7 @@ class Commander:
         self._now_s = now_s
         self._track_landing(now_s, landed)
         self._check_offboard(now_s)
+        self._check_manual_control(now_s)
         self._check_datalink(now_s)
         self._check_auto_disarm(now_s)
         self.events.update(now_s)
@@ -226,6 +246,70 @@ class Commander:
             if checks != self._reported_checks:
                 self._reported_checks = checks
                 ev.send_arming_report(self.events, checks)
+
+    def _check_manual_control(self, now_s: float) -> None:
+        """RcAndDataLinkChecks and the failsafe's manual control loss: lost after
+        COM_RC_LOSS_T; armed, the NAV_RCL_ACT action after COM_FAIL_ACT_T in Hold, unless
+        sticks were already missing at arming, COM_RC_IN_MODE disables them, or
+        COM_RCL_EXCEPT exempts the user's mode."""
+        lost = self.manual_control_lost(now_s)
+        was_lost, self._manual_control_lost = self._manual_control_lost, lost
+        if not lost:
+            self._manual_control_lost_at_arming = False
+        elif not self.armed:
+            self._manual_control_lost_at_arming = True
+        had_input = self.manual_control.last_valid_s > -math.inf
+        if lost and not was_lost and had_input:
+            ev.send_rc_lost(self.events)
+        elif was_lost and not lost and had_input and self._rc_lost_s is not None:
+            ev.send_rc_regained(self.events, now_s - self._rc_lost_s)
+        if lost and not was_lost:
+            self._rc_lost_s = self.manual_control.last_valid_s
+        if lost and not was_lost and self.armed and self._rc_loss_applies():
+            self._start_rc_loss_failsafe(now_s)
+        due = self._rc_loss_action_at_s
+        if due is not None and now_s >= due:
+            self._rc_loss_action_at_s = None
+            self._apply_rc_loss_action()
+
+    def _rc_loss_applies(self) -> bool:
+        if self._manual_control_lost_at_arming:
+            return False
+        if int(self._params.get("COM_RC_IN_MODE")) == RcInMode.STICK_INPUT_DISABLED:
+            return False
+        exempt = int(self._params.get("COM_RCL_EXCEPT"))
+        user = self.user_mode
+        return not (
+            (user == modes.AUTO_MISSION and exempt & 1)
+            or (user in (modes.AUTO_LOITER, modes.AUTO_TAKEOFF, modes.AUTO_VTOL_TAKEOFF)
+                and exempt & 2)
+            or (user == modes.OFFBOARD and exempt & 4)
+        )
+
+    def _start_rc_loss_failsafe(self, now_s: float) -> None:
+        action = int(self._params.get("NAV_RCL_ACT"))
+        mode = failsafe_mode(RclAction, action)
+        delay_s = float(self._params.get("COM_FAIL_ACT_T"))
+        self.failsafe = True
+        if action in (RclAction.TERMINATE, RclAction.DISARM) or delay_s <= 0.1:
+            self._apply_rc_loss_action()
+            return
+        # the framework holds first, so the pilot can notice, then acts
+        self._announce(MAV_SEVERITY_CRITICAL,
+                       f"Failsafe activated: entering Hold for {round(delay_s)} seconds")
+        ev.send_failsafe_hold(self.events, self.user_mode, mode, round(delay_s))
+        self._set_nav_mode(modes.AUTO_LOITER)
+        self._rc_loss_action_at_s = now_s + delay_s
+
+    def _apply_rc_loss_action(self) -> None:
+        action = int(self._params.get("NAV_RCL_ACT"))
+        mode = failsafe_mode(RclAction, action)
+        self.failsafe = True
+        if action == RclAction.DISARM:
+            ev.send_failsafe(self.events, self.user_mode, None)
+            self._disarm(ev.ARM_REASON_FAILSAFE)
+        elif mode is not None:
+            self._set_nav_mode(mode)
 
     def _check_datalink(self, now_s: float) -> None:
         last = self.gcs_heartbeat_s
@@ -311,6 +395,7 @@ class Commander:
         return not (
             not self.ready
             or (self.nav_mode == modes.OFFBOARD and not self.offboard_signal_fresh())
+            or (self.nav_mode in MANUAL_CONTROL_MODES and self.manual_control_lost())
             or (self.nav_mode == modes.AUTO_MISSION
                 and not self._mode_available[modes.AUTO_MISSION])
             or self.nav_mode == modes.TERMINATION
@@ -323,8 +408,13 @@ class Commander:
             (not self._mode_available[modes.AUTO_MISSION], ev.NO_MISSION),
             (not self.offboard_signal_fresh(), ev.OFFBOARD_SIGNAL),
             (self.gcs_heartbeat_s is None or self.datalink_lost, ev.NO_DATALINK),
+            (self.manual_control_lost(), self._no_manual_control_check()),
         )
         return tuple(check for fails, check in failing if fails)
+
+    def _no_manual_control_check(self) -> ev.ArmingCheck:
+        disabled = int(self._params.get("COM_RC_IN_MODE")) == RcInMode.STICK_INPUT_DISABLED
+        return ev.NO_MANUAL_CONTROL_DISABLED if disabled else ev.NO_MANUAL_CONTROL
 
     def _disarm(self, cause: int) -> None:
         self.armed = False
@@ -361,6 +451,7 @@ class Commander:
     def _clear_failsafe(self) -> None:
         self.failsafe = False
         self._offboard_lost_since_s = None
+        self._rc_loss_action_at_s = None
 
     def on_arming_change(self, listener: Callable[[bool], None]) -> None:
         self._arm_listeners.append(listener)

@@ -26,11 +26,14 @@ from sim.modes import Px4Mode
 # navigation_mode_group_t bits (one per vehicle_status nav_state)
 NAV_GROUP_MISSION = 1 << 3
 NAV_GROUP_OFFBOARD = 1 << 14
+# mode_req_manual_control: manual, altctl, posctl, acro, stab
+NAV_GROUP_MANUAL_CONTROL = sum(1 << bit for bit in (0, 1, 2, 10, 15))
 NAV_GROUP_ALL = 0xFFFFFFFF
 # the modes the simulated vehicle flies: manual, altctl, posctl, mission, loiter, rtl, acro,
 # offboard, stab, takeoff, land
 NAV_GROUPS_SUPPORTED = sum(1 << bit for bit in (0, 1, 2, 3, 4, 5, 10, 14, 15, 17, 18))
 # health_component_t bits as indices (the uint8 argument of a check event)
+HEALTH_REMOTE_CONTROL = 7
 HEALTH_COMMUNICATION_LINKS = 12
 HEALTH_GLOBAL_POSITION = 24
 HEALTH_SYSTEM = 20
@@ -89,6 +92,7 @@ class ArmingCheck:
     health_index: int
     level: int
     blocks: bool = True
+    blocked_groups: int | None = None  # when it blocks other modes than the event names
 
 
 OFFBOARD_SIGNAL = ArmingCheck("check_modes_offboard_signal", NAV_GROUP_OFFBOARD,
@@ -99,6 +103,14 @@ NO_GLOBAL_POSITION = ArmingCheck("check_modes_global_pos", NAV_GROUP_ALL,
 # without a GCS link required (NAV_DLL_ACT 0) only a notice
 NO_DATALINK = ArmingCheck("check_rc_dl_no_dllink", NAV_GROUP_ALL, HEALTH_COMMUNICATION_LINKS,
                           LOG_INFO, blocks=False)
+# modeCheck: without stick input the manual modes cannot arm or run; a warning naming no
+# mode, unless COM_RC_IN_MODE disabled the sticks (then an error naming the modes)
+NO_MANUAL_CONTROL = ArmingCheck("check_modes_manual_control", 0, HEALTH_REMOTE_CONTROL,
+                                LOG_WARNING, blocked_groups=NAV_GROUP_MANUAL_CONTROL)
+NO_MANUAL_CONTROL_DISABLED = ArmingCheck("check_modes_manual_control", NAV_GROUP_MANUAL_CONTROL,
+                                         HEALTH_REMOTE_CONTROL, LOG_ERROR)
+# failsafe_cause_t
+FAILSAFE_CAUSE_MANUAL_CONTROL_LOSS = 1
 
 
 def send_arming_report(events: EventLog, checks: tuple[ArmingCheck, ...]) -> None:
@@ -110,7 +122,7 @@ def send_arming_report(events: EventLog, checks: tuple[ArmingCheck, ...]) -> Non
         elif check.level == LOG_WARNING:
             warning |= 1 << check.health_index
         if check.blocks:
-            blocked |= check.nav_groups
+            blocked |= check.nav_groups if check.blocked_groups is None else check.blocked_groups
     can_arm = NAV_GROUPS_SUPPORTED & ~blocked
     events.send("commander_arming_check_summary", log_levels(LOG_PROTOCOL), 0, error, warning,
                 can_arm, can_arm)
@@ -145,6 +157,24 @@ def send_failsafe(events: EventLog, user_mode: Px4Mode, action_mode: Px4Mode | N
               else _FAILSAFE_ACTIONS.get(action_mode, FAILSAFE_ACTION_POSCTRL))
     events.send("commander_failsafe_enter_generic", log_levels(LOG_CRITICAL, LOG_WARNING),
                 user_mode.custom_mode, action)
+
+
+def send_failsafe_hold(
+    events: EventLog, user_mode: Px4Mode, action_mode: Px4Mode | None, delay_s: int
+) -> None:
+    """commander_failsafe_enter_hold: Hold first, the action after delay_s."""
+    action = (FAILSAFE_ACTION_DISARM if action_mode is None
+              else _FAILSAFE_ACTIONS.get(action_mode, FAILSAFE_ACTION_POSCTRL))
+    events.send("commander_failsafe_enter_hold", log_levels(LOG_CRITICAL, LOG_WARNING),
+                user_mode.custom_mode, action, delay_s, FAILSAFE_CAUSE_MANUAL_CONTROL_LOSS)
+
+
+def send_rc_lost(events: EventLog) -> None:
+    events.send("commander_rc_lost", log_levels(LOG_INFO))
+
+
+def send_rc_regained(events: EventLog, after_s: float) -> None:
+    events.send("commander_rc_regained", log_levels(LOG_INFO), after_s)
 
 
 def send_command_decision(events: EventLog, name: str) -> None:

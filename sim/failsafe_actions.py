@@ -32,6 +32,16 @@ class DllAction(IntEnum):
     DISARM = 6
 
 
+class RclAction(IntEnum):
+    """NAV_RCL_ACT values (manual control loss; default 2 Return)."""
+
+    HOLD = 1
+    RETURN = 2
+    LAND = 3
+    TERMINATE = 5
+    DISARM = 6
+
+
 # The mode a failsafe action flies, by the action's name in COM_OBL_RC_ACT and NAV_DLL_ACT
 # (the two parameters name the same actions with different numbers).
 _FAILSAFE_ACTION_MODES: dict[str, Px4Mode] = {

@@ -12,12 +12,13 @@ import math
 
 from sim import modes
 from sim.commander import Announce, Commander
+from sim.manual_control import ManualFlight
 from sim.mission_block import MissionBlock, VtolAirframe
 from sim.modes import Px4Mode
 from sim.params import ParamReader
 from sim.quat import yaw_from_quat
 from sim.rtl_direct import RtlDirect, RtlPhase
-from sim.topics import TrajectorySetpoint, VehicleStateTruth
+from sim.topics import ControlSetpoint, TrajectorySetpoint, VehicleStateTruth
 
 __all__ = ["Navigator", "RtlPhase", "VtolAirframe"]
 
@@ -58,6 +59,8 @@ class Navigator:
         self._takeoff_start_down_m = 0.0
         self._takeoff_started_s = 0.0
         self._land_xy: list[float] = [0.0, 0.0]
+        self._manual = ManualFlight(params)
+        self._last_step_s = 0.0
 
     # -- requests ----------------------------------------------------------------------
 
@@ -97,7 +100,8 @@ class Navigator:
 
     def setpoint(
         self, now_s: float, truth: VehicleStateTruth, origin_alt_m: float
-    ) -> TrajectorySetpoint | None:
+    ) -> ControlSetpoint | None:
+        dt_s, self._last_step_s = now_s - self._last_step_s, now_s
         mode = self._block.commander.nav_mode
         if mode != self._active:
             self._activate(mode, now_s, truth)
@@ -112,7 +116,7 @@ class Navigator:
         if mode == modes.AUTO_RTL:
             return self._rtl.setpoint(now_s, truth)
         if mode in _STICKLESS_MODES:
-            return self._stickless(truth)
+            return self._manual_modes(mode, now_s, truth, dt_s)
         return None
 
     def _activate(self, mode: Px4Mode, now_s: float, truth: VehicleStateTruth) -> None:
@@ -127,6 +131,7 @@ class Navigator:
                 self._hold_yaw_rad = yaw_from_quat(truth.q_wxyz)
                 self._hold_speed_m_s = math.nan
         elif mode in (modes.AUTO_LAND, *_STICKLESS_MODES):
+            self._manual.reset()
             self._land_xy = [position[0], position[1]]
             self._hold_yaw_rad = yaw_from_quat(truth.q_wxyz)
         elif mode == modes.AUTO_RTL:
@@ -186,6 +191,16 @@ class Navigator:
             yaw_rad=self._hold_yaw_rad,
             max_speed_xy_m_s=self._hold_speed_m_s,
         )
+
+    def _manual_modes(
+        self, mode: Px4Mode, now_s: float, truth: VehicleStateTruth, dt_s: float
+    ) -> ControlSetpoint | None:
+        """Flown from the sticks while there is stick input, else stick-less."""
+        commander = self._block.commander
+        sample = commander.manual_control.current(now_s)
+        if sample is None or self._fixed_wing_only or self._block.ground_vehicle:
+            return self._stickless(truth)
+        return self._manual.setpoint(mode, sample, truth, dt_s, commander.landed)
 
     def _stickless(self, truth: VehicleStateTruth) -> TrajectorySetpoint | None:
         if self._block.commander.landed:

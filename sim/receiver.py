@@ -17,6 +17,7 @@ from pymavlink.dialects.v20 import development as mavlink
 from sim import modes
 from sim.commander import MAV_RESULT_ACCEPTED, MAV_RESULT_FAILED, MAV_RESULT_UNSUPPORTED
 from sim.geo import is_valid_lat_lon
+from sim.manual_control import ManualControlReceiver
 from sim.mavlink_event_services import EventServices
 from sim.mavlink_messages import MAVLINK_MSG_ID_PROTOCOL_VERSION, MessageFactory
 from sim.mavlink_parameters import MavlinkParameters
@@ -80,6 +81,7 @@ class Receiver:
             mavlink.MAVLINK_MSG_ID_SET_GPS_GLOBAL_ORIGIN: self._on_set_gps_global_origin,
             mavlink.MAVLINK_MSG_ID_MISSION_REQUEST_LIST: self._on_mission_request_list,
             mavlink.MAVLINK_MSG_ID_TIMESYNC: self._on_timesync,
+            mavlink.MAVLINK_MSG_ID_MANUAL_CONTROL: ManualControlReceiver(vehicle).handle,
             mavlink.MAVLINK_MSG_ID_FILE_TRANSFER_PROTOCOL: self._event_services.handle_ftp,
             mavlink.MAVLINK_MSG_ID_UNKNOWN: self._event_services.handle_unknown,
         }

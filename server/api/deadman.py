@@ -8,7 +8,12 @@ Live inputs: a setpoint or intent marked live (keys, sliders, a gamepad: hold-to
 fed again within ``live_timeout_s``; when it is not, the vehicle brakes and holds. Anything
 not live (a script's position setpoint) is never cancelled by waiting.
 
-Both are announced as "deadman" events; lease changes as "control" events (control_events.py)."""
+Sticks (MANUAL_CONTROL) are live input too: when none come within ``live_timeout_s`` they
+are centred (hold in POSCTL/ALTCTL, hover thrust in STABILIZED) and sent centred for
+``STICKS_CENTRED_S``, then no longer sent, so that PX4's own manual control loss failsafe
+applies. A lease end does the same at once.
+
+All are announced as "deadman" events; lease changes as "control" events (control_events.py)."""
 
 from __future__ import annotations
 
@@ -36,6 +41,8 @@ LIVE_DESCRIPTION = (
     "hold-to-fly input (keys, sliders, a gamepad): unless another live setpoint or intent "
     "follows within deadman_timeout_s, the vehicle brakes and holds"
 )
+# How long centred sticks are sent after the pilot's went silent, before sending stops.
+STICKS_CENTRED_S = 3.0
 _OPERATOR_LOST_NAMES = frozenset(end.value for end in OPERATOR_LOST)
 
 Brake = Callable[[Vehicle], Awaitable[SentSetpoint]]
@@ -45,6 +52,12 @@ Brake = Callable[[Vehicle], Awaitable[SentSetpoint]]
 class _LiveWatch:
     due_at: float
     setpoint: object  # the setpoint streamed when last fed: only that one is braked
+
+
+@dataclass
+class _SticksWatch:
+    due_at: float
+    centred: bool = False  # sent centred since the input went silent: next, stop
 
 
 class Deadman:
@@ -66,6 +79,8 @@ class Deadman:
         self.events = ControlEvents(leases, registry, audit)
         self._brake = brake
         self._live: dict[int, _LiveWatch] = {}
+        self._sticks: dict[int, _SticksWatch] = {}
+        self.sticks_centred_s = STICKS_CENTRED_S
         self._checker: asyncio.Task[None] | None = None
         self._actions: set[asyncio.Task[None]] = set()
         leases.add_listener(self._on_lease)
@@ -119,6 +134,38 @@ class Deadman:
     def live_watched(self, vehicle_id: int) -> bool:
         return vehicle_id in self._live
 
+    # -- sticks ---------------------------------------------------------------------------
+    def feed_sticks(self, vehicle_id: int) -> None:
+        """Sticks were just taken: centre them unless new ones come within live_timeout_s."""
+        self._sticks[vehicle_id] = _SticksWatch(self._leases.now() + self.live_timeout_s)
+
+    def stop_sticks_watch(self, vehicle_id: int) -> None:
+        self._sticks.pop(vehicle_id, None)
+
+    def _check_sticks(self) -> None:
+        now = self._leases.now()
+        for vehicle_id, watch in list(self._sticks.items()):
+            if watch.due_at > now:
+                continue
+            vehicle = self._registry.get(vehicle_id)
+            if vehicle is None or not vehicle.manual_control.active:
+                del self._sticks[vehicle_id]
+            elif not watch.centred:
+                self._centre_sticks(vehicle, watch, "live_timeout")
+            else:
+                del self._sticks[vehicle_id]
+                vehicle.manual_control.stop("deadman: sticks silent")
+                self.events.publish(vehicle_id, "deadman", {
+                    "action": "stop_sticks", "cause": "live_timeout", "ok": True})
+
+    def _centre_sticks(self, vehicle: Vehicle, watch: _SticksWatch, cause: str) -> None:
+        vehicle.manual_control.centre()
+        watch.centred = True
+        watch.due_at = self._leases.now() + self.sticks_centred_s
+        self.events.publish(vehicle.sysid, "deadman", {
+            "action": "centre_sticks", "cause": cause, "timeout_s": self.live_timeout_s,
+            "stop_in_s": self.sticks_centred_s, "ok": True})
+
     def _check_live(self) -> None:
         now = self._leases.now()
         for vehicle_id, watch in list(self._live.items()):
@@ -152,6 +199,7 @@ class Deadman:
         while True:
             self._leases.expire_due()
             self._check_live()
+            self._check_sticks()
             await asyncio.sleep(CHECK_PERIOD_S)
 
     def _on_lease(self, lease: Lease, what: str) -> None:
@@ -160,6 +208,10 @@ class Deadman:
         # nobody flies it now: the operator-loss action decides, not the live-input brake
         self._live.pop(lease.vehicle_id, None)
         vehicle = self._registry.get(lease.vehicle_id)
+        if vehicle is not None and vehicle.manual_control.active:
+            # nobody holds the sticks: centred now, then not sent (PX4's failsafe decides)
+            watch = self._sticks.setdefault(lease.vehicle_id, _SticksWatch(0.0))
+            self._centre_sticks(vehicle, watch, what)
         if vehicle is not None and vehicle.streamer_active:
             self._run(self._apply(vehicle, what))
 

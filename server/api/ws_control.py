@@ -34,7 +34,9 @@ from server.api.lease import (
 )
 from server.api.operations import INTENT_NAMES, OPERATIONS, run_intent, sent_out
 from server.api.routes.control import AskerGone, lease_out, unless_gone
+from server.api.routes.sticks import fly_sticks, stop_sticks
 from server.api.schemas import SetpointBody
+from server.api.schemas.sticks import SticksBody
 from server.api.ws_common import (
     CLOSE_BAD_REQUEST,
     CLOSE_LEASE_HELD,
@@ -210,6 +212,8 @@ class _ControlSession:
                 if not isinstance(live, bool):
                     raise ApiError(422, "live must be true or false", field="live")
                 await self._setpoint(request_id, message.get("setpoint"), live=live)
+            elif kind == "sticks":
+                await self._sticks(request_id, message)
             elif kind == "command":
                 self._start_command(request_id, message.get("name"), message.get("args"))
             elif kind == "takeover_answer":
@@ -217,7 +221,7 @@ class _ControlSession:
             else:
                 raise ApiError(
                     422,
-                    "type must be heartbeat, setpoint, command or takeover_answer",
+                    "type must be heartbeat, setpoint, sticks, command or takeover_answer",
                     field="type",
                 )
         except (json.JSONDecodeError, UnicodeDecodeError):
@@ -234,6 +238,22 @@ class _ControlSession:
             return
         self._context.deadman.watch_live(self._vehicle.sysid, live=live)
         await self._reply(request_id, "setpoint", 200, sent_out(sent).model_dump(mode="json"))
+
+    async def _sticks(self, request_id: Any, message: dict[str, Any]) -> None:
+        """Sticks (MANUAL_CONTROL at 25 Hz, live), or ``"stop": true`` to stop sending.
+        Answered only when the message has an id: the page sends 25 a second."""
+        try:
+            with self._held():
+                if message.get("stop") is True:
+                    out = stop_sticks(self._context, self._vehicle)
+                else:
+                    body = SticksBody.model_validate(message.get("sticks") or {})
+                    out = fly_sticks(self._context, self._vehicle, body)
+        except Exception as exc:
+            await self._reply_error(request_id, "sticks", exc)
+            return
+        if request_id is not None:
+            await self._reply(request_id, "sticks", 200, out.model_dump(mode="json"))
 
     async def _takeover_answer(self, request_id: Any, message: dict[str, Any]) -> None:
         asked_id, grant = message.get("request_id"), message.get("grant")

@@ -10,6 +10,7 @@ from .commands import CommandOutcome, CommandResult
 from .events import VehicleEvent
 from .link import Link
 from .link_stats import LinkStats
+from .manual_control import Sticks
 from .modes import PX4_MODE_NAMES
 from .params import ParamError
 from .setpoint_checks import Envelope, SetpointRejected, check
@@ -51,6 +52,7 @@ __all__ = [
     "StateSubscription",
     "StatusText",
     "StreamStats",
+    "Sticks",
     "Vehicle",
     "VehicleEvent",
     "VehicleState",

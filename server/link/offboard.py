@@ -4,6 +4,7 @@ of PX4's OFFBOARD mode."""
 from __future__ import annotations
 
 import asyncio
+from collections.abc import Callable
 
 from server.link.action import Action
 from server.link.commands import CommandResult
@@ -47,7 +48,16 @@ class Offboard:
         self.setpoint: Setpoint | None = None  # what is streamed now, offsets resolved
         self.streamer = SetpointStreamer(core.send, rate_hz=stream_rate_hz)  # its rate, stats
         self._engaged = False
+        self._on_stream_start: list[Callable[[], None]] = []
         telemetry.on_mode(self._apply_stream_policy)
+
+    def on_stream_start(self, listener: Callable[[], None]) -> None:
+        """Call ``listener()`` before a stopped stream starts (manual control stops then)."""
+        self._on_stream_start.append(listener)
+
+    def stop_stream(self, why: str) -> None:
+        """Stop streaming (an event says why) without a mode change."""
+        self._stop_stream(why)
 
     # -- setpoints ------------------------------------------------------------------------
     def check(self, sp: Setpoint) -> Setpoint:
@@ -126,6 +136,9 @@ class Offboard:
         if self.streamer.active and resolved == self.setpoint:
             # a client repeating its setpoint (a renewal) must not add sends between ticks
             return sent
+        if not self.streamer.active:
+            for listener in self._on_stream_start:
+                listener()
         self.setpoint = resolved
         self.streamer.stream(msg)
         core.hub.notify()

@@ -74,6 +74,14 @@ class SetpointStreamer:
         self._emit(self._loop.time())
         self._rephase()
 
+    def update(self, msg: mavlink.MAVLink_message) -> None:
+        """Send ``msg`` from the next tick on without moving the schedule (a stream that
+        must keep its rate whatever the rate of its updates); stream() it when stopped."""
+        if not self.active:
+            self.stream(msg)
+            return
+        self._msg = msg
+
     def _reset_stats(self) -> None:
         self._ring_next = 0
         self._ring_len = 0

@@ -24,6 +24,7 @@ from pymavlink.dialects.v20 import development as mavlink
 
 from server.link.action import Action
 from server.link.core import Sender, VehicleCore
+from server.link.manual_control import ManualControl
 from server.link.offboard import Offboard
 from server.link.params import ParamClient
 from server.link.px4_events import Px4Events
@@ -103,6 +104,7 @@ class Vehicle:
         core.on_message("PARAM_VALUE", self.params.handle_param_value)
         self.action = Action(core, self.telemetry)
         self.offboard = Offboard(core, self.telemetry, self.action, stream_rate_hz=stream_rate_hz)
+        self.manual_control = ManualControl(core, self.offboard)
         self.telemetry_requests = TelemetryRequests(core, self.telemetry, telemetry_rates_hz)
         self.px4_events = Px4Events(core, self.telemetry)
 
@@ -136,6 +138,7 @@ class Vehicle:
 
     async def close(self) -> None:
         self.offboard.close()
+        self.manual_control.stop("vehicle closed")
         await self.telemetry_requests.close()
         await self.px4_events.close()
         self.core.hub.close_all()

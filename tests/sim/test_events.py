@@ -111,7 +111,8 @@ def test_setpoints_clear_the_offboard_check_with_a_new_report(harness: Harness) 
 
 
 def test_mode_refused_when_armed_names_the_mode(harness: Harness) -> None:
-    harness.set_mode(modes.POSCTL)
+    # armed in Hold: PX4 refuses to arm in Position without stick input
+    harness.set_mode(modes.AUTO_LOITER)
     harness.arm()
     settle(harness)
     harness.api.clear()
@@ -124,7 +125,8 @@ def test_mode_refused_when_armed_names_the_mode(harness: Harness) -> None:
 
 
 def test_mode_refusal_text_and_event_at_most_once_a_second(harness: Harness) -> None:
-    harness.set_mode(modes.POSCTL)
+    # armed in Hold: PX4 refuses to arm in Position without stick input
+    harness.set_mode(modes.AUTO_LOITER)
     harness.arm()
     settle(harness)
     harness.api.clear()
