@@ -8,14 +8,11 @@
   const vh = document.documentElement.clientHeight;
   const name = (el) => el.id ? `#${el.id}` : `${el.tagName.toLowerCase()}.${[...el.classList].join(".")}`
     + (el.textContent.trim() ? ` "${el.textContent.trim().slice(0, 24)}"` : "");
+  // drawn: not display:none, hidden, transparent, nor inside a closed <details>
   const shown = (el) => {
     const r = el.getBoundingClientRect();
     if (r.width < 1 || r.height < 1) return false;
-    for (let p = el; p; p = p.parentElement) {
-      const cs = getComputedStyle(p);
-      if (cs.display === "none" || cs.visibility === "hidden" || cs.opacity === "0") return false;
-    }
-    return true;
+    return el.checkVisibility({ contentVisibilityAuto: true, opacityProperty: true, visibilityProperty: true });
   };
   const scrolls = (cs) => /(auto|scroll)/.test(cs.overflowY) || /(auto|scroll)/.test(cs.overflowX);
   const clips = (cs) => cs.overflowX !== "visible" || cs.overflowY !== "visible";

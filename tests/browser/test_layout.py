@@ -70,6 +70,9 @@ def test_no_control_is_cut_or_overlaps_another(
         assert page.evaluate("document.documentElement.dataset.theme") == scheme
         # the map alone (the 3D scene off, as the tests run it)
         assert _problems(page) == []
+        # with every folded section open too
+        page.evaluate("document.querySelectorAll('details').forEach((d) => { d.open = true; })")
+        assert _problems(page) == []
         # the map and the 3D scene's box side by side, without starting its software WebGL
         page.evaluate("document.getElementById('views').classList.remove('no-scene')")
         scene_box = page.locator("#scene-view").bounding_box()
