@@ -36,6 +36,7 @@ COCKPIT_SIZE = (1280, 800)
 PANEL_SHOTS = {
     "map": ".views-panel",
     "instruments": ".panel:has(#instruments)",
+    "sticks": "#sticks-panel",
     "plots": ".plots",
 }
 # Shot after another client takes control from the page (a real alert).
