@@ -112,7 +112,9 @@ class SigningKeyStore:
         if target <= self.persisted_timestamp:
             return
         try:
-            _write_private(self.timestamp_file, f"{target}\n".encode())
+            # no fsync: it runs on the event loop, and a disk under load can hold an fsync
+            # for seconds; a timestamp lost to a power cut leaves the clock to go by
+            _write_private(self.timestamp_file, f"{target}\n".encode(), sync=False)
         except OSError as exc:
             log.warning("cannot persist the signing timestamp in %s: %s", self.timestamp_file,
                         exc.strerror)
@@ -148,14 +150,15 @@ def _read_timestamp(path: Path) -> int:
         return 0
 
 
-def _write_private(path: Path, data: bytes) -> None:
+def _write_private(path: Path, data: bytes, *, sync: bool = True) -> None:
     """Write via a temporary file and rename, mode 0600, so a crash leaves old or new."""
     path.parent.mkdir(parents=True, exist_ok=True)
     temporary = path.with_name(path.name + ".tmp")
     fd = os.open(temporary, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
     try:
         os.write(fd, data)
-        os.fsync(fd)
+        if sync:
+            os.fsync(fd)
     finally:
         os.close(fd)
     os.replace(temporary, path)

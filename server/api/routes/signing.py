@@ -8,6 +8,7 @@ armed vehicle makes it a 409 before anything is sent."""
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 
 from fastapi import APIRouter, Request
@@ -82,7 +83,8 @@ async def set_signing(
         targets = _targets(context)
         key = None if body.action == "disable" else new_key()
         old_key = store.key
-        store.replace_key(key)  # first: a crash mid-way must not leave the file behind
+        # first: a crash mid-way must not leave the file behind (fsync: off the loop)
+        await asyncio.to_thread(store.replace_key, key)
         done: list[Link] = []
         try:
             for link, sysids in targets:
@@ -92,7 +94,7 @@ async def set_signing(
             for link in done:  # best effort: back to the key the file keeps again
                 with contextlib.suppress(ProvisionError):
                     await provision(link, sorted(link.vehicles), old_key)
-            store.replace_key(old_key)
+            await asyncio.to_thread(store.replace_key, old_key)
             raise ApiError(504, str(exc)) from None
     return _status(context, store)
 
