@@ -97,7 +97,7 @@ async def test_generate_rotate_disable_and_an_unsigned_sender_cannot_arm(
         assert armed.status_code == 200, armed.text
         assert (await post(api, "rotate")).status_code == 409  # PX4: not while armed
         assert (await api.control("disarm", {"force": True})).status_code == 200
-        await wait_for(lambda: not inst.vehicle.armed, 5.0, "disarmed")
+        await api.wait_state(lambda s: not s["armed"], 5.0, "disarmed")
 
         assert (await post(api, "generate")).status_code == 409  # already on
         response = await post(api, "rotate")
