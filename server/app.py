@@ -65,7 +65,6 @@ def create_app(settings: Settings) -> FastAPI:
         settings, tokens, registry, leases, deadman, read_only=is_replay(settings.connect)
     )
     hub = SceneHub() if settings.scene else None
-    signing_store = _signing_store(settings)
     publishers = StatePublishers(
         registry.all, leases.status, max_rate_hz=settings.telemetry_max_rate_hz
     )
@@ -74,6 +73,7 @@ def create_app(settings: Settings) -> FastAPI:
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         sim: SimProcess | None = None
         try:
+            signing_store = app.state.signing_store = _signing_store(settings)
             if settings.connect:
                 await _open_links(registry, settings, settings.connect, signing_store)
             else:
@@ -114,7 +114,7 @@ def create_app(settings: Settings) -> FastAPI:
     app.state.api = context
     app.state.sim = None
     app.state.publishers = publishers
-    app.state.signing_store = signing_store
+    app.state.signing_store = None  # the lifespan reads the key file
     install_error_handlers(app)
     if settings.cors_origins:
         app.add_middleware(

@@ -70,10 +70,13 @@ async def test_generate_rotate_disable_and_an_unsigned_sender_cannot_arm(
         response = await post(api, "generate")
         assert response.status_code == 200, response.text
         body = response.json()
-        assert body["enabled"] and body["links"][0]["signing"]["vehicles_signed"]
+        assert body["enabled"]
+        assert body["links"][0]["signing"]["vehicles_signed"]
         first = key_file.read_text().strip()
-        assert len(first) == 64 and first not in response.text
-        assert inst.signing is not None and inst.signing.secret_key == bytes.fromhex(first)
+        assert len(first) == 64
+        assert first not in response.text
+        assert inst.signing is not None
+        assert inst.signing.secret_key == bytes.fromhex(first)
         state = await api.state()
         assert state["link"]["signing"]["enabled"] is True
         assert first not in str(state)
@@ -103,12 +106,14 @@ async def test_generate_rotate_disable_and_an_unsigned_sender_cannot_arm(
         response = await post(api, "rotate")
         assert response.status_code == 200, response.text
         second = key_file.read_text().strip()
-        assert second != first and inst.signing.secret_key == bytes.fromhex(second)
+        assert second != first
+        assert inst.signing.secret_key == bytes.fromhex(second)
         assert (await api.state())["connected"] is True
 
         response = await post(api, "disable")
         assert response.status_code == 200, response.text
-        assert response.json()["enabled"] is False and not key_file.exists()
+        assert response.json()["enabled"] is False
+        assert not key_file.exists()
         assert not inst.signing.enabled
 
 

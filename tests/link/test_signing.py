@@ -10,7 +10,6 @@ import contextlib
 import logging
 import os
 import secrets
-import time
 from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import cast
@@ -92,7 +91,8 @@ async def test_switching_signing_off_leaves_both_ends_unsigned(tmp_path: Path) -
         await provision(link, [1], secrets.token_bytes(32))
         await provision(link, [1], None)
         signing = sim.instances[0].signing
-        assert signing is not None and not signing.enabled
+        assert signing is not None
+        assert not signing.enabled
         assert not link.signing.enabled
         unsigned_before = signing_of(link)["unsigned_in"]
         await wait_for(lambda: signing_of(link)["unsigned_in"] > unsigned_before, 5.0, "more")
@@ -111,7 +111,9 @@ async def test_setup_signing_and_the_key_never_reach_the_tlog_or_the_log(
     data = tlog.read_bytes()
     text = caplog.text
     assert "SETUP_SIGNING" in text or "signing" in text  # the logging was captured
-    assert key not in data and key.hex() not in text and str(list(key))[1:-1] not in text
+    assert key not in data
+    assert key.hex() not in text
+    assert str(list(key))[1:-1] not in text
     ids = set()
     for _t, frame in iter_tlog(tlog):
         ids.add(frame[7] | frame[8] << 8 | frame[9] << 16 if frame[0] == 0xFD else frame[5])
@@ -202,4 +204,3 @@ def _drain(queue: asyncio.Queue[object]) -> list[object]:  # type: ignore[type-a
     return items
 
 
-_ = time

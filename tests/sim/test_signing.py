@@ -176,7 +176,8 @@ async def test_setup_signing_sets_rotates_and_clears_the_key_and_persists_it(
                           signing_dir=tmp_path) as sim:
         inst = sim.instances[0]
         signing = inst.signing
-        assert signing is not None and not signing.enabled
+        assert signing is not None
+        assert not signing.enabled
         port = inst.api_local_port
         plain = await open_sender()
         try:
@@ -219,7 +220,8 @@ async def test_setup_signing_is_ignored_while_armed(signed_sim: tuple[SimCluster
         holder.send(setup_signing(secrets.token_bytes(32), now_ticks()), inst.api_local_port)
         await wait_for(lambda: inst.signing is not None and inst.signing.setup_refused == 1,
                        5.0, "refused while armed")
-        assert inst.signing is not None and inst.signing.secret_key == key
+        assert inst.signing is not None
+        assert inst.signing.secret_key == key
     finally:
         holder.close()
 
@@ -244,4 +246,5 @@ async def test_a_restarted_vehicle_keeps_its_key_and_signs_past_its_last_timesta
             peer.close()
     # a graceful stop wrote the timestamp reached back
     (stored,) = struct.unpack_from("<Q", key_file.read_bytes(), 32)
-    assert key_file.read_bytes()[:32] == key and stored > future
+    assert key_file.read_bytes()[:32] == key
+    assert stored > future
