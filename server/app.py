@@ -174,7 +174,8 @@ async def _open_links(
         try:
             link = await Link.open(
                 url, log_dir=log_dir, heartbeat_timeout_s=settings.heartbeat_timeout_s,
-                signing_store=signing_store,
+                # a recording is shown as it was recorded: nothing to sign or check
+                signing_store=None if is_replay([url]) else signing_store,
             )
         except OSError as exc:
             raise StartupError(f"cannot open {url}: {exc}") from exc
