@@ -21,6 +21,7 @@ from server.link.link import Link
 from server.link.signing import (
     PERSIST_MARGIN_TICKS,
     LinkSigning,
+    SigningKeyError,
     SigningKeyStore,
     provision,
     signing_timestamp,
@@ -204,3 +205,48 @@ def _drain(queue: asyncio.Queue[object]) -> list[object]:  # type: ignore[type-a
     return items
 
 
+
+
+def test_a_bad_key_file_is_named_without_its_content(tmp_path: Path) -> None:
+    key_file = tmp_path / "signing.key"
+    key_file.write_text("secret-but-not-a-key\n")
+    with pytest.raises(SigningKeyError) as raised:
+        SigningKeyStore(key_file)
+    assert str(key_file) in str(raised.value)
+    assert "secret-but-not-a-key" not in str(raised.value)
+
+
+class Recorder(Peer):
+    def __init__(self) -> None:
+        super().__init__()
+        self.frames: list[bytes] = []
+
+    def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
+        self.frames.append(data)
+
+
+async def test_an_unsigned_spoof_of_the_vehicle_does_not_redirect_the_links_answers(
+    tmp_path: Path,
+) -> None:
+    key = secrets.token_bytes(32)
+    store = SigningKeyStore(tmp_path / "signing.key")
+    store.replace_key(key)
+    link = await Link.open("udpin:127.0.0.1:0", log_dir=None, signing_store=store)
+    loop = asyncio.get_running_loop()
+    t1, vehicle = await loop.create_datagram_endpoint(Recorder, local_addr=("127.0.0.1", 0))
+    t2, spoofer = await loop.create_datagram_endpoint(Recorder, local_addr=("127.0.0.1", 0))
+    try:
+        assert link.local_address is not None
+        port = link.local_address[1]
+        status = mavlink.MAVLink_sys_status_message(*([0] * 13))
+        vehicle.send(bytes(status.pack(vehicle.codec(key))), port)
+        await wait_for(lambda: signing_of(link)["signed_in"] == 1, 5.0, "the vehicle heard")
+        spoofer.send(bytes(status.pack(spoofer.codec(None))), port)  # claims to be system 1
+        await wait_for(lambda: signing_of(link)["rejected_unsigned"] == 1, 5.0, "refused")
+        link.send(link.mav.command_long_encode(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0))
+        await wait_for(lambda: len(vehicle.frames) >= 1, 5.0, "the command at the vehicle")
+        assert not [f for f in spoofer.frames if f[7] == 76]  # no COMMAND_LONG to the spoofer
+    finally:
+        t1.close()
+        t2.close()
+        await link.close()
