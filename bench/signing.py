@@ -82,9 +82,7 @@ async def against_sim(tmp: Path) -> dict[str, Any]:
         link = await Link.open(f"udpout:127.0.0.1:{sim.instances[0].api_local_port}",
                                log_dir=None, signing_store=store)
         try:
-            while 1 not in link.vehicles:
-                await asyncio.sleep(0.05)
-            vehicle = link.vehicles[1]
+            vehicle = await asyncio.wait_for(link.subscribe_vehicles().get(), 30.0)
             await asyncio.sleep(2.0)  # telemetry requests settle
             figures["frames_per_s_unsigned"] = await frame_rate(link)
             figures["arm_ack_ms_unsigned"] = await arm_round_trip_ms(vehicle)

@@ -98,6 +98,7 @@ async def test_generate_rotate_disable_and_an_unsigned_sender_cannot_arm(
         await api.take_control()
         armed = await api.control("arm")
         assert armed.status_code == 200, armed.text
+        await api.wait_state(lambda s: s["armed"], 5.0, "armed")
         assert (await post(api, "rotate")).status_code == 409  # PX4: not while armed
         assert (await api.control("disarm", {"force": True})).status_code == 200
         await api.wait_state(lambda s: not s["armed"], 5.0, "disarmed")
