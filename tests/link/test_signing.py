@@ -28,6 +28,7 @@ from server.link.signing import (
 )
 from server.link.tlog import iter_tlog
 from server.link.vehicle import Vehicle
+from server.simproc import SimProcess
 from sim.runner import SimCluster
 from tests.sim.conftest import PointMassAirframe, point_mass_defaults
 from tests.waiting import wait_for
@@ -250,3 +251,27 @@ async def test_an_unsigned_spoof_of_the_vehicle_does_not_redirect_the_links_answ
         t1.close()
         t2.close()
         await link.close()
+
+
+async def test_sim_process_with_a_signing_dir_talks_signed_with_the_same_key(
+    tmp_path: Path,
+) -> None:
+    """`python -m sim --signing-dir` (what the server starts) loads PX4's key file."""
+    key = secrets.token_bytes(32)
+    key_file = tmp_path / "sim" / "0" / "mavlink" / "mavlink-signing-key.bin"
+    key_file.parent.mkdir(parents=True)
+    key_file.write_bytes(key + signing_timestamp().to_bytes(8, "little"))
+    store = SigningKeyStore(tmp_path / "signing.key")
+    store.replace_key(key)
+    sim = SimProcess(signing_dir=tmp_path / "sim")
+    instances = await sim.start()
+    try:
+        link = await Link.open(instances[0].url, log_dir=None, signing_store=store)
+        try:
+            await wait_for(lambda: signing_of(link)["vehicles_signed"] is True, 20.0,
+                           "signed both ways")
+            assert signing_of(link)["rejected"] == 0
+        finally:
+            await link.close()
+    finally:
+        await sim.stop()
