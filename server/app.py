@@ -24,16 +24,8 @@ from server.api.errors import install_error_handlers
 from server.api.lease import LeaseManager
 from server.api.publisher import StatePublishers
 from server.api.registry import VehicleRegistry
-from server.api.routes import (
-    commands,
-    control,
-    health,
-    intents,
-    params,
-    setpoint,
-    signing,
-    vehicles,
-)
+from server.api.routes import commands, control, health, intents, params, setpoint, vehicles
+from server.api.routes import signing as signing_routes
 from server.link import Envelope, Link
 from server.link.signing import SigningKeyError, SigningKeyStore
 from server.link.urls import parse_link_url
@@ -124,8 +116,9 @@ def create_app(settings: Settings) -> FastAPI:
             allow_headers=["Authorization", "Content-Type", "X-Lease-Id"],
         )
     api = APIRouter(prefix=API_PREFIX)
-    for module in (health, vehicles, control, commands, intents, setpoint, params, signing):
+    for module in (health, vehicles, control, commands, intents, setpoint, params):
         api.include_router(module.router)
+    api.include_router(signing_routes.router)
     api.include_router(ws.router)
     app.include_router(api)
     if hub is not None:
