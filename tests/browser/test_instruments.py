@@ -166,6 +166,10 @@ def test_numbers_ages_and_battery_time_are_written_for_people(page: Any) -> None
             millis: [f.millis(17.4), f.millis(154753)],
             durations: [f.duration(45), f.duration(720), f.duration(3900)],
             battery: [byCurrent, byRate, own],
+            deadman: f.deadmanText({
+                action: "brake", cause: "live_timeout", timeout_s: 0.5, ok: true,
+                setpoint: { type: "position_ned", north_m: 10.04, east_m: -0.02, down_m: -5 },
+            }),
         };
     }""")
     assert shown["zero"] == ["0.0", "0.00", "-0.1", "–", "–"]
@@ -179,6 +183,10 @@ def test_numbers_ages_and_battery_time_are_written_for_people(page: Any) -> None
     # 1 % in 30 s with 79 % left
     assert by_rate == {"seconds": pytest.approx(79 * 30.0), "how": "rate"}
     assert own == {"seconds": 615, "how": "vehicle"}
+    assert shown["deadman"] == (
+        "deadman: brake (the pilot's live input fell silent for 0.5 s)"
+        " — position ned north 10.0 east 0.0 down -5.0"
+    )
 
 
 def test_an_observer_sees_the_setpoint_flown_not_the_forms_defaults(
