@@ -7,6 +7,7 @@ import { Instruments } from "./instruments.js";
 import { flownText } from "./offboard.js";
 import { freshness, page, plots } from "./page.js";
 import { $, nowS, num, setText } from "./ui.js";
+import { renderSigning } from "./signing.js";
 
 export const instruments = new Instruments($("instruments"), freshness);
 // the telemetry table greys out like the instruments (by the age of each value's message)
@@ -61,6 +62,7 @@ export function render(state) {
   $("vtol-state").classList.toggle("hidden", !vtol);
   if (vtol) setText("vtol-state", state.vtol_state.replaceAll("_", " "), state.vtol_state.startsWith("TRANSITION") ? "warn" : "info");
 
+  renderSigning(state);
   renderTelemetry(state);
   renderStream(state.stream || {});
   renderVtol(state);
