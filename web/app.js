@@ -13,6 +13,7 @@ import {
   setClientLabel, tabId, takeControl, takeControlClicked, updateControls,
 } from "./handover.js";
 import { confirmAction, wireConfirm } from "./confirm.js";
+import { deadmanText } from "./format.js";
 import { wireLayout } from "./layout.js";
 import { VehicleMap } from "./map.js";
 import { modeMenu, modesFor } from "./modes.js";
@@ -64,6 +65,10 @@ function onEvent(message) {
     log("NOTICE", controlText(data));
   } else if (message.kind === "lease") {
     return; // the same changes as the control events, in the older shape
+  } else if (message.kind === "deadman") {
+    const text = deadmanText(data);
+    log("WARNING", text);
+    alerts.raise("deadman", text, data.ok === false ? "critical" : "warning", { forMs: 15000 });
   } else {
     const text = data.text || data.reason || Object.entries(data)
       .filter(([, v]) => v !== null && v !== undefined)

@@ -57,3 +57,22 @@ export function heading(deg) {
 export function words(name) {
   return String(name).toLowerCase().replaceAll("_", " ");
 }
+
+/** A deadman event in words: "deadman: brake (the pilot's live input fell silent for 0.5 s)
+ * — position north 10.0 m east 2.0 m down -5.0 m", not its JSON. */
+export function deadmanText(data) {
+  const cause = data.cause === "live_timeout"
+    ? `the pilot's live input fell silent for ${num(data.timeout_s, 1)} s`
+    : `operator ${words(data.cause || "lost")}`;
+  const sp = data.setpoint;
+  let what = "";
+  if (sp && typeof sp === "object") {
+    const parts = Object.entries(sp)
+      .filter(([k, v]) => k !== "type" && typeof v === "number" && Number.isFinite(v))
+      .map(([k, v]) => `${words(k.replace(/_(m|m_s|deg|deg_s)$/, ""))} ${num(v, 1)}`);
+    what = ` — ${words(sp.type || "setpoint")} ${parts.join(" ")}`.trimEnd();
+  }
+  const outcome = data.ok === false ? ` — failed: ${data.reason || data.result || "no answer"}`
+    : data.result ? ` — ${data.result}` : "";
+  return `deadman: ${words(data.action || "action")} (${cause})${what}${outcome}`;
+}

@@ -11,7 +11,7 @@ from typing import Any
 import httpx
 import pytest
 
-from .flows import click_and_wait_result, settle_vehicle, take_control
+from .flows import click_and_wait_result, settle_vehicle, start_offboard_here, take_control
 from .harness import Serve, altitude_m, vehicle_state, wait_for
 from .pausing import sim_paused
 
@@ -166,6 +166,10 @@ def test_numbers_ages_and_battery_time_are_written_for_people(page: Any) -> None
             millis: [f.millis(17.4), f.millis(154753)],
             durations: [f.duration(45), f.duration(720), f.duration(3900)],
             battery: [byCurrent, byRate, own],
+            deadman: f.deadmanText({
+                action: "brake", cause: "live_timeout", timeout_s: 0.5, ok: true,
+                setpoint: { type: "position_ned", north_m: 10.04, east_m: -0.02, down_m: -5 },
+            }),
         };
     }""")
     assert shown["zero"] == ["0.0", "0.00", "-0.1", "–", "–"]
@@ -179,3 +183,32 @@ def test_numbers_ages_and_battery_time_are_written_for_people(page: Any) -> None
     # 1 % in 30 s with 79 % left
     assert by_rate == {"seconds": pytest.approx(79 * 30.0), "how": "rate"}
     assert own == {"seconds": 615, "how": "vehicle"}
+    assert shown["deadman"] == (
+        "deadman: brake (the pilot's live input fell silent for 0.5 s)"
+        " — position ned north 10.0 east 0.0 down -5.0"
+    )
+
+
+def test_an_observer_sees_the_setpoint_flown_not_the_forms_defaults(
+    api: httpx.Client, page: Any, second_page: Any, flying: None
+) -> None:
+    take_control(page)
+    start_offboard_here(page, api)
+    north = round(float(page.input_value("#sp-north_m")) + 3.0, 1)
+    page.fill("#sp-north_m", str(north))  # the pilot moves the setpoint 3 m north
+    wait_for(
+        "the streamed setpoint 3 m further north",
+        lambda: abs((vehicle_state(api)["setpoint"] or {}).get("north_m", 1e9) - north) < 0.05,
+        10.0,
+    )
+    # the observer's panel shows what is flown, in the pilot's words and fields
+    second_page.wait_for_function(
+        "([n]) => Math.abs(parseFloat(document.getElementById('sp-north_m').value) - n) < 0.05",
+        arg=[north],
+        timeout=PAGE_TIMEOUT_MS,
+    )
+    flown = second_page.text_content("#sp-flown-text") or ""
+    assert flown.startswith("Position · North "), flown
+    assert abs(_number(flown.split("North ")[1]) - north) < 0.05, flown
+    assert page.text_content("#sp-flown-text") == flown
+    assert second_page.is_disabled("#sp-north_m")  # observing: shown, not editable
