@@ -124,6 +124,7 @@ function buildPanel(root) {
       <div id="stick-right" class="stick-pad" title="pitch (forward/back) and roll"><div class="stick-knob"></div><span class="stick-label">pitch · roll</span></div>
     </div>
     <div id="sticks-values" class="hint">–</div>
+    <div class="hint">Stopping the sticks in flight is a lost transmitter for PX4: Hold, then Return (NAV_RCL_ACT), unless COM_RCL_EXCEPT exempts the mode.</div>
     <details class="sticks-settings"><summary>Mapping and expo</summary>
       <div class="row small"><label class="field">expo <input id="sticks-expo" type="range" min="0" max="1" step="0.05"></label><b id="sticks-expo-value"></b></div>
       <div class="row small"><label class="field">throttle stick

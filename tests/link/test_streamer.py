@@ -210,3 +210,24 @@ async def test_statistics_restart_with_the_stream(monkeypatch: pytest.MonkeyPatc
     assert second.sent == 3
     assert second.max_gap_ms == pytest.approx(20, rel=1e-9)
     assert second.gaps == 0
+
+
+async def test_update_keeps_the_schedule_however_often_the_message_changes(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """MANUAL_CONTROL's way: new sticks change what the next tick sends, never when."""
+    rec = _Recorder(monkeypatch)
+    streamer = SetpointStreamer(rec, rate_hz=25.0)
+    t0 = _now()
+    streamer.update(_msg(0.0))  # a stopped stream starts at once
+    for k in range(1, 60):  # 60 updates a second for one second
+        await asyncio.sleep(1.0 / 60.0)
+        streamer.update(_msg(float(k)))
+    await asyncio.sleep(0.001)
+    streamer.stop()
+    expected = [t0 + k * 0.04 for k in range(len(rec.times))]
+    assert rec.times == pytest.approx(expected, abs=EXACT_S)
+    assert len(rec.times) == 25  # 0 .. 0.96 s, never an extra send for an update
+    # each tick sends the newest message given before it
+    for t, x in rec.sent[1:]:
+        assert x == pytest.approx(int((t - t0) * 60.0 + 1e-6), abs=1.0)
