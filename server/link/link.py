@@ -77,6 +77,7 @@ class Link:
         self._bytes_in = 0
         self._bytes_out = 0
         self._bad_frames = 0
+        self._unverified_frames = 0
         self._tasks: list[asyncio.Task[None]] = []
         self._closed = False
 
@@ -185,6 +186,7 @@ class Link:
             bytes_out=self._bytes_out,
             lost_frames=self._gaps.lost_frames,
             bad_frames=self._bad_frames,
+            unverified_frames=self._unverified_frames,
             last_heartbeat_age_s=age,
             reconnects=self._transport.reconnects,
         )
@@ -211,15 +213,15 @@ class Link:
     # -- receiving (called by the transport through _LinkReceiver, on the loop) --
 
     def _frame_received(self, msg: mavlink.MAVLink_message) -> None:
-        self._frames_in += 1
         if isinstance(msg, mavlink.MAVLink_unknown):
             msg = px4_messages.decode_unknown(msg) or msg
         if isinstance(msg, mavlink.MAVLink_unknown):
-            # Not in our dialect: counted and recorded, but nobody can read it.
-            self._gaps.observe(*_header_ids(msg.get_msgbuf()))
-            if self._tlog is not None:
-                self._tlog.record(msg.get_msgbuf())
+            # An id outside our dialect: its checksum cannot be checked, so nothing in it
+            # (ids, sequence) can be trusted; random bytes often parse as one. Counted and
+            # dropped: it is not recorded, discovers nothing and keeps nobody alive.
+            self._unverified_frames += 1
             return
+        self._frames_in += 1
         src_system = msg.get_srcSystem()
         self._gaps.observe(src_system, msg.get_srcComponent(), msg.get_seq())
         if self._tlog is not None:
@@ -321,16 +323,6 @@ class _LinkReceiver:
             lambda msg, _peer: link._frame_received(msg), link._bad_frames_received,
             link._bytes_received, link._connection_changed,
         )  # fmt: skip
-
-
-def _header_ids(frame: bytes | bytearray) -> tuple[int, int, int]:
-    """(system, component, sequence) from a raw frame's header, MAVLink 1 or 2.
-
-    pymavlink leaves these unset on messages of ids it does not know.
-    """
-    if frame[0] == mavlink.PROTOCOL_MARKER_V2:
-        return frame[5], frame[6], frame[4]
-    return frame[3], frame[4], frame[2]
 
 
 def _put_drop_oldest(queue: asyncio.Queue[Any], item: Any) -> None:

@@ -20,6 +20,8 @@ class LinkStats:
     bad_frames: int  # bad CRC, garbage, truncated frames: counted and dropped
     last_heartbeat_age_s: float | None  # None before the first vehicle HEARTBEAT
     reconnects: int
+    # frames of ids outside the dialect, whose checksum cannot be checked: counted, dropped
+    unverified_frames: int = 0
 
 
 class SequenceGapCounter:

@@ -55,7 +55,8 @@ class FrameDecoder:
         return True
 
 
-FrameHook = Callable[[mavlink.MAVLink_message, Peer], None]
+# Sees each good frame before the sink; False drops it (the hook counts it).
+FrameHook = Callable[[mavlink.MAVLink_message, Peer], bool | None]
 
 
 def deliver(
@@ -75,8 +76,8 @@ def deliver(
     if bad:
         sink.bad_frames_received(bad)
     for msg in frames:
-        if before_each is not None:
-            before_each(msg, peer)
+        if before_each is not None and before_each(msg, peer) is False:
+            continue
         sink.frame_received(msg, peer)
 
 
@@ -112,6 +113,11 @@ class PeerRouter:
         self._last_heard.pop(peer, None)
         for system in [s for s, p in self._peer_by_system.items() if p == peer]:
             del self._peer_by_system[system]
+
+    def silent_s(self, peer: Peer) -> float:
+        """Seconds since ``peer`` was last heard (infinite for a peer not known)."""
+        last = self._last_heard.get(peer)
+        return float("inf") if last is None else self._clock() - last
 
     def peer_of(self, target_system: int | None) -> Peer | None:
         """The peer a targeted frame should go to; None for broadcasts and unknown systems."""
