@@ -160,7 +160,12 @@ class UdpLink(asyncio.DatagramProtocol):
         self._codec = MavlinkCodec(sysid, compid)
         self._on_message = on_message
         self._transport: asyncio.DatagramTransport | None = None
+        self._observers: list[Callable[[Address, Message], None]] = []
         self.local_port = 0
+
+    def observe(self, observer: Callable[[Address, Message], None]) -> None:
+        """Also show every taken message and its sender to ``observer`` (benches, tests)."""
+        self._observers.append(observer)
 
     @property
     def has_remote(self) -> bool:
@@ -186,9 +191,12 @@ class UdpLink(asyncio.DatagramProtocol):
             if bad == 0 and unverified == 0:
                 self.counters.rx_dropped += 1
             return
-        self._heard_from((addr[0], addr[1]))
+        sender = (addr[0], addr[1])
+        self._heard_from(sender)
         for msg in messages:
             self.counters.rx_messages += 1
+            for observer in self._observers:
+                observer(sender, msg)
             try:
                 self._on_message(self, msg)
             except Exception:
