@@ -82,10 +82,11 @@ def _no_markers(data: bytes) -> bytes:
 class HostileFrames:
     """Deterministic hostile datagrams (seeded), one kind at a time, for one receiver."""
 
-    def __init__(self, seed: int, *, to_server: bool) -> None:
+    def __init__(self, seed: int, *, to_server: bool, vehicle_sysid: int = VEHICLE_SYSID) -> None:
         self._rng = random.Random(seed)
         self._to_server = to_server
-        src = VEHICLE_SYSID if to_server else STRANGER_SYSID
+        self._vehicle_sysid = vehicle_sysid
+        src = vehicle_sysid if to_server else STRANGER_SYSID
         self._mav = mavlink.MAVLink(None, srcSystem=src, srcComponent=1)
         self._unknown_ids = [i for i in range(1, 1 << 24, 4099)
                              if i not in mavlink.mavlink_map and i not in _UNKNOWN_IDS_TAKEN]
@@ -160,7 +161,7 @@ class HostileFrames:
                 target, 1, rng.randrange(1 << 16), rng.randrange(256), *(f() for _ in range(7)))
         elif choice == 3:
             msg = mavlink.MAVLink_param_request_read_message(
-                VEHICLE_SYSID, 1, "".join(rng.choices(_PARAM_CHARS, k=16)).encode(),
+                self._vehicle_sysid, 1, "".join(rng.choices(_PARAM_CHARS, k=16)).encode(),
                 rng.randrange(-(1 << 15), 1 << 15))
         elif choice == 4:
             msg = mavlink.MAVLink_timesync_message(
