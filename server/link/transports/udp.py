@@ -105,8 +105,11 @@ class UdpInTransport(_UdpTransport):
         return bool(destinations)
 
     def _frame_heard(self, msg: mavlink.MAVLink_message, peer: Peer) -> bool | None:
-        if isinstance(msg, mavlink.MAVLink_unknown) and decode_unknown(msg) is None:
-            return None  # unchecked: the link counts and drops it, it names no peer
+        if isinstance(msg, mavlink.MAVLink_unknown):
+            decoded = decode_unknown(msg)
+            if decoded is None:
+                return None  # unchecked: the link counts and drops it, it names no peer
+            msg = decoded  # pymavlink leaves an UNKNOWN_<id>'s header ids unset
         src_system = msg.get_srcSystem()
         owner = self._router.peer_of(src_system)
         if (owner is not None and owner != peer
