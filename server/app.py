@@ -23,7 +23,17 @@ from server.api.errors import install_error_handlers
 from server.api.lease import LeaseManager
 from server.api.publisher import StatePublishers
 from server.api.registry import VehicleRegistry
-from server.api.routes import commands, control, health, intents, params, setpoint, vehicles
+from server.api.routes import (
+    commands,
+    control,
+    health,
+    intents,
+    params,
+    session,
+    setpoint,
+    vehicles,
+)
+from server.api.security import install_security
 from server.link import Envelope, Link
 from server.link.urls import parse_link_url
 from server.scene import ClickPoint, SceneHub
@@ -108,7 +118,7 @@ def create_app(settings: Settings) -> FastAPI:
             allow_headers=["Authorization", "Content-Type", "X-Lease-Id"],
         )
     api = APIRouter(prefix=API_PREFIX)
-    for module in (health, vehicles, control, commands, intents, setpoint, params):
+    for module in (health, session, vehicles, control, commands, intents, setpoint, params):
         api.include_router(module.router)
     api.include_router(ws.router)
     app.include_router(api)
@@ -116,6 +126,7 @@ def create_app(settings: Settings) -> FastAPI:
         hub.mount(app, check_token=tokens.is_valid)
     if settings.web_dir is not None:
         app.mount("/", StaticFiles(directory=settings.web_dir, html=True), name="web")
+    install_security(app, tokens, context.guards, settings.cors_origins)
     return app
 
 

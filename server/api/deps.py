@@ -6,7 +6,7 @@ All are coroutines so they run on the event loop, which owns the leases and the 
 from __future__ import annotations
 
 from collections.abc import AsyncIterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Annotated
 
 from fastapi import Depends, Header, Path, Request, Security
@@ -20,6 +20,7 @@ from server.api.deadman import Deadman
 from server.api.errors import ApiError
 from server.api.lease import Lease, LeaseManager
 from server.api.registry import VehicleRegistry
+from server.api.security import Guards
 from server.link import Vehicle
 from server.settings import Settings
 
@@ -33,6 +34,11 @@ class ApiContext:
     deadman: Deadman
     # A replayed recording: nobody may control, whatever the token.
     read_only: bool = False
+    # Rate limits and the wrong-token lockout (security.py), from the settings.
+    guards: Guards = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.guards = Guards.from_settings(self.settings)
 
     @property
     def audit(self) -> AuditLog:
