@@ -10,6 +10,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 Clock = Callable[[], float]
+_EPSILON = 1e-9
 
 
 @dataclass
@@ -29,8 +30,8 @@ class TokenBucket:
         now = self.clock()
         self._level = min(self.burst, self._level + (now - self._at_s) * self.rate_per_s)
         self._at_s = now
-        if self._level >= 1.0:
-            self._level -= 1.0
+        if self._level >= 1.0 - _EPSILON:  # a refill's rounding must not refuse a call
+            self._level = max(0.0, self._level - 1.0)
             return 0.0
         return (1.0 - self._level) / self.rate_per_s
 
