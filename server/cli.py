@@ -20,7 +20,14 @@ from server.settings import Settings, SettingsError, load_settings
 
 log = logging.getLogger("server")
 
-__all__ = ["RedactTokens", "build_parser", "main", "ready_url", "settings_from_args"]
+__all__ = [
+    "RedactTokens",
+    "build_parser",
+    "main",
+    "ready_url",
+    "settings_from_args",
+    "uvicorn_server",
+]
 
 
 def configure_logging(level: str) -> None:
@@ -153,7 +160,8 @@ def ready_url(settings: Settings, port: int) -> str:
     return f"{scheme}://{host}:{port}/?token={settings.pilot_token()}"
 
 
-async def serve(settings: Settings) -> int:
+def uvicorn_server(settings: Settings) -> uvicorn.Server:
+    """The server `skyhelm serve` runs: https and wss when a TLS certificate is set."""
     from server.app import create_app
 
     config = uvicorn.Config(
@@ -161,7 +169,7 @@ async def serve(settings: Settings) -> int:
         host=settings.host,
         port=settings.port,
         log_config=None,
-        # the access log and uvicorn's own lines pass security.RedactTokens: no token shows
+        # records are redacted as they are made (security.install_log_redaction): no token
         access_log=settings.access_log,
         ssl_certfile=settings.tls_cert,
         ssl_keyfile=settings.tls_key,
@@ -171,7 +179,11 @@ async def serve(settings: Settings) -> int:
         # than the bandwidth it saves.
         ws_per_message_deflate=False,
     )
-    server = uvicorn.Server(config)
+    return uvicorn.Server(config)
+
+
+async def serve(settings: Settings) -> int:
+    server = uvicorn_server(settings)
     running = asyncio.create_task(server.serve())
     while not server.started:
         if running.done():

@@ -5,8 +5,9 @@ All are coroutines so they run on the event loop, which owns the leases and the 
 
 from __future__ import annotations
 
+import functools
 from collections.abc import AsyncIterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Annotated
 
 from fastapi import Depends, Header, Path, Request, Security
@@ -34,11 +35,11 @@ class ApiContext:
     deadman: Deadman
     # A replayed recording: nobody may control, whatever the token.
     read_only: bool = False
-    # Rate limits and the wrong-token lockout (security.py), from the settings.
-    guards: Guards = field(init=False)
 
-    def __post_init__(self) -> None:
-        self.guards = Guards.from_settings(self.settings)
+    @functools.cached_property
+    def guards(self) -> Guards:
+        """Rate limits and the wrong-token lockout (security.py), from the settings."""
+        return Guards.from_settings(self.settings)
 
     @property
     def audit(self) -> AuditLog:

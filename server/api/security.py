@@ -87,7 +87,10 @@ def csp_for(path: str) -> str:
 _SECRETS_IN_TEXT = (
     re.compile(r"((?:\btoken|" + re.escape(TOKEN_COOKIE) + r")=)[^&\s\"';,]+", re.IGNORECASE),
     re.compile(r"(\bbearer\s+)[^\s\"',]+", re.IGNORECASE),
-    re.compile(r"(\bauthorization[\"']?\s*[:=,]\s*[\"']?)[^\"'\r\n]+", re.IGNORECASE),
+    # the credential after the scheme word (Basic, Bearer, …) or a bare one
+    re.compile(
+        r"(\bauthorization[\"']?\s*[:=,]\s*[\"']?(?:[a-z]+\s+)?)[^\s\"',;]+", re.IGNORECASE
+    ),
 )
 REDACTED = "***"
 
@@ -103,27 +106,36 @@ class RedactTokens(logging.Filter):
     """Tokens travel in URLs (?token=), headers and a cookie; no log line may carry one."""
 
     def filter(self, record: logging.LogRecord) -> bool:
-        try:
-            message = record.getMessage()
-        except Exception:  # a malformed record is the logging module's to report
-            return True
-        redacted = redact(message)
-        if redacted != message:
-            record.msg = redacted
-            record.args = None
+        _redact_record(record)
         return True
 
 
-# uvicorn logs a WebSocket's path with its query on uvicorn.error, requests on uvicorn.access.
-REDACTED_LOGGERS = ("uvicorn.access", "uvicorn.error", "uvicorn", "server", "sim")
+def _redact_record(record: logging.LogRecord) -> None:
+    try:
+        message = record.getMessage()
+    except Exception:  # a malformed record is the logging module's to report
+        return
+    redacted = redact(message)
+    if redacted != message:
+        record.msg = redacted
+        record.args = None
 
 
-def install_log_redaction(loggers: Iterable[str] = REDACTED_LOGGERS) -> None:
-    """Put the filter on the loggers themselves, so it holds whatever handlers are set up."""
-    for name in loggers:
-        logger = logging.getLogger(name)
-        if not any(isinstance(f, RedactTokens) for f in logger.filters):
-            logger.addFilter(RedactTokens())
+def install_log_redaction() -> None:
+    """Redact every log record as it is made, whichever logger makes it (uvicorn logs a
+    request's and a WebSocket's path with its query on uvicorn.access and uvicorn.error) and
+    whichever handlers are set up; installed once per process."""
+    factory = logging.getLogRecordFactory()
+    if getattr(factory, "redacts_tokens", False):
+        return
+
+    def make_record(*args: Any, **kwargs: Any) -> logging.LogRecord:
+        record = factory(*args, **kwargs)
+        _redact_record(record)
+        return record
+
+    make_record.redacts_tokens = True  # type: ignore[attr-defined]
+    logging.setLogRecordFactory(make_record)
 
 
 # --- limits ----------------------------------------------------------------------------------

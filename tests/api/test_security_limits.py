@@ -15,7 +15,6 @@ from server.api.auth_lockout import Lockout
 from server.api.ratelimit import RateLimiter, TokenBucket
 from tests.api.conftest import OBSERVER, PILOT, Api, api_for, auth
 
-
 WEB_DIR = Path(__file__).resolve().parents[2] / "web"
 
 
