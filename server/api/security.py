@@ -52,9 +52,12 @@ PAGE_CSP = (
     "object-src 'none'; base-uri 'none'; form-action 'self'; frame-ancestors 'self'"
 )
 # viser's client is one inline loader script that unpacks a zstd-compressed bundle with
-# WebAssembly and inserts it as inline <script>/<style>; it draws with WebGL in workers.
+# WebAssembly and inserts it as inline <script>/<style>; the bundle also evaluates code at
+# run time (Chromium reports a script-src 'eval' violation without 'unsafe-eval'); it draws
+# with WebGL in workers. The scene's documents carry no token (the cookie is HttpOnly).
 SCENE_CSP = (
-    "default-src 'self'; script-src 'self' 'unsafe-inline' 'wasm-unsafe-eval' blob:; "
+    "default-src 'self'; "
+    "script-src 'self' 'unsafe-inline' 'unsafe-eval' 'wasm-unsafe-eval' blob:; "
     "style-src 'self' 'unsafe-inline'; img-src 'self' data: blob:; font-src 'self' data:; "
     "connect-src 'self' data: blob:; worker-src 'self' blob:; "
     "object-src 'none'; base-uri 'none'; frame-ancestors 'self'"
