@@ -193,3 +193,35 @@ async def test_lockout_covers_query_tokens_and_the_scene_but_not_the_static_page
             page = await anonymous.get("/index.html", headers={"Cookie": "skyhelm_token=stale"})
             assert page.status_code == 200
         assert limited.app.state.api.guards.lockout.failures("10.0.0.5") == 4
+
+
+def test_secrets_are_compared_in_constant_time(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Both tokens are always compared with hmac.compare_digest, whichever matches, and lease
+    ids go through the same comparison (any string: no TypeError on non-ASCII)."""
+    from server.api import auth
+    from server.api.auth import TokenChecker, same_secret
+    from server.api.lease import LeaseInvalid, LeaseManager
+
+    calls: list[tuple[bytes, bytes]] = []
+    real = auth.hmac.compare_digest
+
+    def spy(a: bytes, b: bytes) -> bool:
+        calls.append((a, b))
+        return real(a, b)
+
+    monkeypatch.setattr(auth.hmac, "compare_digest", spy)
+    checker = TokenChecker(PILOT, OBSERVER)
+    for token, role in ((PILOT, "pilot"), (OBSERVER, "observer"), ("pilot-token-for-test", None)):
+        calls.clear()
+        found = checker.role_of(token)
+        assert (found.value if found else None) == role
+        assert [b for _, b in calls] == [PILOT.encode(), OBSERVER.encode()]
+    assert same_secret("é-lease", "é-lease")
+    assert not same_secret("\udcff", "x")
+    leases = LeaseManager(ttl_s=10.0)
+    lease = leases.acquire(1, "pilot · t", session="rest")
+    calls.clear()
+    assert leases.renew(1, lease.lease_id) is lease
+    assert calls == [(lease.lease_id.encode(), lease.lease_id.encode())]
+    with pytest.raises(LeaseInvalid):
+        leases.renew(1, "ünïcode-lease-id")
