@@ -24,9 +24,10 @@ from typing import Any
 from urllib.parse import urlsplit
 
 from fastapi import FastAPI
-from starlette.requests import HTTPConnection
+from starlette.datastructures import QueryParams
+from starlette.requests import cookie_parser
 
-from server.api.auth import TOKEN_COOKIE, Role, TokenChecker, token_from
+from server.api.auth import TOKEN_COOKIE, TOKEN_QUERY, Role, TokenChecker, token_from
 from server.api.auth_lockout import Lockout
 from server.api.ratelimit import RateLimiter
 from server.settings import Settings
@@ -194,12 +195,13 @@ class SecurityMiddleware:
         if kind not in ("http", "websocket"):
             await self.app(scope, receive, send)
             return
-        connection = HTTPConnection(scope)
         path: str = scope.get("path", "")
-        address = connection.client.host if connection.client else ""
+        client = scope.get("client")
+        address = client[0] if client else ""
+        headers = _headers(scope)
         # Only the API and the scene read tokens: a stale cookie on the static page is no guess.
         checks_token = path.startswith((API_PATH, SCENE_PATH))
-        token = token_from(connection.headers, connection.query_params, connection.cookies)
+        token = _token(scope, headers) if checks_token else None
         role: Role | None = None
         if token and checks_token:
             wait_s = self.guards.lockout.retry_after_s(address)
@@ -212,7 +214,7 @@ class SecurityMiddleware:
                 self.guards.lockout.failed(address)
             else:
                 self.guards.lockout.succeeded(address)
-        if not origin_allowed(connection.headers, self.allowed_origins) and (
+        if not origin_allowed(headers, self.allowed_origins) and (
             (kind == "websocket" and path.startswith(API_PATH))
             or (kind == "http" and scope["method"] not in SAFE_METHODS)
         ):
@@ -248,15 +250,49 @@ def install_security(
     install_log_redaction()
 
 
+_WANTED_HEADERS = frozenset({b"authorization", b"cookie", b"origin", b"host"})
+
+
+def _headers(scope: Scope) -> dict[str, str]:
+    """The few request headers the checks read (the first of each), without parsing all."""
+    found: dict[str, str] = {}
+    for name, value in scope.get("headers", ()):
+        lower = name.lower()
+        if lower in _WANTED_HEADERS and lower.decode() not in found:
+            found[lower.decode()] = value.decode("latin-1")
+    return found
+
+
+def _token(scope: Scope, headers: dict[str, str]) -> str | None:
+    """What auth.token_from finds, parsing the query and cookies only when they can hold it."""
+    query: Mapping[str, str] = {}
+    raw_query: bytes = scope.get("query_string", b"")
+    if TOKEN_QUERY.encode() + b"=" in raw_query:
+        query = QueryParams(raw_query.decode("latin-1"))
+    cookies: Mapping[str, str] = {}
+    cookie = headers.get("cookie", "")
+    if TOKEN_COOKIE in cookie:
+        cookies = cookie_parser(cookie)
+    return token_from(headers, query, cookies)
+
+
+_ADDED_HEADERS: dict[str, list[tuple[bytes, bytes]]] = {
+    csp: [
+        (name.encode(), value.encode())
+        for name, value in {**COMMON_HEADERS, "content-security-policy": csp}.items()
+    ]
+    for csp in (PAGE_CSP, SCENE_CSP, DOCS_CSP)
+}
+
+
 def _with_headers(send: Send, csp: str) -> Send:
+    added = _ADDED_HEADERS[csp]
+
     async def send_with_headers(message: Message) -> None:
         if message["type"] == "http.response.start":
             headers = list(message.get("headers", []))
             present = {name.lower() for name, _ in headers}
-            wanted = {**COMMON_HEADERS, "content-security-policy": csp}
-            for name, value in wanted.items():
-                if name.encode() not in present:
-                    headers.append((name.encode(), value.encode()))
+            headers += [(name, value) for name, value in added if name not in present]
             message["headers"] = headers
         await send(message)
 
