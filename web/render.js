@@ -3,6 +3,7 @@
 
 import { page, plots } from "./page.js";
 import { $, nowS, num, setText } from "./ui.js";
+import { renderSigning } from "./signing.js";
 
 export function altitudeAboveHome(state) {
   if (state.global && Number.isFinite(state.global.alt_rel_m)) return state.global.alt_rel_m;
@@ -49,6 +50,7 @@ export function render(state) {
   $("vtol-state").classList.toggle("hidden", !vtol);
   if (vtol) setText("vtol-state", state.vtol_state.replaceAll("_", " "), state.vtol_state.startsWith("TRANSITION") ? "warn" : "info");
 
+  renderSigning(state);
   renderTelemetry(state);
   renderStream(state.stream || {});
   renderVtol(state);

@@ -8,6 +8,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from server.api.schemas.control import LeaseStatusOut
 from server.api.schemas.setpoints import SetpointBody
+from server.api.schemas.signing import SigningOut
 
 
 class _Out(BaseModel):
@@ -91,6 +92,7 @@ class LinkOut(_Out):
     bad_frames: int
     last_heartbeat_age_s: float | None
     reconnects: int = 0
+    signing: SigningOut | None = None
 
 
 class StatusTextOut(_Out):
