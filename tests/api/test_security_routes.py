@@ -35,6 +35,9 @@ EXCEPTIONS: dict[tuple[str, str], tuple[int, int, int]] = {
     ("POST", "/api/v1/session"): (401, READ, READ),
     ("DELETE", "/api/v1/session"): (401, READ, READ),
     ("POST", "/api/v1/vehicles/{vehicle_id}/control"): (401, 403, 409),
+    # server-wide, not per vehicle: the pilot token without any lease; 409 here (no
+    # signing_key_file), and always while a vehicle is armed (PX4 refuses SETUP_SIGNING)
+    ("POST", "/api/v1/signing"): (401, 403, 409),
 }
 # A body that passes validation where {} would not, so the answer is the lease's, not a 422.
 BODIES: dict[tuple[str, str], dict[str, Any]] = {
