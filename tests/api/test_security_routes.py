@@ -42,6 +42,7 @@ EXCEPTIONS: dict[tuple[str, str], tuple[int, int, int]] = {
 # A body that passes validation where {} would not, so the answer is the lease's, not a 422.
 BODIES: dict[tuple[str, str], dict[str, Any]] = {
     ("POST", "/api/v1/vehicles/{vehicle_id}/control/requests/{request_id}"): {"grant": True},
+    ("POST", "/api/v1/signing"): {"action": "generate"},
 }
 SOCKETS: dict[str, tuple[int, int | None, int]] = {
     # no token, observer (None: admitted), pilot without the lease
