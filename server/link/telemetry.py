@@ -21,6 +21,32 @@ MAV_LANDED_STATE_ON_GROUND = 1
 # alone says the mode; HEARTBEAT takes over when it has been silent this long.
 CURRENT_MODE_FRESH_S = 2.0
 
+# The messages each live state field comes from: after a cut, a field is stale until one
+# of them arrives again. Home and origin are settings, not live readings: they stay.
+_SOURCES: dict[str, tuple[str, ...]] = {
+    "mode": ("HEARTBEAT", "CURRENT_MODE"),
+    "user_mode": ("HEARTBEAT", "CURRENT_MODE"),
+    "armed": ("HEARTBEAT",),
+    "system_status": ("HEARTBEAT",),
+    "landed_state": ("EXTENDED_SYS_STATE",),
+    "vtol_state": ("EXTENDED_SYS_STATE",),
+    "position_ned": ("LOCAL_POSITION_NED",),
+    "velocity_ned": ("LOCAL_POSITION_NED",),
+    "global_position": ("GLOBAL_POSITION_INT",),
+    "attitude": ("ATTITUDE",),
+    "target_ned": ("POSITION_TARGET_LOCAL_NED",),
+    "ground_speed_m_s": ("VFR_HUD",),
+    "air_speed_m_s": ("VFR_HUD",),
+    "climb_rate_m_s": ("VFR_HUD",),
+    "heading_deg": ("VFR_HUD", "GLOBAL_POSITION_INT"),
+    "actuator_outputs": ("SERVO_OUTPUT_RAW", "ACTUATOR_OUTPUT_STATUS"),
+    "ready_to_arm": ("SYS_STATUS",),
+    "battery": ("SYS_STATUS", "BATTERY_STATUS"),
+    "gps": ("GPS_RAW_INT",),
+}
+# What a state shows for the mode while it is not known since the link came back.
+MODE_WITHHELD = "UNKNOWN"
+
 # PX4's RTL announces its phases in STATUSTEXT ("RTL: climb to ...", "RTL: land at ...");
 # the first keyword found names the phase, so the more specific ones come first.
 _RTL_PHASES = (
@@ -114,7 +140,12 @@ class Telemetry:
         self.armed_changed_s: float | None = None
         self.disarmed_s: float | None = None  # when a reported arm last ended
         self.statustext: list[state.StatusText] = []
-        self.handlers: dict[str, Callable[[Any], None]] = {
+        # when each message type last came, and since when the readings count as live
+        # (None: since ever; set when the link comes back); lost while the link is
+        self._heard_s: dict[str, float] = {}
+        self.fresh_since_s: float | None = None
+        self.lost = False
+        handlers: dict[str, Callable[[Any], None]] = {
             "HEARTBEAT": self._on_heartbeat,
             "CURRENT_MODE": self._on_current_mode,
             "EXTENDED_SYS_STATE": self._on_extended_sys_state,
@@ -132,16 +163,61 @@ class Telemetry:
             "ACTUATOR_OUTPUT_STATUS": self._on_actuator_output,
             "STATUSTEXT": self._on_statustext,
         }
+        self.handlers = {kind: self._noting(kind, h) for kind, h in handlers.items()}
 
     def reported(self) -> dict[str, Any]:
-        """The telemetry part of a VehicleState, by field name."""
+        """The telemetry part of a VehicleState, by field name. After the link came back,
+        the mode is withheld until the vehicle has told it again: the mode before a cut
+        is the one most likely to have changed during it."""
         values = {name: getattr(self, name) for name in _REPORTED}
+        stale = self.stale_fields()
         values.update(
             landed_state=self.landed_state_name,
             vtol_state=self.vtol_state_name,
             statustext=tuple(self.statustext),
+            stale=stale,
         )
+        if not self.lost and "mode" in stale:
+            values.update(mode=MODE_WITHHELD, user_mode=None)
         return values
+
+    # -- freshness ------------------------------------------------------------------------
+    def _noting(self, kind: str, handler: Callable[[Any], None]) -> Callable[[Any], None]:
+        def noted(msg: Any) -> None:
+            self._heard_s[kind] = self._clock()
+            handler(msg)
+
+        return noted
+
+    def heard_since(self, field: str, since_s: float) -> bool:
+        """A message that sets ``field`` came at or after since_s."""
+        return any(self._heard_s.get(kind, -math.inf) >= since_s for kind in _SOURCES[field])
+
+    def stale_fields(self) -> tuple[str, ...]:
+        """Live fields not to be taken as current: while the link is lost, every one that
+        has a value; after it came back, those not reported again since."""
+        if self.lost:
+            return tuple(f for f in _SOURCES if any(k in self._heard_s for k in _SOURCES[f]))
+        if self.fresh_since_s is None:
+            return ()
+        since_s = self.fresh_since_s
+        return tuple(f for f in _SOURCES if not self.heard_since(f, since_s))
+
+    def link_lost(self) -> None:
+        self.lost = True
+
+    def link_back(self) -> None:
+        self.lost = False
+        self.fresh_since_s = self._clock()
+
+    def forget(self) -> None:
+        """A rebooted vehicle: nothing it said before counts, home and origin included."""
+        for name in _RESETTABLE:
+            vars(self).pop(name, None)  # back to the class's "not reported" value
+        self._current_mode_s = None
+        self.armed_changed_s = self.disarmed_s = None
+        self._heard_s.clear()
+        self.fresh_since_s = self._clock()
 
     def on_mode(self, listener: Callable[[], None]) -> None:
         """Call ``listener()`` whenever a HEARTBEAT or CURRENT_MODE told the mode."""
@@ -308,6 +384,11 @@ class Telemetry:
             self._publish("rtl", {"phase": phase})
 
 
+# the reported values a reboot forgets (the class attributes hold their initial values)
+_RESETTABLE = tuple(
+    name for name, value in vars(Telemetry).items()
+    if not name.startswith("_") and not callable(value) and not isinstance(value, property)
+)
 # what reported() copies as it is (the others it names or freezes)
 _REPORTED = tuple(
     f.name
