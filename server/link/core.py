@@ -103,8 +103,11 @@ class VehicleCore:
         self.updated_s = self.now()
         self.changed()
 
-    def set_connected(self, connected: bool, reason: str | None = None) -> None:
-        """The link lost the vehicle (``reason``: how it noticed) or heard it again."""
+    def set_connected(
+        self, connected: bool, reason: str | None = None, *, silent_since_s: float | None = None
+    ) -> None:
+        """The link lost the vehicle (``reason``: how it noticed; ``silent_since_s``: when
+        it last heard it, if it knows) or heard it again."""
         if connected == self.connected:
             return
         self.connected = connected
@@ -115,7 +118,7 @@ class VehicleCore:
             self.publish_event("connection", {"connected": True, "lost_for_s": lost_for_s,
                                               "text": text})
         else:
-            self.lost_s = self.now()
+            self.lost_s = self.now() if silent_since_s is None else silent_since_s
             text = "link to the vehicle lost" + (f": {reason}" if reason else "")
             self.publish_event("connection", {"connected": False, "reason": reason,
                                               "text": text})

@@ -328,7 +328,8 @@ class Link:
             if why is not None:
                 self._connected_sysids.discard(sysid)
                 log.warning("link %s: vehicle %d lost (%s)", self.name, sysid, why)
-                self._vehicles[sysid].set_connected(False, why)
+                self._vehicles[sysid].set_connected(
+                    False, why, silent_since_s=self._liveness.last_frame_s(sysid))
 
 
 @dataclass(frozen=True)

@@ -68,9 +68,9 @@ class Liveness:
     def known(self, sysid: int) -> bool:
         return sysid in self._heard
 
-    def last_heartbeat_s(self, sysid: int) -> float | None:
+    def last_frame_s(self, sysid: int) -> float | None:
         heard = self._heard.get(sysid)
-        return None if heard is None else heard.last_heartbeat_s
+        return None if heard is None else heard.last_frame_s
 
     def silent_for(self, sysid: int, now_s: float) -> str | None:
         """Why the vehicle counts as lost now ("no HEARTBEAT for 3.0 s", "nothing heard for
