@@ -140,7 +140,8 @@ async def _open_links(registry: VehicleRegistry, settings: Settings, urls: list[
         log_dir = None if is_replay([url]) else settings.log_dir
         try:
             link = await Link.open(
-                url, log_dir=log_dir, heartbeat_timeout_s=settings.heartbeat_timeout_s
+                url, log_dir=log_dir, heartbeat_timeout_s=settings.heartbeat_timeout_s,
+                silence_timeout_s=settings.silence_timeout_s,
             )
         except OSError as exc:
             raise StartupError(f"cannot open {url}: {exc}") from exc
