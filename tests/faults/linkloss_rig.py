@@ -15,11 +15,14 @@ import json
 import time
 from collections.abc import AsyncIterator
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import httpx
+from pymavlink import mavutil
 from websockets.asyncio.client import ClientConnection
 
+from server.link.tlog import iter_tlog
 from sim.runner import SimCluster
 from sim.vehicle import SimVehicle
 from tools.faultproxy import FaultProxy
@@ -90,3 +93,15 @@ async def rest_state(client: httpx.AsyncClient, vehicle_id: int = 1) -> dict[str
     assert response.status_code == 200, response.text
     result: dict[str, Any] = response.json()
     return result
+
+
+def read_tlog(log_dir: Path) -> tuple[Path, int, int]:
+    """The one .tlog in log_dir, its message count through pymavlink and through
+    iter_tlog (whole records)."""
+    (path,) = log_dir.glob("*.tlog")
+    reader = mavutil.mavlink_connection(str(path), dialect="development")
+    count = 0
+    while reader.recv_match(blocking=False) is not None:
+        count += 1
+    reader.close()
+    return path, count, sum(1 for _ in iter_tlog(path))

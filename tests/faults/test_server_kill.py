@@ -11,10 +11,9 @@ from pathlib import Path
 from typing import Any
 
 import httpx
-from pymavlink import mavutil
 
 from server.link.tlog import iter_tlog
-from tests.faults.linkloss_rig import Rig, proxied_sim
+from tests.faults.linkloss_rig import Rig, proxied_sim, read_tlog
 from tests.serve_process import Served, skyhelm_serve
 from tests.waiting import eventually, holds_for, wait_for
 
@@ -58,18 +57,6 @@ async def _fly_offboard(client: httpx.AsyncClient) -> None:
     await eventually(climbed, 20.0, "climb to 4 m")
 
 
-def _read_tlog(log_dir: Path) -> tuple[Path, int, int]:
-    """The one .tlog in log_dir, its message count through pymavlink and through
-    iter_tlog (whole records)."""
-    (path,) = log_dir.glob("*.tlog")
-    reader = mavutil.mavlink_connection(str(path), dialect="development")
-    count = 0
-    while reader.recv_match(blocking=False) is not None:
-        count += 1
-    reader.close()
-    return path, count, sum(1 for _ in iter_tlog(path))
-
-
 async def test_server_sigkill_in_offboard_failsafe_tlog_and_rediscovery(tmp_path: Path) -> None:
     async with proxied_sim() as rig:
         first_logs = tmp_path / "first"
@@ -84,15 +71,15 @@ async def test_server_sigkill_in_offboard_failsafe_tlog_and_rediscovery(tmp_path
             served.process.wait(timeout=10)
         await _vehicle_fails_safe(rig, killed_at)
 
-        path, messages, records = _read_tlog(first_logs)
+        path, messages, records = read_tlog(first_logs)
         assert messages > 100
         assert messages == records  # pymavlink reads every whole record iter_tlog finds
         lost_tail_s = killed_at - _last_record_age(path)
 
         second_logs = tmp_path / "second"
         second_logs.mkdir()
-        restarted_at = time.monotonic()
         with skyhelm_serve(second_logs, "--connect", rig.url, "--no-scene") as served:
+            restarted_at = time.monotonic()  # serving: from here it looks for the vehicle
             async with _client(served) as client:
 
                 async def rediscovered() -> dict[str, Any] | None:
