@@ -33,14 +33,20 @@ class _Seen:
     wall_s: float
 
     @classmethod
-    def of(cls, t: Telemetry) -> _Seen:
-        return cls(t.mode, t.user_mode, t.armed, _alt_rel_m(t), time.time())
+    def of(cls, t: Telemetry, since_s: float | None = None) -> _Seen:
+        return cls(t.mode, t.user_mode, t.armed, _alt_rel_m(t, since_s), time.time())
 
 
-def _alt_rel_m(t: Telemetry) -> float | None:
-    if t.global_position is not None:
+def _alt_rel_m(t: Telemetry, since_s: float | None) -> float | None:
+    """Above home, from the global position or else the local one; with since_s, only
+    from one reported again since then."""
+
+    def usable(field: str) -> bool:
+        return since_s is None or t.heard_since(field, since_s)
+
+    if t.global_position is not None and usable("global_position"):
         return t.global_position.alt_rel_m
-    if t.position_ned is not None:
+    if t.position_ned is not None and usable("position_ned"):
         return -t.position_ned.down_m
     return None
 
@@ -92,7 +98,7 @@ class OutageReport:
         if not self._core.connected:
             return  # lost again while waiting: the next return reports the whole outage
         self._before = None
-        after = _Seen.of(t)
+        after = _Seen.of(t, since_s)
         texts = [m.text for m in t.statustext if m.time_s >= before.wall_s]
         mode_known = t.heard_since("mode", since_s)
         data: dict[str, object] = {
@@ -105,7 +111,7 @@ class OutageReport:
             "armed_before": before.armed,
             "armed_after": after.armed if mode_known else None,
             "alt_rel_before_m": before.alt_rel_m,
-            "alt_rel_after_m": after.alt_rel_m if settled() else None,
+            "alt_rel_after_m": after.alt_rel_m,
             "vehicle_texts": texts,
         }
         data["text"] = _summary(data)
