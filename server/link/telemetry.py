@@ -143,6 +143,7 @@ class Telemetry:
         # when each message type last came, and since when the readings count as live
         # (None: since ever; set when the link comes back); lost while the link is
         self._heard_s: dict[str, float] = {}
+        self._heard_before: frozenset[str] = frozenset()  # kinds heard before fresh_since_s
         self.fresh_since_s: float | None = None
         self.lost = False
         handlers: dict[str, Callable[[Any], None]] = {
@@ -195,19 +196,23 @@ class Telemetry:
 
     def stale_fields(self) -> tuple[str, ...]:
         """Live fields not to be taken as current: while the link is lost, every one that
-        has a value; after it came back, those not reported again since."""
+        was reported; after it came back (or rebooted), those reported before and not since."""
         if self.lost:
             return tuple(f for f in _SOURCES if any(k in self._heard_s for k in _SOURCES[f]))
         if self.fresh_since_s is None:
             return ()
-        since_s = self.fresh_since_s
-        return tuple(f for f in _SOURCES if not self.heard_since(f, since_s))
+        since_s, before = self.fresh_since_s, self._heard_before
+        return tuple(
+            f for f in _SOURCES
+            if before.intersection(_SOURCES[f]) and not self.heard_since(f, since_s)
+        )
 
     def link_lost(self) -> None:
         self.lost = True
 
     def link_back(self) -> None:
         self.lost = False
+        self._heard_before = frozenset(self._heard_s)
         self.fresh_since_s = self._clock()
 
     def forget(self) -> None:
@@ -216,6 +221,8 @@ class Telemetry:
             vars(self).pop(name, None)  # back to the class's "not reported" value
         self._current_mode_s = None
         self.armed_changed_s = self.disarmed_s = None
+        # what it reported before stays stale (at its "not reported" value) until reported
+        self._heard_before = frozenset(self._heard_s) | self._heard_before
         self._heard_s.clear()
         self.fresh_since_s = self._clock()
 

@@ -148,5 +148,7 @@ async def test_a_boot_clock_going_back_is_a_reboot(scripted: ScriptedSession) ->
     state = vehicle.snapshot()
     assert state.home is None  # a rebooted vehicle sets its home again
     assert state.mode == MODE_WITHHELD
+    assert {"armed", "position_ned", "global_position"} <= set(state.stale)
     assert state.attitude is not None  # the message that showed the reboot is taken in
+    assert "attitude" not in state.stale
     assert not vehicle.streamer_active
