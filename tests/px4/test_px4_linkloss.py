@@ -237,7 +237,8 @@ async def test_px4_server_sigkill_in_offboard(px4_process: Px4Process, tmp_path:
 
                 state = await eventually(found, 30.0, "PX4 found again")
                 found_s = time.monotonic() - restarted
-                assert state["mode"] == tap.mode()
+                assert state["mode"] == tap.mode(), [(round(t - killed_at, 2), m)
+                                                     for t, m in tap.modes if t >= killed_at]
                 assert state["mode"] != "OFFBOARD"
                 assert state["stream"]["active"] is False
                 since = time.monotonic()
