@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import itertools
 import logging
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -22,6 +23,7 @@ from . import px4_messages
 from .aio import cancel_and_wait
 from .link_stats import LinkStats, SequenceGapCounter
 from .liveness import DEFAULT_SILENCE_TIMEOUT_S, Liveness
+from .signing import MAVLINK_MSG_ID_SETUP_SIGNING, LinkSigning, SigningKeyStore
 from .tlog import TlogWriter
 from .transports import Peer, Transport, create_transport
 from .urls import LinkUrl, parse_link_url
@@ -42,6 +44,8 @@ LOOP_STALL_S = 0.25
 VEHICLE_QUEUE_SIZE = 32
 
 VehicleFactory = Callable[..., Vehicle]
+# MAVLink signing link ids, one per link of this process
+_signing_link_ids = itertools.count()
 
 
 class Link:
@@ -59,12 +63,17 @@ class Link:
         heartbeat_timeout_s: float,
         vehicle_factory: VehicleFactory | None,
         silence_timeout_s: float = DEFAULT_SILENCE_TIMEOUT_S,
+        signing_store: SigningKeyStore | None = None,
     ) -> None:
         self.name = name
         self.url = address.url
         self.address = address
         self.heartbeat_timeout_s = heartbeat_timeout_s
         self.mav = mavlink.MAVLink(None, srcSystem=gcs_sysid, srcComponent=gcs_compid)
+        # one signing state for the packer and every decoder (see server.link.signing)
+        self.signing = LinkSigning(signing_store, next(_signing_link_ids))
+        self.mav.signing = self.signing.state
+        transport.codec_factory = self.signing.codec
         self.frames_dropped_out = 0  # frames send() could not write (no peer, not connected)
         # taken once: stats() may be called from other threads (the scene)
         self._loop = asyncio.get_running_loop()
@@ -97,6 +106,7 @@ class Link:
         heartbeat_timeout_s: float = 3.0,
         silence_timeout_s: float = DEFAULT_SILENCE_TIMEOUT_S,
         vehicle_factory: VehicleFactory | None = None,
+        signing_store: SigningKeyStore | None = None,
     ) -> Link:
         """Bind or connect ``url`` (pymavlink style), start the GCS heartbeat and the tlog.
 
@@ -104,6 +114,7 @@ class Link:
         ``vehicle_factory`` replaces the Vehicle class (tests feed links to stand-ins).
         A vehicle is lost after ``heartbeat_timeout_s`` without HEARTBEAT, or, while it
         streams telemetry, after ``silence_timeout_s`` without any frame (see liveness).
+        ``signing_store`` holds the MAVLink signing key (none: the link signs nothing).
         """
         address = parse_link_url(url)
         link_name = name or address.label
@@ -113,6 +124,7 @@ class Link:
             address, transport, name=link_name, gcs_sysid=gcs_sysid, gcs_compid=gcs_compid,
             tlog=tlog, heartbeat_timeout_s=heartbeat_timeout_s, vehicle_factory=vehicle_factory,
             silence_timeout_s=silence_timeout_s,
+            signing_store=signing_store,
         )
         try:
             await transport.start(_LinkReceiver.of(link))
@@ -144,6 +156,7 @@ class Link:
         for vehicle in list(self._vehicles.values()):
             await _close_vehicle(vehicle)
         await self._transport.close()
+        await self.signing.close()
         if self._tlog is not None:
             await self._tlog.close()
         log.info("link %s closed", self.name)
@@ -196,6 +209,7 @@ class Link:
             bad_frames=self._bad_frames,
             last_heartbeat_age_s=age,
             reconnects=self._transport.reconnects,
+            signing=self.signing.stats(self._vehicles),
         )
 
     def send(self, msg: mavlink.MAVLink_message) -> None:
@@ -209,8 +223,8 @@ class Link:
             return
         self._frames_out += 1
         self._bytes_out += len(frame)
-        if self._tlog is not None:
-            self._tlog.record(frame)
+        if self._tlog is not None and msg.get_msgId() != MAVLINK_MSG_ID_SETUP_SIGNING:
+            self._tlog.record(frame)  # a key never goes to the tlog
 
     def send_gcs_heartbeat(self) -> None:
         self.send(self.mav.heartbeat_encode(
@@ -222,6 +236,8 @@ class Link:
     def _frame_received(self, msg: mavlink.MAVLink_message) -> None:
         self._frames_in += 1
         if isinstance(msg, mavlink.MAVLink_unknown):
+            if not self.signing.accepts_unknown(msg.get_msgbuf()):
+                return
             msg = px4_messages.decode_unknown(msg) or msg
         if isinstance(msg, mavlink.MAVLink_unknown):
             # Not in our dialect: counted and recorded, but nobody can read it.
@@ -231,6 +247,9 @@ class Link:
             return
         src_system = msg.get_srcSystem()
         self._gaps.observe(src_system, msg.get_srcComponent(), msg.get_seq())
+        self.signing.note_received(msg)
+        if msg.get_msgId() == MAVLINK_MSG_ID_SETUP_SIGNING:
+            return  # a key: never recorded, and no vehicle of ours takes one from a peer
         if self._tlog is not None:
             self._tlog.record(msg.get_msgbuf())
         if (msg.get_msgId() == mavlink.MAVLINK_MSG_ID_HEARTBEAT
@@ -302,6 +321,7 @@ class Link:
         ]
         if self._tlog is not None:
             self._tlog.start()
+        self.signing.start()
 
     async def _send_gcs_heartbeats(self) -> None:
         loop = asyncio.get_running_loop()

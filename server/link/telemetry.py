@@ -121,6 +121,9 @@ class Telemetry:
     home: state.HomeState | None = None
     origin: state.OriginState | None = None
     rtl_phase: str | None = None
+    # ESTIMATOR_STATUS, SYS_STATUS's sensor health bits
+    estimator: state.EstimatorState | None = None
+    sensors_unhealthy: tuple[str, ...] | None = None
 
     def __init__(
         self,
@@ -140,13 +143,12 @@ class Telemetry:
         self.armed_changed_s: float | None = None
         self.disarmed_s: float | None = None  # when a reported arm last ended
         self.statustext: list[state.StatusText] = []
-        # when each message type last came, and since when the readings count as live
-        # (None: since ever; set when the link comes back); lost while the link is
-        self._heard_s: dict[str, float] = {}
+        # since when the readings count as live (None: since ever; set when the link
+        # comes back); lost while the link is
         self._heard_before: frozenset[str] = frozenset()  # kinds heard before fresh_since_s
         self.fresh_since_s: float | None = None
         self.lost = False
-        handlers: dict[str, Callable[[Any], None]] = {
+        self.handlers: dict[str, Callable[[Any], None]] = {
             "HEARTBEAT": self._on_heartbeat,
             "CURRENT_MODE": self._on_current_mode,
             "EXTENDED_SYS_STATE": self._on_extended_sys_state,
@@ -163,8 +165,23 @@ class Telemetry:
             "SERVO_OUTPUT_RAW": self._on_servo_output,
             "ACTUATOR_OUTPUT_STATUS": self._on_actuator_output,
             "STATUSTEXT": self._on_statustext,
+            "ESTIMATOR_STATUS": self._on_estimator_status,
         }
-        self.handlers = {kind: self._noting(kind, h) for kind, h in handlers.items()}
+        # when each of those message types last came (the clock's seconds)
+        self.received_s: dict[str, float] = {}
+        for kind, handler in list(self.handlers.items()):
+            self.handlers[kind] = self._timed(kind, handler)
+
+    def _timed(self, kind: str, handler: Callable[[Any], None]) -> Callable[[Any], None]:
+        def timed(msg: Any) -> None:
+            self.received_s[kind] = self._clock()
+            handler(msg)
+
+        return timed
+
+    def ages_at(self, now_s: float) -> dict[str, float]:
+        """Seconds since each message type was last received (ms resolution)."""
+        return {kind: round(now_s - t, 3) for kind, t in self.received_s.items()}
 
     def reported(self) -> dict[str, Any]:
         """The telemetry part of a VehicleState, by field name. After the link came back,
@@ -183,22 +200,15 @@ class Telemetry:
         return values
 
     # -- freshness ------------------------------------------------------------------------
-    def _noting(self, kind: str, handler: Callable[[Any], None]) -> Callable[[Any], None]:
-        def noted(msg: Any) -> None:
-            self._heard_s[kind] = self._clock()
-            handler(msg)
-
-        return noted
-
     def heard_since(self, field: str, since_s: float) -> bool:
         """A message that sets ``field`` came at or after since_s."""
-        return any(self._heard_s.get(kind, -math.inf) >= since_s for kind in _SOURCES[field])
+        return any(self.received_s.get(kind, -math.inf) >= since_s for kind in _SOURCES[field])
 
     def stale_fields(self) -> tuple[str, ...]:
         """Live fields not to be taken as current: while the link is lost, every one that
         was reported; after it came back (or rebooted), those reported before and not since."""
         if self.lost:
-            return tuple(f for f in _SOURCES if any(k in self._heard_s for k in _SOURCES[f]))
+            return tuple(f for f in _SOURCES if any(k in self.received_s for k in _SOURCES[f]))
         if self.fresh_since_s is None:
             return ()
         since_s, before = self.fresh_since_s, self._heard_before
@@ -212,7 +222,7 @@ class Telemetry:
 
     def link_back(self) -> None:
         self.lost = False
-        self._heard_before = frozenset(self._heard_s)
+        self._heard_before = frozenset(self.received_s)
         self.fresh_since_s = self._clock()
 
     def forget(self) -> None:
@@ -222,8 +232,8 @@ class Telemetry:
         self._current_mode_s = None
         self.armed_changed_s = self.disarmed_s = None
         # what it reported before stays stale (at its "not reported" value) until reported
-        self._heard_before = frozenset(self._heard_s) | self._heard_before
-        self._heard_s.clear()
+        self._heard_before = frozenset(self.received_s) | self._heard_before
+        self.received_s.clear()
         self.fresh_since_s = self._clock()
 
     def on_mode(self, listener: Callable[[], None]) -> None:
@@ -314,13 +324,42 @@ class Telemetry:
         self.ready_to_arm = bool(
             msg.onboard_control_sensors_health & mavlink.MAV_SYS_STATUS_PREARM_CHECK
         )
+        unhealthy = (
+            msg.onboard_control_sensors_present
+            & msg.onboard_control_sensors_enabled
+            & ~msg.onboard_control_sensors_health
+            & ~mavlink.MAV_SYS_STATUS_PREARM_CHECK
+        )
+        self.sensors_unhealthy = _flag_names("MAV_SYS_STATUS_SENSOR", unhealthy, "MAV_SYS_STATUS_")
         voltage_v = None if msg.voltage_battery == 0xFFFF else msg.voltage_battery / 1000.0
-        self.battery = _battery(voltage_v, msg.current_battery, msg.battery_remaining)
+        battery = _battery(voltage_v, msg.current_battery, msg.battery_remaining)
+        if self.battery is not None:  # what only BATTERY_STATUS tells stays
+            battery = dataclasses.replace(
+                battery,
+                consumed_mah=self.battery.consumed_mah,
+                time_remaining_s=self.battery.time_remaining_s,
+            )
+        self.battery = battery
 
     def _on_battery_status(self, msg: mavlink.MAVLink_battery_status_message) -> None:
         cells = [v for v in msg.voltages if v != 0xFFFF]
         voltage_v = sum(cells) / 1000.0 if cells else None
-        self.battery = _battery(voltage_v, msg.current_battery, msg.battery_remaining)
+        self.battery = dataclasses.replace(
+            _battery(voltage_v, msg.current_battery, msg.battery_remaining),
+            # -1: not known; time_remaining 0: not known (a MAVLink 2 extension)
+            consumed_mah=None if msg.current_consumed < 0 else float(msg.current_consumed),
+            time_remaining_s=float(getattr(msg, "time_remaining", 0)) or None,
+        )
+
+    def _on_estimator_status(self, msg: mavlink.MAVLink_estimator_status_message) -> None:
+        flags = _flag_names("ESTIMATOR_STATUS_FLAGS", msg.flags, "ESTIMATOR_")
+        self.estimator = state.EstimatorState(
+            flags=flags,
+            healthy=all(f in flags for f in _ESTIMATOR_NEEDED) and "GPS_GLITCH" not in flags,
+            pos_horiz_ratio=_finite(msg.pos_horiz_ratio),
+            pos_vert_ratio=_finite(msg.pos_vert_ratio),
+            mag_ratio=_finite(msg.mag_ratio),
+        )
 
     def _on_gps_raw(self, msg: mavlink.MAVLink_gps_raw_int_message) -> None:
         self.gps = state.GpsState(
@@ -402,6 +441,23 @@ _REPORTED = tuple(
     for f in dataclasses.fields(state.VehicleState)
     if f.name in vars(Telemetry) and f.name not in ("landed_state", "vtol_state")
 )
+
+
+# an estimate a pilot can fly on: attitude, velocity and a horizontal position
+_ESTIMATOR_NEEDED = ("ATTITUDE", "VELOCITY_HORIZ", "POS_HORIZ_REL")
+
+
+def _flag_names(enum: str, bits: int, prefix: str) -> tuple[str, ...]:
+    """The names of the set bits of a MAVLink bitmask enum, without the prefix."""
+    return tuple(
+        entry.name.removeprefix(prefix)
+        for value, entry in sorted(mavlink.enums[enum].items())
+        if value > 0 and value & (value - 1) == 0 and bits & value
+    )
+
+
+def _finite(value: float) -> float | None:
+    return float(value) if math.isfinite(value) else None
 
 
 def _battery(voltage_v: float | None, current_ca: int, remaining_pct: int) -> state.BatteryState:
