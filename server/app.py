@@ -178,6 +178,7 @@ async def _open_links(
         try:
             link = await Link.open(
                 url, log_dir=log_dir, heartbeat_timeout_s=settings.heartbeat_timeout_s,
+                silence_timeout_s=settings.silence_timeout_s,
                 # a recording is shown as it was recorded: nothing to sign or check
                 signing_store=None if is_replay([url]) else signing_store,
             )

@@ -83,6 +83,10 @@ class Settings(BaseSettings):
     cors_origins: Annotated[list[str], NoDecode] = Field(default_factory=list)
     telemetry_max_rate_hz: float = Field(50.0, gt=0.0, le=200.0)
     heartbeat_timeout_s: float = Field(3.0, gt=0.0, le=60.0)
+    silence_timeout_s: float = Field(
+        1.0, ge=0.2, le=60.0,
+        description="a vehicle streaming telemetry is lost after this long without a frame",
+    )
     vehicle_wait_s: float = Field(
         20.0, ge=0.0, description="how long startup waits for each simulated vehicle"
     )
