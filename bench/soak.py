@@ -59,6 +59,8 @@ RECOVERY_S = 5.0  # after a fault window, still counted as the fault's
 GAP_S = 3.0 / STREAM_RATE_HZ  # an interval longer than three periods is a gap
 SET_POSITION_TARGET_LOCAL_NED = 84
 MAVLINK2_STX = 0xFD
+LAG_PROBE_S = 0.01
+CLK_TCK = os.sysconf("SC_CLK_TCK")
 HOLD_DOWN_M = -5.0
 
 
@@ -172,6 +174,26 @@ def rss_kb(pid: int) -> int:
 
 def open_fds(pid: int) -> int:
     return len(os.listdir(f"/proc/{pid}/fd"))
+
+
+def cpu_seconds(pid: int) -> float:
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / CLK_TCK  # utime, stime
+
+
+def runqueue_wait_s(pid: int) -> float:
+    """Time the process's main thread (the server's event loop) waited for a core."""
+    return int(Path(f"/proc/{pid}/schedstat").read_text().split()[1]) / 1e9
+
+
+async def watch_own_loop(lags_s: list[float], stop: asyncio.Event) -> None:
+    """How late this process's loop wakes: the arrival times the proxies record are late
+    by as much, so a gap seen at every vehicle at once may be ours, not the server's."""
+    loop = asyncio.get_running_loop()
+    while not stop.is_set():
+        due = loop.time() + LAG_PROBE_S
+        await asyncio.sleep(LAG_PROBE_S)
+        lags_s.append(loop.time() - due)
 
 
 # -- flying --------------------------------------------------------------------------------
@@ -403,6 +425,9 @@ async def _fly_and_measure(soak: Soak, pid: int, base: str, client: httpx.AsyncC
         counts[:] = [0, 0]
     measure_from = soak.now()
     fds_start = open_fds(pid)
+    cpu_start, wait_start = cpu_seconds(pid), runqueue_wait_s(pid)
+    lags_s: list[float] = []
+    lag_watch = asyncio.create_task(watch_own_loop(lags_s, stop))
     sampler = asyncio.create_task(sample_server(soak, pid, stop))
     supervisor = asyncio.create_task(pilot.supervise(stop))
     duration_s = minutes * 60.0
@@ -410,8 +435,16 @@ async def _fly_and_measure(soak: Soak, pid: int, base: str, client: httpx.AsyncC
     await asyncio.sleep(max(0.0, measure_from + duration_s - soak.now()))
     measured_s = soak.now() - measure_from
     fds_end = open_fds(pid)
+    cpu_s, wait_s = cpu_seconds(pid) - cpu_start, runqueue_wait_s(pid) - wait_start
     stop.set()
-    await asyncio.gather(sampler, supervisor, *clients)
+    await asyncio.gather(sampler, supervisor, lag_watch, *clients)
+    server_stream = {}
+    for sysid in range(1, VEHICLES + 1):
+        stats = (await client.get(f"/api/v1/vehicles/{sysid}/stream")).json()
+        server_stream[str(sysid)] = {
+            key: round(stats[key], 1) if isinstance(stats.get(key), float) else stats.get(key)
+            for key in ("sent", "interval_p50_ms", "interval_p99_ms", "max_gap_ms", "gaps")
+        }
 
     expected = TELEMETRY_RATE_HZ * measured_s * VEHICLES
     clean_s = soak.clean_seconds(measure_from, measure_from + measured_s)
@@ -437,6 +470,13 @@ async def _fly_and_measure(soak: Soak, pid: int, base: str, client: httpx.AsyncC
         },
         "file_handles": {"start": fds_start, "end": fds_end},
         "stream_at_vehicles": stream_figures(soak, measure_from),
+        # the streamer's own figures (recent window), to tell its gaps from the proxies'
+        "stream_server_side": server_stream,
+        "server_cpu_share": round(cpu_s / measured_s, 3),
+        "server_loop_waited_for_core_s": round(wait_s, 2),
+        "bench_loop_lag_ms": {"p99": _ms(percentile(lags_s, 99)),
+                              "max": _ms(max(lags_s, default=None)),
+                              "over_50_ms": sum(1 for lag in lags_s if lag > 0.05)},
         "telemetry": {
             "expected_per_client": round(expected),
             "received_share_mean": round(statistics.fmean(per_client), 4),
@@ -469,7 +509,11 @@ def print_summary(result: dict[str, Any]) -> None:
           f"slope {memory['slope_mb_per_hour']} MB/h); file handles {fds['start']} -> "
           f"{fds['end']}")
     for sysid, figures in result["stream_at_vehicles"].items():
-        print(f"vehicle {sysid}: {figures}")
+        print(f"vehicle {sysid} (at the proxy): {figures}")
+        print(f"vehicle {sysid} (server's streamer): {result['stream_server_side'][sysid]}")
+    print(f"server CPU {100 * result['server_cpu_share']:.0f}% of a core, its loop waited "
+          f"{result['server_loop_waited_for_core_s']} s for a core; bench loop lag "
+          f"{result['bench_loop_lag_ms']}; load average {result['machine']['load_average_after']}")
     print(f"telemetry received {100 * telemetry['received_share_mean']:.1f}% of expected "
           f"(min client {100 * telemetry['received_share_min']:.1f}%); outside faults "
           f"{100 * telemetry['clean_received_share_mean']:.1f}% (min client "
