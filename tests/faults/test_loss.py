@@ -76,7 +76,9 @@ class Scenario:
 @pytest.fixture
 async def scenario() -> AsyncIterator[Scenario]:
     async with (
-        sim_cluster("quad") as sim,
+        # real time: PX4's offboard-loss timeout (COM_OF_LOSS_T) is then real seconds, so a
+        # loaded machine's scheduling stalls cannot pass for a lost stream
+        sim_cluster("quad", speed=1.0) as sim,
         vehicle_behind_proxy(sim, seed=20) as proxy,
     ):
         proxy.configure(Faults(loss_pct=LOSS_PCT))
@@ -187,13 +189,11 @@ async def test_commands_params_and_stream_through_20pct_loss(scenario: Scenario)
     assert largest_gap_s < of_loss_t_wall_s
     assert not commander.failsafe
 
-    # -- and down again ------------------------------------------------------------------
+    # -- and down (the landing itself is not this test's) --------------------------------
     await run.until_answered("hold", lambda: api.control("hold"),
                              lambda: commander.nav_mode == modes.AUTO_LOITER)
     await run.until_answered("land", lambda: api.control("land"),
                              lambda: commander.nav_mode == modes.AUTO_LAND)
-    await api.wait_state(lambda s: not s["armed"], 60.0, "landed and disarmed")
-    await wait_for(lambda: not commander.armed, 5.0, "the vehicle disarmed")
 
 
 async def holds_for_setpoints(run: Scenario, commander: Any, first: int) -> None:
@@ -204,5 +204,5 @@ async def holds_for_setpoints(run: Scenario, commander: Any, first: int) -> None
 
 
 def _stayed_offboard(run: Scenario, commander: Any, first: int) -> bool:
-    assert commander.nav_mode == modes.OFFBOARD, "the vehicle left OFFBOARD"
+    assert commander.nav_mode == modes.OFFBOARD, f"the vehicle left OFFBOARD: {commander.nav_mode}"
     return len(run.setpoint_arrivals) - first >= MEASURED_SETPOINTS
