@@ -149,8 +149,11 @@ class Requester:
             if remaining <= 0:
                 return False
             self._changed.clear()
+            # asyncio.timeout, not wait_for: on Python 3.11 wait_for swallows a cancellation
+            # that comes just as the event is set, and a cancelled request then runs on
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self._changed.wait(), remaining)
+                async with asyncio.timeout(remaining):
+                    await self._changed.wait()
         return True
 
     # -- outgoing -----------------------------------------------------------------
