@@ -32,6 +32,7 @@ import asyncio
 import contextlib
 import itertools
 import json
+import math
 import os
 import statistics
 import sys
@@ -91,6 +92,8 @@ class Soak:
     # per client: (clean states, states during a fault or its recovery)
     telemetry: list[list[int]] = field(default_factory=list)
     telemetry_errors: list[str] = field(default_factory=list)
+    # SkyHelm's "connection" events as the first telemetry client saw them
+    link_events: list[dict[str, Any]] = field(default_factory=list)
     active: tuple[str, float] | None = None  # the fault being injected: name, start
 
     def now(self) -> float:
@@ -268,7 +271,8 @@ class Pilot:
 # -- load and faults -----------------------------------------------------------------------
 
 
-async def telemetry_client(url: str, soak: Soak, counts: list[int], stop: asyncio.Event) -> None:
+async def telemetry_client(url: str, soak: Soak, counts: list[int], stop: asyncio.Event,
+                           *, note_events: bool = False) -> None:
     try:
         async with connect(url, max_size=2**22) as ws:
             while not stop.is_set():
@@ -279,6 +283,14 @@ async def telemetry_client(url: str, soak: Soak, counts: list[int], stop: asynci
                 message = json.loads(text)
                 if message.get("type") == "state":
                     counts[0 if soak.fault_at(soak.now()) is None else 1] += 1
+                elif (note_events and message.get("type") == "event"
+                      and message.get("kind") == "connection"):
+                    now = soak.now()
+                    soak.link_events.append({
+                        "t_s": round(now, 1), "vehicle": message.get("vehicle"),
+                        "connected": message["data"].get("connected"),
+                        "during": soak.fault_at(now),
+                    })
     except Exception as exc:  # a socket that fails is a finding, reported with the rest
         soak.telemetry_errors.append(repr(exc))
 
@@ -418,8 +430,9 @@ async def _fly_and_measure(soak: Soak, pid: int, base: str, client: httpx.AsyncC
     ws_url = (f"ws://{base.removeprefix('http://')}/api/v1/ws/telemetry?token={TOKEN}"
               f"&rate_hz={TELEMETRY_RATE_HZ:g}")
     soak.telemetry = [[0, 0] for _ in range(TELEMETRY_CLIENTS)]
-    clients = [asyncio.create_task(telemetry_client(ws_url, soak, counts, stop))
-               for counts in soak.telemetry]
+    clients = [asyncio.create_task(telemetry_client(ws_url, soak, counts, stop,
+                                                    note_events=index == 0))
+               for index, counts in enumerate(soak.telemetry)]
     await asyncio.sleep(2.0)  # sockets up before counting starts
     for counts in soak.telemetry:
         counts[:] = [0, 0]
@@ -450,7 +463,9 @@ async def _fly_and_measure(soak: Soak, pid: int, base: str, client: httpx.AsyncC
     clean_s = soak.clean_seconds(measure_from, measure_from + measured_s)
     expected_clean = TELEMETRY_RATE_HZ * clean_s * VEHICLES
     per_client = [sum(counts) / expected for counts in soak.telemetry]
-    per_client_clean = [counts[0] / max(expected_clean, 1.0) for counts in soak.telemetry]
+    # (a run too short to have time outside its faults has no clean share)
+    per_client_clean = [counts[0] / expected_clean for counts in soak.telemetry
+                        if expected_clean >= 1.0] or [math.nan]
     rss = soak.rss_kb
     result: dict[str, Any] = {
         "minutes": round(measured_s / 60.0, 2),
@@ -489,6 +504,13 @@ async def _fly_and_measure(soak: Soak, pid: int, base: str, client: httpx.AsyncC
             "socket_errors": soak.telemetry_errors,
         },
         "operator_recoveries": soak.recoveries,
+        "vehicle_lost": {
+            "during_faults": sum(1 for e in soak.link_events
+                                 if e["connected"] is False and e["during"] is not None),
+            "outside_faults": sum(1 for e in soak.link_events
+                                  if e["connected"] is False and e["during"] is None),
+            "events": soak.link_events,
+        },
         "proxies": [proxy.stats() for proxy in soak.proxies],
         "machine": machine_info(load_before),
     }
@@ -519,6 +541,9 @@ def print_summary(result: dict[str, Any]) -> None:
           f"{100 * telemetry['clean_received_share_mean']:.1f}% (min client "
           f"{100 * telemetry['clean_received_share_min']:.1f}%); socket errors "
           f"{len(telemetry['socket_errors'])}")
+    lost = result["vehicle_lost"]
+    print(f"vehicle marked lost by SkyHelm: {lost['during_faults']} times during a fault "
+          f"window, {lost['outside_faults']} outside one")
     print(f"operator recoveries (back into OFFBOARD after a fault): "
           f"{len(result['operator_recoveries'])} {result['operator_recoveries']}")
 
