@@ -128,6 +128,14 @@ class ParamClient:
             raise TimeoutError(f"no answer for parameter {name}")
         return self.cache[name].value
 
+    async def reread(self) -> dict[str, float | int]:
+        """A rebooted vehicle: forget what it said and read again what had been read."""
+        names = sorted(self.cache)
+        self.cache.clear()
+        self._by_index.clear()
+        self._count = None
+        return await self.get_many(names) if names else {}
+
     async def get_many(self, names: Sequence[str]) -> dict[str, float | int]:
         values = await asyncio.gather(*(self.get(n) for n in names))
         return dict(zip(names, values, strict=True))

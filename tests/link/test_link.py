@@ -32,7 +32,7 @@ class _StandInVehicle:
     def handle_message(self, msg: mavlink.MAVLink_message) -> None:
         self.messages.append(msg)
 
-    def set_connected(self, connected: bool) -> None:
+    def set_connected(self, connected: bool, reason: str | None = None, **_: object) -> None:
         self.connected_calls.append(connected)
 
     def types(self) -> list[str]:
