@@ -76,7 +76,9 @@ class Scenario:
 @pytest.fixture
 async def scenario() -> AsyncIterator[Scenario]:
     async with (
-        sim_cluster("quad") as sim,
+        # real time: PX4's offboard-loss timeout (COM_OF_LOSS_T) is then real seconds, so a
+        # loaded machine's scheduling stalls cannot pass for a lost stream
+        sim_cluster("quad", speed=1.0) as sim,
         vehicle_behind_proxy(sim, seed=20) as proxy,
     ):
         proxy.configure(Faults(loss_pct=LOSS_PCT))
@@ -97,7 +99,7 @@ async def scenario() -> AsyncIterator[Scenario]:
                     run.setpoint_arrivals.append(asyncio.get_running_loop().time())
                 handle(link, msg)
 
-            receiver.handle = noting
+            receiver.handle = noting  # type: ignore[method-assign]
             await api.wait_state(
                 lambda s: s["global"] is not None and s["home"] is not None, 30.0,
                 "position and home through the lossy link", renew=False,
@@ -146,6 +148,9 @@ async def test_commands_params_and_stream_through_20pct_loss(scenario: Scenario)
     )
 
     # -- the stream at the vehicle, in OFFBOARD ------------------------------------------
+    (link,) = api.app.state.api.registry.links
+    link_before = link.stats()
+    dropped_before = run.proxy.counters()["to_server"].dropped
     streamer_sent = api.vehicle().stream_stats().sent
     out_before, first = run.setpoints_out, len(run.setpoint_arrivals)
     loop = asyncio.get_running_loop()
@@ -165,6 +170,16 @@ async def test_commands_params_and_stream_through_20pct_loss(scenario: Scenario)
         f"{1000 * largest_gap_s:.0f} ms; commands/params that timed out (504) and were "
         f"retried: {run.timeouts or 'none'}; proxy {run.proxy.stats()}"
     )
+    # the link's count of frames lost (gaps in the vehicle's sequence numbers) is the
+    # proxy's count of datagrams dropped towards it; a gap is seen at the next frame, so
+    # the drops just before each end of the window may fall on either side
+    link_after = link.stats()
+    dropped = run.proxy.counters()["to_server"].dropped - dropped_before
+    lost = link_after.lost_frames - link_before.lost_frames
+    print(f"vehicle -> server in the same window: proxy dropped {dropped}, link counted "
+          f"{lost} lost frames, {link_after.bad_frames} bad frames")
+    assert abs(lost - dropped) <= 10
+    assert link_after.bad_frames == 0
     low, high = RECEIVED_SHARE_BOUNDS
     assert low <= share <= high, share
     # what reached the vehicle is what the proxy let through (nothing lost on loopback)
@@ -174,13 +189,11 @@ async def test_commands_params_and_stream_through_20pct_loss(scenario: Scenario)
     assert largest_gap_s < of_loss_t_wall_s
     assert not commander.failsafe
 
-    # -- and down again ------------------------------------------------------------------
+    # -- and down (the landing itself is not this test's) --------------------------------
     await run.until_answered("hold", lambda: api.control("hold"),
                              lambda: commander.nav_mode == modes.AUTO_LOITER)
     await run.until_answered("land", lambda: api.control("land"),
                              lambda: commander.nav_mode == modes.AUTO_LAND)
-    await api.wait_state(lambda s: not s["armed"], 60.0, "landed and disarmed")
-    await wait_for(lambda: not commander.armed, 5.0, "the vehicle disarmed")
 
 
 async def holds_for_setpoints(run: Scenario, commander: Any, first: int) -> None:
@@ -191,5 +204,5 @@ async def holds_for_setpoints(run: Scenario, commander: Any, first: int) -> None
 
 
 def _stayed_offboard(run: Scenario, commander: Any, first: int) -> bool:
-    assert commander.nav_mode == modes.OFFBOARD, "the vehicle left OFFBOARD"
+    assert commander.nav_mode == modes.OFFBOARD, f"the vehicle left OFFBOARD: {commander.nav_mode}"
     return len(run.setpoint_arrivals) - first >= MEASURED_SETPOINTS

@@ -22,8 +22,9 @@ from typing import Any
 import pytest
 from websockets.asyncio.client import ClientConnection, connect
 
-from tests.api.conftest import OBSERVER
-from tests.api.test_ws import Served, receive_until, served
+from tests.api.conftest import OBSERVER, api_for, sim_cluster
+from tests.api.test_ws import TTL_S, Served, receive_until
+from tests.serving import uvicorn_serving
 from tests.waiting import eventually
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -44,9 +45,17 @@ def _speed(state: dict[str, Any]) -> float:
 
 @pytest.fixture
 async def quad() -> AsyncIterator[Served]:
-    async with served(deadman_timeout_s=DEADMAN_S) as s:
-        await _hover_in_offboard(s)
-        yield s
+    # the sim in real time: the times to stop are real seconds, and a loaded machine does
+    # not starve a sim running 8x faster in the same process
+    async with (
+        sim_cluster("quad", speed=1.0) as sim,
+        api_for(sim, lease_ttl_s=TTL_S, deadman_timeout_s=DEADMAN_S) as api,
+    ):
+        await api.wait_ready()
+        async with uvicorn_serving(api.app) as host:
+            s = Served(api, host)
+            await _hover_in_offboard(s)
+            yield s
 
 
 async def _hover_in_offboard(s: Served) -> None:
