@@ -31,11 +31,13 @@ from server.api.routes import (
     intents,
     page_config,
     params,
+    session,
     setpoint,
     sticks,
     vehicles,
 )
 from server.api.routes import signing as signing_routes
+from server.api.security import install_security
 from server.link import Envelope, Link
 from server.link.signing import SigningKeyError, SigningKeyStore
 from server.link.urls import parse_link_url
@@ -128,6 +130,7 @@ def create_app(settings: Settings) -> FastAPI:
     api = APIRouter(prefix=API_PREFIX)
     for module in (
         health,
+        session,
         page_config,
         vehicles,
         control,
@@ -145,6 +148,7 @@ def create_app(settings: Settings) -> FastAPI:
         hub.mount(app, check_token=tokens.is_valid)
     if settings.web_dir is not None:
         app.mount("/", StaticFiles(directory=settings.web_dir, html=True), name="web")
+    install_security(app, tokens, context.guards, settings.cors_origins)
     return app
 
 
@@ -187,6 +191,7 @@ async def _open_links(
         try:
             link = await Link.open(
                 url, log_dir=log_dir, heartbeat_timeout_s=settings.heartbeat_timeout_s,
+                silence_timeout_s=settings.silence_timeout_s,
                 # a recording is shown as it was recorded: nothing to sign or check
                 signing_store=None if is_replay([url]) else signing_store,
             )
