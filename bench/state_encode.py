@@ -45,7 +45,7 @@ def full_state(north_m: float = 12.5) -> link.VehicleState:
         global_position=link.GlobalState(47.3978541, 8.5455923, 498.2, 10.0),
         attitude=link.AttitudeState(1.2, -0.8, 87.5, 0.1, -0.2, 0.5),
         ground_speed_m_s=1.52, air_speed_m_s=float("nan"), climb_rate_m_s=-0.05,
-        heading_deg=87.0, battery=link.BatteryState(16.1, 12.4, 81.0),
+        heading_deg=87.0, battery=link.BatteryState(16.1, 12.4, 81.0, 412.0, 1260.0),
         gps=link.GpsState("3D_FIX", 14, 0.8),
         home=link.HomeState(47.397742, 8.545594, 488.0, 0.0, 0.0, 0.0),
         origin=link.OriginState(47.397742, 8.545594, 488.0),
@@ -59,6 +59,18 @@ def full_state(north_m: float = 12.5) -> link.VehicleState:
         link=LinkStats("udpin:0.0.0.0:14540", True, 123456, 23456, 4567890, 345678, 3, 0, 0.21, 0),
         updated_s=1234.5,
         telemetry_refused=(),
+        estimator=link.EstimatorState(
+            ("ATTITUDE", "VELOCITY_HORIZ", "VELOCITY_VERT", "POS_HORIZ_REL", "POS_HORIZ_ABS",
+             "POS_VERT_ABS", "POS_VERT_AGL", "PRED_POS_HORIZ_REL", "PRED_POS_HORIZ_ABS"),
+            True, 0.02, 0.05, 0.1,
+        ),
+        sensors_unhealthy=(),
+        message_ages_s={kind: 0.001 * i for i, kind in enumerate((
+            "HEARTBEAT", "CURRENT_MODE", "EXTENDED_SYS_STATE", "LOCAL_POSITION_NED",
+            "GLOBAL_POSITION_INT", "ATTITUDE", "VFR_HUD", "SYS_STATUS", "BATTERY_STATUS",
+            "GPS_RAW_INT", "HOME_POSITION", "GPS_GLOBAL_ORIGIN", "POSITION_TARGET_LOCAL_NED",
+            "SERVO_OUTPUT_RAW", "STATUSTEXT", "ESTIMATOR_STATUS",
+        ))},
     )  # fmt: skip
 
 

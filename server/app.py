@@ -10,6 +10,7 @@ import logging
 import time
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
+from pathlib import Path
 
 from fastapi import APIRouter, FastAPI
 from fastapi.middleware.cors import CORSMiddleware
@@ -24,7 +25,9 @@ from server.api.lease import LeaseManager
 from server.api.publisher import StatePublishers
 from server.api.registry import VehicleRegistry
 from server.api.routes import commands, control, health, intents, params, setpoint, sticks, vehicles
+from server.api.routes import signing as signing_routes
 from server.link import Envelope, Link
+from server.link.signing import SigningKeyError, SigningKeyStore
 from server.link.urls import parse_link_url
 from server.scene import ClickPoint, SceneHub
 from server.settings import Settings
@@ -62,17 +65,21 @@ def create_app(settings: Settings) -> FastAPI:
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         sim: SimProcess | None = None
         try:
+            signing_store = app.state.signing_store = _signing_store(settings)
             if settings.connect:
-                await _open_links(registry, settings, settings.connect)
+                await _open_links(registry, settings, settings.connect, signing_store)
             else:
                 sim = SimProcess(
                     airframe=settings.sim_airframe,
                     count=settings.sim_count,
                     speed=settings.sim_speed,
+                    signing_dir=_sim_signing_dir(signing_store),
                 )
                 app.state.sim = sim
                 instances = await sim.start()
-                await _open_links(registry, settings, [i.url for i in instances])
+                await _open_links(
+                    registry, settings, [i.url for i in instances], signing_store
+                )
                 await _wait_for_vehicles(registry, [i.sysid for i in instances], settings)
             await deadman.start()
             await publishers.start(registry.links)
@@ -99,6 +106,7 @@ def create_app(settings: Settings) -> FastAPI:
     app.state.api = context
     app.state.sim = None
     app.state.publishers = publishers
+    app.state.signing_store = None  # the lifespan reads the key file
     install_error_handlers(app)
     if settings.cors_origins:
         app.add_middleware(
@@ -110,6 +118,7 @@ def create_app(settings: Settings) -> FastAPI:
     api = APIRouter(prefix=API_PREFIX)
     for module in (health, vehicles, control, commands, intents, setpoint, sticks, params):
         api.include_router(module.router)
+    api.include_router(signing_routes.router)
     api.include_router(ws.router)
     app.include_router(api)
     if hub is not None:
@@ -134,13 +143,32 @@ def is_replay(urls: list[str]) -> bool:
     return any(parse_link_url(url).kind == "tlog" for url in urls)
 
 
-async def _open_links(registry: VehicleRegistry, settings: Settings, urls: list[str]) -> None:
+def _signing_store(settings: Settings) -> SigningKeyStore | None:
+    if settings.signing_key_file is None:
+        return None
+    try:
+        return SigningKeyStore(settings.signing_key_file)
+    except SigningKeyError as exc:
+        raise StartupError(str(exc)) from None
+
+
+def _sim_signing_dir(store: SigningKeyStore | None) -> Path | None:
+    """The embedded sim's key files live beside the server's, so both survive restarts."""
+    return store.key_file.parent / "sim" if store is not None else None
+
+
+async def _open_links(
+    registry: VehicleRegistry, settings: Settings, urls: list[str],
+    signing_store: SigningKeyStore | None = None,
+) -> None:
     for url in urls:
         # Recording a replay would only copy the file being replayed.
         log_dir = None if is_replay([url]) else settings.log_dir
         try:
             link = await Link.open(
-                url, log_dir=log_dir, heartbeat_timeout_s=settings.heartbeat_timeout_s
+                url, log_dir=log_dir, heartbeat_timeout_s=settings.heartbeat_timeout_s,
+                # a recording is shown as it was recorded: nothing to sign or check
+                signing_store=None if is_replay([url]) else signing_store,
             )
         except OSError as exc:
             raise StartupError(f"cannot open {url}: {exc}") from exc

@@ -86,6 +86,9 @@ def _serve_parser(sub: Any) -> None:
     serve.add_argument("--max-speed-z-m-s", type=float, help="envelope: vertical speed")
     serve.add_argument("--log-dir", type=Path, help="where .tlog recordings go (default logs)")
     serve.add_argument("--no-tlog", action="store_true", help="record no .tlog")
+    serve.add_argument("--signing-key-file", type=Path,
+                       help="MAVLink 2 signing key file (a path: the key itself never goes on "
+                            "the command line); POST /api/v1/signing creates it")
     _numeric_setting_flags(serve)
 
 

@@ -75,6 +75,10 @@ class Settings(BaseSettings):
     max_speed_xy_m_s: float | None = Field(12.0, gt=0.0)
     max_speed_z_m_s: float | None = Field(5.0, gt=0.0)
     log_dir: Path | None = Path("logs")
+    signing_key_file: Path | None = Field(
+        None, description="MAVLink 2 signing key (64 hex digits); POST /api/v1/signing writes "
+        "it; the embedded sim keeps its keys beside it"
+    )
     cors_origins: Annotated[list[str], NoDecode] = Field(default_factory=list)
     telemetry_max_rate_hz: float = Field(50.0, gt=0.0, le=200.0)
     heartbeat_timeout_s: float = Field(3.0, gt=0.0, le=60.0)

@@ -11,6 +11,7 @@ import logging
 import signal
 import sys
 from dataclasses import dataclass
+from pathlib import Path
 
 from server.link.aio import cancel_and_wait
 
@@ -37,8 +38,12 @@ class SimInstance:
 
 
 class SimProcess:
-    def __init__(self, *, airframe: str = "quad", count: int = 1, speed: float = 1.0) -> None:
+    def __init__(
+        self, *, airframe: str = "quad", count: int = 1, speed: float = 1.0,
+        signing_dir: Path | None = None,
+    ) -> None:
         self.airframe = airframe
+        self.signing_dir = signing_dir  # where the simulated vehicles keep signing keys
         self.count = count
         self.speed = speed
         self.instances: list[SimInstance] = []
@@ -70,6 +75,7 @@ class SimProcess:
             "0",
             "--gcs-local-port",
             "0",
+            *(["--signing-dir", str(self.signing_dir)] if self.signing_dir is not None else []),
         ]
 
     async def start(self) -> list[SimInstance]:

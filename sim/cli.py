@@ -10,6 +10,7 @@ import signal
 import sys
 import threading
 from collections.abc import Sequence
+from pathlib import Path
 
 from sim.runner import SimCluster
 
@@ -44,6 +45,10 @@ def build_parser() -> argparse.ArgumentParser:
                         help="print one JSON line with the bound ports once ready")
     parser.add_argument("--exit-on-stdin-eof", action="store_true",
                         help="stop when stdin reaches end of file")
+    parser.add_argument("--signing-dir", type=Path, default=None,
+                        help="MAVLink signing keys: instance i keeps its key in "
+                             "DIR/i/mavlink/mavlink-signing-key.bin (PX4's file, 40 bytes); "
+                             "unset: a key set by SETUP_SIGNING lasts until exit")
     return parser
 
 
@@ -69,6 +74,7 @@ async def serve(args: argparse.Namespace) -> int:
         api_local_port=_ports_for_instance(args.api_local_port, args.instance),
         gcs_local_port=_ports_for_instance(args.gcs_local_port, args.instance),
         speed=args.speed,
+        signing_dir=args.signing_dir,
     )
     async with cluster:
         _report_ports(cluster, args)

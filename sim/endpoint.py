@@ -16,6 +16,7 @@ from typing import Any, TypeAlias, cast
 from pymavlink.dialects.v20 import development as mavlink
 
 from sim.frames import pack_frame
+from sim.signing import MAVLINK_MSG_ID_SETUP_SIGNING, VehicleSigning
 
 # pymavlink messages carry their fields as dynamic attributes.
 Message: TypeAlias = Any
@@ -43,15 +44,22 @@ class LinkCounters:
 class MavlinkCodec:
     """pymavlink's codec used per datagram: sequence numbers out, a fresh parse in."""
 
-    def __init__(self, sysid: int, compid: int) -> None:
-        self._mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
+    def __init__(self, sysid: int, compid: int, mav: mavlink.MAVLink | None = None) -> None:
+        # ``mav``: a signing codec (sim.signing), which signs and checks frames
+        self._mav = mav if mav is not None else mavlink.MAVLink(
+            None, srcSystem=sysid, srcComponent=compid
+        )
         self._mav.robust_parsing = True
         self._sysid = sysid
         self._compid = compid
+        self.last_refused = 0  # frames of the last datagram the signing refused
 
     def encode(self, msg: Message) -> bytes:
         mav = self._mav
-        data = pack_frame(msg, mav.seq, self._sysid, self._compid)
+        # pack_frame writes unsigned frames only; pymavlink signs
+        data = None if mav.signing.sign_outgoing else pack_frame(
+            msg, mav.seq, self._sysid, self._compid
+        )
         if data is None:
             data = msg.pack(mav)
         mav.seq = (mav.seq + 1) % 256
@@ -60,6 +68,7 @@ class MavlinkCodec:
     def decode(self, data: bytes) -> tuple[list[Message], int]:
         """The messages in one datagram and how many pieces of it were unusable."""
         mav = self._mav
+        self.last_refused = 0
         # A datagram never continues in the next one: forget any partial frame.
         mav.buf = bytearray()
         mav.buf_index = 0
@@ -70,7 +79,10 @@ class MavlinkCodec:
         except Exception:  # pymavlink raises MAVError and struct/index errors on bad input
             return [], 1
         good = [m for m in parsed if not isinstance(m, mavlink.MAVLink_bad_data)]
-        bad = len(parsed) - len(good)
+        # frames the signing refused are counted there, not as broken
+        refused = sum(1 for m in parsed if getattr(m, "reason", None) == "Invalid signature")
+        self.last_refused = refused
+        bad = len(parsed) - len(good) - refused
         if mav.buf_len() > 0:
             bad += 1  # a truncated frame left at the end
         return good, bad
@@ -86,11 +98,16 @@ class UdpLink(asyncio.DatagramProtocol):
         compid: int,
         on_message: MessageHandler,
         remote: Address | None = None,
+        signing: VehicleSigning | None = None,
+        link_id: int = 0,
     ) -> None:
         self.name = name
         self.remote = remote
         self.counters = LinkCounters()
-        self._codec = MavlinkCodec(sysid, compid)
+        self.signing = signing
+        self._codec = MavlinkCodec(
+            sysid, compid, signing.codec(link_id) if signing is not None else None
+        )
         self._on_message = on_message
         self._transport: asyncio.DatagramTransport | None = None
         self.local_port = 0
@@ -115,12 +132,17 @@ class UdpLink(asyncio.DatagramProtocol):
         messages, bad = self._codec.decode(data)
         self.counters.rx_dropped += bad
         if not messages:
-            if bad == 0:
+            if bad == 0 and self._codec.last_refused == 0:
                 self.counters.rx_dropped += 1
             return
         self.remote = (addr[0], addr[1])
         for msg in messages:
             self.counters.rx_messages += 1
+            if msg.get_msgId() == MAVLINK_MSG_ID_SETUP_SIGNING:
+                # the MAVLink module's own business: never handed on (nor forwarded)
+                if self.signing is not None:
+                    self.signing.handle_setup_signing(msg)
+                continue
             try:
                 self._on_message(self, msg)
             except Exception:
@@ -152,12 +174,14 @@ async def open_link(
     host: str,
     local_port: int,
     remote_port: int | None,
+    signing: VehicleSigning | None = None,
+    link_id: int = 0,
 ) -> UdpLink:
     """Bind host:local_port (0 = ephemeral) and return the link once bound."""
     loop = asyncio.get_running_loop()
     remote = (host, remote_port) if remote_port else None
     _, protocol = await loop.create_datagram_endpoint(
-        lambda: UdpLink(name, sysid, compid, on_message, remote),
+        lambda: UdpLink(name, sysid, compid, on_message, remote, signing, link_id),
         local_addr=(host, local_port),
     )
     return protocol

@@ -9,11 +9,13 @@ from __future__ import annotations
 
 import asyncio
 from dataclasses import dataclass
+from pathlib import Path
 from types import TracebackType
 
 from sim.clock import Clock
 from sim.endpoint import UdpLink, open_link
 from sim.run_loop import LoopStats, run_vehicles
+from sim.signing import MAVLINK_SECRET_FILE, VehicleSigning
 from sim.vehicle import AirframeFactory, DefaultsFactory, SimVehicle
 
 # Spacing of the instances' spawn points along east, so they do not start inside each other.
@@ -27,6 +29,7 @@ class SimInstance:
     vehicle: SimVehicle
     api_link: UdpLink
     gcs_link: UdpLink
+    signing: VehicleSigning | None = None
 
     @property
     def api_local_port(self) -> int:
@@ -53,6 +56,8 @@ class SimInstance:
     def close(self) -> None:
         for link in self.links:
             link.close()
+        if self.signing is not None:
+            self.signing.close()
 
 
 class SimCluster:
@@ -73,6 +78,7 @@ class SimCluster:
         airframe_factory: AirframeFactory | None = None,
         defaults_factory: DefaultsFactory | None = None,
         clock: Clock | None = None,
+        signing_dir: Path | None = None,
     ) -> None:
         if count < 1:
             raise ValueError("count must be at least 1")
@@ -92,6 +98,8 @@ class SimCluster:
         self._airframe_factory = airframe_factory
         self._defaults_factory = defaults_factory
         self._clock = clock
+        # instance i keeps its signing key in <signing_dir>/<i>/mavlink/ (PX4: on its SD card)
+        self.signing_dir = signing_dir
         self._task: asyncio.Task[None] | None = None
 
     async def start(self) -> None:
@@ -117,6 +125,11 @@ class SimCluster:
         )
         vehicle.ready_event = asyncio.Event()
 
+        key_file = (self.signing_dir / str(index) / MAVLINK_SECRET_FILE
+                    if self.signing_dir is not None else None)
+        signing = VehicleSigning(key_file, sysid=vehicle.sysid, compid=vehicle.compid,
+                                 is_armed=lambda: vehicle.armed)
+
         def port(base: int | None, local: bool) -> int | None:
             if base is None or base == 0:
                 return 0 if local else None
@@ -125,19 +138,20 @@ class SimCluster:
         api_link = await open_link(
             "api", vehicle.sysid, vehicle.compid, vehicle.handle_message, self.host,
             port(self.api_local_port, True) or 0, port(self.api_port, False),
+            signing=signing, link_id=0,
         )
         try:
             gcs_local = port(self.gcs_local_port, True) or 0
             gcs_link = await open_link(
                 "gcs", vehicle.sysid, vehicle.compid, vehicle.handle_message, self.host,
-                gcs_local, self.gcs_port or None,
+                gcs_local, self.gcs_port or None, signing=signing, link_id=1,
             )
         except BaseException:
             api_link.close()
             raise
         vehicle.attach_link(api_link, onboard=True)
         vehicle.attach_link(gcs_link, onboard=False)
-        return SimInstance(index, vehicle.sysid, vehicle, api_link, gcs_link)
+        return SimInstance(index, vehicle.sysid, vehicle, api_link, gcs_link, signing)
 
     async def wait_ready(self, timeout_s: float | None = None) -> None:
         """Until every vehicle has a valid position and can arm (≈ 3 s sim time)."""

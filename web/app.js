@@ -2,6 +2,7 @@
 // answer shown is the one the API returned. The page polls nothing: state, events, the
 // vehicle list and clicks in the 3D scene all come on the telemetry socket.
 
+import { Alerts, alertLog } from "./alerts.js";
 import { TelemetrySocket, onTokenRejected, reconnectDelayMs, request, token } from "./api.js";
 import {
   brake, confirmThen, goByOffset, goTo, keyboard, panel, runCommand, showResult, showSetpointType,
@@ -11,26 +12,33 @@ import {
   answerPrompt, clientLabel, clientName, inControl, onControlEvent, releaseControl, renderHolder,
   setClientLabel, tabId, takeControl, takeControlClicked, updateControls,
 } from "./handover.js";
+import { confirmAction, wireConfirm } from "./confirm.js";
+import { deadmanText } from "./format.js";
 import { modeMenu, modesFor } from "./modes.js";
 import { SETPOINT_TYPES } from "./offboard.js";
-import { page, plots } from "./page.js";
-import { render } from "./render.js";
+import { freshness, page, plots } from "./page.js";
+import { instruments, render } from "./render.js";
 import { $, banner, log, nowS, num, setText } from "./ui.js";
 
 const OFFBOARD_PARAMS = [
   "COM_OF_LOSS_T", "COM_OBL_RC_ACT", "COM_RC_IN_MODE", "MIS_TAKEOFF_ALT", "RTL_RETURN_ALT",
   "RTL_DESCEND_ALT", "RTL_LAND_DELAY",
 ];
+const alerts = new Alerts($("alerts"), $("alerts-mute"));
+const IN_AIR = new Set(["IN_AIR", "TAKEOFF", "LANDING"]);
+
 // ---- telemetry ----------------------------------------------------------------------------
 
 function onTelemetry(message) {
   if (message.type === "statustext") {
     log(message.severity || "INFO", message.text || "");
+    alerts.fromText(message.severity || "INFO", message.text || "");
   } else if (message.type === "event") {
     onEvent(message);
   } else if (message.type === "state") {
     if (message.vehicle !== page.vehicleId) return; // a socket for every vehicle, before one is chosen
     render(message);
+    alerts.fromState(message);
     renderHolder(message.lease);
     modeMenu.follow(message.vehicle_type || page.vehicleType, message.mode);
   } else if (message.type === "vehicles") {
@@ -53,6 +61,10 @@ function onEvent(message) {
     log("NOTICE", controlText(data));
   } else if (message.kind === "lease") {
     return; // the same changes as the control events, in the older shape
+  } else if (message.kind === "deadman") {
+    const text = deadmanText(data);
+    log("WARNING", text);
+    alerts.raise("deadman", text, data.ok === false ? "critical" : "warning", { forMs: 15000 });
   } else {
     const text = data.text || data.reason || Object.entries(data)
       .filter(([, v]) => v !== null && v !== undefined)
@@ -73,6 +85,8 @@ function controlText(data) {
 
 function onTelemetryStatus(status) {
   page.connected = status.state === "connected";
+  if (page.connected) page.everConnected = true;
+  if (page.everConnected) alerts.fromServer(page.connected);
   if (page.connected) {
     setText("conn-status", "connected", "ok");
     if (status.reconnected) {
@@ -173,8 +187,9 @@ function selectVehicle(id) {
   page.vehicleId = Number(id);
   page.vehicleType = page.vehicles.find((v) => v.id === page.vehicleId)?.type || "";
   page.state = null;
-  plots.alt.clear();
-  plots.speed.clear();
+  plots.clear();
+  instruments.reset();
+  alerts.clearAll();
   watchTelemetry(page.vehicleId);
   loadParams();
 }
@@ -254,7 +269,27 @@ function wire() {
   setText("tab-id", `tab ${tabId()}`);
   $("client-label").title = `this tab is "${clientName()}" to the others`;
   $("client-label").addEventListener("change", (e) => setClientLabel(e.target.value));
+  // in the air a slip would be costly: a dialog that says so, instead of the second click
+  $("btn-arm").addEventListener("click", (e) => {
+    const landed = page.state?.landed_state;
+    if (!IN_AIR.has(landed)) return;
+    e.stopImmediatePropagation();
+    confirmAction({
+      title: "Arm in the air?",
+      text: `The vehicle reports ${landed.replace("_", " ").toLowerCase()}. Arm it anyway?`,
+      confirm: "Arm in the air",
+    }).then((ok) => { if (ok) runCommand("Arm", "arm", {}, $("btn-arm")); });
+  });
   confirmThen($("btn-arm"), () => runCommand("Arm", "arm", {}, $("btn-arm")));
+  $("btn-kill").addEventListener("click", async (e) => {
+    const flying = IN_AIR.has(page.state?.landed_state);
+    const ok = await confirmAction({
+      title: "Kill the motors?",
+      text: `The motors stop at once${flying ? " and the vehicle falls: it is in the air" : ""}. This is PX4's forced disarm.`,
+      confirm: "Kill",
+    });
+    if (ok) runCommand("Kill", "disarm", { force: true }, e.target);
+  });
   confirmThen($("btn-disarm"), () => runCommand("Disarm", "disarm", {}, $("btn-disarm")));
   $("btn-takeoff").addEventListener("click", (e) => {
     const alt = parseFloat($("takeoff-alt").value);
@@ -291,8 +326,7 @@ function wire() {
 
 function drawLoop() {
   const t = nowS();
-  plots.alt.draw(t);
-  plots.speed.draw(t);
+  plots.draw(t);
   setTimeout(() => requestAnimationFrame(drawLoop), 200);
 }
 
@@ -302,6 +336,8 @@ async function main() {
     banner("Open the URL printed by `skyhelm serve` (it carries ?token=…)");
   }
   if (new URLSearchParams(location.search).get("scene") === "off") $("scene-enable").checked = false;
+  wireConfirm();
+  document.addEventListener("skyhelm-control-taken", (e) => alerts.controlTaken(e.detail.by));
   wire();
   showSetpointType("position");
   updateControls();
@@ -316,4 +352,6 @@ async function main() {
 main();
 
 // The page's state, for the browser console and the browser tests.
-window.skyhelm = { page, SETPOINT_TYPES, keyboard, modesFor, reconnectDelayMs };
+window.skyhelm = {
+  page, SETPOINT_TYPES, keyboard, modesFor, reconnectDelayMs, alerts, alertLog, plots, freshness,
+};

@@ -132,6 +132,12 @@ function showFlown(setpoint) {
   return true;
 }
 
+/** While observing, the panel shows the setpoint the vehicle flies (from the state), not the
+ * form's defaults; the pilot's own panel is left to the pilot. */
+export function followFlown(state) {
+  if (!inControl() && state.stream?.active) showFlown(state.setpoint);
+}
+
 /** Starts OFFBOARD with the panel's setpoint (an intent panel sends its intent first). */
 export async function startOffboard(button) {
   const message = currentMessage();

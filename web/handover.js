@@ -104,6 +104,7 @@ function closed(session, info) {
   } else if (takenBy) {
     page.wantControl = false;
     const text = `Control taken by ${takenBy}`;
+    document.dispatchEvent(new CustomEvent("skyhelm-control-taken", { detail: { by: takenBy } }));
     showNote(`${text} at ${new Date().toTimeString().slice(0, 8)}`, "bad");
     const told = `${text}: this tab no longer sends anything`;
     banner(told);

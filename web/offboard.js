@@ -131,6 +131,25 @@ export function panelForSetpoint(setpoint, homeDownM = 0) {
   return { type, values };
 }
 
+const PANEL_LABELS = {
+  position: "Position", velocity: "Velocity NED", velocity_body: "Velocity body", attitude: "Attitude",
+};
+
+/** The setpoint the vehicle flies, in the panel's own terms: "Position · North 10 m · East 0 m
+ * · Altitude 5 m · Yaw 90 deg", or "–" when none is streamed. */
+export function flownText(setpoint, homeDownM = 0) {
+  const shown = panelForSetpoint(setpoint, homeDownM);
+  if (!shown) return setpoint ? String(setpoint.type || "setpoint").replaceAll("_", " ") : "–";
+  const parts = (SETPOINT_TYPES[shown.type] || [])
+    .filter((field) => Number.isFinite(shown.values[field.key]))
+    .map((field) => {
+      const v = shown.values[field.key];
+      const text = Math.abs(v) < 0.05 ? "0" : String(Math.round(v * 10) / 10);
+      return `${field.label} ${text}${field.unit && !field.unit.includes("..") ? ` ${field.unit}` : ""}`;
+    });
+  return [PANEL_LABELS[shown.type] || shown.type, ...parts].join(" · ");
+}
+
 /** Panel values that hold the vehicle where it is (for "Here" and for switching types). */
 export function valuesFromState(type, state) {
   const values = {};

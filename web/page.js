@@ -1,7 +1,8 @@
 // The page's shared state: which vehicle is shown, the sockets, the latest state. One object
 // every module reads and writes, also exposed as window.skyhelm.page for the browser tests.
 
-import { StripChart } from "./plots.js";
+import { Freshness } from "./instruments.js";
+import { Plots } from "./plots.js";
 
 const $ = (id) => document.getElementById(id);
 
@@ -19,7 +20,14 @@ export const page = {
   rejected: false, // the server refused the token: the page stops asking
 };
 
-export const plots = {
-  alt: new StripChart($("plot-alt"), { unit: "m", minSpan: 2 }),
-  speed: new StripChart($("plot-speed"), { unit: "m/s", minSpan: 1 }),
-};
+// Any telemetry field can be picked; these two (with their setpoints) are computed by render.js.
+export const plots = new Plots($("plots"), {
+  derived: {
+    alt_above_home_m: { label: "Altitude above home (m)", unit: "m" },
+    ground_speed_m_s: { label: "Ground speed (m/s)", unit: "m/s" },
+  },
+  fields: ["alt_above_home_m", "ground_speed_m_s"],
+});
+
+// How old each value is (from the state's message ages); instruments and tables grey out by it.
+export const freshness = new Freshness();

@@ -1,98 +1,192 @@
-// Strip charts drawn on a <canvas>: one value and its setpoint over the last 60 s.
+// Live plots with uPlot (vendored in vendor/uplot/, a global `uPlot`): any numeric telemetry
+// field over the last 60 s, picked from a menu per chart. The page keeps 60 s of every field
+// (at most 10 samples a second), so a newly picked field shows its past at once.
+
+import { num } from "./format.js";
 
 const WINDOW_S = 60;
+const SAMPLE_EVERY_S = 0.1;
+const SKIP = new Set(["id", "vehicle", "sysid", "compid", "updated_s"]);
+const SKIP_PREFIX = ["statustext", "lease", "telemetry_refused"];
+const COLOURS = { value: "#5dade2", setpoint: "#f5b041" };
 
-export class StripChart {
-  constructor(canvas, { unit, minSpan = 2 }) {
-    this.canvas = canvas;
-    this.unit = unit;
-    this.minSpan = minSpan;
-    this.samples = []; // [time_s, value, setpoint | null]
-    this.dirty = true;
+/** Every finite number in a state, by path: "global.alt_rel_m", "actuator_outputs[2]". */
+export function numericFields(value, prefix = "", out = {}) {
+  if (typeof value === "number") {
+    if (Number.isFinite(value) && prefix && !SKIP.has(prefix)) out[prefix] = value;
+  } else if (Array.isArray(value)) {
+    value.forEach((v, i) => numericFields(v, `${prefix}[${i}]`, out));
+  } else if (value && typeof value === "object") {
+    for (const [k, v] of Object.entries(value)) {
+      const path = prefix ? `${prefix}.${k}` : k;
+      if (!SKIP_PREFIX.some((p) => path.startsWith(p))) numericFields(v, path, out);
+    }
+  }
+  return out;
+}
+
+function unitOf(field) {
+  const m = /_(m_s|m|deg_s|deg|pct|v|a|s|ms|hz|mah)(\]|$)/.exec(field.replace(/\[\d+\]$/, ""));
+  const units = { m_s: "m/s", m: "m", deg_s: "°/s", deg: "°", pct: "%", v: "V", a: "A", s: "s", ms: "ms", hz: "Hz", mah: "mAh" };
+  return m ? units[m[1]] : "";
+}
+
+class Chart {
+  constructor(plots, container, index, field) {
+    this.plots = plots;
+    this.field = field;
+    const pick = document.createElement("div");
+    pick.className = "plot-pick";
+    this.select = document.createElement("select");
+    this.select.id = `plot-field-${index}`;
+    this.select.setAttribute("aria-label", `field of plot ${index + 1}`);
+    this.select.addEventListener("change", () => this.pick(this.select.value));
+    this.latest = document.createElement("b");
+    this.latest.className = "plot-latest";
+    pick.append(this.select, this.latest);
+    this.area = document.createElement("div");
+    this.area.className = "plot-area";
+    this.area.id = `plot-${index}`;
+    container.append(pick, this.area);
+    this.uplot = null;
+    new ResizeObserver(() => this.fit()).observe(this.area);
   }
 
-  add(timeS, value, setpoint) {
-    if (value === null || value === undefined || !Number.isFinite(value)) return;
-    this.samples.push([timeS, value, Number.isFinite(setpoint) ? setpoint : null]);
-    while (this.samples.length && timeS - this.samples[0][0] > WINDOW_S) this.samples.shift();
-    this.dirty = true;
+  make() {
+    const { width, height } = this.size();
+    const unit = this.plots.unitOf(this.field);
+    const axis = { stroke: "#8a93a2", grid: { stroke: "#262c35", width: 1 }, ticks: { stroke: "#262c35" }, font: "10px sans-serif" };
+    const options = {
+      width, height,
+      legend: { show: false },
+      cursor: { drag: { x: false, y: false } },
+      scales: { x: { time: false, auto: false, range: [-WINDOW_S, 0] }, y: { range: (u, lo, hi) => span(lo, hi) } },
+      axes: [
+        { ...axis, values: (u, ticks) => ticks.map((t) => (t === 0 ? "now" : `${t}s`)) },
+        { ...axis, size: 46, label: unit, labelSize: 12, labelFont: "10px sans-serif", values: (u, ticks) => ticks.map((t) => num(t, Math.abs(t) < 10 ? 1 : 0)) },
+      ],
+      series: [
+        {},
+        { label: this.field, stroke: COLOURS.value, width: 1.6, points: { show: false } },
+        { label: "setpoint", stroke: COLOURS.setpoint, width: 1.6, dash: [4, 3], points: { show: false } },
+      ],
+    };
+    this.uplot?.destroy();
+    this.uplot = new window.uPlot(options, [[], [], []], this.area);
+  }
+
+  size() {
+    return { width: Math.max(120, this.area.clientWidth), height: Math.max(60, this.area.clientHeight) };
+  }
+
+  fit() {
+    if (this.uplot) this.uplot.setSize(this.size());
+  }
+
+  pick(field) {
+    this.field = field;
+    if (this.select.value !== field) this.select.value = field;
+    this.make();
+    this.draw(performance.now() / 1000);
+  }
+
+  /** The points shown now (for the tests and the console). */
+  points() {
+    return this.uplot ? this.uplot.data[1].filter((v) => v !== null && Number.isFinite(v)).length : 0;
+  }
+
+  draw(nowS) {
+    if (!this.uplot) this.make();
+    const samples = this.plots.samples;
+    const xs = [];
+    const ys = [];
+    const sps = [];
+    const spField = `${this.field}@setpoint`;
+    for (const [t, fields] of samples) {
+      xs.push(t - nowS);
+      ys.push(fields[this.field] ?? null);
+      sps.push(fields[spField] ?? null);
+    }
+    this.uplot.setData([xs, ys, sps], false);
+    this.uplot.setScale("x", { min: -WINDOW_S, max: 0 });
+    this.uplot.redraw(false, true);
+    const last = ys.findLast((v) => v !== null);
+    const text = last === undefined ? "–" : `${num(last, 2)} ${this.plots.unitOf(this.field)}`.trim();
+    if (this.latest.textContent !== text) this.latest.textContent = text;
+  }
+}
+
+function span(lo, hi) {
+  if (lo === null || hi === null) return [0, 1];
+  const minSpan = Math.max(0.5, Math.abs(hi) * 0.02);
+  if (hi - lo < minSpan) {
+    const mid = (hi + lo) / 2;
+    return [mid - minSpan / 2, mid + minSpan / 2];
+  }
+  const margin = (hi - lo) * 0.08;
+  return [lo - margin, hi + margin];
+}
+
+export class Plots {
+  /** derived: {name: {label, unit}} shown first in the menus (fed through add()'s extras). */
+  constructor(container, { derived = {}, fields = [] } = {}) {
+    this.derived = derived;
+    this.samples = []; // [time_s, {field: value}]
+    this.known = new Set(Object.keys(derived));
+    this.charts = fields.map((field, i) => {
+      const box = document.createElement("div");
+      box.className = "plot";
+      container.append(box);
+      return new Chart(this, box, i, field);
+    });
+    this.fillMenus();
+  }
+
+  unitOf(field) {
+    return this.derived[field]?.unit ?? unitOf(field);
+  }
+
+  /** One state at time t (s); extras: {field: [value, setpoint]} computed by the page. */
+  add(t, state, extras = {}) {
+    const last = this.samples.at(-1);
+    if (last && t - last[0] < SAMPLE_EVERY_S) return;
+    const fields = numericFields(state);
+    for (const [name, [value, setpoint]] of Object.entries(extras)) {
+      if (Number.isFinite(value)) fields[name] = value;
+      if (Number.isFinite(setpoint)) fields[`${name}@setpoint`] = setpoint;
+    }
+    this.samples.push([t, fields]);
+    while (this.samples.length && t - this.samples[0][0] > WINDOW_S) this.samples.shift();
+    let added = false;
+    for (const name of Object.keys(fields)) {
+      if (!name.endsWith("@setpoint") && !this.known.has(name)) {
+        this.known.add(name);
+        added = true;
+      }
+    }
+    if (added) this.fillMenus();
   }
 
   clear() {
     this.samples = [];
-    this.dirty = true;
+  }
+
+  fillMenus() {
+    const derived = Object.keys(this.derived);
+    const others = [...this.known].filter((f) => !(f in this.derived)).sort();
+    for (const chart of this.charts) {
+      const options = [...derived, ...others].map((f) => {
+        const option = document.createElement("option");
+        option.value = f;
+        option.textContent = this.derived[f]?.label ?? f;
+        return option;
+      });
+      chart.select.replaceChildren(...options);
+      chart.select.value = chart.field;
+    }
   }
 
   draw(nowS) {
-    const canvas = this.canvas;
-    const dpr = window.devicePixelRatio || 1;
-    const w = Math.max(10, Math.round(canvas.clientWidth * dpr));
-    const h = Math.max(10, Math.round(canvas.clientHeight * dpr));
-    if (canvas.width !== w || canvas.height !== h) {
-      canvas.width = w;
-      canvas.height = h;
-    }
-    const ctx = canvas.getContext("2d");
-    ctx.clearRect(0, 0, w, h);
-    const pad = { l: 38 * dpr, r: 6 * dpr, t: 6 * dpr, b: 14 * dpr };
-    const values = [];
-    for (const [, v, sp] of this.samples) {
-      values.push(v);
-      if (sp !== null) values.push(sp);
-    }
-    let lo = values.length ? Math.min(...values) : 0;
-    let hi = values.length ? Math.max(...values) : 1;
-    if (hi - lo < this.minSpan) {
-      const mid = (hi + lo) / 2;
-      lo = mid - this.minSpan / 2;
-      hi = mid + this.minSpan / 2;
-    }
-    const margin = (hi - lo) * 0.08;
-    lo -= margin;
-    hi += margin;
-    const x = (t) => pad.l + ((t - (nowS - WINDOW_S)) / WINDOW_S) * (w - pad.l - pad.r);
-    const y = (v) => pad.t + (1 - (v - lo) / (hi - lo)) * (h - pad.t - pad.b);
-
-    ctx.font = `${10 * dpr}px sans-serif`;
-    ctx.fillStyle = "#8a93a2";
-    ctx.strokeStyle = "#262c35";
-    ctx.lineWidth = 1;
-    for (let i = 0; i <= 4; i++) {
-      const v = lo + ((hi - lo) * i) / 4;
-      const yy = y(v);
-      ctx.beginPath();
-      ctx.moveTo(pad.l, yy);
-      ctx.lineTo(w - pad.r, yy);
-      ctx.stroke();
-      ctx.fillText(`${v.toFixed(1)}`, 2 * dpr, yy + 3 * dpr);
-    }
-    for (let s = 0; s <= WINDOW_S; s += 10) {
-      const xx = x(nowS - s);
-      ctx.fillText(s === 0 ? "now" : `-${s}s`, xx - (s === 0 ? 18 : 10) * dpr, h - 2 * dpr);
-    }
-    ctx.fillText(this.unit, pad.l + 4 * dpr, pad.t + 9 * dpr);
-    this.line(ctx, x, y, 2, "#f5b041", dpr, [4 * dpr, 3 * dpr]);
-    this.line(ctx, x, y, 1, "#5dade2", dpr, []);
-    this.dirty = false;
-  }
-
-  line(ctx, x, y, index, colour, dpr, dash) {
-    ctx.strokeStyle = colour;
-    ctx.lineWidth = 1.6 * dpr;
-    ctx.setLineDash(dash);
-    ctx.beginPath();
-    let pen = false;
-    for (const sample of this.samples) {
-      const v = sample[index];
-      if (v === null) {
-        pen = false;
-        continue;
-      }
-      if (pen) ctx.lineTo(x(sample[0]), y(v));
-      else ctx.moveTo(x(sample[0]), y(v));
-      pen = true;
-    }
-    ctx.stroke();
-    ctx.setLineDash([]);
+    for (const chart of this.charts) chart.draw(nowS);
   }
 }

@@ -1,8 +1,21 @@
 // Drawing one state message: the top bar, the telemetry table, the setpoint stream, the
 // VTOL progress and the strip charts.
 
-import { page, plots } from "./page.js";
+import { followFlown } from "./control.js";
+import { millis } from "./format.js";
+import { Instruments } from "./instruments.js";
+import { flownText } from "./offboard.js";
+import { freshness, page, plots } from "./page.js";
 import { $, nowS, num, setText } from "./ui.js";
+import { renderSigning } from "./signing.js";
+
+export const instruments = new Instruments($("instruments"), freshness);
+// the telemetry table greys out like the instruments (by the age of each value's message)
+for (const [id, source] of Object.entries({
+  "t-battery": "battery", "t-gps": "gps", "t-pos": "position", "t-vel": "position",
+  "t-alt": "altitude", "t-latlon": "altitude", "t-att": "attitude", "t-speed": "speed",
+  "t-home": "home", "t-motors": "motors", mode: "mode", armed: "mode", landed: "landed",
+})) freshness.watch($(id), source);
 
 export function altitudeAboveHome(state) {
   if (state.global && Number.isFinite(state.global.alt_rel_m)) return state.global.alt_rel_m;
@@ -49,12 +62,18 @@ export function render(state) {
   $("vtol-state").classList.toggle("hidden", !vtol);
   if (vtol) setText("vtol-state", state.vtol_state.replaceAll("_", " "), state.vtol_state.startsWith("TRANSITION") ? "warn" : "info");
 
+  renderSigning(state);
   renderTelemetry(state);
   renderStream(state.stream || {});
   renderVtol(state);
-  const t = nowS();
-  plots.alt.add(t, altitudeAboveHome(state), setpointAltitude(state));
-  plots.speed.add(t, state.ground_speed_m_s, setpointSpeed(state));
+  instruments.show(state);
+  const streaming = Boolean(state.stream?.active && state.setpoint);
+  setText("sp-flown-text", streaming ? flownText(state.setpoint, state.home?.down_m ?? 0) : "no setpoint streamed");
+  followFlown(state);
+  plots.add(nowS(), state, {
+    alt_above_home_m: [altitudeAboveHome(state), setpointAltitude(state)],
+    ground_speed_m_s: [state.ground_speed_m_s, setpointSpeed(state)],
+  });
 }
 
 function renderTelemetry(state) {
@@ -86,7 +105,7 @@ function renderStream(s) {
   setText("stream-rate", s.rate_hz ? `${num(s.rate_hz, 1)} Hz` : "–");
   setText("stream-p99", Number.isFinite(s.interval_p99_ms) ? `${num(s.interval_p99_ms, 1)} ms` : "–");
   setText("stream-gap", Number.isFinite(s.max_gap_ms) ? `${num(s.max_gap_ms, 0)} ms` : "–");
-  setText("stream-since", Number.isFinite(s.since_last_ms) ? `${num(s.since_last_ms, 0)} ms` : "–");
+  setText("stream-since", millis(s.since_last_ms));
   setText("stream-sent", `${s.sent ?? "–"}`);
   $("stream-gap").style.color = s.max_gap_ms > 500 ? "var(--bad)" : s.max_gap_ms > 100 ? "var(--warn)" : "";
 }

@@ -6,7 +6,7 @@ const LOG_LIMIT = 400;
 const REPLAY_NOTICE = "Replay of a recording — observe only";
 
 export const $ = (id) => document.getElementById(id);
-export const num = (x, digits = 1) => (Number.isFinite(x) ? x.toFixed(digits) : "–");
+export { num } from "./format.js"; // never "-0.0"
 export const nowS = () => performance.now() / 1000;
 
 export function setText(id, text, cls) {

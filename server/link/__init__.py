@@ -18,6 +18,7 @@ from .setpoints import *  # noqa: F403  (the setpoint kinds, encode, resolve, de
 from .state import (
     AttitudeState,
     BatteryState,
+    EstimatorState,
     GlobalState,
     GpsState,
     HomeState,
@@ -38,6 +39,7 @@ __all__ = [
     "CommandOutcome",
     "CommandResult",
     "Envelope",
+    "EstimatorState",
     "GlobalState",
     "GpsState",
     "HomeState",

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import itertools
 import logging
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -21,6 +22,7 @@ from pymavlink.dialects.v20 import development as mavlink
 from . import px4_messages
 from .aio import cancel_and_wait
 from .link_stats import LinkStats, SequenceGapCounter
+from .signing import MAVLINK_MSG_ID_SETUP_SIGNING, LinkSigning, SigningKeyStore
 from .tlog import TlogWriter
 from .transports import Peer, Transport, create_transport
 from .urls import LinkUrl, parse_link_url
@@ -38,6 +40,8 @@ HEARTBEAT_CHECK_PERIOD_S = 0.5
 VEHICLE_QUEUE_SIZE = 32
 
 VehicleFactory = Callable[..., Vehicle]
+# MAVLink signing link ids, one per link of this process
+_signing_link_ids = itertools.count()
 
 
 class Link:
@@ -54,12 +58,17 @@ class Link:
         tlog: TlogWriter | None,
         heartbeat_timeout_s: float,
         vehicle_factory: VehicleFactory | None,
+        signing_store: SigningKeyStore | None = None,
     ) -> None:
         self.name = name
         self.url = address.url
         self.address = address
         self.heartbeat_timeout_s = heartbeat_timeout_s
         self.mav = mavlink.MAVLink(None, srcSystem=gcs_sysid, srcComponent=gcs_compid)
+        # one signing state for the packer and every decoder (see server.link.signing)
+        self.signing = LinkSigning(signing_store, next(_signing_link_ids))
+        self.mav.signing = self.signing.state
+        transport.codec_factory = self.signing.codec
         self.frames_dropped_out = 0  # frames send() could not write (no peer, not connected)
         # taken once: stats() may be called from other threads (the scene)
         self._loop = asyncio.get_running_loop()
@@ -91,11 +100,13 @@ class Link:
         log_dir: Path | None = None,
         heartbeat_timeout_s: float = 3.0,
         vehicle_factory: VehicleFactory | None = None,
+        signing_store: SigningKeyStore | None = None,
     ) -> Link:
         """Bind or connect ``url`` (pymavlink style), start the GCS heartbeat and the tlog.
 
         A ``tcp:`` or serial peer that is not there yet is retried in the background.
         ``vehicle_factory`` replaces the Vehicle class (tests feed links to stand-ins).
+        ``signing_store`` holds the MAVLink signing key (none: the link signs nothing).
         """
         address = parse_link_url(url)
         link_name = name or address.label
@@ -104,6 +115,7 @@ class Link:
         link = cls(
             address, transport, name=link_name, gcs_sysid=gcs_sysid, gcs_compid=gcs_compid,
             tlog=tlog, heartbeat_timeout_s=heartbeat_timeout_s, vehicle_factory=vehicle_factory,
+            signing_store=signing_store,
         )
         try:
             await transport.start(_LinkReceiver.of(link))
@@ -135,6 +147,7 @@ class Link:
         for vehicle in list(self._vehicles.values()):
             await _close_vehicle(vehicle)
         await self._transport.close()
+        await self.signing.close()
         if self._tlog is not None:
             await self._tlog.close()
         log.info("link %s closed", self.name)
@@ -187,6 +200,7 @@ class Link:
             bad_frames=self._bad_frames,
             last_heartbeat_age_s=age,
             reconnects=self._transport.reconnects,
+            signing=self.signing.stats(self._vehicles),
         )
 
     def send(self, msg: mavlink.MAVLink_message) -> None:
@@ -200,8 +214,8 @@ class Link:
             return
         self._frames_out += 1
         self._bytes_out += len(frame)
-        if self._tlog is not None:
-            self._tlog.record(frame)
+        if self._tlog is not None and msg.get_msgId() != MAVLINK_MSG_ID_SETUP_SIGNING:
+            self._tlog.record(frame)  # a key never goes to the tlog
 
     def send_gcs_heartbeat(self) -> None:
         self.send(self.mav.heartbeat_encode(
@@ -213,6 +227,8 @@ class Link:
     def _frame_received(self, msg: mavlink.MAVLink_message) -> None:
         self._frames_in += 1
         if isinstance(msg, mavlink.MAVLink_unknown):
+            if not self.signing.accepts_unknown(msg.get_msgbuf()):
+                return
             msg = px4_messages.decode_unknown(msg) or msg
         if isinstance(msg, mavlink.MAVLink_unknown):
             # Not in our dialect: counted and recorded, but nobody can read it.
@@ -222,6 +238,9 @@ class Link:
             return
         src_system = msg.get_srcSystem()
         self._gaps.observe(src_system, msg.get_srcComponent(), msg.get_seq())
+        self.signing.note_received(msg)
+        if msg.get_msgId() == MAVLINK_MSG_ID_SETUP_SIGNING:
+            return  # a key: never recorded, and no vehicle of ours takes one from a peer
         if self._tlog is not None:
             self._tlog.record(msg.get_msgbuf())
         if (msg.get_msgId() == mavlink.MAVLINK_MSG_ID_HEARTBEAT
@@ -282,6 +301,7 @@ class Link:
         ]
         if self._tlog is not None:
             self._tlog.start()
+        self.signing.start()
 
     async def _send_gcs_heartbeats(self) -> None:
         loop = asyncio.get_running_loop()

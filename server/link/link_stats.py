@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from .signing import SigningStats
+
 # MAVLink sequence numbers are one byte per sending component.
 _SEQ_MODULO = 256
 
@@ -20,6 +22,7 @@ class LinkStats:
     bad_frames: int  # bad CRC, garbage, truncated frames: counted and dropped
     last_heartbeat_age_s: float | None  # None before the first vehicle HEARTBEAT
     reconnects: int
+    signing: SigningStats | None = None  # MAVLink 2 signing: on or off, what was rejected
 
 
 class SequenceGapCounter:

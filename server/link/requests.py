@@ -149,8 +149,12 @@ class Requester:
             if remaining <= 0:
                 return False
             self._changed.clear()
+            # asyncio.timeout, not wait_for: on Python 3.11 wait_for loses a cancellation
+            # that arrives as the event is set, and a closing link then waits for every
+            # request still queued behind this one
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self._changed.wait(), remaining)
+                async with asyncio.timeout(remaining):
+                    await self._changed.wait()
         return True
 
     # -- outgoing -----------------------------------------------------------------

@@ -88,6 +88,21 @@ class BatteryState:
     voltage_v: float | None
     current_a: float | None
     remaining_pct: float | None
+    # BATTERY_STATUS only (None until one came, or when the vehicle does not know)
+    consumed_mah: float | None = None
+    time_remaining_s: float | None = None
+
+
+@dataclass(frozen=True)
+class EstimatorState:
+    """ESTIMATOR_STATUS: the ESTIMATOR_* flags set (names without the prefix), and the
+    test ratios PX4 checks its innovations against (1.0 is the limit)."""
+
+    flags: tuple[str, ...]
+    healthy: bool  # attitude, velocity and horizontal position solutions all valid
+    pos_horiz_ratio: float | None
+    pos_vert_ratio: float | None
+    mag_ratio: float | None
 
 
 @dataclass(frozen=True)
@@ -171,6 +186,13 @@ class VehicleState:
     link: LinkStats
     updated_s: float
     telemetry_refused: tuple[str, ...] = field(default=())
+    estimator: EstimatorState | None = None
+    # SYS_STATUS: the sensors present and enabled but reported unhealthy (MAV_SYS_STATUS_
+    # names without the prefix); None until a SYS_STATUS came
+    sensors_unhealthy: tuple[str, ...] | None = None
+    # seconds since each message type that fills the state was last received, by its
+    # MAVLink name (the age of every value: a value is as old as its source message)
+    message_ages_s: dict[str, float] = field(default_factory=dict)
 
 
 class StateSubscription:

@@ -95,6 +95,9 @@ class Telemetry:
     home: state.HomeState | None = None
     origin: state.OriginState | None = None
     rtl_phase: str | None = None
+    # ESTIMATOR_STATUS, SYS_STATUS's sensor health bits
+    estimator: state.EstimatorState | None = None
+    sensors_unhealthy: tuple[str, ...] | None = None
 
     def __init__(
         self,
@@ -131,7 +134,23 @@ class Telemetry:
             "SERVO_OUTPUT_RAW": self._on_servo_output,
             "ACTUATOR_OUTPUT_STATUS": self._on_actuator_output,
             "STATUSTEXT": self._on_statustext,
+            "ESTIMATOR_STATUS": self._on_estimator_status,
         }
+        # when each of those message types last came (the clock's seconds)
+        self.received_s: dict[str, float] = {}
+        for kind, handler in list(self.handlers.items()):
+            self.handlers[kind] = self._timed(kind, handler)
+
+    def _timed(self, kind: str, handler: Callable[[Any], None]) -> Callable[[Any], None]:
+        def timed(msg: Any) -> None:
+            self.received_s[kind] = self._clock()
+            handler(msg)
+
+        return timed
+
+    def ages_at(self, now_s: float) -> dict[str, float]:
+        """Seconds since each message type was last received (ms resolution)."""
+        return {kind: round(now_s - t, 3) for kind, t in self.received_s.items()}
 
     def reported(self) -> dict[str, Any]:
         """The telemetry part of a VehicleState, by field name."""
@@ -231,13 +250,42 @@ class Telemetry:
         self.ready_to_arm = bool(
             msg.onboard_control_sensors_health & mavlink.MAV_SYS_STATUS_PREARM_CHECK
         )
+        unhealthy = (
+            msg.onboard_control_sensors_present
+            & msg.onboard_control_sensors_enabled
+            & ~msg.onboard_control_sensors_health
+            & ~mavlink.MAV_SYS_STATUS_PREARM_CHECK
+        )
+        self.sensors_unhealthy = _flag_names("MAV_SYS_STATUS_SENSOR", unhealthy, "MAV_SYS_STATUS_")
         voltage_v = None if msg.voltage_battery == 0xFFFF else msg.voltage_battery / 1000.0
-        self.battery = _battery(voltage_v, msg.current_battery, msg.battery_remaining)
+        battery = _battery(voltage_v, msg.current_battery, msg.battery_remaining)
+        if self.battery is not None:  # what only BATTERY_STATUS tells stays
+            battery = dataclasses.replace(
+                battery,
+                consumed_mah=self.battery.consumed_mah,
+                time_remaining_s=self.battery.time_remaining_s,
+            )
+        self.battery = battery
 
     def _on_battery_status(self, msg: mavlink.MAVLink_battery_status_message) -> None:
         cells = [v for v in msg.voltages if v != 0xFFFF]
         voltage_v = sum(cells) / 1000.0 if cells else None
-        self.battery = _battery(voltage_v, msg.current_battery, msg.battery_remaining)
+        self.battery = dataclasses.replace(
+            _battery(voltage_v, msg.current_battery, msg.battery_remaining),
+            # -1: not known; time_remaining 0: not known (a MAVLink 2 extension)
+            consumed_mah=None if msg.current_consumed < 0 else float(msg.current_consumed),
+            time_remaining_s=float(getattr(msg, "time_remaining", 0)) or None,
+        )
+
+    def _on_estimator_status(self, msg: mavlink.MAVLink_estimator_status_message) -> None:
+        flags = _flag_names("ESTIMATOR_STATUS_FLAGS", msg.flags, "ESTIMATOR_")
+        self.estimator = state.EstimatorState(
+            flags=flags,
+            healthy=all(f in flags for f in _ESTIMATOR_NEEDED) and "GPS_GLITCH" not in flags,
+            pos_horiz_ratio=_finite(msg.pos_horiz_ratio),
+            pos_vert_ratio=_finite(msg.pos_vert_ratio),
+            mag_ratio=_finite(msg.mag_ratio),
+        )
 
     def _on_gps_raw(self, msg: mavlink.MAVLink_gps_raw_int_message) -> None:
         self.gps = state.GpsState(
@@ -314,6 +362,23 @@ _REPORTED = tuple(
     for f in dataclasses.fields(state.VehicleState)
     if f.name in vars(Telemetry) and f.name not in ("landed_state", "vtol_state")
 )
+
+
+# an estimate a pilot can fly on: attitude, velocity and a horizontal position
+_ESTIMATOR_NEEDED = ("ATTITUDE", "VELOCITY_HORIZ", "POS_HORIZ_REL")
+
+
+def _flag_names(enum: str, bits: int, prefix: str) -> tuple[str, ...]:
+    """The names of the set bits of a MAVLink bitmask enum, without the prefix."""
+    return tuple(
+        entry.name.removeprefix(prefix)
+        for value, entry in sorted(mavlink.enums[enum].items())
+        if value > 0 and value & (value - 1) == 0 and bits & value
+    )
+
+
+def _finite(value: float) -> float | None:
+    return float(value) if math.isfinite(value) else None
 
 
 def _battery(voltage_v: float | None, current_ca: int, remaining_pct: int) -> state.BatteryState:

@@ -175,4 +175,5 @@ class Vehicle:
             link=self.link.stats(),
             updated_s=core.updated_s,
             telemetry_refused=tuple(sorted(self.telemetry_requests.refused)),
+            message_ages_s=t.ages_at(core.now()),
         )

@@ -8,6 +8,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from server.api.schemas.control import LeaseStatusOut
 from server.api.schemas.setpoints import SetpointBody
+from server.api.schemas.signing import SigningOut
 
 
 class _Out(BaseModel):
@@ -46,6 +47,18 @@ class BatteryOut(_Out):
     voltage_v: float | None
     current_a: float | None
     remaining_pct: float | None
+    consumed_mah: float | None = Field(None, description="BATTERY_STATUS.current_consumed")
+    time_remaining_s: float | None = Field(
+        None, description="the vehicle's own estimate (BATTERY_STATUS.time_remaining)"
+    )
+
+
+class EstimatorOut(_Out):
+    flags: list[str] = Field(description="ESTIMATOR_STATUS flags set, without ESTIMATOR_")
+    healthy: bool = Field(description="attitude, horizontal velocity and position valid")
+    pos_horiz_ratio: float | None
+    pos_vert_ratio: float | None
+    mag_ratio: float | None
 
 
 class GpsOut(_Out):
@@ -91,6 +104,7 @@ class LinkOut(_Out):
     bad_frames: int
     last_heartbeat_age_s: float | None
     reconnects: int = 0
+    signing: SigningOut | None = None
 
 
 class StatusTextOut(_Out):
@@ -150,3 +164,11 @@ class VehicleStateOut(_Out):
     rtl_phase: str | None
     link: LinkOut
     updated_s: float = Field(description="time.monotonic() of the newest telemetry")
+    estimator: EstimatorOut | None = None
+    sensors_unhealthy: list[str] | None = Field(
+        None, description="SYS_STATUS sensors present and enabled but not healthy"
+    )
+    message_ages_s: dict[str, float] = Field(
+        default_factory=dict,
+        description="seconds since each source message (by MAVLink name) was last received",
+    )

@@ -33,17 +33,21 @@ class FrameSink(Protocol):
 
 
 class FrameDecoder:
-    """pymavlink's parser in robust mode: garbage, bad CRC and truncation become counts."""
+    """pymavlink's parser in robust mode: garbage, bad CRC and truncation become counts.
 
-    def __init__(self) -> None:
-        self._mav = mavlink.MAVLink(None)
+    ``codec`` (a link's signing codec) checks signatures too; the frames it rejects are
+    neither delivered nor bad frames: the link's signing counts them."""
+
+    def __init__(self, codec: mavlink.MAVLink | None = None) -> None:
+        self._mav = codec if codec is not None else mavlink.MAVLink(None)
         self._mav.robust_parsing = True
 
     def feed(self, data: bytes) -> tuple[list[mavlink.MAVLink_message], int]:
         """Decode what ``data`` completes; return (good frames, bad frame count)."""
         parsed = self._mav.parse_buffer(data) or []
         good = [m for m in parsed if not isinstance(m, mavlink.MAVLink_bad_data)]
-        return good, len(parsed) - len(good)
+        unsigned = sum(1 for m in parsed if getattr(m, "reason", None) == _SIGNATURE_REJECTED)
+        return good, len(parsed) - len(good) - unsigned
 
     def discard_partial(self) -> bool:
         """Forget a frame still incomplete; True when there was one (it was truncated)."""
@@ -54,6 +58,9 @@ class FrameDecoder:
         self._mav.expected_length = mavlink.HEADER_LEN_V1 + 2
         return True
 
+
+# pymavlink's reason for a frame its signing state rejected
+_SIGNATURE_REJECTED = "Invalid signature"
 
 FrameHook = Callable[[mavlink.MAVLink_message, Peer], None]
 
@@ -144,6 +151,11 @@ class Transport(ABC):
         self.backoff_s = RECONNECT_BACKOFF_MIN_S
         self._ever_connected = False
         self._sink: FrameSink | None = None
+        # makes each decoder's pymavlink codec; a link with signing sets it before start()
+        self.codec_factory: Callable[[], mavlink.MAVLink] | None = None
+
+    def _new_decoder(self) -> FrameDecoder:
+        return FrameDecoder(self.codec_factory() if self.codec_factory is not None else None)
 
     @property
     def local_address(self) -> tuple[str, int] | None:

@@ -30,6 +30,7 @@ class SerialTransport(Transport):
 
     async def start(self, sink: FrameSink) -> None:
         self._sink = sink
+        self._decoder = self._new_decoder()
         loop = asyncio.get_running_loop()
         self._thread = threading.Thread(
             target=self._read_forever, args=(loop, sink), name=f"serial:{self.address.device}",

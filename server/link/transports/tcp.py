@@ -33,6 +33,7 @@ async def _pump_stream(
     writer: asyncio.StreamWriter,
     sink: FrameSink,
     peer: Peer,
+    decoder: FrameDecoder,
     router: PeerRouter | None = None,
 ) -> None:
     """Deliver what the connection carries until it ends, then close it."""
@@ -41,7 +42,6 @@ async def _pump_stream(
         if router is not None:
             router.heard(peer, msg.get_srcSystem())
 
-    decoder = FrameDecoder()
     try:
         with contextlib.suppress(OSError):
             while data := await reader.read(_READ_CHUNK_BYTES):
@@ -93,7 +93,7 @@ class TcpClientTransport(Transport):
             self._writer = writer
             sink.connection_changed(True)
             try:
-                await _pump_stream(reader, writer, sink, None)
+                await _pump_stream(reader, writer, sink, None, self._new_decoder())
             finally:
                 self._writer = None
             sink.connection_changed(False)
@@ -145,7 +145,9 @@ class TcpServerTransport(Transport):
         assert self._sink is not None
         self._sink.connection_changed(True)
         try:
-            await _pump_stream(reader, writer, self._sink, peer, self._router)
+            await _pump_stream(
+                reader, writer, self._sink, peer, self._new_decoder(), self._router
+            )
         finally:
             self._clients.pop(peer, None)
             self._router.forget(peer)

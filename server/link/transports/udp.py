@@ -45,6 +45,7 @@ class _UdpTransport(Transport):
 
     async def _open_endpoint(self, sink: FrameSink, **kwargs: Any) -> None:
         self._sink = sink
+        self._decoder = self._new_decoder()
         loop = asyncio.get_running_loop()
         endpoint, _ = await loop.create_datagram_endpoint(
             lambda: _DatagramReceiver(self), **kwargs

@@ -1,0 +1,16 @@
+// The MAVLink signing badge: whether the link to this vehicle is signed (state.link.signing).
+import { setText } from "./ui.js";
+
+export function renderSigning(state) {
+  const s = (state.link || {}).signing;
+  if (!s || !s.enabled) {
+    setText("signing", "UNSIGNED", "");
+  } else if (s.vehicles_signed) {
+    setText("signing", "SIGNED", "ok");
+  } else {
+    // our key is set but the vehicle's frames do not verify: wrong key, or none on it
+    setText("signing", "SIGNING: NO ANSWER", "bad");
+  }
+  const el = document.getElementById("signing");
+  if (el && s) el.title = `MAVLink 2 signing · rejected: ${s.rejected_bad_signature} bad signature, ${s.rejected_replay} replayed, ${s.rejected_unsigned} unsigned`;
+}
