@@ -6,6 +6,7 @@ only sequences them so their numbers come from one run on one machine.
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import time
@@ -13,11 +14,17 @@ from pathlib import Path
 
 BENCH_DIR = Path(__file__).resolve().parent
 SKIP = {"__init__.py", "run_all.py"}
+# Long runs, only when asked: SKYHELM_BENCH_SOAK=1 (or --soak) adds the 30-minute soak.
+OPT_IN = {"soak.py": "SKYHELM_BENCH_SOAK"}
 
 
 def main() -> int:
+    wanted = {name for name, env in OPT_IN.items()
+              if os.environ.get(env) == "1" or "--soak" in sys.argv[1:]}
     scripts = sorted(
-        p for p in BENCH_DIR.glob("*.py") if p.name not in SKIP and not p.name.startswith("_")
+        p for p in BENCH_DIR.glob("*.py")
+        if p.name not in SKIP and not p.name.startswith("_")
+        and (p.name not in OPT_IN or p.name in wanted)
     )
     failed: list[str] = []
     for script in scripts:

@@ -24,8 +24,19 @@ from server.api.errors import install_error_handlers
 from server.api.lease import LeaseManager
 from server.api.publisher import StatePublishers
 from server.api.registry import VehicleRegistry
-from server.api.routes import commands, control, health, intents, params, setpoint, sticks, vehicles
+from server.api.routes import (
+    commands,
+    control,
+    health,
+    intents,
+    params,
+    session,
+    setpoint,
+    sticks,
+    vehicles,
+)
 from server.api.routes import signing as signing_routes
+from server.api.security import install_security
 from server.link import Envelope, Link
 from server.link.signing import SigningKeyError, SigningKeyStore
 from server.link.urls import parse_link_url
@@ -116,7 +127,9 @@ def create_app(settings: Settings) -> FastAPI:
             allow_headers=["Authorization", "Content-Type", "X-Lease-Id"],
         )
     api = APIRouter(prefix=API_PREFIX)
-    for module in (health, vehicles, control, commands, intents, setpoint, sticks, params):
+    for module in (
+        health, session, vehicles, control, commands, intents, setpoint, sticks, params
+    ):
         api.include_router(module.router)
     api.include_router(signing_routes.router)
     api.include_router(ws.router)
@@ -125,6 +138,7 @@ def create_app(settings: Settings) -> FastAPI:
         hub.mount(app, check_token=tokens.is_valid)
     if settings.web_dir is not None:
         app.mount("/", StaticFiles(directory=settings.web_dir, html=True), name="web")
+    install_security(app, tokens, context.guards, settings.cors_origins)
     return app
 
 
@@ -167,6 +181,7 @@ async def _open_links(
         try:
             link = await Link.open(
                 url, log_dir=log_dir, heartbeat_timeout_s=settings.heartbeat_timeout_s,
+                silence_timeout_s=settings.silence_timeout_s,
                 # a recording is shown as it was recorded: nothing to sign or check
                 signing_store=None if is_replay([url]) else signing_store,
             )

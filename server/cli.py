@@ -7,7 +7,6 @@ import argparse
 import asyncio
 import logging
 import os
-import re
 import sys
 import typing
 from collections.abc import Sequence
@@ -16,22 +15,19 @@ from typing import Any
 
 import uvicorn
 
+from server.api.security import RedactTokens
 from server.settings import Settings, SettingsError, load_settings
 
 log = logging.getLogger("server")
 
-_TOKEN_IN_TEXT = re.compile(r"(token=)[^&\s\"']+")
-
-
-class RedactTokens(logging.Filter):
-    """Tokens travel in URLs (?token=); no log line may carry one."""
-
-    def filter(self, record: logging.LogRecord) -> bool:
-        message = record.getMessage()
-        if "token=" in message:
-            record.msg = _TOKEN_IN_TEXT.sub(r"\1***", message)
-            record.args = None
-        return True
+__all__ = [
+    "RedactTokens",
+    "build_parser",
+    "main",
+    "ready_url",
+    "settings_from_args",
+    "uvicorn_server",
+]
 
 
 def configure_logging(level: str) -> None:
@@ -52,6 +48,11 @@ def _server_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--observer-token", help="read-only token")
     parser.add_argument("--cors-origin", action="append", dest="cors_origins", metavar="ORIGIN")
     parser.add_argument("--no-scene", action="store_true", help="do not start the 3D scene")
+    parser.add_argument("--tls-cert", type=Path, help="PEM certificate: serve https and wss")
+    parser.add_argument("--tls-key", type=Path, help="PEM private key of --tls-cert")
+    parser.add_argument(
+        "--no-access-log", action="store_true", help="no request log (tokens are redacted in it)"
+    )
     parser.add_argument("--log-level", default="info", help="debug|info|warning|error")
 
 
@@ -137,7 +138,8 @@ def replay_url(file: Path, speed: float, loop: bool) -> str:
 
 def settings_from_args(args: argparse.Namespace) -> Settings:
     flags = dict(vars(args))
-    for name in ("command", "config", "log_level", "no_tlog", "no_scene", "file", "speed", "loop"):
+    ours = ("command", "config", "log_level", "no_tlog", "no_scene", "no_access_log")
+    for name in (*ours, "file", "speed", "loop"):
         flags.pop(name, None)
     if args.command == "replay":
         flags["connect"] = [replay_url(args.file, args.speed, getattr(args, "loop", False))]
@@ -146,6 +148,8 @@ def settings_from_args(args: argparse.Namespace) -> Settings:
         flags["log_dir"] = None
     if getattr(args, "no_scene", False):
         flags["scene"] = False
+    if getattr(args, "no_access_log", False):
+        flags["access_log"] = False
     return load_settings(getattr(args, "config", None), **flags)
 
 
@@ -155,10 +159,12 @@ def ready_url(settings: Settings, port: int) -> str:
         host = "127.0.0.1"
     if ":" in host:
         host = f"[{host}]"
-    return f"http://{host}:{port}/?token={settings.pilot_token()}"
+    scheme = "https" if settings.tls else "http"
+    return f"{scheme}://{host}:{port}/?token={settings.pilot_token()}"
 
 
-async def serve(settings: Settings) -> int:
+def uvicorn_server(settings: Settings) -> uvicorn.Server:
+    """The server `skyhelm serve` runs: https and wss when a TLS certificate is set."""
     from server.app import create_app
 
     config = uvicorn.Config(
@@ -166,14 +172,21 @@ async def serve(settings: Settings) -> int:
         host=settings.host,
         port=settings.port,
         log_config=None,
-        access_log=False,
+        # records are redacted as they are made (security.install_log_redaction): no token
+        access_log=settings.access_log,
+        ssl_certfile=settings.tls_cert,
+        ssl_keyfile=settings.tls_key,
         lifespan="on",
         ws="websockets-sansio",
         # Telemetry is small and mostly local: compressing 1000 messages/s costs more CPU
         # than the bandwidth it saves.
         ws_per_message_deflate=False,
     )
-    server = uvicorn.Server(config)
+    return uvicorn.Server(config)
+
+
+async def serve(settings: Settings) -> int:
+    server = uvicorn_server(settings)
     running = asyncio.create_task(server.serve())
     while not server.started:
         if running.done():

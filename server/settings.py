@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hmac
 import secrets
 from contextvars import ContextVar
 from pathlib import Path
@@ -82,11 +83,35 @@ class Settings(BaseSettings):
     cors_origins: Annotated[list[str], NoDecode] = Field(default_factory=list)
     telemetry_max_rate_hz: float = Field(50.0, gt=0.0, le=200.0)
     heartbeat_timeout_s: float = Field(3.0, gt=0.0, le=60.0)
+    silence_timeout_s: float = Field(
+        1.0, ge=0.2, le=60.0,
+        description="a vehicle streaming telemetry is lost after this long without a frame",
+    )
     vehicle_wait_s: float = Field(
         20.0, ge=0.0, description="how long startup waits for each simulated vehicle"
     )
     scene: bool = True
     web_dir: Path | None = Field(default_factory=_default_web_dir)
+    # Abuse limits (docs/api.md, "Security"): per token, per client address.
+    control_rate_per_s: float = Field(
+        100.0, gt=0.0, le=100000.0, description="REST control calls per second, per token"
+    )
+    control_burst: int = Field(200, ge=1, le=100000, description="REST control calls at once")
+    ws_message_rate_per_s: float = Field(
+        100.0, gt=0.0, le=100000.0, description="control-socket messages per second, per token"
+    )
+    ws_message_burst: int = Field(200, ge=1, le=100000, description="control-socket burst")
+    ws_abuse_close_after: int = Field(
+        200, ge=1, le=1000000, description="refused control messages in a row before closing"
+    )
+    lockout_free_failures: int = Field(
+        10, ge=1, le=10000, description="wrong tokens per address before backing off"
+    )
+    lockout_base_s: float = Field(1.0, gt=0.0, le=3600.0, description="first lockout")
+    lockout_max_s: float = Field(300.0, gt=0.0, le=86400.0, description="longest lockout")
+    access_log: bool = True
+    tls_cert: Path | None = Field(None, description="PEM certificate: serve https and wss")
+    tls_key: Path | None = Field(None, description="PEM private key of tls_cert")
 
     @field_validator("connect", "cors_origins", mode="before")
     @classmethod
@@ -129,10 +154,26 @@ class Settings(BaseSettings):
         if (
             self.token is not None
             and self.observer_token is not None
-            and self.token.get_secret_value() == self.observer_token.get_secret_value()
+            and hmac.compare_digest(
+                self.token.get_secret_value().encode(),
+                self.observer_token.get_secret_value().encode(),
+            )
         ):
             raise ValueError("observer_token must differ from token")
         return self
+
+    @model_validator(mode="after")
+    def _tls_pair(self) -> Settings:
+        if (self.tls_cert is None) != (self.tls_key is None):
+            raise ValueError("tls_cert and tls_key go together: give both or neither")
+        for path in (self.tls_cert, self.tls_key):
+            if path is not None and not path.is_file():
+                raise ValueError(f"no TLS file at {path}")
+        return self
+
+    @property
+    def tls(self) -> bool:
+        return self.tls_cert is not None
 
     @classmethod
     def settings_customise_sources(

@@ -1,20 +1,34 @@
 """UDP endpoints of the simulated vehicle: one socket per link, MAVLink 2 on the wire.
 
-Like PX4's UDP links, a link sends to a configured remote port if it has one and
-otherwise (and from then on) to whoever sent it the last datagram. Every datagram is
-parsed on its own: garbage, truncated frames and bad CRCs are counted and dropped.
+Where a link sends, after PX4's mavlink_receiver (the client source address is set once):
+
+- With a configured remote port, it sends there until the first checked frame arrives;
+  that sender is its partner from then on and nobody else is ever followed.
+- Without one, it answers the sender of the first checked frame, and moves to a new sender
+  only once its partner has been silent for ``PEER_HANDOVER_S`` (a restarted ground station
+  on a new port is found again; a stranger cannot take a partner's telemetry while the
+  partner talks).
+
+Every datagram is parsed on its own. Garbage, truncated frames and bad CRCs are counted
+and dropped. A frame of an id pymavlink's dialect lacks (UNKNOWN_<id>) has a checksum
+nobody here can check, unless the id is one the vehicle takes (REQUEST_EVENT): such frames
+are counted as unverified and dropped; they never choose the partner, as random bytes often
+parse as one.
 """
 
 from __future__ import annotations
 
 import asyncio
 import logging
+import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, TypeAlias, cast
 
 from pymavlink.dialects.v20 import development as mavlink
 
+from sim.events import MAVLINK_MSG_ID_REQUEST_EVENT
 from sim.frames import pack_frame
 from sim.signing import MAVLINK_MSG_ID_SETUP_SIGNING, VehicleSigning
 
@@ -22,6 +36,18 @@ from sim.signing import MAVLINK_MSG_ID_SETUP_SIGNING, VehicleSigning
 Message: TypeAlias = Any
 Address = tuple[str, int]
 MessageHandler = Callable[["UdpLink", Message], None]
+
+# A link without a configured remote follows a new sender once its partner is this quiet.
+PEER_HANDOVER_S = 2.0
+# Ids outside pymavlink's dialect the vehicle takes, with their CRC extra (PX4's generated
+# common headers: MAVLINK_MSG_ID_REQUEST_EVENT_CRC).
+MAVLINK_MSG_ID_REQUEST_EVENT_CRC = 33
+_CHECKABLE_UNKNOWN_CRC_EXTRA: dict[int, int] = {
+    MAVLINK_MSG_ID_REQUEST_EVENT: MAVLINK_MSG_ID_REQUEST_EVENT_CRC,
+}
+_MAVLINK2_HEADER_LEN = 10
+_MAVLINK1_HEADER_LEN = 6
+_MAVLINK_SIGNATURE_LEN = 13
 
 log = logging.getLogger(__name__)
 
@@ -34,6 +60,10 @@ class LinkCounters:
     rx_messages: int = 0
     # garbage, truncated frames and bad CRCs: pieces of datagrams that were thrown away
     rx_dropped: int = 0
+    # frames of ids outside the dialect whose checksum cannot be checked: thrown away
+    rx_unverified: int = 0
+    # datagrams with a checked frame from someone other than the partner (never followed)
+    rx_from_strangers: int = 0
     tx_messages: int = 0
     # ICMP "port unreachable" while nobody listens on the remote port
     tx_errors: int = 0
@@ -65,8 +95,9 @@ class MavlinkCodec:
         mav.seq = (mav.seq + 1) % 256
         return data
 
-    def decode(self, data: bytes) -> tuple[list[Message], int]:
-        """The messages in one datagram and how many pieces of it were unusable."""
+    def decode(self, data: bytes) -> tuple[list[Message], int, int]:
+        """The messages in one datagram, how many pieces of it were unusable and how many
+        frames could not be checked (UNKNOWN_<id> of ids the vehicle does not take)."""
         mav = self._mav
         self.last_refused = 0
         # A datagram never continues in the next one: forget any partial frame.
@@ -77,7 +108,7 @@ class MavlinkCodec:
         try:
             parsed = mav.parse_buffer(data) or []
         except Exception:  # pymavlink raises MAVError and struct/index errors on bad input
-            return [], 1
+            return [], 1, 0
         good = [m for m in parsed if not isinstance(m, mavlink.MAVLink_bad_data)]
         # frames the signing refused are counted there, not as broken
         refused = sum(1 for m in parsed if getattr(m, "reason", None) == "Invalid signature")
@@ -85,7 +116,39 @@ class MavlinkCodec:
         bad = len(parsed) - len(good) - refused
         if mav.buf_len() > 0:
             bad += 1  # a truncated frame left at the end
-        return good, bad
+        checked = [m for m in good if _checked(m)]
+        return checked, bad, len(good) - len(checked)
+
+
+def _checked(msg: Message) -> bool:
+    """Whether a parsed frame's checksum was checked: always for the dialect's ids (pymavlink
+    drops bad CRCs), for UNKNOWN_<id> only when the id's CRC extra is known here."""
+    if not isinstance(msg, mavlink.MAVLink_unknown):
+        return True
+    return unknown_frame_crc_ok(bytes(msg.get_msgbuf()))
+
+
+def unknown_frame_crc_ok(frame: bytes) -> bool:
+    """True when a raw frame's id is one the vehicle takes and its checksum holds."""
+    if len(frame) < 8:
+        return False
+    if frame[0] == mavlink.PROTOCOL_MARKER_V2:
+        if len(frame) < _MAVLINK2_HEADER_LEN + 2:
+            return False
+        header_len = _MAVLINK2_HEADER_LEN
+        msg_id = frame[7] | frame[8] << 8 | frame[9] << 16
+        signature_len = _MAVLINK_SIGNATURE_LEN if frame[2] & mavlink.MAVLINK_IFLAG_SIGNED else 0
+    else:
+        header_len = _MAVLINK1_HEADER_LEN
+        msg_id = frame[5]
+        signature_len = 0
+    crc_extra = _CHECKABLE_UNKNOWN_CRC_EXTRA.get(msg_id)
+    end = header_len + frame[1]
+    if crc_extra is None or len(frame) != end + 2 + signature_len:
+        return False
+    crc = mavlink.x25crc(frame[1:end])
+    crc.accumulate(bytes([crc_extra]))
+    return bool(crc.crc == frame[end] | frame[end + 1] << 8)
 
 
 class UdpLink(asyncio.DatagramProtocol):
@@ -103,6 +166,10 @@ class UdpLink(asyncio.DatagramProtocol):
     ) -> None:
         self.name = name
         self.remote = remote
+        # a configured remote is replaced once, by the first checked frame's sender
+        self._partner_set = False
+        self._follows_senders = remote is None
+        self._partner_heard_s = -math.inf
         self.counters = LinkCounters()
         self.signing = signing
         self._codec = MavlinkCodec(
@@ -110,7 +177,12 @@ class UdpLink(asyncio.DatagramProtocol):
         )
         self._on_message = on_message
         self._transport: asyncio.DatagramTransport | None = None
+        self._observers: list[Callable[[Address, Message], None]] = []
         self.local_port = 0
+
+    def observe(self, observer: Callable[[Address, Message], None]) -> None:
+        """Also show every taken message and its sender to ``observer`` (benches, tests)."""
+        self._observers.append(observer)
 
     @property
     def has_remote(self) -> bool:
@@ -129,15 +201,19 @@ class UdpLink(asyncio.DatagramProtocol):
 
     def datagram_received(self, data: bytes, addr: Address) -> None:
         self.counters.rx_datagrams += 1
-        messages, bad = self._codec.decode(data)
+        messages, bad, unverified = self._codec.decode(data)
         self.counters.rx_dropped += bad
+        self.counters.rx_unverified += unverified
         if not messages:
-            if bad == 0 and self._codec.last_refused == 0:
+            if bad == 0 and unverified == 0 and self._codec.last_refused == 0:
                 self.counters.rx_dropped += 1
             return
-        self.remote = (addr[0], addr[1])
+        sender = (addr[0], addr[1])
+        self._heard_from(sender)
         for msg in messages:
             self.counters.rx_messages += 1
+            for observer in self._observers:
+                observer(sender, msg)
             if msg.get_msgId() == MAVLINK_MSG_ID_SETUP_SIGNING:
                 # the MAVLink module's own business: never handed on (nor forwarded)
                 if self.signing is not None:
@@ -147,6 +223,24 @@ class UdpLink(asyncio.DatagramProtocol):
                 self._on_message(self, msg)
             except Exception:
                 log.exception("%s: handling %s failed", self.name, msg.get_type())
+
+    def _heard_from(self, sender: Address) -> None:
+        """A datagram with a checked frame came from ``sender``: is it the partner now?"""
+        now_s = time.monotonic()
+        if sender == self.remote:
+            self._partner_set = True
+            self._partner_heard_s = now_s
+            return
+        if self._follows_senders:
+            taken = self.remote is not None and now_s - self._partner_heard_s < PEER_HANDOVER_S
+        else:
+            taken = self._partner_set
+        if taken:
+            self.counters.rx_from_strangers += 1
+            return
+        self.remote = sender
+        self._partner_set = True
+        self._partner_heard_s = now_s
 
     def send(self, msg: Message) -> None:
         if self._transport is None or self.remote is None:

@@ -26,6 +26,7 @@ class Served:
     pilot_token: str
     observer_token: str
     stderr_path: Path
+    process: subprocess.Popen[str] | None = None  # to kill it the hard way
 
     @property
     def api(self) -> str:
@@ -44,7 +45,7 @@ def skyhelm_serve(log_dir: Path, *args: str, ready_timeout_s: float = 60.0) -> I
         try:
             line = _first_line(server, ready_timeout_s, stderr_path)
             base, _, token = line.removeprefix(READY_PREFIX).strip().partition("/?token=")
-            yield Served(base, token, observer, stderr_path)
+            yield Served(base, token, observer, stderr_path, server)
         finally:
             _stop(server)
 

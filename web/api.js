@@ -1,8 +1,28 @@
 // The public SkyHelm API as the page uses it: REST with the bearer token, the telemetry
 // socket and the pilot's control socket, both reconnecting by themselves.
 
-export const token = new URLSearchParams(location.search).get("token") || "";
 const API = "/api/v1";
+const TOKEN_KEY = "skyhelm.token";
+
+/** The token arrives once, in the URL the server printed (?token=…). It leaves the address
+ * bar (and the history) at once and stays in this tab's sessionStorage; REST calls send it
+ * as a Bearer header, the sockets and the 3D scene carry the session cookie (below). */
+function takeToken() {
+  const url = new URL(location.href);
+  const fromUrl = url.searchParams.get("token");
+  let stored = "";
+  try {
+    if (fromUrl) sessionStorage.setItem(TOKEN_KEY, fromUrl);
+    stored = sessionStorage.getItem(TOKEN_KEY) || "";
+  } catch { /* storage disabled: the token lives in this page only */ }
+  if (fromUrl) {
+    url.searchParams.delete("token");
+    history.replaceState(history.state, "", url.pathname + url.search + url.hash);
+  }
+  return fromUrl || stored;
+}
+
+export const token = takeToken();
 
 export class ApiError extends Error {
   constructor(status, body) {
@@ -41,15 +61,19 @@ const rejectedListeners = [];
 /** Calls listener(reason) once, when the server first rejects the token (HTTP 401 / WS 4401). */
 export function onTokenRejected(listener) {
   rejectedListeners.push(listener);
+  if (rejected) listener(rejectedReason);
 }
 
 export function tokenRejected() {
   return rejected;
 }
 
+let rejectedReason = "";
+
 function reject(reason) {
   if (rejected) return;
   rejected = true;
+  rejectedReason = reason;
   for (const listener of rejectedListeners) listener(reason);
 }
 
@@ -68,9 +92,33 @@ export async function request(method, path, body, extraHeaders = {}) {
   return data;
 }
 
+// The session cookie (HttpOnly, SameSite=Strict) for the sockets and the scene, set by
+// POST /session with the Bearer token; asked again after a failure.
+let session = null;
+
+export function ensureSession() {
+  if (!session) {
+    session = fetch(`${API}/session`, { method: "POST", headers: { Authorization: `Bearer ${token}` } })
+      .then((response) => {
+        if (response.status === 401) reject("the server rejected the token");
+        if (!response.ok) throw new Error(`session: HTTP ${response.status}`);
+      })
+      .catch((err) => {
+        session = null;
+        throw err;
+      });
+  }
+  return session;
+}
+
+// Before the page's modules run: the scene and the first sockets need the cookie.
+if (token) {
+  try { await ensureSession(); } catch (err) { console.warn(err.message); }
+}
+
 export function socketUrl(path, params) {
   const scheme = location.protocol === "https:" ? "wss:" : "ws:";
-  const query = new URLSearchParams({ ...params, token });
+  const query = new URLSearchParams(params);
   return `${scheme}//${location.host}${API}${path}?${query}`;
 }
 
@@ -107,6 +155,18 @@ export class TelemetrySocket {
   open() {
     this.retry = null;
     if (this.closed || rejected) return;
+    ensureSession().then(() => this.connect(), (err) => this.lost({ code: 0, reason: err.message }));
+  }
+
+  lost(event) {
+    if (this.closed || rejected) return;
+    const delayMs = reconnectDelayMs(this.attempt++);
+    this.onStatus({ state: "lost", code: event.code, reason: event.reason, retryInMs: delayMs });
+    this.retry = setTimeout(() => this.open(), delayMs);
+  }
+
+  connect() {
+    if (this.closed || rejected) return;
     const params = { rate_hz: this.rateHz };
     if (this.vehicleId !== null) params.vehicle = this.vehicleId;
     const ws = new WebSocket(socketUrl("/ws/telemetry", params));
@@ -128,9 +188,7 @@ export class TelemetrySocket {
         reject(event.reason || "the server rejected the token");
         return;
       }
-      const delayMs = reconnectDelayMs(this.attempt++);
-      this.onStatus({ state: "lost", code: event.code, reason: event.reason, retryInMs: delayMs });
-      this.retry = setTimeout(() => this.open(), delayMs);
+      this.lost(event);
     };
   }
 
@@ -166,7 +224,10 @@ export class ControlSession {
     if (clientName) params.client_name = clientName;
     this.worker = new Worker(new URL("./control-worker.js", import.meta.url), { type: "module" });
     this.worker.onmessage = (event) => this.fromWorker(event.data);
-    this.worker.postMessage({ op: "open", url: socketUrl("/ws/control", params) });
+    ensureSession().then(
+      () => this.worker.postMessage({ op: "open", url: socketUrl("/ws/control", params) }),
+      (err) => this.closedWith({ code: 1006, reason: err.message }),
+    );
     this.alive = setInterval(() => this.worker.postMessage({ op: "alive" }), 1000);
   }
 

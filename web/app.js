@@ -207,7 +207,7 @@ function onSceneClick(click) {
 }
 
 function sceneUrl() {
-  return `/scene/?token=${encodeURIComponent(token)}&darkMode`;
+  return "/scene/?darkMode"; // the session cookie carries the token (api.js)
 }
 
 // The 3D scene renders continuously; switching it off frees the CPU on weak machines.

@@ -14,6 +14,15 @@ TOKEN_COOKIE = "skyhelm_token"
 TOKEN_QUERY = "token"
 
 
+def same_secret(given: str, expected: str) -> bool:
+    """Compare a secret (token, lease id) in constant time; any string may be given."""
+    return hmac.compare_digest(_bytes(given), _bytes(expected))
+
+
+def _bytes(text: str) -> bytes:
+    return text.encode("utf-8", "surrogatepass")
+
+
 class Role(enum.Enum):
     PILOT = "pilot"
     OBSERVER = "observer"
@@ -28,8 +37,8 @@ class TokenChecker:
         pilot_name: str = Role.PILOT.value,
         observer_name: str = Role.OBSERVER.value,
     ) -> None:
-        self._pilot = pilot_token.encode()
-        self._observer = observer_token.encode() if observer_token else None
+        self._pilot = _bytes(pilot_token)
+        self._observer = _bytes(observer_token) if observer_token else None
         # shown in holder names ("pilot · Chrome tab 7f3a"); never the token itself
         self._names = {Role.PILOT: pilot_name, Role.OBSERVER: observer_name}
 
@@ -50,7 +59,7 @@ class TokenChecker:
     def role_of(self, token: str | None) -> Role | None:
         if not token:
             return None
-        candidate = token.encode()
+        candidate = _bytes(token)
         # Both comparisons always run so timing does not tell which token was close.
         is_pilot = hmac.compare_digest(candidate, self._pilot)
         is_observer = self._observer is not None and hmac.compare_digest(candidate, self._observer)

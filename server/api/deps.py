@@ -5,6 +5,7 @@ All are coroutines so they run on the event loop, which owns the leases and the 
 
 from __future__ import annotations
 
+import functools
 from collections.abc import AsyncIterator
 from dataclasses import dataclass
 from typing import Annotated
@@ -20,6 +21,7 @@ from server.api.deadman import Deadman
 from server.api.errors import ApiError
 from server.api.lease import Lease, LeaseManager
 from server.api.registry import VehicleRegistry
+from server.api.security import Guards
 from server.link import Vehicle
 from server.settings import Settings
 
@@ -33,6 +35,11 @@ class ApiContext:
     deadman: Deadman
     # A replayed recording: nobody may control, whatever the token.
     read_only: bool = False
+
+    @functools.cached_property
+    def guards(self) -> Guards:
+        """Rate limits and the wrong-token lockout (security.py), from the settings."""
+        return Guards.from_settings(self.settings)
 
     @property
     def audit(self) -> AuditLog:

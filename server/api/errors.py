@@ -75,6 +75,7 @@ def _described(model: type[BaseModel], description: str) -> dict[str, Any]:
 Responses = dict[int | str, dict[str, Any]]
 AUTH_RESPONSES: Responses = {
     401: _described(ErrorOut, "missing or wrong token"),
+    429: _described(ErrorOut, "rate limit, or too many wrong tokens: see Retry-After"),
     422: _described(UnprocessableOut, "invalid request: the field and the reason"),
 }
 READ_RESPONSES: dict[int | str, dict[str, Any]] = {

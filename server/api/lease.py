@@ -19,6 +19,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+from server.api.auth import same_secret
 from server.settings import Settings
 
 
@@ -179,7 +180,7 @@ class LeaseManager:
         """A new lease; re-acquiring with the current lease id just renews it. With
         ``takeover`` the holder's lease ends as TAKEN_OVER (``forced`` says it was not asked)."""
         held = self._leases.get(vehicle_id)
-        if held is not None and lease_id is not None and lease_id == held.lease_id:
+        if held is not None and lease_id is not None and same_secret(lease_id, held.lease_id):
             return self.renew(vehicle_id, lease_id, ttl_s=ttl_s)
         ttl = self.ttl_for(ttl_s)
         if held is not None:
@@ -285,7 +286,7 @@ class LeaseManager:
         if (
             request is None
             or request.answer.done()
-            or not secrets.compare_digest(request.request_id, request_id)
+            or not same_secret(request_id, request.request_id)
         ):
             raise UnknownRequest(f"no pending takeover request {request_id}")
         # announced while the request is still attached, so the event can name it
@@ -299,7 +300,7 @@ class LeaseManager:
         if (
             lease is None
             or lease_id is None
-            or not secrets.compare_digest(lease.lease_id, lease_id)
+            or not same_secret(lease_id, lease.lease_id)
         ):
             raise self._invalid(lease, lease_id)
         if ttl_s is not None:

@@ -7,10 +7,12 @@ oldest entry when full; a single send that does not complete within SEND_TIMEOUT
 the client (code 1008): a client that stops reading cannot hold server memory or the event
 loop.
 
-Close codes: 4401 no/wrong token, 4403 observer token on the control socket, a read-only
-replay, or a foreign Origin, 4404 unknown vehicle, 4409 control held by another pilot (or a
-takeover denied or unanswered), 4408 lease lost (expired, taken over), 4422 a bad query
-parameter (ttl_s outside the server's bounds).
+Close codes: 4401 no/wrong token, 4403 observer token on the control socket or a read-only
+replay, 4404 unknown vehicle, 4409 control held by another pilot (or a takeover denied or
+unanswered), 4408 lease lost (expired, taken over), 4422 a bad query parameter (ttl_s
+outside the server's bounds), 1008 sustained abuse of the control socket's rate limit. A
+foreign Origin and a locked-out address are refused at the handshake (HTTP 403 / 429,
+security.py).
 """
 
 from __future__ import annotations
@@ -20,13 +22,13 @@ import contextlib
 import json
 from collections.abc import Awaitable
 from typing import Any
-from urllib.parse import urlsplit
 
 from fastapi import WebSocket, WebSocketDisconnect
 from starlette.websockets import WebSocketState
 
 from server.api.auth import Role, token_from
 from server.api.deps import READ_ONLY_REASON, ApiContext
+from server.api.security import origin_allowed
 
 EVENT_BACKLOG = 256
 SEND_TIMEOUT_S = 5.0
@@ -59,14 +61,6 @@ class Sender:
         await self.send_text(json.dumps(message, allow_nan=False))
 
 
-def _origin_allowed(websocket: WebSocket, allowed: list[str]) -> bool:
-    """Browsers always send Origin; scripts usually do not. Same host, or a configured one."""
-    origin = websocket.headers.get("origin")
-    if origin is None or origin in allowed:
-        return True
-    return urlsplit(origin).netloc == websocket.headers.get("host")
-
-
 async def close_socket(websocket: WebSocket, code: int, reason: str = "") -> None:
     if websocket.application_state == WebSocketState.CONNECTED:
         with contextlib.suppress(RuntimeError, WebSocketDisconnect):
@@ -83,7 +77,8 @@ async def admit(websocket: WebSocket, need: Role) -> ApiContext | None:
     if role is None:
         await close_socket(websocket, CLOSE_UNAUTHORIZED, "missing or wrong token")
         return None
-    if not _origin_allowed(websocket, context.settings.cors_origins):
+    # security.py refuses these at the handshake (403); kept for apps mounted without it
+    if not origin_allowed(websocket.headers, context.settings.cors_origins):
         await close_socket(websocket, CLOSE_FORBIDDEN, "origin not allowed")
         return None
     if need is Role.PILOT and context.read_only:

@@ -134,6 +134,20 @@ async def _disconnected(websocket: WebSocket) -> None:
         pass
 
 
+def _id_and_type(text: str) -> tuple[Any, str]:
+    """A refused message's id and type, when it has them, to answer it by."""
+    try:
+        message = json.loads(text)
+    except ValueError:
+        return None, "error"
+    if not isinstance(message, dict):
+        return None, "error"
+    request_id, kind = message.get("id"), message.get("type")
+    if non_finite_field(request_id) is not None:
+        request_id = None
+    return request_id, kind if isinstance(kind, str) and len(kind) <= 32 else "error"
+
+
 class _ControlSession:
     def __init__(self, context: ApiContext, vehicle: Vehicle, lease: Lease, sender: Sender) -> None:
         self._context = context
@@ -141,6 +155,7 @@ class _ControlSession:
         self._lease = lease
         self._sender = sender
         self._commands: set[asyncio.Future[None]] = set()
+        self._refused_in_a_row = 0
         context.leases.add_listener(self._on_lease)
 
     async def run(self, websocket: WebSocket) -> None:
@@ -190,7 +205,39 @@ class _ControlSession:
                 return
             # Binary frames are read as UTF-8 JSON too rather than ending the session.
             text = message.get("text") or (message.get("bytes") or b"").decode(errors="replace")
+            if not await self._within_rate(websocket, text):
+                if self._refused_in_a_row >= self._context.guards.ws_close_after:
+                    return
+                continue
             await self._handle(text)
+
+    async def _within_rate(self, websocket: WebSocket, text: str) -> bool:
+        """The token's message bucket (security.py): a refused message is answered 429 with
+        retry_after_s; refused ws_abuse_close_after times in a row, the socket is closed
+        (1008) and the lease released."""
+        guards = self._context.guards
+        wait_s = guards.ws_messages.take(Role.PILOT.value)
+        if wait_s <= 0:
+            self._refused_in_a_row = 0
+            return True
+        self._refused_in_a_row += 1
+        limit = guards.ws_messages
+        reason = f"rate limit: {limit.rate_per_s:g} messages/s (burst {limit.burst:g}) per token"
+        retry_after_s = round(wait_s, 3)
+        if self._refused_in_a_row >= guards.ws_close_after:
+            await self._sender.send_json(
+                {
+                    "type": "error",
+                    "reason": f"{reason}; {self._refused_in_a_row} refused in a row: closing",
+                    "retry_after_s": retry_after_s,
+                }
+            )
+            await close_socket(websocket, 1008, "rate limit exceeded")
+            return False
+        request_id, kind = _id_and_type(text)
+        detail = {"reason": reason, "retry_after_s": retry_after_s}
+        await self._reply(request_id, kind, 429, {"detail": detail})
+        return False
 
     async def _handle(self, text: str) -> None:
         request_id: Any = None

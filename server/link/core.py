@@ -54,6 +54,7 @@ class VehicleCore:
         self.mav_type = heartbeat.type if heartbeat is not None else 0
         self.autopilot = heartbeat.autopilot if heartbeat is not None else 0
         self.connected = True
+        self.lost_s: float | None = None  # when the link last lost the vehicle
         self.created_s = self.last_heartbeat_s = self.updated_s = self.now()
         self.events = EventHub()
         self.hub = SubscriptionHub(snapshot)
@@ -102,12 +103,25 @@ class VehicleCore:
         self.updated_s = self.now()
         self.changed()
 
-    def set_connected(self, connected: bool) -> None:
+    def set_connected(
+        self, connected: bool, reason: str | None = None, *, silent_since_s: float | None = None
+    ) -> None:
+        """The link lost the vehicle (``reason``: how it noticed; ``silent_since_s``: when
+        it last heard it, if it knows) or heard it again."""
         if connected == self.connected:
             return
         self.connected = connected
-        self.publish_event("connection", {"connected": connected})
-        if not connected:
+        if connected:
+            lost_for_s = self.now() - self.lost_s if self.lost_s is not None else None
+            text = "link to the vehicle back" + (
+                f" after {lost_for_s:.1f} s" if lost_for_s is not None else "")
+            self.publish_event("connection", {"connected": True, "lost_for_s": lost_for_s,
+                                              "text": text})
+        else:
+            self.lost_s = self.now() if silent_since_s is None else silent_since_s
+            text = "link to the vehicle lost" + (f": {reason}" if reason else "")
+            self.publish_event("connection", {"connected": False, "reason": reason,
+                                              "text": text})
             self.requests.fail_all()
         for handler in self._on_connection:
             handler(connected)

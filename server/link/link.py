@@ -22,6 +22,7 @@ from pymavlink.dialects.v20 import development as mavlink
 from . import px4_messages
 from .aio import cancel_and_wait
 from .link_stats import LinkStats, SequenceGapCounter
+from .liveness import DEFAULT_SILENCE_TIMEOUT_S, Liveness
 from .signing import MAVLINK_MSG_ID_SETUP_SIGNING, LinkSigning, SigningKeyStore
 from .tlog import TlogWriter
 from .transports import Peer, Transport, create_transport
@@ -35,7 +36,10 @@ MAV_AUTOPILOT_INVALID = mavlink.MAV_AUTOPILOT_INVALID
 # Heartbeats of these types are other ground stations or companions, never vehicles.
 _NOT_VEHICLE_TYPES = frozenset({mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_ONBOARD_CONTROLLER})
 GCS_HEARTBEAT_PERIOD_S = 1.0
-HEARTBEAT_CHECK_PERIOD_S = 0.5
+# How often silence is looked for: the delay added to the silence bound at most.
+HEARTBEAT_CHECK_PERIOD_S = 0.1
+# A check later than this was held up by the loop itself (see Liveness.forgive).
+LOOP_STALL_S = 0.25
 # subscribe_vehicles() queues hold this many announcements and drop the oldest beyond it.
 VEHICLE_QUEUE_SIZE = 32
 
@@ -58,6 +62,7 @@ class Link:
         tlog: TlogWriter | None,
         heartbeat_timeout_s: float,
         vehicle_factory: VehicleFactory | None,
+        silence_timeout_s: float = DEFAULT_SILENCE_TIMEOUT_S,
         signing_store: SigningKeyStore | None = None,
     ) -> None:
         self.name = name
@@ -76,7 +81,7 @@ class Link:
         self._tlog = tlog
         self._vehicle_factory = vehicle_factory
         self._vehicles: dict[int, Vehicle] = {}
-        self._last_heartbeat_s: dict[int, float] = {}
+        self._liveness = Liveness(heartbeat_timeout_s, silence_timeout_s)
         self._connected_sysids: set[int] = set()
         self._last_vehicle_heartbeat_s: float | None = None
         self._vehicle_queues: list[asyncio.Queue[Vehicle]] = []
@@ -86,6 +91,7 @@ class Link:
         self._bytes_in = 0
         self._bytes_out = 0
         self._bad_frames = 0
+        self._unverified_frames = 0
         self._tasks: list[asyncio.Task[None]] = []
         self._closed = False
 
@@ -99,6 +105,7 @@ class Link:
         gcs_compid: int = 190,
         log_dir: Path | None = None,
         heartbeat_timeout_s: float = 3.0,
+        silence_timeout_s: float = DEFAULT_SILENCE_TIMEOUT_S,
         vehicle_factory: VehicleFactory | None = None,
         signing_store: SigningKeyStore | None = None,
     ) -> Link:
@@ -106,6 +113,8 @@ class Link:
 
         A ``tcp:`` or serial peer that is not there yet is retried in the background.
         ``vehicle_factory`` replaces the Vehicle class (tests feed links to stand-ins).
+        A vehicle is lost after ``heartbeat_timeout_s`` without HEARTBEAT, or, while it
+        streams telemetry, after ``silence_timeout_s`` without any frame (see liveness).
         ``signing_store`` holds the MAVLink signing key (none: the link signs nothing).
         """
         address = parse_link_url(url)
@@ -115,6 +124,7 @@ class Link:
         link = cls(
             address, transport, name=link_name, gcs_sysid=gcs_sysid, gcs_compid=gcs_compid,
             tlog=tlog, heartbeat_timeout_s=heartbeat_timeout_s, vehicle_factory=vehicle_factory,
+            silence_timeout_s=silence_timeout_s,
             signing_store=signing_store,
         )
         try:
@@ -191,13 +201,14 @@ class Link:
         age = None if last is None else max(0.0, self.now() - last)
         return LinkStats(
             url=self.url,
-            connected=age is not None and age <= self.heartbeat_timeout_s,
+            connected=bool(self._connected_sysids),
             frames_in=self._frames_in,
             frames_out=self._frames_out,
             bytes_in=self._bytes_in,
             bytes_out=self._bytes_out,
             lost_frames=self._gaps.lost_frames,
             bad_frames=self._bad_frames,
+            unverified_frames=self._unverified_frames,
             last_heartbeat_age_s=age,
             reconnects=self._transport.reconnects,
             signing=self.signing.stats(self._vehicles),
@@ -225,17 +236,17 @@ class Link:
     # -- receiving (called by the transport through _LinkReceiver, on the loop) --
 
     def _frame_received(self, msg: mavlink.MAVLink_message) -> None:
-        self._frames_in += 1
         if isinstance(msg, mavlink.MAVLink_unknown):
             if not self.signing.accepts_unknown(msg.get_msgbuf()):
                 return
             msg = px4_messages.decode_unknown(msg) or msg
         if isinstance(msg, mavlink.MAVLink_unknown):
-            # Not in our dialect: counted and recorded, but nobody can read it.
-            self._gaps.observe(*_header_ids(msg.get_msgbuf()))
-            if self._tlog is not None:
-                self._tlog.record(msg.get_msgbuf())
+            # An id outside our dialect: its checksum cannot be checked, so nothing in it
+            # (ids, sequence) can be trusted; random bytes often parse as one. Counted and
+            # dropped: it is not recorded, discovers nothing and keeps nobody alive.
+            self._unverified_frames += 1
             return
+        self._frames_in += 1
         src_system = msg.get_srcSystem()
         self._gaps.observe(src_system, msg.get_srcComponent(), msg.get_seq())
         self.signing.note_received(msg)
@@ -246,6 +257,8 @@ class Link:
         if (msg.get_msgId() == mavlink.MAVLINK_MSG_ID_HEARTBEAT
                 and msg.get_srcComponent() == MAV_COMP_ID_AUTOPILOT1):
             self._vehicle_heartbeat(msg)
+        if msg.get_srcComponent() == MAV_COMP_ID_AUTOPILOT1:
+            self._vehicle_heard(src_system)
         vehicle = self._vehicles.get(src_system)
         if vehicle is not None:
             try:
@@ -259,13 +272,22 @@ class Link:
             return
         sysid = msg.get_srcSystem()
         now = self.now()
-        self._last_heartbeat_s[sysid] = now
+        self._liveness.heartbeat(sysid, now)
         self._last_vehicle_heartbeat_s = now
-        vehicle = self._vehicles.get(sysid)
-        if vehicle is None:
+        if sysid not in self._vehicles:
             self._discover(sysid, msg)
-        elif sysid not in self._connected_sysids:
+
+    def _vehicle_heard(self, sysid: int) -> None:
+        """Any frame of a known vehicle keeps it alive, and brings a lost one back (its
+        first frame after a cut is seldom the HEARTBEAT)."""
+        if not self._liveness.known(sysid):
+            return
+        now = self.now()
+        self._liveness.frame(sysid, now)
+        vehicle = self._vehicles.get(sysid)
+        if vehicle is not None and sysid not in self._connected_sysids:
             self._connected_sysids.add(sysid)
+            self._liveness.back(sysid, now)
             log.info("link %s: vehicle %d back", self.name, sysid)
             vehicle.set_connected(True)
 
@@ -312,18 +334,24 @@ class Link:
             await asyncio.sleep(max(0.0, next_s - loop.time()))
 
     async def _watch_heartbeats(self) -> None:
+        expected_s = self.now() + HEARTBEAT_CHECK_PERIOD_S
         while True:
-            await asyncio.sleep(HEARTBEAT_CHECK_PERIOD_S)
+            await asyncio.sleep(max(0.0, expected_s - self.now()))
+            late_s = self.now() - expected_s
+            if late_s > LOOP_STALL_S:
+                self._liveness.forgive(late_s)
+            expected_s = self.now() + HEARTBEAT_CHECK_PERIOD_S
             self._mark_silent_vehicles()
 
     def _mark_silent_vehicles(self) -> None:
         now = self.now()
         for sysid in list(self._connected_sysids):
-            if now - self._last_heartbeat_s[sysid] > self.heartbeat_timeout_s:
+            why = self._liveness.silent_for(sysid, now)
+            if why is not None:
                 self._connected_sysids.discard(sysid)
-                log.warning("link %s: vehicle %d lost (no HEARTBEAT for %.1f s)", self.name,
-                            sysid, self.heartbeat_timeout_s)
-                self._vehicles[sysid].set_connected(False)
+                log.warning("link %s: vehicle %d lost (%s)", self.name, sysid, why)
+                self._vehicles[sysid].set_connected(
+                    False, why, silent_since_s=self._liveness.last_frame_s(sysid))
 
 
 @dataclass(frozen=True)
@@ -341,16 +369,6 @@ class _LinkReceiver:
             lambda msg, _peer: link._frame_received(msg), link._bad_frames_received,
             link._bytes_received, link._connection_changed,
         )  # fmt: skip
-
-
-def _header_ids(frame: bytes | bytearray) -> tuple[int, int, int]:
-    """(system, component, sequence) from a raw frame's header, MAVLink 1 or 2.
-
-    pymavlink leaves these unset on messages of ids it does not know.
-    """
-    if frame[0] == mavlink.PROTOCOL_MARKER_V2:
-        return frame[5], frame[6], frame[4]
-    return frame[3], frame[4], frame[2]
 
 
 def _put_drop_oldest(queue: asyncio.Queue[Any], item: Any) -> None:

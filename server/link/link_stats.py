@@ -23,6 +23,8 @@ class LinkStats:
     last_heartbeat_age_s: float | None  # None before the first vehicle HEARTBEAT
     reconnects: int
     signing: SigningStats | None = None  # MAVLink 2 signing: on or off, what was rejected
+    # frames of ids outside the dialect, whose checksum cannot be checked: counted, dropped
+    unverified_frames: int = 0
 
 
 class SequenceGapCounter:

@@ -49,7 +49,9 @@ class Offboard:
         self.streamer = SetpointStreamer(core.send, rate_hz=stream_rate_hz)  # its rate, stats
         self._engaged = False
         self._on_stream_start: list[Callable[[], None]] = []
+        self.stopped_by_link: str | None = None  # why the link stopped the stream, if it did
         telemetry.on_mode(self._apply_stream_policy)
+        core.on_connection(self._connection_changed)
 
     def on_stream_start(self, listener: Callable[[], None]) -> None:
         """Call ``listener()`` before a stopped stream starts (manual control stops then)."""
@@ -82,6 +84,29 @@ class Offboard:
 
     def close(self) -> None:
         self.streamer.stop()
+
+    def vehicle_rebooted(self) -> None:
+        self._stop_by_link("vehicle rebooted")
+
+    # -- link loss ------------------------------------------------------------------------
+    def _connection_changed(self, connected: bool) -> None:
+        """Lost: stop streaming at once, so PX4's own offboard-loss failsafe takes over and
+        the vehicle does not fly off again by itself when the link heals (PX4 re-enters
+        OFFBOARD whenever setpoints return). Back: the stream stays stopped until an
+        operator sends a setpoint or starts offboard, and says so."""
+        if not connected:
+            self._stop_by_link("link lost")
+        elif self.stopped_by_link is not None:
+            self._core.publish_event("stream", {
+                "active": False, "reason": f"{self.stopped_by_link}; link back",
+                "text": "setpoint stream stays stopped after the link loss: send a setpoint "
+                        "or start offboard to fly again",
+            })  # fmt: skip
+
+    def _stop_by_link(self, why: str) -> None:
+        if self.streamer.active:
+            self.stopped_by_link = why
+            self._stop_stream(why)
 
     # -- OFFBOARD mode --------------------------------------------------------------------
     async def start(self, sp: Setpoint | None = None) -> CommandResult:
@@ -131,6 +156,9 @@ class Offboard:
 
     def _stream(self, resolved: Setpoint) -> SentSetpoint:
         core = self._core
+        if not core.connected:
+            raise SetpointRejected("the link to the vehicle is lost: nothing is streamed")
+        self.stopped_by_link = None  # an operator's setpoint: the stream is theirs again
         time_boot_ms = int((core.now() - core.created_s) * 1000) & 0xFFFFFFFF
         msg, sent = encode(resolved, core.mav, core.sysid, core.compid, time_boot_ms)
         if self.streamer.active and resolved == self.setpoint:
@@ -147,7 +175,8 @@ class Offboard:
     def _stop_stream(self, why: str) -> None:
         if self.streamer.active:
             self.streamer.stop()
-            self._core.publish_event("stream", {"active": False, "reason": why})
+            self._core.publish_event("stream", {
+                "active": False, "reason": why, "text": f"setpoint stream stopped: {why}"})
         self.setpoint = None
         self._engaged = False
 

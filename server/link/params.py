@@ -82,7 +82,7 @@ class ParamClient:
 
     timeout_s = 0.5  # per try; the number of retries is the requester's
     list_quiet_s = 0.5  # a list is complete, or has gaps, once it has been quiet this long
-    list_rounds = 5  # of asking for the gaps by index
+    list_rounds = 8  # of asking for the gaps by index in a row with no answer
 
     def __init__(self, requests: Requester) -> None:
         self._requests = requests
@@ -128,6 +128,14 @@ class ParamClient:
             raise TimeoutError(f"no answer for parameter {name}")
         return self.cache[name].value
 
+    async def reread(self) -> dict[str, float | int]:
+        """A rebooted vehicle: forget what it said and read again what had been read."""
+        names = sorted(self.cache)
+        self.cache.clear()
+        self._by_index.clear()
+        self._count = None
+        return await self.get_many(names) if names else {}
+
     async def get_many(self, names: Sequence[str]) -> dict[str, float | int]:
         values = await asyncio.gather(*(self.get(n) for n in names))
         return dict(zip(names, values, strict=True))
@@ -144,17 +152,23 @@ class ParamClient:
 
         if not await requests.until(request, lambda: self._count is not None, self.timeout_s):
             raise TimeoutError("no answer to PARAM_REQUEST_LIST")
-        for _ in range(self.list_rounds):
+        # On a lossy link every round of reads by index brings some back: give up only after
+        # list_rounds rounds in a row that brought nothing.
+        fruitless = 0
+        before = self._count or 0
+        while fruitless < self.list_rounds:
             while await self._wait_value(self.list_quiet_s):
                 if self._missing() == []:
                     break
             missing = self._missing()
             if not missing:
                 return {name: self.cache[name].value for name in self._by_index.values()}
+            fruitless = fruitless + 1 if len(missing) >= before else 0
+            before = len(missing)
             for index in missing:
                 self._request_read(b"", index)
         raise TimeoutError(
-            f"parameters still missing after {self.list_rounds} rounds: "
+            f"parameters still missing after {self.list_rounds} rounds without an answer: "
             f"{len(self._missing())} of {self._count}"
         )
 

@@ -166,6 +166,20 @@ class Px4Events:
     async def close(self) -> None:
         await cancel_and_wait(self._load_task)
 
+    def reload(self) -> None:
+        """A rebooted vehicle: its sequence starts again and its metadata (new firmware,
+        perhaps) is fetched again."""
+        if self._load_task is not None:
+            self._load_task.cancel()
+            self._load_task = None
+        self.decoder = None
+        self.metadata_error = None
+        self._latest = None
+        self._missing.clear()
+        self._checks = {}
+        self._refusal = None
+        self._start_loading()
+
     # -- the sequence protocol ----------------------------------------------------------
     def _on_event(self, msg: Any) -> None:
         if msg.destination_system not in (0, self._core.mav.srcSystem):

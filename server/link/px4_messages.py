@@ -17,6 +17,9 @@ from typing import Any, ClassVar
 
 from pymavlink.dialects.v20 import development as mavlink
 
+MAVLINK_MSG_ID_LINK_NODE_STATUS = 8
+MAVLINK_MSG_ID_PROTOCOL_VERSION = 300
+MAVLINK_MSG_ID_TIME_ESTIMATE_TO_TARGET = 380
 MAVLINK_MSG_ID_COMPONENT_INFORMATION = 395
 MAVLINK_MSG_ID_COMPONENT_METADATA = 397
 MAVLINK_MSG_ID_EVENT = 410
@@ -110,6 +113,22 @@ ResponseEventErrorMessage = _message_type(
     "sequence sequence_oldest_available target_system target_component reason",
 )
 
+# Streamed by PX4 v1.16 on its links (mavlink_main.cpp), read only so that their checksum
+# is checked: a frame nobody can check is dropped by the link.
+LinkNodeStatusMessage = _message_type(
+    "LINK_NODE_STATUS", MAVLINK_MSG_ID_LINK_NODE_STATUS, 117, "<QIIIIIHHHBB",
+    "timestamp tx_rate rx_rate messages_sent messages_received messages_lost rx_parse_err "
+    "tx_overflows rx_overflows tx_buf rx_buf",
+)
+TimeEstimateToTargetMessage = _message_type(
+    "TIME_ESTIMATE_TO_TARGET", MAVLINK_MSG_ID_TIME_ESTIMATE_TO_TARGET, 232, "<iiiii",
+    "safe_return land mission_next_item mission_end commanded_action",
+)
+ProtocolVersionMessage = _message_type(
+    "PROTOCOL_VERSION", MAVLINK_MSG_ID_PROTOCOL_VERSION, 217, "<HHH8s8s",
+    "version min_version max_version spec_version_hash library_version_hash",
+)
+
 _RECEIVED: dict[int, type[_WireMessage]] = {
     cls.id: cls
     for cls in (
@@ -118,6 +137,9 @@ _RECEIVED: dict[int, type[_WireMessage]] = {
         EventMessage,
         CurrentEventSequenceMessage,
         ResponseEventErrorMessage,
+        LinkNodeStatusMessage,
+        TimeEstimateToTargetMessage,
+        ProtocolVersionMessage,
     )
 }
 _MAVLINK2_STX = 0xFD

@@ -186,6 +186,9 @@ class VehicleState:
     link: LinkStats
     updated_s: float
     telemetry_refused: tuple[str, ...] = field(default=())
+    # live fields not to be taken as current: all of them while the link is lost, those
+    # not reported again since it came back (the mode then reads UNKNOWN until it is)
+    stale: tuple[str, ...] = field(default=())
     estimator: EstimatorState | None = None
     # SYS_STATUS: the sensors present and enabled but reported unhealthy (MAV_SYS_STATUS_
     # names without the prefix); None until a SYS_STATUS came

@@ -21,6 +21,32 @@ MAV_LANDED_STATE_ON_GROUND = 1
 # alone says the mode; HEARTBEAT takes over when it has been silent this long.
 CURRENT_MODE_FRESH_S = 2.0
 
+# The messages each live state field comes from: after a cut, a field is stale until one
+# of them arrives again. Home and origin are settings, not live readings: they stay.
+_SOURCES: dict[str, tuple[str, ...]] = {
+    "mode": ("HEARTBEAT", "CURRENT_MODE"),
+    "user_mode": ("HEARTBEAT", "CURRENT_MODE"),
+    "armed": ("HEARTBEAT",),
+    "system_status": ("HEARTBEAT",),
+    "landed_state": ("EXTENDED_SYS_STATE",),
+    "vtol_state": ("EXTENDED_SYS_STATE",),
+    "position_ned": ("LOCAL_POSITION_NED",),
+    "velocity_ned": ("LOCAL_POSITION_NED",),
+    "global_position": ("GLOBAL_POSITION_INT",),
+    "attitude": ("ATTITUDE",),
+    "target_ned": ("POSITION_TARGET_LOCAL_NED",),
+    "ground_speed_m_s": ("VFR_HUD",),
+    "air_speed_m_s": ("VFR_HUD",),
+    "climb_rate_m_s": ("VFR_HUD",),
+    "heading_deg": ("VFR_HUD", "GLOBAL_POSITION_INT"),
+    "actuator_outputs": ("SERVO_OUTPUT_RAW", "ACTUATOR_OUTPUT_STATUS"),
+    "ready_to_arm": ("SYS_STATUS",),
+    "battery": ("SYS_STATUS", "BATTERY_STATUS"),
+    "gps": ("GPS_RAW_INT",),
+}
+# What a state shows for the mode while it is not known since the link came back.
+MODE_WITHHELD = "UNKNOWN"
+
 # PX4's RTL announces its phases in STATUSTEXT ("RTL: climb to ...", "RTL: land at ...");
 # the first keyword found names the phase, so the more specific ones come first.
 _RTL_PHASES = (
@@ -117,6 +143,11 @@ class Telemetry:
         self.armed_changed_s: float | None = None
         self.disarmed_s: float | None = None  # when a reported arm last ended
         self.statustext: list[state.StatusText] = []
+        # since when the readings count as live (None: since ever; set when the link
+        # comes back); lost while the link is
+        self._heard_before: frozenset[str] = frozenset()  # kinds heard before fresh_since_s
+        self.fresh_since_s: float | None = None
+        self.lost = False
         self.handlers: dict[str, Callable[[Any], None]] = {
             "HEARTBEAT": self._on_heartbeat,
             "CURRENT_MODE": self._on_current_mode,
@@ -153,14 +184,57 @@ class Telemetry:
         return {kind: round(now_s - t, 3) for kind, t in self.received_s.items()}
 
     def reported(self) -> dict[str, Any]:
-        """The telemetry part of a VehicleState, by field name."""
+        """The telemetry part of a VehicleState, by field name. After the link came back,
+        the mode is withheld until the vehicle has told it again: the mode before a cut
+        is the one most likely to have changed during it."""
         values = {name: getattr(self, name) for name in _REPORTED}
+        stale = self.stale_fields()
         values.update(
             landed_state=self.landed_state_name,
             vtol_state=self.vtol_state_name,
             statustext=tuple(self.statustext),
+            stale=stale,
         )
+        if not self.lost and "mode" in stale:
+            values.update(mode=MODE_WITHHELD, user_mode=None)
         return values
+
+    # -- freshness ------------------------------------------------------------------------
+    def heard_since(self, field: str, since_s: float) -> bool:
+        """A message that sets ``field`` came at or after since_s."""
+        return any(self.received_s.get(kind, -math.inf) >= since_s for kind in _SOURCES[field])
+
+    def stale_fields(self) -> tuple[str, ...]:
+        """Live fields not to be taken as current: while the link is lost, every one that
+        was reported; after it came back (or rebooted), those reported before and not since."""
+        if self.lost:
+            return tuple(f for f in _SOURCES if any(k in self.received_s for k in _SOURCES[f]))
+        if self.fresh_since_s is None:
+            return ()
+        since_s, before = self.fresh_since_s, self._heard_before
+        return tuple(
+            f for f in _SOURCES
+            if before.intersection(_SOURCES[f]) and not self.heard_since(f, since_s)
+        )
+
+    def link_lost(self) -> None:
+        self.lost = True
+
+    def link_back(self) -> None:
+        self.lost = False
+        self._heard_before = frozenset(self.received_s)
+        self.fresh_since_s = self._clock()
+
+    def forget(self) -> None:
+        """A rebooted vehicle: nothing it said before counts, home and origin included."""
+        for name in _RESETTABLE:
+            vars(self).pop(name, None)  # back to the class's "not reported" value
+        self._current_mode_s = None
+        self.armed_changed_s = self.disarmed_s = None
+        # what it reported before stays stale (at its "not reported" value) until reported
+        self._heard_before = frozenset(self.received_s) | self._heard_before
+        self.received_s.clear()
+        self.fresh_since_s = self._clock()
 
     def on_mode(self, listener: Callable[[], None]) -> None:
         """Call ``listener()`` whenever a HEARTBEAT or CURRENT_MODE told the mode."""
@@ -356,6 +430,11 @@ class Telemetry:
             self._publish("rtl", {"phase": phase})
 
 
+# the reported values a reboot forgets (the class attributes hold their initial values)
+_RESETTABLE = tuple(
+    name for name, value in vars(Telemetry).items()
+    if not name.startswith("_") and not callable(value) and not isinstance(value, property)
+)
 # what reported() copies as it is (the others it names or freezes)
 _REPORTED = tuple(
     f.name

@@ -54,13 +54,16 @@ class TelemetryRequests:
         core.on_connection(self._connection_changed)
         self.start()
 
-    def start(self) -> None:
+    def start(self, *, heartbeat_first: bool = False) -> None:
+        """Ask for every stream (again: a vehicle that rebooted forgot them). After a loss,
+        ``heartbeat_first`` asks for a HEARTBEAT at once: mode and arming are then known
+        again within a round trip, not at the vehicle's next 1 Hz HEARTBEAT."""
         if not self._rates_hz:
             return
         if self._task is not None and not self._task.done():
             self._task.cancel()
         self._task = asyncio.get_running_loop().create_task(
-            self._request_all(), name=f"telemetry-request:{self._core.sysid}"
+            self._request_all(heartbeat_first), name=f"telemetry-request:{self._core.sysid}"
         )
 
     async def close(self) -> None:
@@ -68,9 +71,11 @@ class TelemetryRequests:
 
     def _connection_changed(self, connected: bool) -> None:
         if connected:
-            self.start()
+            self.start(heartbeat_first=True)
 
-    async def _request_all(self) -> None:
+    async def _request_all(self, heartbeat_first: bool = False) -> None:
+        if heartbeat_first:
+            await self._ask(MAV_CMD_REQUEST_MESSAGE, mavlink.MAVLINK_MSG_ID_HEARTBEAT)
         for msg_id, rate_hz in self._rates_hz.items():
             self._note(msg_id, await self._ask(MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / rate_hz))
         for msg_id in ONE_SHOT_MESSAGES:

@@ -17,17 +17,22 @@ Every operation of a plugin is also callable on the vehicle itself (``vehicle.ar
 
 from __future__ import annotations
 
+import asyncio
+import logging
 from collections.abc import Mapping, Sequence
 from typing import Generic, Self, TypeVar, overload
 
 from pymavlink.dialects.v20 import development as mavlink
 
 from server.link.action import Action
+from server.link.aio import cancel_and_wait
 from server.link.core import Sender, VehicleCore
 from server.link.manual_control import ManualControl
 from server.link.offboard import Offboard
+from server.link.outage import OutageReport
 from server.link.params import ParamClient
 from server.link.px4_events import Px4Events
+from server.link.reboot import RebootWatch
 from server.link.requests import Requester
 from server.link.setpoint_checks import Envelope
 from server.link.setpoints import Setpoint, describe
@@ -37,6 +42,7 @@ from server.link.telemetry import Telemetry, enum_name
 from server.link.telemetry_requests import TelemetryRequests
 
 T = TypeVar("T")
+log = logging.getLogger(__name__)
 
 
 class _OnPlugin(Generic[T]):
@@ -97,7 +103,12 @@ class Vehicle:
         core = self.core = VehicleCore(
             sender=link, sysid=sysid, compid=compid, heartbeat=heartbeat, snapshot=self.snapshot
         )
+        # before the telemetry's handlers: a reboot resets the state, then the message that
+        # showed it is taken in
+        self.reboot_watch = RebootWatch(core, self._rebooted)
+        self._reread: asyncio.Task[None] | None = None
         self.telemetry = Telemetry(clock=core.now, texts=core.texts, publish=core.publish_event)
+        core.on_connection(self._connection_changed)
         for kind, handler in self.telemetry.handlers.items():
             core.on_message(kind, handler)
         self.params = ParamClient(core.requests)
@@ -107,6 +118,7 @@ class Vehicle:
         self.manual_control = ManualControl(core, self.offboard)
         self.telemetry_requests = TelemetryRequests(core, self.telemetry, telemetry_rates_hz)
         self.px4_events = Px4Events(core, self.telemetry)
+        self.outage = OutageReport(core, self.telemetry)
 
         # the plugins' operations, callable on the vehicle itself
         self.handle_message = core.handle_message
@@ -141,7 +153,43 @@ class Vehicle:
         self.manual_control.stop("vehicle closed")
         await self.telemetry_requests.close()
         await self.px4_events.close()
+        await self.outage.close()
+        await cancel_and_wait(self._reread)
         self.core.hub.close_all()
+
+    # -- loss, return and reboot ----------------------------------------------------------
+    def _connection_changed(self, connected: bool) -> None:
+        if connected:
+            self.telemetry.link_back()
+        else:
+            self.telemetry.link_lost()
+
+    def _rebooted(self, reason: str) -> None:
+        """Nothing the vehicle said before counts: state, stream, parameters, events."""
+        log.warning("vehicle %d rebooted (%s)", self.sysid, reason)
+        self.core.publish_event("reboot", {"reason": reason, "text": f"vehicle rebooted: {reason}"})
+        self.offboard.vehicle_rebooted()
+        self.outage.vehicle_rebooted()
+        self.telemetry.forget()
+        self.telemetry_requests.start()
+        self.px4_events.reload()
+        if self._reread is not None:
+            self._reread.cancel()
+        self._reread = asyncio.get_running_loop().create_task(
+            self._reread_params(), name=f"params-reread:{self.sysid}"
+        )
+        self.core.changed()
+
+    async def _reread_params(self) -> None:
+        try:
+            values = await self.params.reread()
+        except (TimeoutError, ConnectionError) as exc:
+            self.core.publish_event("params", {"reread": False, "error": str(exc)})
+            return
+        self.core.publish_event("params", {
+            "reread": True, "count": len(values),
+            "text": f"{len(values)} parameters read again after the reboot",
+        })  # fmt: skip
 
     def check_setpoint(self, sp: Setpoint) -> None:
         """SetpointRejected if the setpoint would be refused."""

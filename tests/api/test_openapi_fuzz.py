@@ -134,7 +134,13 @@ async def test_openapi_fuzz_finds_no_5xx_and_no_schema_violation() -> None:
     cases = generate_all()
     generated_s = time.monotonic() - started
     # The vehicle only answers here: a slower sim leaves the CPU to the fuzzing.
-    async with sim_cluster("quad", speed=2.0) as sim, api_for(sim, lease_ttl_s=60.0) as api:
+    # The abuse limits (tested in test_security_*.py) would otherwise answer the fuzz's
+    # wrong-credential cases by locking its address out, and later cases with 429.
+    unlimited = {"lockout_free_failures": 10000, "control_rate_per_s": 1e5, "control_burst": 100000}
+    async with (
+        sim_cluster("quad", speed=2.0) as sim,
+        api_for(sim, lease_ttl_s=60.0, **unlimited) as api,
+    ):
         await api.wait_ready()
         # Modes the vehicle accepts but never reports would each wait out the 3 s confirmation;
         # the fuzz checks the API's answers, not the vehicle's timing.

@@ -20,7 +20,9 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
 
 
 @pytest.fixture(scope="module")
-def browser() -> Iterator[Any]:
+def browser(request: pytest.FixtureRequest) -> Iterator[Any]:
+    """Chromium; it ignores the server's Content-Security-Policy (which forbids the eval that
+    Playwright's string predicates use) unless the module sets ENFORCE_CSP (test_csp.py)."""
     if not CHROMIUM.exists():
         pytest.skip("/usr/bin/chromium is not installed (make chromium, as root)")
     sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
@@ -34,6 +36,7 @@ def browser() -> Iterator[Any]:
             args=CHROMIUM_ARGS,
             headless=True,
             viewport={"width": 1600, "height": 1000},
+            bypass_csp=not getattr(request.module, "ENFORCE_CSP", False),
         )
         try:
             yield context

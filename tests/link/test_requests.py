@@ -236,3 +236,17 @@ async def test_request_in_flight_ends_as_link_lost_when_the_vehicle_goes_silent(
 
     assert result.outcome is CommandOutcome.LINK_LOST
     assert result.elapsed_ms == pytest.approx(200.0)
+
+
+async def test_a_cancelled_wait_ends_even_when_a_message_arrives_in_the_same_tick() -> None:
+    # The vehicle calls changed() for every message, hundreds a second: a request cancelled
+    # (the link closing) just as one arrives must still end, not run on through its retries.
+    vehicle = _FakeVehicle()
+    for _ in range(20):
+        waiting = asyncio.create_task(vehicle.requests.wait_until(lambda: False, 5.0))
+        await asyncio.sleep(0)
+        vehicle.requests.changed()
+        await asyncio.sleep(0)  # the event's waiter is done, the waiting task not yet woken
+        waiting.cancel()
+        with pytest.raises(asyncio.CancelledError):
+            await asyncio.wait_for(waiting, 1.0)

@@ -10,6 +10,7 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, Depends, Query, Request, Response
 
+from server.api.auth import same_secret
 from server.api.deps import ApiContext, Context, KnownVehicle, LeaseIdHeader, Pilot, Reader
 from server.api.errors import CONTROL_RESPONSES, READ_RESPONSES, ApiError
 from server.api.lease import Lease, LeaseHeld, TakeoverRefused, TtlOutOfBounds, UnknownRequest
@@ -119,7 +120,7 @@ async def acquire_control(
     vehicle, context, x_lease_id = call.vehicle, call.context, call.lease_id
     ttl_s = ttl_checked(context, body.ttl_s)
     held = context.leases.current(vehicle.sysid)
-    if held is not None and x_lease_id is not None and x_lease_id == held.lease_id:
+    if held is not None and x_lease_id is not None and same_secret(x_lease_id, held.lease_id):
         return lease_out(
             context.leases.renew(vehicle.sysid, x_lease_id, ttl_s=ttl_s), context, vehicle
         )

@@ -39,6 +39,7 @@ class ErrorDetail(BaseModel):
     field: str | None = None
     limit: float | None = None
     holder: str | None = None
+    retry_after_s: float | None = Field(None, description="429: when to try again (Retry-After)")
 
 
 class ErrorOut(BaseModel):

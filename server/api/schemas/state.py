@@ -164,6 +164,11 @@ class VehicleStateOut(_Out):
     rtl_phase: str | None
     link: LinkOut
     updated_s: float = Field(description="time.monotonic() of the newest telemetry")
+    stale: list[str] = Field(
+        default_factory=list,
+        description="fields not current: all while the link is lost, those not reported "
+        "again since it came back (mode reads UNKNOWN until it is)",
+    )
     estimator: EstimatorOut | None = None
     sensors_unhealthy: list[str] | None = Field(
         None, description="SYS_STATUS sensors present and enabled but not healthy"

@@ -62,7 +62,8 @@ class FrameDecoder:
 # pymavlink's reason for a frame its signing state rejected
 _SIGNATURE_REJECTED = "Invalid signature"
 
-FrameHook = Callable[[mavlink.MAVLink_message, Peer], None]
+# Sees each good frame before the sink; False drops it (the hook counts it).
+FrameHook = Callable[[mavlink.MAVLink_message, Peer], bool | None]
 
 
 def deliver(
@@ -82,8 +83,8 @@ def deliver(
     if bad:
         sink.bad_frames_received(bad)
     for msg in frames:
-        if before_each is not None:
-            before_each(msg, peer)
+        if before_each is not None and before_each(msg, peer) is False:
+            continue
         sink.frame_received(msg, peer)
 
 
@@ -119,6 +120,11 @@ class PeerRouter:
         self._last_heard.pop(peer, None)
         for system in [s for s, p in self._peer_by_system.items() if p == peer]:
             del self._peer_by_system[system]
+
+    def silent_s(self, peer: Peer) -> float:
+        """Seconds since ``peer`` was last heard (infinite for a peer not known)."""
+        last = self._last_heard.get(peer)
+        return float("inf") if last is None else self._clock() - last
 
     def peer_of(self, target_system: int | None) -> Peer | None:
         """The peer a targeted frame should go to; None for broadcasts and unknown systems."""

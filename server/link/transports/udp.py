@@ -1,6 +1,14 @@
 """UDP transports: ``udpin:`` listens and answers whoever spoke, ``udpout:`` talks to one
 address. Each datagram is decoded on its own: a frame never continues in the next one, so a
-truncated frame at a datagram's end is counted and dropped instead of corrupting what follows."""
+truncated frame at a datagram's end is counted and dropped instead of corrupting what follows.
+
+Only frames whose checksum was checked tell ``udpin:`` who its peers are. pymavlink hands
+frames of ids outside its dialect over as UNKNOWN_<id> without checking anything, and random
+bytes often parse as one: such a frame never makes a sender a peer, nor moves a system to a
+new address (the link counts and drops it). A checked frame that claims a system still
+heard from another address (within ``UDP_PEER_HANDOVER_S``) is counted as bad and dropped:
+the system's address moves only once the old one has gone quiet (a rebooted vehicle on a
+new port). ``udpout:`` sockets are connected, so the OS delivers only its peer's datagrams."""
 
 from __future__ import annotations
 
@@ -10,6 +18,7 @@ from typing import Any, cast
 
 from pymavlink.dialects.v20 import development as mavlink
 
+from ..px4_messages import decode_unknown
 from ..urls import LinkUrl
 from .base import FrameDecoder, FrameSink, Peer, PeerRouter, Transport, deliver, host_port
 
@@ -17,6 +26,8 @@ log = logging.getLogger(__name__)
 
 # Broadcast frames (HEARTBEAT, untargeted) go to every UDP peer heard from this recently.
 UDP_PEER_EXPIRY_S = 10.0
+# A system heard from one address is not taken from another until the first is this quiet.
+UDP_PEER_HANDOVER_S = 2.0
 
 
 class _DatagramReceiver(asyncio.DatagramProtocol):
@@ -53,12 +64,20 @@ class _UdpTransport(Transport):
         self._endpoint = endpoint
 
     def datagram_received(self, data: bytes, addr: tuple[str | Any, int]) -> None:
-        if self._sink is not None:
+        if self._sink is None:
+            return
+        try:
             deliver(self._sink, self._decoder, data, addr, datagram=True,
                     before_each=self._frame_heard)
+        except Exception:
+            # pymavlink raises on inputs its robust mode misses: one bad datagram, counted
+            log.debug("%s: undecodable datagram", self.address.url, exc_info=True)
+            self._decoder.discard_partial()
+            self._sink.bad_frames_received(1)
 
-    def _frame_heard(self, msg: mavlink.MAVLink_message, peer: Peer) -> None:
-        """Called for each good frame before the sink sees it."""
+    def _frame_heard(self, msg: mavlink.MAVLink_message, peer: Peer) -> bool | None:
+        """Called for each good frame before the sink sees it; False drops it."""
+        return None
 
     async def close(self) -> None:
         if self._endpoint is not None:
@@ -72,6 +91,8 @@ class UdpInTransport(_UdpTransport):
     def __init__(self, address: LinkUrl) -> None:
         super().__init__(address)
         self._router = PeerRouter(expiry_s=UDP_PEER_EXPIRY_S)
+        # checked frames dropped: their system is heard from another address
+        self.foreign_frames = 0
 
     async def start(self, sink: FrameSink) -> None:
         await self._open_endpoint(sink, local_addr=(self.address.host, self.address.port))
@@ -84,11 +105,25 @@ class UdpInTransport(_UdpTransport):
             self._endpoint.sendto(frame, cast(tuple[str, int], addr))
         return bool(destinations)
 
-    def _frame_heard(self, msg: mavlink.MAVLink_message, peer: Peer) -> None:
+    def _frame_heard(self, msg: mavlink.MAVLink_message, peer: Peer) -> bool | None:
+        if isinstance(msg, mavlink.MAVLink_unknown):
+            decoded = decode_unknown(msg)
+            if decoded is None:
+                return None  # unchecked: the link counts and drops it, it names no peer
+            msg = decoded  # pymavlink leaves an UNKNOWN_<id>'s header ids unset
+        src_system = msg.get_srcSystem()
+        owner = self._router.peer_of(src_system)
+        if (owner is not None and owner != peer
+                and self._router.silent_s(owner) < UDP_PEER_HANDOVER_S):
+            self.foreign_frames += 1
+            if self._sink is not None:
+                self._sink.bad_frames_received(1)
+            return False
         # A new peer's first frame reports a connection, so the link can introduce itself
         # (a GCS HEARTBEAT) at once instead of at its next 1 Hz tick.
-        if self._router.heard(peer, msg.get_srcSystem()) and self._sink is not None:
+        if self._router.heard(peer, src_system) and self._sink is not None:
             self._sink.connection_changed(True)
+        return None
 
 
 class UdpOutTransport(_UdpTransport):

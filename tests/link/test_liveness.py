@@ -1,0 +1,154 @@
+"""Link loss without a network fault: when a vehicle counts as lost (silence while it
+streams, the heartbeat otherwise, a stalled loop forgiven), what the state shows while it
+is lost and after it is back, the stream stopped for good, the report on the return, and
+a reboot noticed by the boot clock."""
+
+from __future__ import annotations
+
+from pymavlink.dialects.v20 import development as mavlink
+
+from server.link.events import VehicleEvent
+from server.link.liveness import Liveness
+from server.link.setpoints import PositionNed
+from server.link.telemetry import MODE_WITHHELD
+from tests.link.conftest import ScriptedSession, drain, wait_for
+from tests.waiting import holds_for
+
+OFFBOARD = 0x60000
+POSCTL = 0x30000
+ARMED_CUSTOM = mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+
+
+def _streamed(liveness: Liveness, sysid: int, from_s: float, to_s: float, rate_hz: float) -> None:
+    """Frames at rate_hz from from_s to to_s, a HEARTBEAT among them every second."""
+    for i in range(round((to_s - from_s) * rate_hz) + 1):
+        t = from_s + i / rate_hz
+        if i % round(rate_hz) == 0:
+            liveness.heartbeat(sysid, t)
+        liveness.frame(sysid, t)
+
+
+def test_a_streaming_vehicle_is_lost_after_the_silence_bound() -> None:
+    liveness = Liveness(heartbeat_timeout_s=3.0, silence_timeout_s=1.0)
+    _streamed(liveness, 1, 0.0, 2.5, rate_hz=50.0)
+    last_s = 2.5
+    assert liveness.silent_for(1, last_s + 0.9) is None
+    assert liveness.silent_for(1, last_s + 1.1) == "nothing heard for 1.0 s"
+
+
+def test_a_vehicle_sending_only_heartbeats_is_judged_by_its_heartbeat() -> None:
+    liveness = Liveness(heartbeat_timeout_s=3.0, silence_timeout_s=1.0)
+    for second in range(4):
+        liveness.heartbeat(1, float(second))
+        liveness.frame(1, float(second))
+    assert liveness.silent_for(1, 3.0 + 2.5) is None
+    assert liveness.silent_for(1, 3.0 + 3.1) == "no HEARTBEAT for 3.0 s"
+
+
+def test_a_stalled_loop_is_not_silence() -> None:
+    liveness = Liveness(heartbeat_timeout_s=3.0, silence_timeout_s=1.0)
+    _streamed(liveness, 1, 0.0, 2.0, rate_hz=50.0)
+    liveness.forgive(1.5)  # the loop stood still: nothing could have been read
+    assert liveness.silent_for(1, 2.0 + 1.6) is None
+    assert liveness.silent_for(1, 2.0 + 1.5 + 1.1) is not None
+
+
+def _telemetry(session: ScriptedSession, custom_mode: int, down_m: float) -> None:
+    peer = session.peer
+    peer.base_mode = ARMED_CUSTOM
+    peer.custom_mode = custom_mode
+    peer.send(mavlink.MAVLink_current_mode_message(0, custom_mode, OFFBOARD))
+    peer.heartbeat()
+    peer.send(mavlink.MAVLink_local_position_ned_message(0, 0.0, 0.0, down_m, 0, 0, 0))
+    peer.send(mavlink.MAVLink_global_position_int_message(
+        0, 473977420, 85455940, 489400 - int(down_m * 1000), int(-down_m * 1000), 0, 0, 0, 0))
+    peer.send(mavlink.MAVLink_attitude_message(0, 0, 0, 0, 0, 0, 0))
+
+
+async def test_loss_stops_the_stream_marks_state_stale_and_the_return_is_reported(
+    scripted: ScriptedSession,
+) -> None:
+    vehicle = scripted.vehicle
+    _telemetry(scripted, OFFBOARD, -10.0)
+    await scripted.vehicle_heard_all()
+    await vehicle.set_setpoint(PositionNed(0.0, 0.0, -10.0))
+    assert vehicle.streamer_active
+    events = vehicle.subscribe_events()
+
+    vehicle.set_connected(False, "nothing heard for 1.0 s")
+    lost = vehicle.snapshot()
+    assert not lost.connected
+    assert not vehicle.streamer_active
+    assert {"mode", "armed", "position_ned", "attitude"} <= set(lost.stale)
+    assert lost.mode == "OFFBOARD"  # the last known one, marked stale
+
+    vehicle.set_connected(True)
+    back = vehicle.snapshot()
+    assert back.mode == MODE_WITHHELD  # not the mode from before the cut
+    assert back.user_mode is None
+    assert "position_ned" in back.stale
+    _telemetry(scripted, POSCTL, -9.8)
+    await scripted.vehicle_heard_all()
+    fresh = vehicle.snapshot()
+    assert fresh.mode == "POSCTL"
+    assert fresh.user_mode == "OFFBOARD"
+    assert not {"mode", "armed", "position_ned", "global_position", "attitude"} & set(fresh.stale)
+
+    seen: list[VehicleEvent] = []
+    await wait_for(lambda: seen.extend(drain(events)) or any(
+        e.kind == "link_restored" for e in seen), 3.0, "the report")
+    (report,) = [e.data for e in seen if e.kind == "link_restored"]
+    assert report["mode_before"] == "OFFBOARD"
+    assert report["mode_after"] == "POSCTL"
+    assert report["failsafe"] is True
+    assert "vehicle left OFFBOARD for POSCTL (failsafe), altitude 10.0 -> 9.8 m" in str(
+        report["text"])
+    stream_reasons = [e.data.get("reason") for e in seen if e.kind == "stream"]
+    assert stream_reasons[0] == "link lost"
+    assert "link back" in str(stream_reasons[-1])
+    assert [e.data["connected"] for e in seen if e.kind == "connection"] == [False, True]
+
+
+async def test_the_stream_stays_stopped_after_the_return_until_a_setpoint(
+    scripted: ScriptedSession,
+) -> None:
+    vehicle = scripted.vehicle
+    _telemetry(scripted, OFFBOARD, -5.0)
+    await scripted.vehicle_heard_all()
+    await vehicle.set_setpoint(PositionNed(0.0, 0.0, -5.0))
+    vehicle.set_connected(False, "test")
+    vehicle.set_connected(True)
+    sent = vehicle.stream_stats().sent
+    await holds_for(lambda: vehicle.stream_stats().sent == sent and not vehicle.streamer_active,
+                    0.3, "nothing streamed after the return")
+    await vehicle.set_setpoint(PositionNed(0.0, 0.0, -5.0))
+    assert vehicle.streamer_active
+
+
+async def test_a_boot_clock_going_back_is_a_reboot(scripted: ScriptedSession) -> None:
+    vehicle = scripted.vehicle
+    peer = scripted.peer
+    _telemetry(scripted, OFFBOARD, -5.0)
+    peer.send(mavlink.MAVLink_attitude_message(60_000, 0, 0, 0, 0, 0, 0))
+    peer.send(mavlink.MAVLink_home_position_message(
+        473977420, 85455940, 489400, 0.0, 0.0, 0.0, [1, 0, 0, 0], 0, 0, 0))
+    await scripted.vehicle_heard_all()
+    await vehicle.set_setpoint(PositionNed(0.0, 0.0, -5.0))
+    assert vehicle.snapshot().home is not None
+    events = vehicle.subscribe_events()
+
+    peer.send(mavlink.MAVLink_attitude_message(59_500, 0, 0, 0, 0, 0, 0))  # reordered: no
+    await scripted.vehicle_heard_all()
+    assert not [e for e in drain(events) if e.kind == "reboot"]
+    peer.send(mavlink.MAVLink_attitude_message(400, 0, 0, 0, 0, 0, 0))
+    await scripted.vehicle_heard_all()
+
+    (reboot,) = [e for e in drain(events) if e.kind == "reboot"]
+    assert "from 60.0 s to 0.4 s" in str(reboot.data["reason"])
+    state = vehicle.snapshot()
+    assert state.home is None  # a rebooted vehicle sets its home again
+    assert state.mode == MODE_WITHHELD
+    assert {"armed", "position_ned", "global_position"} <= set(state.stale)
+    assert state.attitude is not None  # the message that showed the reboot is taken in
+    assert "attitude" not in state.stale
+    assert not vehicle.streamer_active
