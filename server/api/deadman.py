@@ -148,7 +148,7 @@ class Deadman:
             if watch.due_at > now:
                 continue
             vehicle = self._registry.get(vehicle_id)
-            if vehicle is None or not vehicle.manual_control.active:
+            if vehicle is None or not _sends_sticks(vehicle):
                 del self._sticks[vehicle_id]
             elif not watch.centred:
                 self._centre_sticks(vehicle, watch, "live_timeout")
@@ -208,7 +208,7 @@ class Deadman:
         # nobody flies it now: the operator-loss action decides, not the live-input brake
         self._live.pop(lease.vehicle_id, None)
         vehicle = self._registry.get(lease.vehicle_id)
-        if vehicle is not None and vehicle.manual_control.active:
+        if vehicle is not None and _sends_sticks(vehicle):
             # nobody holds the sticks: centred now, then not sent (PX4's failsafe decides)
             watch = self._sticks.setdefault(lease.vehicle_id, _SticksWatch(0.0))
             self._centre_sticks(vehicle, watch, what)
@@ -242,3 +242,9 @@ class Deadman:
         if self.action == "rtl":
             return await vehicle.return_to_launch()
         return await vehicle.set_mode("HOLD")
+
+
+def _sends_sticks(vehicle: Vehicle) -> bool:
+    """Whether MANUAL_CONTROL is being sent (a vehicle without sticks support sends none)."""
+    manual = getattr(vehicle, "manual_control", None)
+    return bool(manual is not None and manual.active)
