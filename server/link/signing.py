@@ -396,7 +396,9 @@ async def provision(
     SETUP_SIGNING goes out under the current key (PX4 requires that once it has one), with
     our timestamp as the initial one, so the vehicle's next frames are newer than anything
     we have seen. A vehicle counts as switched when a frame of it verifies with the new key
-    (switching off: when an unsigned frame of it arrives).
+    (switching off: when an unsigned frame of it arrives). After the last failed try the
+    link goes back to its previous key and tells a vehicle that may have switched to do
+    the same (:func:`_roll_back`).
     """
     signing = link.signing
     old_key = signing.state.secret_key
@@ -412,7 +414,25 @@ async def provision(
             signing.checkpoint()
             return
         signing.use_key(old_key)
+    _roll_back(link, sysids, key, old_key, tries)
     raise ProvisionError(sysids)
+
+
+def _roll_back(link: SigningLink, sysids: list[int], key: bytes | None,
+               old_key: bytes | None, copies: int) -> None:
+    """A vehicle may have taken ``key`` while every answer of it was lost: give it
+    ``old_key`` back with SETUP_SIGNING signed with ``key``, or each end would drop the
+    other's frames (HEARTBEAT too, badly signed) for good. A vehicle that never switched
+    drops these; one that did takes the first and drops the other copies (wrong key)."""
+    signing = link.signing
+    timestamp = signing.state.timestamp
+    signing.use_key(key, timestamp)
+    for _ in range(copies):
+        for sysid in sysids:
+            link.send(link.mav.setup_signing_encode(
+                sysid, 0, list(old_key or bytes(SIGNING_KEY_BYTES)), timestamp if old_key else 0,
+            ))  # fmt: skip
+    signing.use_key(old_key, timestamp)
 
 
 async def _switched(link: SigningLink, sysids: list[int], signed: bool, timeout_s: float) -> bool:
