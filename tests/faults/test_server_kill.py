@@ -84,7 +84,10 @@ async def test_server_sigkill_in_offboard_failsafe_tlog_and_rediscovery(tmp_path
 
                 async def rediscovered() -> dict[str, Any] | None:
                     state = await _state(client)
-                    return state if state is not None and not state["stale"] else None
+                    # the intended mode comes with CURRENT_MODE, which may trail the
+                    # first HEARTBEAT a little on a loaded machine
+                    fresh = state is not None and not state["stale"]
+                    return state if fresh and state["user_mode"] is not None else None
 
                 state = await eventually(rediscovered, 20.0, "the vehicle found again")
                 found_s = time.monotonic() - restarted_at

@@ -102,6 +102,9 @@ class LinkOut(_Out):
     bytes_out: int
     lost_frames: int
     bad_frames: int
+    unverified_frames: int = Field(
+        0, description="frames whose message id cannot be CRC-checked: counted and dropped"
+    )
     last_heartbeat_age_s: float | None
     reconnects: int = 0
     signing: SigningOut | None = None
