@@ -1,10 +1,18 @@
-"""Fake vehicles for the scene tests: only snapshot() is used by the scene hub."""
+"""Fake vehicles for the scene tests (only snapshot() is used by the scene hub) and a real
+viser scene to draw into."""
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import io
+import sys
 import time
+from collections.abc import Iterator
 from typing import Any
+
+import pytest
+import viser
 
 from server.link.link_stats import LinkStats
 from server.link.state import (
@@ -17,6 +25,18 @@ from server.link.state import (
 )
 
 ORIGIN = OriginState(lat_deg=47.397742, lon_deg=8.545594, alt_amsl_m=488.0)
+
+
+@pytest.fixture(scope="module")
+def scene() -> Iterator[viser.SceneApi]:
+    """A real viser server's scene, one per test module."""
+    with contextlib.redirect_stdout(io.StringIO()):
+        server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        yield server.scene
+    finally:
+        with contextlib.redirect_stdout(sys.stderr):
+            server.stop()
 
 
 def make_state(**changes: Any) -> VehicleState:

@@ -3,11 +3,7 @@ follows the ground grid to home."""
 
 from __future__ import annotations
 
-import contextlib
-import io
 import math
-import sys
-from collections.abc import Iterator
 
 import numpy as np
 import pytest
@@ -27,17 +23,6 @@ from tests.api.state_fakes import pushing, scene_fed_by
 from tests.waiting import wait_for
 
 from .conftest import ORIGIN, FakeVehicle
-
-
-@pytest.fixture(scope="module")
-def scene() -> Iterator[viser.SceneApi]:
-    with contextlib.redirect_stdout(io.StringIO()):
-        server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
-    try:
-        yield server.scene
-    finally:
-        with contextlib.redirect_stdout(sys.stderr):
-            server.stop()
 
 
 @pytest.mark.parametrize(

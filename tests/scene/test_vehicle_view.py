@@ -2,11 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
-import io
-import sys
-from collections.abc import Iterator
-
 import numpy as np
 import pytest
 import viser
@@ -18,17 +13,6 @@ from server.scene.styling import STATE_COLOURS, StateCategory
 from server.scene.vehicle_view import VehicleView, rtl_path_enu, setpoint_point_ned
 
 from .conftest import ORIGIN, make_state
-
-
-@pytest.fixture(scope="module")
-def scene() -> Iterator[viser.SceneApi]:
-    with contextlib.redirect_stdout(io.StringIO()):
-        server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
-    try:
-        yield server.scene
-    finally:
-        with contextlib.redirect_stdout(sys.stderr):
-            server.stop()
 
 
 def test_model_sits_at_the_enu_position_with_the_attitude(scene: viser.SceneApi) -> None:
