@@ -6,6 +6,8 @@ control is taken (after the taker confirmed) hears it."""
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import httpx
@@ -40,13 +42,25 @@ def _events(page: Any, kind: str) -> list[dict[str, Any]]:
     return events
 
 
+@contextmanager
+def _two_recording_tabs(browser: Any, serve: Serve, api: httpx.Client) -> Iterator[tuple[Any, Any]]:
+    """Two dashboard tabs on the settled vehicle, each recording its alerts and speech; a
+    mute set in either is forgotten afterwards (the tabs share the page's storage)."""
+    settle_vehicle(api, flying=False)
+    first = open_dashboard(browser, serve.url, scene=False, init_script=SPEECH_STUB)
+    second = open_dashboard(browser, serve.url, scene=False, init_script=SPEECH_STUB)
+    try:
+        yield first, second
+    finally:
+        second.evaluate("localStorage.removeItem('skyhelm.alerts.muted')")
+        second.close()
+        first.close()
+
+
 def test_link_lost_is_shown_spoken_and_recorded_and_a_muted_tab_only_shows_it(
     browser: Any, serve: Serve, api: httpx.Client
 ) -> None:
-    settle_vehicle(api, flying=False)
-    loud = open_dashboard(browser, serve.url, scene=False, init_script=SPEECH_STUB)
-    quiet = open_dashboard(browser, serve.url, scene=False, init_script=SPEECH_STUB)
-    try:
+    with _two_recording_tabs(browser, serve, api) as (loud, quiet):
         assert quiet.text_content("#alerts-mute") == "Sound: on"
         quiet.click("#alerts-mute")
         assert quiet.text_content("#alerts-mute") == "Sound: muted"
@@ -78,19 +92,12 @@ def test_link_lost_is_shown_spoken_and_recorded_and_a_muted_tab_only_shows_it(
                                    timeout=PAGE_TIMEOUT_MS)  # fmt: skip
         loud.wait_for_selector('.alert[data-kind="link-back"]', timeout=PAGE_TIMEOUT_MS)
         assert len(_events(loud, "link")) == 1  # said once, not at every state
-    finally:
-        quiet.evaluate("localStorage.removeItem('skyhelm.alerts.muted')")
-        loud.close()
-        quiet.close()
 
 
 def test_a_tab_hears_that_its_control_was_taken_after_the_taker_confirmed(
     browser: Any, serve: Serve, api: httpx.Client
 ) -> None:
-    settle_vehicle(api, flying=False)
-    pilot = open_dashboard(browser, serve.url, scene=False, init_script=SPEECH_STUB)
-    taker = open_dashboard(browser, serve.url, scene=False, init_script=SPEECH_STUB)
-    try:
+    with _two_recording_tabs(browser, serve, api) as (pilot, taker):
         take_control(pilot)
         taker.wait_for_selector("#force-control:not(.hidden)", timeout=PAGE_TIMEOUT_MS)
         taker.click("#force-control")
@@ -104,6 +111,3 @@ def test_a_tab_hears_that_its_control_was_taken_after_the_taker_confirmed(
         assert heard[0]["text"].startswith("Control taken by ")
         assert pilot.evaluate("window.__spoken") == [heard[0]["text"]]
         assert _events(taker, "control") == []
-    finally:
-        taker.close()
-        pilot.close()
