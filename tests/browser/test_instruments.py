@@ -100,6 +100,24 @@ def test_a_value_greys_out_with_its_age_while_the_vehicle_is_silent(
     page.wait_for_selector("#t-att:not(.stale)", timeout=PAGE_TIMEOUT_MS)
 
 
+def _open_confirmation(page: Any, button: str) -> str:
+    """Clicks a button that asks first; returns the title of the dialog it opened."""
+    page.click(button)
+    page.wait_for_selector("#confirm-dialog[open]", timeout=5_000)
+    return page.text_content("#confirm-title") or ""
+
+
+def _confirm_and_wait_result(page: Any, button: str, result_prefix: str) -> None:
+    """Clicks the button, says yes in its dialog and waits for the answer in #result."""
+    _open_confirmation(page, button)
+    page.click("#confirm-ok")
+    page.wait_for_function(
+        "(prefix) => document.getElementById('result').textContent.startsWith(prefix)",
+        arg=result_prefix,
+        timeout=PAGE_TIMEOUT_MS,
+    )
+
+
 def test_arming_in_the_air_asks_first(api: httpx.Client, page: Any, flying: None) -> None:
     take_control(page)
     page.wait_for_function(
@@ -107,20 +125,12 @@ def test_arming_in_the_air_asks_first(api: httpx.Client, page: Any, flying: None
         timeout=PAGE_TIMEOUT_MS,
     )
     before = page.text_content("#result")
-    page.click("#btn-arm")
-    page.wait_for_selector("#confirm-dialog[open]", timeout=5_000)
-    assert page.text_content("#confirm-title") == "Arm in the air?"
+    assert _open_confirmation(page, "#btn-arm") == "Arm in the air?"
     page.click("#confirm-cancel")
     page.wait_for_selector("#confirm-dialog", state="hidden", timeout=5_000)
     assert page.text_content("#result") == before  # nothing was sent
 
-    page.click("#btn-arm")
-    page.wait_for_selector("#confirm-dialog[open]", timeout=5_000)
-    page.click("#confirm-ok")
-    page.wait_for_function(
-        "document.getElementById('result').textContent.startsWith('Arm: ')",
-        timeout=PAGE_TIMEOUT_MS,
-    )
+    _confirm_and_wait_result(page, "#btn-arm", "Arm: ")
     assert vehicle_state(api)["armed"]
 
 
@@ -130,20 +140,12 @@ def test_kill_asks_first_then_disarms_at_once(api: httpx.Client, page: Any) -> N
     click_and_wait_result(page, "#btn-arm", confirm=True)
     wait_for("armed", lambda: vehicle_state(api)["armed"], 10.0)
 
-    page.click("#btn-kill")
-    page.wait_for_selector("#confirm-dialog[open]", timeout=5_000)
-    assert page.text_content("#confirm-title") == "Kill the motors?"
+    assert _open_confirmation(page, "#btn-kill") == "Kill the motors?"
     page.keyboard.press("Escape")
     page.wait_for_selector("#confirm-dialog", state="hidden", timeout=5_000)
     assert vehicle_state(api)["armed"]  # Escape is no
 
-    page.click("#btn-kill")
-    page.wait_for_selector("#confirm-dialog[open]", timeout=5_000)
-    page.click("#confirm-ok")
-    page.wait_for_function(
-        "document.getElementById('result').textContent.startsWith('Kill: ACCEPTED')",
-        timeout=PAGE_TIMEOUT_MS,
-    )
+    _confirm_and_wait_result(page, "#btn-kill", "Kill: ACCEPTED")
     wait_for("disarmed", lambda: not vehicle_state(api)["armed"], 10.0)
 
 
