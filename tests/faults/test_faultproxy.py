@@ -18,6 +18,7 @@ from tests.waiting import holds_for, wait_for
 from tools.faultproxy import (
     DIRECTIONS,
     Direction,
+    DirectionCounters,
     FaultProxy,
     Faults,
     build_parser,
@@ -53,6 +54,12 @@ class End(asyncio.DatagramProtocol):
     def send(self, data: bytes, to: tuple[str, int]) -> None:
         assert self.endpoint is not None
         self.endpoint.sendto(data, to)
+
+
+def close_ends(*ends: End) -> None:
+    for end in ends:
+        assert end.endpoint is not None
+        end.endpoint.close()
 
 
 async def open_end() -> End:
@@ -98,13 +105,37 @@ async def rig() -> AsyncIterator[Rig]:
     server, vehicle = await open_end(), await open_end()
     async with FaultProxy(vehicle=vehicle.address, server=server.address, seed=7) as proxy:
         yield Rig(proxy, server, vehicle)
-    for end in (server, vehicle):
-        assert end.endpoint is not None
-        end.endpoint.close()
+    close_ends(server, vehicle)
 
 
 def numbered(n: int, size: int = 40) -> list[bytes]:
     return [i.to_bytes(4, "big") + bytes(size - 4) for i in range(n)]
+
+
+async def pass_through(
+    rig: Rig, faults: Faults, direction: Direction, count: int
+) -> tuple[list[bytes], DirectionCounters]:
+    """Sets one direction's faults, sends `count` numbered datagrams that way and waits for
+    the proxy to settle: what was sent, and that direction's counters."""
+    rig.proxy.configure(faults, direction)
+    sent = numbered(count)
+    await send_all(rig, direction, sent)
+    counters = rig.proxy.counters()[direction]
+    await rig.settle()
+    return sent, counters
+
+
+async def latencies_s(rig: Rig, direction: Direction, count: int) -> list[float]:
+    """Sends `count` numbered datagrams one way at once and, once the proxy has settled,
+    the time each took to arrive, in the order they arrived."""
+    send, end = (rig.up, rig.vehicle) if direction == "to_vehicle" else (rig.down, rig.server)
+    loop = asyncio.get_running_loop()
+    sent_at = {}
+    for data in numbered(count):
+        sent_at[data] = loop.time()
+        send(data)
+    await rig.settle()
+    return [t - sent_at[data] for t, data, _ in end.received]
 
 
 def balanced(counters: Any) -> bool:
@@ -134,9 +165,7 @@ async def test_learns_each_side_from_what_it_sends() -> None:
         await wait_for(lambda: down.unroutable == 1, 5.0, "the first datagram to be unroutable")
         await _relay_both_ways(rig)
         assert (down.in_, down.out, down.unroutable) == (2, 1, 1)
-    for end in (server, vehicle):
-        assert end.endpoint is not None
-        end.endpoint.close()
+    close_ends(server, vehicle)
 
 
 async def test_relays_to_fixed_addresses(rig: Rig) -> None:
@@ -155,11 +184,7 @@ async def _relay_both_ways(rig: Rig) -> None:
 
 
 async def test_loss_drops_its_share_and_the_counters_match_what_arrived(rig: Rig) -> None:
-    rig.proxy.configure(Faults(loss_pct=20), "to_vehicle")
-    sent = numbered(2000)
-    await send_all(rig, "to_vehicle", sent)
-    counters = rig.proxy.counters()["to_vehicle"]
-    await rig.settle()
+    sent, counters = await pass_through(rig, Faults(loss_pct=20), "to_vehicle", 2000)
     assert counters.dropped + counters.out == len(sent)
     assert len(rig.vehicle.received) == counters.out
     # binomial(2000, 0.2): 400 expected, sd 18; 300..500 is more than 5 sd either way
@@ -180,37 +205,23 @@ async def test_the_same_seed_drops_the_same_datagrams() -> None:
             await send_all(rig, "to_vehicle", numbered(300))
             await rig.settle()
             patterns.append(vehicle.payloads)
-        for end in (server, vehicle):
-            assert end.endpoint is not None
-            end.endpoint.close()
+        close_ends(server, vehicle)
     assert patterns[0] == patterns[1]
     assert 0 < len(patterns[0]) < 300
 
 
 async def test_delay_holds_every_datagram_at_least_that_long(rig: Rig) -> None:
     rig.proxy.configure(Faults(delay_ms=80), "to_server")
-    loop = asyncio.get_running_loop()
-    sent_at = {}
-    for data in numbered(20):
-        sent_at[data] = loop.time()
-        rig.down(data)
-    await rig.settle()
+    latencies = await latencies_s(rig, "to_server", 20)
     counters = rig.proxy.counters()["to_server"]
     assert (counters.in_, counters.delayed, counters.out) == (20, 20, 20)
-    latencies = [t - sent_at[data] for t, data, _ in rig.server.received]
     assert min(latencies) >= 0.075
     assert rig.server.payloads == numbered(20)  # a fixed delay keeps the order
 
 
 async def test_jitter_spreads_the_delays_within_its_bounds(rig: Rig) -> None:
     rig.proxy.configure(Faults(delay_ms=60, jitter_ms=50), "to_vehicle")
-    loop = asyncio.get_running_loop()
-    sent_at = {}
-    for data in numbered(60):
-        sent_at[data] = loop.time()
-        rig.up(data)
-    await rig.settle()
-    latencies = sorted(t - sent_at[data] for t, data, _ in rig.vehicle.received)
+    latencies = sorted(await latencies_s(rig, "to_vehicle", 60))
     assert len(latencies) == 60
     assert latencies[0] >= 0.009  # never below delay - jitter
     assert latencies[-1] - latencies[0] > 0.04  # really spread, not one fixed delay
@@ -218,11 +229,7 @@ async def test_jitter_spreads_the_delays_within_its_bounds(rig: Rig) -> None:
 
 
 async def test_duplication_sends_the_counted_share_twice(rig: Rig) -> None:
-    rig.proxy.configure(Faults(duplicate_pct=30), "to_vehicle")
-    sent = numbered(500)
-    await send_all(rig, "to_vehicle", sent)
-    counters = rig.proxy.counters()["to_vehicle"]
-    await rig.settle()
+    sent, counters = await pass_through(rig, Faults(duplicate_pct=30), "to_vehicle", 500)
     assert 100 <= counters.duplicated <= 200
     assert counters.out == len(sent) + counters.duplicated == len(rig.vehicle.received)
     twice = [d for d in sent if rig.vehicle.payloads.count(d) == 2]
@@ -250,11 +257,7 @@ async def test_a_held_datagram_is_released_when_no_successor_comes(rig: Rig) -> 
 
 
 async def test_partial_reordering_keeps_every_datagram(rig: Rig) -> None:
-    rig.proxy.configure(Faults(reorder_pct=25), "to_vehicle")
-    sent = numbered(400)
-    await send_all(rig, "to_vehicle", sent)
-    counters = rig.proxy.counters()["to_vehicle"]
-    await rig.settle()
+    sent, counters = await pass_through(rig, Faults(reorder_pct=25), "to_vehicle", 400)
     arrived = rig.vehicle.payloads
     assert sorted(arrived) == sent
     out_of_order = sum(1 for a, b in itertools.pairwise(arrived) if a > b)
@@ -263,11 +266,8 @@ async def test_partial_reordering_keeps_every_datagram(rig: Rig) -> None:
 
 
 async def test_corruption_flips_the_counted_bits(rig: Rig) -> None:
-    rig.proxy.configure(Faults(corrupt_pct=50, corrupt_bits=3), "to_server")
-    sent = numbered(200)
-    await send_all(rig, "to_server", sent)
-    counters = rig.proxy.counters()["to_server"]
-    await rig.settle()
+    faults = Faults(corrupt_pct=50, corrupt_bits=3)
+    sent, counters = await pass_through(rig, faults, "to_server", 200)
     flipped = [
         sum(bin(a ^ b).count("1") for a, b in zip(original, got, strict=True))
         for original, got in zip(sent, rig.server.payloads, strict=True)
@@ -383,9 +383,7 @@ async def test_the_command_line_tool_relays_with_its_faults() -> None:
     finally:
         process.terminate()
         assert await asyncio.wait_for(process.wait(), 10.0) == 0
-        for end in (server, vehicle):
-            assert end.endpoint is not None
-            end.endpoint.close()
+        close_ends(server, vehicle)
 
 
 def test_the_command_line_tool_refuses_a_remote_address() -> None:
