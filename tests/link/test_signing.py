@@ -12,7 +12,7 @@ import os
 import secrets
 from collections.abc import AsyncIterator
 from pathlib import Path
-from typing import cast
+from typing import TypeVar, cast
 
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
@@ -51,6 +51,21 @@ async def sim_and_link(
             yield sim, link, link.vehicles[1]
         finally:
             await link.close()
+
+
+@contextlib.asynccontextmanager
+async def signed_link_on_loopback(tmp_path: Path) -> AsyncIterator[tuple[bytes, Link, int]]:
+    """A link listening on a loopback port with a fresh signing key: the key, the link and
+    its port."""
+    key = secrets.token_bytes(32)
+    store = SigningKeyStore(tmp_path / "signing.key")
+    store.replace_key(key)
+    link = await Link.open("udpin:127.0.0.1:0", log_dir=None, signing_store=store)
+    try:
+        assert link.local_address is not None
+        yield key, link, link.local_address[1]
+    finally:
+        await link.close()
 
 
 def signing_of(link: Link) -> dict[str, object]:
@@ -165,38 +180,31 @@ class Peer(asyncio.DatagramProtocol):
 async def test_link_rejects_unsigned_wrong_key_and_replayed_frames_and_counts_them(
     tmp_path: Path,
 ) -> None:
-    key = secrets.token_bytes(32)
-    store = SigningKeyStore(tmp_path / "signing.key")
-    store.replace_key(key)
-    link = await Link.open("udpin:127.0.0.1:0", log_dir=None, signing_store=store)
-    loop = asyncio.get_running_loop()
-    transport, peer = await loop.create_datagram_endpoint(Peer, local_addr=("127.0.0.1", 0))
-    try:
-        assert link.local_address is not None
-        port = link.local_address[1]
-        good = peer.codec(key)
-        status = mavlink.MAVLink_sys_status_message(*([0] * 13))
-        recorded = bytes(status.pack(good))
-        peer.send(recorded, port)
-        await wait_for(lambda: signing_of(link)["signed_in"] == 1, 5.0, "signed frame in")
-        peer.send(recorded, port)  # replayed
-        peer.send(bytes(status.pack(peer.codec(secrets.token_bytes(32)))), port)  # wrong key
-        peer.send(bytes(status.pack(peer.codec(None))), port)  # unsigned
-        peer.send(bytes(HEARTBEAT.pack(peer.codec(None))), port)  # unsigned, allowlisted
-        await wait_for(lambda: signing_of(link)["rejected"] == 3, 5.0, "three rejected")
-        stats = signing_of(link)
-        assert (stats["rejected_replay"], stats["rejected_bad_signature"],
-                stats["rejected_unsigned"]) == (1, 1, 1)
-        await wait_for(lambda: 1 in link.vehicles, 5.0, "found by its unsigned HEARTBEAT")
-        assert link.stats().bad_frames == 0  # refused frames are not broken ones
-        # a forged frame from a far-future timestamp must not make the genuine stream stale
-        forged = peer.codec(secrets.token_bytes(32), signing_timestamp() + 10**12)
-        peer.send(bytes(status.pack(forged)), port)
-        peer.send(bytes(status.pack(good)), port)
-        await wait_for(lambda: signing_of(link)["signed_in"] == 2, 5.0, "genuine one taken")
-    finally:
-        transport.close()
-        await link.close()
+    async with signed_link_on_loopback(tmp_path) as (key, link, port):
+        transport, peer = await open_peer(Peer)
+        try:
+            good = peer.codec(key)
+            status = mavlink.MAVLink_sys_status_message(*([0] * 13))
+            recorded = bytes(status.pack(good))
+            peer.send(recorded, port)
+            await wait_for(lambda: signing_of(link)["signed_in"] == 1, 5.0, "signed frame in")
+            peer.send(recorded, port)  # replayed
+            peer.send(bytes(status.pack(peer.codec(secrets.token_bytes(32)))), port)  # wrong key
+            peer.send(bytes(status.pack(peer.codec(None))), port)  # unsigned
+            peer.send(bytes(HEARTBEAT.pack(peer.codec(None))), port)  # unsigned, allowlisted
+            await wait_for(lambda: signing_of(link)["rejected"] == 3, 5.0, "three rejected")
+            stats = signing_of(link)
+            assert (stats["rejected_replay"], stats["rejected_bad_signature"],
+                    stats["rejected_unsigned"]) == (1, 1, 1)
+            await wait_for(lambda: 1 in link.vehicles, 5.0, "found by its unsigned HEARTBEAT")
+            assert link.stats().bad_frames == 0  # refused frames are not broken ones
+            # a forged frame from a far-future timestamp must not make the genuine stream stale
+            forged = peer.codec(secrets.token_bytes(32), signing_timestamp() + 10**12)
+            peer.send(bytes(status.pack(forged)), port)
+            peer.send(bytes(status.pack(good)), port)
+            await wait_for(lambda: signing_of(link)["signed_in"] == 2, 5.0, "genuine one taken")
+        finally:
+            transport.close()
 
 
 def _drain(queue: asyncio.Queue[object]) -> list[object]:  # type: ignore[type-arg]
@@ -217,6 +225,15 @@ def test_a_bad_key_file_is_named_without_its_content(tmp_path: Path) -> None:
     assert "secret-but-not-a-key" not in str(raised.value)
 
 
+PeerT = TypeVar("PeerT", bound="Peer")
+
+
+async def open_peer(kind: type[PeerT]) -> tuple[asyncio.DatagramTransport, PeerT]:
+    return await asyncio.get_running_loop().create_datagram_endpoint(
+        kind, local_addr=("127.0.0.1", 0)
+    )
+
+
 class Recorder(Peer):
     def __init__(self) -> None:
         super().__init__()
@@ -229,28 +246,21 @@ class Recorder(Peer):
 async def test_an_unsigned_spoof_of_the_vehicle_does_not_redirect_the_links_answers(
     tmp_path: Path,
 ) -> None:
-    key = secrets.token_bytes(32)
-    store = SigningKeyStore(tmp_path / "signing.key")
-    store.replace_key(key)
-    link = await Link.open("udpin:127.0.0.1:0", log_dir=None, signing_store=store)
-    loop = asyncio.get_running_loop()
-    t1, vehicle = await loop.create_datagram_endpoint(Recorder, local_addr=("127.0.0.1", 0))
-    t2, spoofer = await loop.create_datagram_endpoint(Recorder, local_addr=("127.0.0.1", 0))
-    try:
-        assert link.local_address is not None
-        port = link.local_address[1]
-        status = mavlink.MAVLink_sys_status_message(*([0] * 13))
-        vehicle.send(bytes(status.pack(vehicle.codec(key))), port)
-        await wait_for(lambda: signing_of(link)["signed_in"] == 1, 5.0, "the vehicle heard")
-        spoofer.send(bytes(status.pack(spoofer.codec(None))), port)  # claims to be system 1
-        await wait_for(lambda: signing_of(link)["rejected_unsigned"] == 1, 5.0, "refused")
-        link.send(link.mav.command_long_encode(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0))
-        await wait_for(lambda: len(vehicle.frames) >= 1, 5.0, "the command at the vehicle")
-        assert not [f for f in spoofer.frames if f[7] == 76]  # no COMMAND_LONG to the spoofer
-    finally:
-        t1.close()
-        t2.close()
-        await link.close()
+    async with signed_link_on_loopback(tmp_path) as (key, link, port):
+        t1, vehicle = await open_peer(Recorder)
+        t2, spoofer = await open_peer(Recorder)
+        try:
+            status = mavlink.MAVLink_sys_status_message(*([0] * 13))
+            vehicle.send(bytes(status.pack(vehicle.codec(key))), port)
+            await wait_for(lambda: signing_of(link)["signed_in"] == 1, 5.0, "the vehicle heard")
+            spoofer.send(bytes(status.pack(spoofer.codec(None))), port)  # claims to be system 1
+            await wait_for(lambda: signing_of(link)["rejected_unsigned"] == 1, 5.0, "refused")
+            link.send(link.mav.command_long_encode(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0))
+            await wait_for(lambda: len(vehicle.frames) >= 1, 5.0, "the command at the vehicle")
+            assert not [f for f in spoofer.frames if f[7] == 76]  # no COMMAND_LONG to the spoofer
+        finally:
+            t1.close()
+            t2.close()
 
 
 async def test_sim_process_with_a_signing_dir_talks_signed_with_the_same_key(
