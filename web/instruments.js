@@ -243,6 +243,15 @@ export class BatteryClock {
 const GOOD_FIXES = new Set(["3D_FIX", "DGPS", "RTK_FLOAT", "RTK_FIXED"]);
 const ESTIMATOR_NEEDED = ["ATTITUDE", "VELOCITY_HORIZ", "POS_HORIZ_REL"];
 
+// A div of the class (and id, when given) appended to the parent.
+function panel(parent, className, id) {
+  const box = document.createElement("div");
+  box.className = className;
+  if (id) box.id = id;
+  parent.append(box);
+  return box;
+}
+
 function tile(parent, id, label, source, freshness) {
   const box = document.createElement("div");
   box.className = "inst-tile";
@@ -266,21 +275,13 @@ export class Instruments {
     this.freshness = freshness;
     this.battery = new BatteryClock();
     container.classList.add("instruments");
-    const tapeBox = document.createElement("div");
-    tapeBox.className = "inst-heading";
-    tapeBox.id = "inst-heading";
-    container.append(tapeBox);
+    const tapeBox = panel(container, "inst-heading", "inst-heading");
     this.tape = new HeadingTape(tapeBox);
     freshness.watch(tapeBox, "heading");
-    const adiBox = document.createElement("div");
-    adiBox.className = "inst-adi";
-    adiBox.id = "inst-attitude";
-    container.append(adiBox);
+    const adiBox = panel(container, "inst-adi", "inst-attitude");
     this.adi = new AttitudeIndicator(adiBox);
     freshness.watch(adiBox, "attitude");
-    const grid = document.createElement("div");
-    grid.className = "inst-grid";
-    container.append(grid);
+    const grid = panel(container, "inst-grid");
     this.alt = tile(grid, "inst-alt", "Alt above home", "altitude", freshness);
     this.airspeed = tile(grid, "inst-airspeed", "Airspeed", "speed", freshness);
     this.vspeed = tile(grid, "inst-vspeed", "Vertical speed", "speed", freshness);
