@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
 import logging
 from collections.abc import AsyncIterator
 from pathlib import Path
@@ -16,11 +15,12 @@ from typing import Any
 import httpx
 import pytest
 import uvicorn
-from websockets.asyncio.client import ClientConnection, connect
-from websockets.exceptions import ConnectionClosed, InvalidStatus
+from websockets.asyncio.client import connect
+from websockets.exceptions import InvalidStatus
 
 from server.api.security import DOCS_CSP, PAGE_CSP, SCENE_CSP, csp_for
 from tests.api.conftest import OBSERVER, PILOT, Api, api_for, auth
+from tests.api.test_ws import close_code, receive
 from tests.serving import uvicorn_serving
 from tests.waiting import eventually
 
@@ -32,18 +32,6 @@ NO_VEHICLE = ["udpin:127.0.0.1:0"]
 async def empty(**overrides: Any) -> AsyncIterator[Api]:
     async with api_for(None, connect=NO_VEHICLE, web_dir=WEB_DIR, **overrides) as api:
         yield api
-
-
-async def first_message(ws: ClientConnection) -> dict[str, Any]:
-    message: dict[str, Any] = json.loads(await asyncio.wait_for(ws.recv(), 10.0))
-    return message
-
-
-async def close_code(ws: ClientConnection) -> int | None:
-    with contextlib.suppress(ConnectionClosed, TimeoutError):
-        while True:
-            await asyncio.wait_for(ws.recv(), 5.0)
-    return ws.close_code
 
 
 async def test_every_answer_carries_the_security_headers() -> None:
@@ -101,7 +89,7 @@ async def test_browser_sockets_from_a_foreign_origin_are_refused_at_the_handshak
             assert b"origin not allowed" in refused.value.response.body
         for origin in ("https://ops.example", f"http://{host}", None):
             async with connect(url, origin=origin) as ws:  # type: ignore[arg-type]
-                assert (await first_message(ws))["type"] == "vehicles", origin
+                assert (await receive(ws, 10.0))["type"] == "vehicles", origin
         # no Origin (a script) still needs its token
         async with connect(f"ws://{host}/api/v1/ws/telemetry") as ws:
             assert await close_code(ws) == 4401
@@ -130,7 +118,7 @@ async def test_the_session_cookie_carries_the_token_for_sockets_only_when_set() 
             additional_headers=cookie_header,
             origin=f"http://{host}",  # type: ignore[arg-type]
         ) as ws:
-            assert (await first_message(ws))["type"] == "vehicles"
+            assert (await receive(ws, 10.0))["type"] == "vehicles"
     async with (
         empty() as api,
         httpx.AsyncClient(
@@ -177,7 +165,7 @@ async def test_no_log_line_carries_a_token(caplog: pytest.LogCaptureFixture) -> 
                     await client.post("/api/v1/session", headers=auth(PILOT))
                     await client.get("/?token=" + PILOT)
                 async with connect(f"ws://{host}/api/v1/ws/telemetry?token={PILOT}") as ws:
-                    await first_message(ws)
+                    await receive(ws, 10.0)
                 async with connect(f"ws://{host}/api/v1/ws/telemetry?token={wrong}") as ws:
                     await close_code(ws)
                 logging.getLogger("server.api").warning(
