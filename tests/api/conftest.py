@@ -117,15 +117,28 @@ async def app_running(settings: Settings) -> AsyncIterator[FastAPI]:
 @contextlib.asynccontextmanager
 async def api_for(sim: SimCluster | None, **overrides: Any) -> AsyncIterator[Api]:
     url = f"udpout:127.0.0.1:{sim.instances[0].api_local_port}" if sim else None
+    async with api_at(url, sim, **overrides) as api:
+        yield api
+
+
+@contextlib.asynccontextmanager
+async def api_at(
+    url: str | None, sim: SimCluster | None, *, client_timeout_s: float = 30.0,
+    appear_within_s: float = 10.0, **overrides: Any,
+) -> AsyncIterator[Api]:
+    """SkyHelm's app linked to `url` (none: no vehicle) with a pilot client over ASGI,
+    yielded once the vehicle shows in /vehicles."""
     async with app_running(make_settings(url, **overrides)) as app:
         transport = httpx.ASGITransport(app=app)
         async with httpx.AsyncClient(
-            transport=transport, base_url="http://testserver", headers=auth(), timeout=30.0
+            transport=transport, base_url="http://testserver", headers=auth(),
+            timeout=client_timeout_s,
         ) as client:
             api = Api(app, client, sim)
-            if sim is not None:
+            if url is not None:
                 await eventually(
-                    lambda: _has_vehicle(client), 10.0, "the vehicle to appear in /vehicles"
+                    lambda: _has_vehicle(client), appear_within_s,
+                    "the vehicle to appear in /vehicles",
                 )
             yield api
 

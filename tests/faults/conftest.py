@@ -8,11 +8,8 @@ import contextlib
 from collections.abc import AsyncIterator
 from typing import Any
 
-import httpx
-
 from sim.runner import SimCluster
-from tests.api.conftest import Api, app_running, auth, make_settings
-from tests.waiting import eventually
+from tests.api.conftest import Api, api_at
 from tools.faultproxy import FaultProxy
 
 # MAVLink 2 frames start with 0xFD; the message id is bytes 7..9, little endian.
@@ -40,15 +37,6 @@ async def vehicle_behind_proxy(
 async def api_through(proxy: FaultProxy, sim: SimCluster, **overrides: Any) -> AsyncIterator[Api]:
     """SkyHelm's app connected through ``proxy``, with a pilot client over ASGI."""
     url = f"udpout:127.0.0.1:{proxy.server_facing_address[1]}"
-    async with app_running(make_settings(url, **overrides)) as app:
-        transport = httpx.ASGITransport(app=app)
-        async with httpx.AsyncClient(
-            transport=transport, base_url="http://testserver", headers=auth(), timeout=60.0
-        ) as client:
-            api = Api(app, client, sim)
-
-            async def has_vehicle() -> bool:
-                return bool((await client.get("/api/v1/vehicles")).json())
-
-            await eventually(has_vehicle, 20.0, "the vehicle to appear through the proxy")
-            yield api
+    async with api_at(url, sim, client_timeout_s=60.0, appear_within_s=20.0,
+                      **overrides) as api:
+        yield api
