@@ -5,7 +5,6 @@ nears an end, and the number box still takes any value the API accepts."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from typing import Any
 
 import httpx
@@ -37,10 +36,10 @@ SLIDERS = """() => [...document.querySelectorAll('#sp-fields input[type=range]')
 
 
 @pytest.fixture
-def small_page(page: Any) -> Iterator[Any]:
+def small_page(page: Any) -> Any:
     """The test's dashboard in a 1280x800 window."""
     page.set_viewport_size(SIZE)
-    yield page
+    return page
 
 
 @pytest.fixture
@@ -71,6 +70,7 @@ def test_every_slider_is_wide_and_a_position_pixel_is_a_fraction_of_a_metre(
 ) -> None:
     take_control(small_page)
     figures = {}
+    metres_per_px = {}
     for panel_type in PANEL_TYPES:
         small_page.select_option("#sp-type", panel_type)
         sliders = _sliders(small_page)
@@ -80,14 +80,14 @@ def test_every_slider_is_wide_and_a_position_pixel_is_a_fraction_of_a_metre(
             assert slider["width"] >= MIN_SLIDER_PX, f"{panel_type} {name}: {slider}"
             # the slider takes the row's free width (its label, number and unit are above it)
             assert slider["width"] >= 0.9 * slider["rowWidth"], f"{panel_type} {name}: {slider}"
-    metres = {
-        name: per_px for name, (_, per_px) in figures.items() if name.startswith("position ")
-        and not name.endswith("yaw_deg-slider")
-    }
-    assert sorted(metres) == [
-        "position sp-alt_m-slider", "position sp-east_m-slider", "position sp-north_m-slider",
+            if slider["unit"] == "m":
+                metres_per_px[f"{panel_type} {name}"] = _per_px(slider)
+    assert sorted(metres_per_px) == [
+        "position sp-alt_m-slider",
+        "position sp-east_m-slider",
+        "position sp-north_m-slider",
     ]
-    assert all(per_px <= MAX_POSITION_M_PER_PX for per_px in metres.values()), metres
+    assert all(m <= MAX_POSITION_M_PER_PX for m in metres_per_px.values()), metres_per_px
     print(f"\nslider width px, units per px at 1280x800: {figures}")
 
 
@@ -158,9 +158,13 @@ def test_dragging_north_a_few_pixels_moves_the_setpoint_less_than_a_metre(
     # the window is centred on where the vehicle is
     assert (north["min"] + north["max"]) / 2 == pytest.approx(before["north_m"], abs=0.6)
     box = small_page.locator("#sp-north_m-slider").bounding_box()
-    x = box["x"] + THUMB_PX / 2 + (north["value"] - north["min"]) / (
-        north["max"] - north["min"]
-    ) * (box["width"] - THUMB_PX)
+    x = (
+        box["x"]
+        + THUMB_PX / 2
+        + (north["value"] - north["min"])
+        / (north["max"] - north["min"])
+        * (box["width"] - THUMB_PX)
+    )
     y = box["y"] + box["height"] / 2
     small_page.mouse.move(x, y)
     small_page.mouse.down()
