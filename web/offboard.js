@@ -46,7 +46,8 @@ const DISPLAY_BY_UNIT = {
 const WINDOW_EDGE = 0.1;
 const INITIAL = { alt_m: 5, thrust: 0.5 };
 
-/** Panel type -> its fields ({key, label, unit, min, max, step, value, api, scale, fromHome}),
+/** Panel type -> its fields ({key, label, unit, min, max, step, span, value, api, scale, fromHome}:
+ * min..max a fixed slider range, or the bounds of a window `span` wide),
  * filled from the API schema by loadSetpointKinds(). */
 export const SETPOINT_TYPES = {};
 
