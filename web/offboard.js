@@ -28,18 +28,26 @@ const PANELS = {
   attitude: { kind: "attitude" },
 };
 
-// The sliders' display ranges [min, max, step] by panel key, else by unit; the first value
-// of a field is 0 unless INITIAL says otherwise.
+// The sliders' display ranges by panel key, else by unit: [min, max, step], or a window
+// {span, step, min?, max?}: a slider `span` wide around the field's value, re-centred when the
+// form takes its values from the vehicle or the setpoint flown, and when the value nears an end
+// (so at 1280x800 a pixel is a fifth of a metre, not 2 m), inside min..max and the API's limits.
+// The number beside a slider takes any value the API accepts; the first value of a field is 0
+// unless INITIAL says otherwise.
 const DISPLAY_BY_KEY = {
-  alt_m: [0, 60, 0.1], up_m_s: [-3, 3, 0.1], roll_deg: [-30, 30, 0.5], pitch_deg: [-30, 30, 0.5],
+  alt_m: { span: 30, step: 0.1, min: 0 }, up_m_s: [-3, 3, 0.1], roll_deg: [-30, 30, 0.5],
+  pitch_deg: [-30, 30, 0.5],
 };
 const DISPLAY_BY_UNIT = {
-  m: [-100, 100, 0.5], "m/s": [-5, 5, 0.1], "m/s^2": [-5, 5, 0.1], deg: [-180, 180, 1],
+  m: { span: 50, step: 0.1 }, "m/s": [-5, 5, 0.1], "m/s^2": [-5, 5, 0.1], deg: [-180, 180, 1],
   "deg/s": [-90, 90, 1], 1: [0, 1, 0.01],
 };
+// A window re-centres when a value comes within this share of its span from an end.
+const WINDOW_EDGE = 0.1;
 const INITIAL = { alt_m: 5, thrust: 0.5 };
 
-/** Panel type -> its fields ({key, label, unit, min, max, step, value, api, scale, fromHome}),
+/** Panel type -> its fields ({key, label, unit, min, max, step, span, value, api, scale, fromHome}:
+ * min..max a fixed slider range, or the bounds of a window `span` wide),
  * filled from the API schema by loadSetpointKinds(). */
 export const SETPOINT_TYPES = {};
 
@@ -86,10 +94,13 @@ function panelFields(panel, kinds) {
     const { unit, min, max } = fields[api];
     const limits = [min / view.scale, max / view.scale].sort((a, b) => a - b);
     const shownUnit = view.unit ?? unit;
-    const [low, high, step] = DISPLAY_BY_KEY[view.key] ?? DISPLAY_BY_UNIT[shownUnit] ?? [...limits, 0.01];
+    const display = DISPLAY_BY_KEY[view.key] ?? DISPLAY_BY_UNIT[shownUnit] ?? [...limits, 0.01];
+    const [low, high, step] = Array.isArray(display)
+      ? display : [display.min ?? -Infinity, display.max ?? Infinity, display.step];
     return {
       key: view.key, label: view.label, unit: shownUnit === "1" ? `${min}..${max}` : shownUnit,
       valid: limits, min: Math.max(low, limits[0]), max: Math.min(high, limits[1]), step,
+      span: Array.isArray(display) ? null : display.span,
       value: INITIAL[view.key] ?? 0, api, scale: view.scale, fromHome: Boolean(view.fromHome),
     };
   });
@@ -168,6 +179,23 @@ export function valuesFromState(type, state) {
 
 const round = (x, digits) => Math.round(x * 10 ** digits) / 10 ** digits;
 
+/** A field's slider range [min, max] around a value: its fixed range, or its window centred on
+ * the value (in whole units), moved inside the field's bounds. */
+export function sliderRange(field, value) {
+  if (!field.span) return [field.min, field.max];
+  const centre = Number.isFinite(value) ? Math.round(value) : field.value;
+  const low = Math.max(field.min, Math.min(centre - field.span / 2, field.max - field.span));
+  return [low, Math.min(field.max, low + field.span)];
+}
+
+/** Whether a value lies outside a windowed field's slider range or near one of its ends (an
+ * end the window can still move past). */
+export function nearAnEnd(field, [min, max], value) {
+  if (!field.span || !Number.isFinite(value)) return false;
+  const edge = field.span * WINDOW_EDGE;
+  return (value < min + edge && min > field.min) || (value > max - edge && max < field.max);
+}
+
 /** Builds the fields of the current type; calls onChange(values) as sliders move. */
 export class SetpointPanel {
   constructor(container, onChange) {
@@ -176,6 +204,7 @@ export class SetpointPanel {
     this.type = "position";
     this.values = {};
     this.inputs = {};
+    this.fields = {};
     this.loaded = false;
     this.loading = null;
     this.load();
@@ -198,6 +227,7 @@ export class SetpointPanel {
     this.type = type;
     this.values = { ...values };
     this.inputs = {};
+    this.fields = {};
     this.container.replaceChildren();
     if (!this.loaded) {
       this.load();
@@ -209,9 +239,12 @@ export class SetpointPanel {
       row.className = "sp-field";
       const label = document.createElement("label");
       label.textContent = field.label;
-      const slider = this.input("range", field, `sp-${field.key}-slider`, [field.min, field.max]);
+      const slider = this.input(
+        "range", field, `sp-${field.key}-slider`, sliderRange(field, this.values[field.key]),
+      );
       const number = this.input("number", field, `sp-${field.key}`, field.valid);
       number.classList.add("num");
+      label.htmlFor = number.id;
       const unit = document.createElement("span");
       unit.className = "unit";
       unit.textContent = field.unit;
@@ -222,30 +255,64 @@ export class SetpointPanel {
         this.values[field.key] = value;
         this.onChange(this.values);
       };
+      // Re-centred once a drag ends (moving the range under a held thumb would make it jump),
+      // or at once for a typed value.
       slider.addEventListener("input", () => sync(slider, number));
-      number.addEventListener("input", () => sync(number, slider));
+      slider.addEventListener("change", () => this.recentre(field, false));
+      number.addEventListener("input", () => {
+        this.recentre(field, false);
+        sync(number, slider);
+      });
+      this.fields[field.key] = field;
       this.inputs[field.key] = [slider, number];
       row.append(label, slider, number, unit);
       this.container.append(row);
     }
   }
 
-  input(kind, field, id, [min, max]) {
+  input(kind, field, id, range) {
     const el = document.createElement("input");
     el.type = kind;
     el.id = id;
     el.className = "ctl";
-    el.min = min;
-    el.max = max;
     el.step = field.step;
+    if (kind === "range") this.setRange(el, field, range);
+    else [el.min, el.max] = range;
     el.value = this.values[field.key];
     return el;
   }
 
+  /** A slider's range, and its title saying what the ends are. */
+  setRange(slider, field, [min, max]) {
+    slider.min = min;
+    slider.max = max;
+    const unit = field.unit.includes("..") ? "" : ` ${field.unit}`;
+    slider.title = field.span
+      ? `${min} to ${max}${unit} (moves with the value; type any value in the box)`
+      : `${min} to ${max}${unit}`;
+  }
+
+  /** Centres a windowed field's slider on the field's value: always, or only when the value
+   * is out of the window or near one of its ends. */
+  recentre(field, always) {
+    const [slider, number] = this.inputs[field.key] || [];
+    if (!slider || !field.span) return;
+    const typed = parseFloat(number.value);
+    const value = Number.isFinite(typed) ? typed : this.values[field.key];
+    if (!always && !nearAnEnd(field, [parseFloat(slider.min), parseFloat(slider.max)], value)) return;
+    this.setRange(slider, field, sliderRange(field, value));
+    slider.value = value;
+  }
+
+  /** Takes values from the vehicle or the setpoint it flies; the windows centre on them. */
   set(values) {
     Object.assign(this.values, values);
     for (const [key, value] of Object.entries(values)) {
-      for (const el of this.inputs[key] || []) el.value = value;
+      const [slider, number] = this.inputs[key] || [];
+      if (!slider) continue;
+      number.value = value;
+      this.recentre(this.fields[key], true);
+      slider.value = value;
     }
   }
 }
