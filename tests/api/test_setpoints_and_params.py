@@ -208,6 +208,13 @@ async def test_params_round_trip(quad_api: Api) -> None:
     assert isinstance(integer.json()["value"], int)
 
 
+async def test_a_parameter_name_outside_px4_ids_is_422_naming_the_field(quad_api: Api) -> None:
+    for names in ("MIS_TAKEOFF_ALT,\u00a0\uf9b7", "COM)", "A B"):
+        answer = await quad_api.client.get("/api/v1/vehicles/1/params", params={"names": names})
+        assert answer.status_code == 422, (names, answer.text)
+        assert answer.json()["detail"]["field"] == "names"
+
+
 async def test_param_write_needs_the_lease(quad_api: Api) -> None:
     response = await quad_api.client.put(
         "/api/v1/vehicles/1/params/MIS_TAKEOFF_ALT", json={"value": 4.0}

@@ -7,6 +7,7 @@ from fastapi import APIRouter
 from pydantic import BaseModel, Field
 
 from server.api.deps import Context, Reader
+from server.api.errors import AUTH_RESPONSES
 
 router = APIRouter(tags=["health"])
 
@@ -18,7 +19,7 @@ class PageConfigOut(BaseModel):
     map_tile_attribution: str
 
 
-@router.get("/config", response_model=PageConfigOut)
+@router.get("/config", response_model=PageConfigOut, responses=AUTH_RESPONSES)
 async def page_config(context: Context, _role: Reader) -> PageConfigOut:
     settings = context.settings
     return PageConfigOut(

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from typing import Annotated
 
 from fastapi import APIRouter, Path, Query
@@ -14,6 +15,7 @@ from server.api.views import finite
 router = APIRouter(prefix="/vehicles/{vehicle_id}/params", tags=["params"])
 
 # PX4 parameter ids are at most 16 characters.
+_NAME = re.compile(r"[A-Za-z0-9_]{1,16}")
 ParamName = Annotated[str, Path(pattern=r"^[A-Za-z0-9_]{1,16}$", examples=["MIS_TAKEOFF_ALT"])]
 _NO_ANSWER: Responses = {
     504: {"model": ErrorOut, "description": "no answer (PX4 ignores unknown names)"}
@@ -32,6 +34,9 @@ def _names(names: str | None) -> list[str] | None:
     for name in wanted:
         if len(name) > 16:
             raise ApiError(422, f"parameter name {name!r} is longer than 16", field="names")
+        if _NAME.fullmatch(name) is None:
+            # the same rule as a single name in the path: PX4's ids are ASCII
+            raise ApiError(422, f"parameter name {name!r} is not [A-Za-z0-9_]", field="names")
     return wanted
 
 
