@@ -137,10 +137,11 @@ def test_telemetry_iterates_states_and_events(served: Served) -> None:
         finally:
             messages.close()
         assert "state" in seen
-        # a new socket's states reach the armed state within a second (20 states at 20 Hz)
+        # a new socket's states reach the armed state (within 5 s: 100 states at 20 Hz; a
+        # loaded machine may hold a state back while the vehicle is briefly unheard)
         states = sky.states(rate_hz=20)
         try:
-            assert any(state.armed for state, _ in zip(states, range(20), strict=False))
+            assert any(state.armed for state, _ in zip(states, range(100), strict=False))
         finally:
             states.close()
         sky.disarm()
