@@ -64,7 +64,7 @@ def measure(vehicles: int, seconds: float) -> dict[str, Any]:
             browser = playwright.chromium.launch(
                 executable_path=str(CHROMIUM), args=CHROMIUM_ARGS, headless=True
             )
-            context = browser.new_context(viewport={"width": 1280, "height": 800})
+            context = browser.new_context(viewport={"width": 1280, "height": 800}, bypass_csp=True)
             page = open_dashboard(context, serve.url, scene=False)
             page.wait_for_function(
                 f"document.querySelectorAll('.map-vehicle').length === {vehicles}",
