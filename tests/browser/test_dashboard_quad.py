@@ -276,7 +276,10 @@ def test_keys_that_fall_silent_are_braked_by_the_servers_deadman(
 
 
 def test_reposition_by_offset_from_the_form(flying: None, page: Any, api: httpx.Client) -> None:
-    start = vehicle_state(api)
+    # the offset is taken from where the vehicle is when the form is sent: read that once it
+    # has settled from the previous flight, not while it still drifts
+    start = wait_for("the vehicle at rest", lambda: (
+        s if speed_m_s(s := vehicle_state(api)) < 0.2 else None), 30.0)
     before = start["position_ned"]
     page.fill("#repo-north", "8")
     page.fill("#repo-east", "-4")
