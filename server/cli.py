@@ -91,7 +91,27 @@ def _serve_parser(sub: Any) -> None:
     serve.add_argument("--signing-key-file", type=Path,
                        help="MAVLink 2 signing key file (a path: the key itself never goes on "
                             "the command line); POST /api/v1/signing creates it")
+    _fleet_flags(serve)
     _numeric_setting_flags(serve)
+
+
+def _fleet_flags(parser: argparse.ArgumentParser) -> None:
+    fleet = parser.add_argument_group("fleet over Zenoh (docs/fleet.md)")
+    fleet.add_argument("--zenoh", action="store_true",
+                       help="publish this server's vehicles to the fleet (an edge)")
+    fleet.add_argument("--fleet", action="store_true",
+                       help="see and fly every vehicle of the fleet")
+    fleet.add_argument("--fleet-name", help="the fleet's name (default 'default')")
+    fleet.add_argument("--edge-name", help="this edge's name (default: the host name)")
+    fleet.add_argument("--zenoh-mode", help="peer (default) or client (through a router)")
+    fleet.add_argument("--zenoh-connect", action="append", metavar="ENDPOINT",
+                       help="a Zenoh endpoint to connect to, e.g. tcp/10.0.0.2:7447")
+    fleet.add_argument("--zenoh-listen", action="append", metavar="ENDPOINT",
+                       help="a Zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447")
+    fleet.add_argument("--no-zenoh-multicast-scouting", action="store_false",
+                       dest="zenoh_multicast_scouting",
+                       help="find peers only through --zenoh-connect")
+    fleet.add_argument("--zenoh-config", type=Path, help="Zenoh JSON5 configuration file")
 
 
 def _numeric_setting_flags(parser: argparse.ArgumentParser) -> None:

@@ -63,6 +63,10 @@ def tile_origin(url: str | None) -> str | None:
     return f"{parts.scheme}://{host}"
 
 
+# A fleet or edge name is one Zenoh key chunk: no separators or wildcards.
+FLEET_NAME_PATTERN = r"^[A-Za-z0-9_-]{1,64}$"
+
+
 def _default_web_dir() -> Path | None:
     candidate = Path(__file__).resolve().parent.parent / "web"
     return candidate if candidate.is_dir() else None
@@ -147,8 +151,28 @@ class Settings(BaseSettings):
     access_log: bool = True
     tls_cert: Path | None = Field(None, description="PEM certificate: serve https and wss")
     tls_key: Path | None = Field(None, description="PEM private key of tls_cert")
+    # The fleet over Zenoh (docs/fleet.md): an edge publishes its vehicles and answers
+    # commands (zenoh); a fleet server sees and flies every edge's vehicles (fleet).
+    zenoh: bool = Field(False, description="publish this server's vehicles to the fleet")
+    fleet: bool = Field(False, description="see and fly every edge of the fleet")
+    fleet_name: str = Field(
+        "default", pattern=FLEET_NAME_PATTERN, description="the fleet (a Zenoh key chunk)"
+    )
+    edge_name: str | None = Field(
+        None, pattern=FLEET_NAME_PATTERN,
+        description="this edge's name in the fleet (default: the host name)",
+    )
+    zenoh_mode: Literal["peer", "client"] = "peer"
+    zenoh_connect: Annotated[list[str], NoDecode] = Field(
+        default_factory=list, description="Zenoh endpoints to connect to, e.g. a router's"
+    )
+    zenoh_listen: Annotated[list[str], NoDecode] = Field(default_factory=list)
+    zenoh_multicast_scouting: bool = True
+    zenoh_config: Path | None = Field(
+        None, description="Zenoh JSON5 configuration (TLS, access control)"
+    )
 
-    @field_validator("connect", "cors_origins", mode="before")
+    @field_validator("connect", "cors_origins", "zenoh_connect", "zenoh_listen", mode="before")
     @classmethod
     def _split_commas(cls, value: Any) -> Any:
         if isinstance(value, str):

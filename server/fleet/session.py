@@ -1,0 +1,44 @@
+"""The Zenoh session of a server: peer mode by default, a router's address when given."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal
+
+import zenoh
+
+ZenohMode = Literal["peer", "client", "router"]
+
+
+@dataclass(frozen=True)
+class ZenohOptions:
+    mode: ZenohMode = "peer"
+    # e.g. tcp/10.0.0.2:7447 (a router, or peers to reach without scouting)
+    connect: list[str] = field(default_factory=list)
+    # e.g. tcp/0.0.0.0:7447; empty = Zenoh's default
+    listen: list[str] = field(default_factory=list)
+    # multicast scouting finds peers on the LAN; off when every peer is named in connect
+    multicast_scouting: bool = True
+    # a Zenoh JSON5 configuration file (TLS, access control); the options above override it
+    config_file: Path | None = None
+
+
+def zenoh_config(options: ZenohOptions) -> zenoh.Config:
+    config = (
+        zenoh.Config.from_file(str(options.config_file))
+        if options.config_file is not None else zenoh.Config()
+    )
+    config.insert_json5("mode", json.dumps(options.mode))
+    if options.connect:
+        config.insert_json5("connect/endpoints", json.dumps(options.connect))
+    if options.listen:
+        config.insert_json5("listen/endpoints", json.dumps(options.listen))
+    config.insert_json5("scouting/multicast/enabled", json.dumps(options.multicast_scouting))
+    return config
+
+
+def open_session(options: ZenohOptions) -> zenoh.Session:
+    """Open a session (blocking; call it off the event loop)."""
+    return zenoh.open(zenoh_config(options))
