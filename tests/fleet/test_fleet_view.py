@@ -103,17 +103,22 @@ async def test_lists_edges_and_vehicles_with_freshness_and_controller(fleet_rig:
     fleet = (await r.client.get("/api/v1/fleet", headers=auth(OBSERVER))).json()
     assert fleet == {"fleet": FLEET, "edges": [{"edge": "edge-a", "alive": True, "vehicles": [1]}]}
     [row] = (await r.client.get("/api/v1/fleet/vehicles", headers=auth(OBSERVER))).json()
-    assert row["key"] == "edge-a/1" and row["edge"] == "edge-a" and row["id"] == 1
+    assert row["key"] == "edge-a/1"
+    assert row["edge"] == "edge-a"
+    assert row["id"] == 1
     assert row["alive"] is True
     assert row["controller"] == "pilot · tab 1"
     assert (row["type"], row["mode"], row["armed"], row["connected"]) == (
         "quadrotor", "HOLD", False, True,
     )
-    assert row["global"] == STATE["global"] and row["position_ned"] == STATE["position_ned"]
-    assert 0.0 <= row["age_s"] < 30.0 and -5.0 < row["state_age_s"] < 30.0
+    assert row["global"] == STATE["global"]
+    assert row["position_ned"] == STATE["position_ned"]
+    assert 0.0 <= row["age_s"] < 30.0
+    assert -5.0 < row["state_age_s"] < 30.0
     detail = await r.client.get("/api/v1/fleet/edges/edge-a/vehicles/1")
     assert detail.status_code == 200
-    assert detail.json()["mode"] == "HOLD" and detail.json()["alive"] is True
+    assert detail.json()["mode"] == "HOLD"
+    assert detail.json()["alive"] is True
     assert detail.json()["lease"] == STATE["lease"]
     missing = await r.client.get("/api/v1/fleet/edges/edge-a/vehicles/9")
     assert missing.status_code == 404
@@ -131,7 +136,8 @@ async def test_lists_edges_and_vehicles_with_freshness_and_controller(fleet_rig:
     r.edge.vehicle_down(1)
     await wait_for(lambda: not vehicle_alive(r, "edge-a", 1), 5.0, "the vehicle lost")
     [row] = (await r.client.get("/api/v1/fleet/vehicles")).json()
-    assert row["alive"] is False and row["mode"] == "HOLD"
+    assert row["alive"] is False
+    assert row["mode"] == "HOLD"
     r.edge.vehicle_up(1)
     await wait_for(lambda: vehicle_alive(r, "edge-a", 1), 5.0, "the vehicle back")
 
@@ -145,7 +151,8 @@ async def test_an_edge_that_goes_away_is_lost_and_comes_back(fleet_rig: Rig) -> 
     )
     assert lost_in_s < 2.0
     edge = r.fleet.view.edge("edge-a")
-    assert edge is not None and not edge.alive
+    assert edge is not None
+    assert not edge.alive
     # calls to a lost edge: 503 at once, nothing sent
     refused = await r.client.post("/api/v1/fleet/edges/edge-a/vehicles/1/arm", json={})
     assert refused.status_code == 503
@@ -174,7 +181,8 @@ async def test_calls_go_to_the_edge_with_the_callers_authority(fleet_rig: Rig) -
     )
     assert answer.status_code == 423
     assert answer.json() == refused
-    assert answer.headers["retry-after"] == "3" and "x-other" not in answer.headers
+    assert answer.headers["retry-after"] == "3"
+    assert "x-other" not in answer.headers
     [sent] = r.edge.queries
     assert sent == {
         "method": "POST",
@@ -226,14 +234,17 @@ async def test_the_fleet_socket_sends_presence_states_and_events(fleet_rig: Rig)
             assert (state["key"], state["edge"], state["id"], state["alive"]) == (
                 "edge-a/1", "edge-a", 1, True,
             )
-            assert state["state"]["mode"] == "HOLD" and state["age_s"] >= 0.0
+            assert state["state"]["mode"] == "HOLD"
+            assert state["age_s"] >= 0.0
             event = {"type": "event", "vehicle": 1, "kind": "armed", "time_s": 1.0, "data": {}}
             r.edge.publish_event(1, event)
             got = await receive_until(ws, {"type": "event"})
-            assert got["key"] == "edge-a/1" and got["event"]["kind"] == "armed"
+            assert got["key"] == "edge-a/1"
+            assert got["event"]["kind"] == "armed"
             r.edge.vehicle_down(1)
             lost = await receive_until(ws, {"type": "presence", "key": "edge-a/1"})
-            assert lost["alive"] is False and lost["id"] == 1
+            assert lost["alive"] is False
+            assert lost["id"] == 1
         async with connect(url) as ws:
             assert await close_code(ws) == 4401
 
@@ -257,10 +268,12 @@ def test_messages_are_json() -> None:
     view.set_state("e", 3, {"seq": 5, "sent_unix_s": 1.0, "state": STATE})
     view.set_state("e", 3, {"seq": 4, "sent_unix_s": 0.5, "state": {**STATE, "mode": "OLD"}})
     vehicle = view.vehicle("e", 3)
-    assert vehicle is not None and vehicle.state is not None
+    assert vehicle is not None
+    assert vehicle.state is not None
     assert vehicle.state["mode"] == "HOLD"  # the older sample did not overwrite the newer
     message: dict[str, Any] = json.loads(vehicle.state_message())
-    assert message["type"] == "fleet_state" and message["key"] == "e/3"
+    assert message["type"] == "fleet_state"
+    assert message["key"] == "e/3"
     view.set_alive("e", None, True)
     view.set_alive("e", None, False)  # the edge's token went: its vehicles with it
     assert not vehicle.alive
