@@ -28,6 +28,9 @@ def free_tcp_endpoint() -> str:
 def loopback_options(
     listen: list[str] | None = None, connect: list[str] | None = None, mode: str = "peer"
 ) -> ZenohOptions:
+    if mode == "peer" and not listen:
+        # a peer listens somewhere: on loopback, not Zenoh's default of every interface
+        listen = [free_tcp_endpoint()]
     return ZenohOptions(
         mode=mode,  # type: ignore[arg-type]
         listen=listen or [],

@@ -68,6 +68,10 @@ class Process:
             self.popen.send_signal(signal.SIGKILL)
             self.popen.wait(timeout=10)
 
+    def signal(self, signum: int) -> None:
+        assert self.popen is not None
+        self.popen.send_signal(signum)
+
     def stop(self) -> None:
         if self.popen is not None:
             _stop(self.popen)

@@ -6,6 +6,7 @@ nothing at the edges. One rig per topology, shared by the module's tests, in ord
 
 from __future__ import annotations
 
+import signal
 import time
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
@@ -160,6 +161,27 @@ def test_fleet_routes_refuse_who_may_not_call_them(rig: FleetRig) -> None:
     asked = rig.via_fleet("POST", EDGES[0], "control", {})
     assert asked.status_code == 409
     assert fleet_state(rig, EDGES[0])["mode"] == "OFFBOARD"
+
+
+def test_a_frozen_edge_is_lost_within_2_s_and_returns_when_it_thaws(rig: FleetRig) -> None:
+    """SIGSTOP: its sockets stay open but it says nothing, as when the network is cut; the
+    Zenoh lease (1 s, server/fleet/session.py) drops it."""
+    victim = EDGES[1]
+    frozen = time.monotonic()
+    rig.edges[victim].signal(signal.SIGSTOP)
+    try:
+        wait_for_blocking(
+            f"{victim}/1 lost", lambda: rig.alive()[f"{victim}/1"] is False, 10.0, every_s=0.02
+        )
+        lost_after_s = time.monotonic() - frozen
+    finally:
+        rig.edges[victim].signal(signal.SIGCONT)
+    print(f"[{rig.topology}] {victim} SIGSTOPped: lost in the fleet after {lost_after_s:.3f} s")
+    assert lost_after_s < 2.0
+    assert rig.alive()[f"{EDGES[0]}/1"] is True
+    thawed = time.monotonic()
+    rig.wait_alive([f"{victim}/1"], 30.0)
+    print(f"[{rig.topology}] {victim} thawed: alive again after {time.monotonic() - thawed:.3f} s")
 
 
 def test_a_killed_edge_is_lost_within_2_s_and_returns_when_restarted(rig: FleetRig) -> None:
