@@ -260,17 +260,20 @@ async def test_a_fleet_server_may_fly_its_own_vehicles_too() -> None:
     assert not starts_sim(make_settings("udpin:127.0.0.1:0", fleet=True, sim_count=2))
 
 
-def test_messages_are_json() -> None:
+def test_the_view_keeps_the_newest_state_and_presence() -> None:
     from server.fleet.view import FleetView
 
     view = FleetView(FLEET)
     view.set_alive("e", 3, True)
     view.set_state("e", 3, {"seq": 5, "sent_unix_s": 1.0, "state": STATE})
-    view.set_state("e", 3, {"seq": 4, "sent_unix_s": 0.5, "state": {**STATE, "mode": "OLD"}})
+    view.set_state("e", 3, {"seq": 1, "sent_unix_s": 2.0, "state": {**STATE, "mode": "LAND"}})
     vehicle = view.vehicle("e", 3)
     assert vehicle is not None
     assert vehicle.state is not None
-    assert vehicle.state["mode"] == "HOLD"  # the older sample did not overwrite the newer
+    assert vehicle.state["mode"] == "LAND"  # a restarted edge's seq starts again
+    assert (vehicle.seq, vehicle.sent_unix_s) == (1, 2.0)
+    view.set_state("e", 3, {"seq": 2, "state": "not an object"})  # ignored
+    assert vehicle.seq == 1
     message: dict[str, Any] = json.loads(vehicle.state_message())
     assert message["type"] == "fleet_state"
     assert message["key"] == "e/3"
