@@ -141,6 +141,18 @@ async def test_lists_edges_and_vehicles_with_freshness_and_controller(fleet_rig:
     r.edge.vehicle_up(1)
     await wait_for(lambda: vehicle_alive(r, "edge-a", 1), 5.0, "the vehicle back")
 
+    # a fleet server started after the edge sees who is alive at once (liveliness history)
+    late = FleetService(FLEET, loopback_options(connect=r.edge.listen))
+    await late.start()
+    try:
+        await wait_for(
+            lambda: (found := late.view.vehicle("edge-a", 1)) is not None and found.alive,
+            10.0, "the late fleet server to see the vehicle",
+        )
+        assert late.view.summary() == fleet
+    finally:
+        await late.stop()
+
 
 async def test_an_edge_that_goes_away_is_lost_and_comes_back(fleet_rig: Rig) -> None:
     r = fleet_rig
