@@ -26,7 +26,7 @@ from server.fleet.session import open_session
 from sim.runner import SimCluster
 from tests.api.conftest import OBSERVER, PILOT, Api, api_for, sim_cluster
 from tests.fleet.fake_edge import free_tcp_endpoint, loopback_options
-from tests.waiting import wait_for
+from tests.waiting import holds_for, wait_for
 
 pytestmark = pytest.mark.asyncio(loop_scope="module")
 
@@ -208,6 +208,16 @@ async def test_a_pilot_with_the_lease_flies_through_the_edge(rig: Rig) -> None:
     assert (event["edge"], event["id"], event["vehicle"]) == (
         EDGE, 1, 1
     )
+    # PX4's texts (STATUSTEXT and its events) go to .../messages, in the socket's shapes
+    await wait_for(
+        lambda: any(
+            p.get("text") == "Armed by external command" for _, p in rig.seen.on("messages")
+        ),
+        10.0, "PX4's STATUSTEXT on arming",
+    )
+    kinds = {p.get("kind", p["type"]) for _, p in rig.seen.on("messages")}
+    assert kinds <= {"statustext", "px4_event"}
+    assert not any(p["kind"] in ("statustext", "px4_event") for _, p in rig.seen.on("events"))
     # the vehicle's refusal comes back verbatim: the body REST gives
     refused = await rig.call(
         "POST", "/api/v1/vehicles/1/vtol/transition", lease=lease,
@@ -248,11 +258,9 @@ async def test_stream_health_while_a_stream_runs_and_once_when_it_stops(rig: Rig
     assert (sample["edge"], sample["id"]) == (EDGE, 1)
     assert sample["rate_hz"] > 0
     assert sample["sent"] > 0
-    await asyncio.sleep(2.5)  # a stopped stream is not published again
-    assert len(rig.seen.on("stream")) == count
-    # the vehicle said what it did: PX4's texts go to .../messages
-    assert all(p["type"] == "statustext" or p["kind"] == "px4_event"
-               for _, p in rig.seen.on("messages"))
+    await holds_for(
+        lambda: len(rig.seen.on("stream")) == count, 1.5, "no stream sample after the last"
+    )
 
 
 async def test_tokens_go_when_the_link_is_lost_and_when_the_edge_stops(rig: Rig) -> None:
