@@ -17,9 +17,10 @@ as coming from the client address ``zenoh`` (its lockout and logs say so). Token
 logged.
 
 Threads: Zenoh calls back on its own thread; the payload is read there and the call handed
-to the event loop, which runs it and replies through the query object (a reply is a fast,
-non-blocking send). Every query is answered (503 when the edge is stopping or too busy)
-and then dropped, so the querier never waits for its timeout.
+to the event loop, which runs it; the reply goes out from a small thread pool (a reply may
+wait while the querier's link is congested; the loop never does). Every query is answered
+(503 when the edge is stopping or too busy) and then dropped, so the querier never waits
+for its timeout.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ import contextlib
 import json
 import logging
 from collections.abc import Awaitable, Callable, MutableMapping
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 from urllib.parse import unquote
 
@@ -58,6 +60,10 @@ ZENOH_CLIENT = ("zenoh", 0)
 CALL_TIMEOUT_S = 60.0
 # calls run at once; more are refused with 503 (the app's rate limit counts the rest)
 MAX_IN_FLIGHT = 64
+# threads that send replies (a reply may wait while the querier's link is congested)
+REPLY_THREADS = 2
+# a REST call's JSON is small; a larger query payload is refused before it is parsed
+MAX_PAYLOAD_BYTES = 1 << 20
 
 
 class CallError(Exception):
@@ -84,6 +90,8 @@ def parse_call(data: bytes | None) -> dict[str, Any]:
     """The query payload as a checked call (method, path, query, headers, body)."""
     if not data:
         raise CallError(422, "the query carries no payload", "payload")
+    if len(data) > MAX_PAYLOAD_BYTES:
+        raise CallError(413, f"the query payload exceeds {MAX_PAYLOAD_BYTES} bytes", "payload")
     try:
         call = json.loads(data)
     except ValueError:  # also bad UTF-8
@@ -153,7 +161,9 @@ class EdgeApi:
         )
         self._loop: asyncio.AbstractEventLoop | None = None
         self._tasks: set[asyncio.Task[None]] = set()
+        self._running = 0
         self._closing = False
+        self._replies = ThreadPoolExecutor(REPLY_THREADS, thread_name_prefix="zenoh-reply")
 
     def bind(self) -> None:
         """Remember the loop calls are handed to (call on the loop, before declaring)."""
@@ -166,6 +176,7 @@ class EdgeApi:
             task.cancel()
         await asyncio.gather(*self._tasks, return_exceptions=True)
         await self._client.aclose()
+        await asyncio.to_thread(self._replies.shutdown)
 
     async def run(self, data: bytes | None) -> dict[str, Any]:
         """The reply payload for a query payload: the app's answer, or why not."""
@@ -211,47 +222,54 @@ class EdgeApi:
             with contextlib.suppress(RuntimeError):  # the loop closed: refused below
                 loop.call_soon_threadsafe(self._begin, query, data)
                 return
-        self._answer_now(query, _stopping())
+        send_reply(query, self.reply_key, _stopping())
 
     # --- on the loop ---------------------------------------------------------------------
 
     def _begin(self, query: zenoh.Query, data: bytes | None) -> None:
+        refusal: dict[str, Any] | None = None
         if self._closing:
-            self._answer_now(query, _stopping())
-            return
-        if len(self._tasks) >= self.max_in_flight:
+            refusal = _stopping()
+        elif self._running >= self.max_in_flight:
             self.refused += 1
             reason = f"the edge is running {self.max_in_flight} calls; try again"
-            self._answer_now(query, CallError(503, reason).reply())
-            return
-        task = asyncio.create_task(self._answer(query, data), name="zenoh-api-call")
+            refusal = CallError(503, reason).reply()
+        task = asyncio.create_task(self._answer(query, data, refusal), name="zenoh-api-call")
         self._tasks.add(task)
         task.add_done_callback(self._tasks.discard)
 
-    async def _answer(self, query: zenoh.Query, data: bytes | None) -> None:
-        reply = _stopping()
-        try:
-            reply = await self.run(data)
-        except asyncio.CancelledError:
-            pass  # the edge is stopping: 503
-        except Exception:  # the client failed, not the app (its errors are answers): 500
-            log.exception("zenoh api call failed")
-            reply = CallError(500, "the edge failed to run the call").reply()
-        finally:
-            self._answer_now(query, reply)
+    async def _answer(
+        self, query: zenoh.Query, data: bytes | None, refusal: dict[str, Any] | None
+    ) -> None:
+        reply = refusal
+        if reply is None:
+            self._running += 1
+            try:
+                reply = await self.run(data)
+            except asyncio.CancelledError:
+                reply = _stopping()  # answered all the same, below
+            except Exception:  # the client failed, not the app (its errors are answers)
+                log.exception("zenoh api call failed")
+                reply = CallError(500, "the edge failed to run the call").reply()
+            finally:
+                self._running -= 1
+        # a reply may wait for a congested link: never on the loop
+        loop = asyncio.get_running_loop()
+        await loop.run_in_executor(self._replies, send_reply, query, self.reply_key, reply)
 
-    def _answer_now(self, query: zenoh.Query, reply: dict[str, Any]) -> None:
-        try:
-            query.reply(
-                self.reply_key,
-                json.dumps(reply, allow_nan=False).encode(),
-                encoding=zenoh.Encoding.APPLICATION_JSON,
-            )
-        except zenoh.ZError as exc:  # the session closed, or the querier gave up
-            log.debug("zenoh api reply not sent: %s", exc)
-        finally:
-            with contextlib.suppress(zenoh.ZError):
-                query.drop()  # type: ignore[no-untyped-call]
+
+def send_reply(query: zenoh.Query, key: str, reply: dict[str, Any]) -> None:
+    """Answer a query and drop it (finalising it for the querier); errors only logged."""
+    try:
+        query.reply(
+            key, json.dumps(reply, allow_nan=False).encode(),
+            encoding=zenoh.Encoding.APPLICATION_JSON,
+        )
+    except zenoh.ZError as exc:  # the session closed, or the querier gave up
+        log.debug("zenoh api reply not sent: %s", exc)
+    finally:
+        with contextlib.suppress(zenoh.ZError):
+            query.drop()  # type: ignore[no-untyped-call]
 
 
 def _stopping() -> dict[str, Any]:

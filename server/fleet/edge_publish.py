@@ -48,6 +48,13 @@ def _dumps(value: Any) -> bytes:
     return json.dumps(value, separators=(",", ":"), allow_nan=False).encode()
 
 
+def _declare(session: zenoh.Session, key: str) -> zenoh.Publisher:
+    # DROP: a put on the loop never waits for a congested link (Zenoh's default, said here)
+    return session.declare_publisher(
+        key, encoding=_JSON, congestion_control=zenoh.CongestionControl.DROP
+    )
+
+
 class Sequence:
     """One vehicle's sample numbers: one per tick, in tick order, across tiers."""
 
@@ -86,18 +93,12 @@ class VehiclePublication:
         self._extra = {"edge": edge, "id": self.vehicle_id}
         self._sequence = Sequence(seq_start)
         self._state = {
-            tier: session.declare_publisher(keys.state(edge, self.vehicle_id, tier), encoding=_JSON)
+            tier: _declare(session, keys.state(edge, self.vehicle_id, tier))
             for tier in TIER_RATE_HZ
         }
-        self._events = session.declare_publisher(
-            keys.events(edge, self.vehicle_id), encoding=_JSON
-        )
-        self._messages = session.declare_publisher(
-            keys.messages(edge, self.vehicle_id), encoding=_JSON
-        )
-        self._stream = session.declare_publisher(
-            keys.stream(edge, self.vehicle_id), encoding=_JSON
-        )
+        self._events = _declare(session, keys.events(edge, self.vehicle_id))
+        self._messages = _declare(session, keys.messages(edge, self.vehicle_id))
+        self._stream = _declare(session, keys.stream(edge, self.vehicle_id))
         self._token: zenoh.LivelinessToken | None = None
         self._tasks: list[asyncio.Task[None]] = []
         self.sent: dict[str, int] = {"fast": 0, "slow": 0, "events": 0, "messages": 0, "stream": 0}
