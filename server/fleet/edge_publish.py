@@ -42,16 +42,19 @@ log = logging.getLogger(__name__)
 MESSAGE_KINDS = frozenset({"statustext", "px4_event"})
 STREAM_PERIOD_S = 1.0
 _JSON = zenoh.Encoding.APPLICATION_JSON
+_EVENTS = zenoh.Priority.DATA_HIGH
 
 
 def _dumps(value: Any) -> bytes:
     return json.dumps(value, separators=(",", ":"), allow_nan=False).encode()
 
 
-def _declare(session: zenoh.Session, key: str) -> zenoh.Publisher:
+def _declare(
+    session: zenoh.Session, key: str, priority: zenoh.Priority = zenoh.Priority.DATA
+) -> zenoh.Publisher:
     # DROP: a put on the loop never waits for a congested link (Zenoh's default, said here)
     return session.declare_publisher(
-        key, encoding=_JSON, congestion_control=zenoh.CongestionControl.DROP
+        key, encoding=_JSON, congestion_control=zenoh.CongestionControl.DROP, priority=priority
     )
 
 
@@ -65,7 +68,10 @@ class Sequence:
     def stamp(self, published: Published) -> tuple[int, Published]:
         """(seq, the tick to send): the newest tick seen if ``published`` is older."""
         newest = self.newest
-        if newest is None or published.version > newest.version:
+        # a tick re-taken for a read (same version, later) is newer too: the age in it grew
+        if newest is None or (published.version, published.taken_s) > (
+            newest.version, newest.taken_s
+        ):
             self.seq += 1
             self.newest = published
             return self.seq, published
@@ -96,8 +102,9 @@ class VehiclePublication:
             tier: _declare(session, keys.state(edge, self.vehicle_id, tier))
             for tier in TIER_RATE_HZ
         }
-        self._events = _declare(session, keys.events(edge, self.vehicle_id))
-        self._messages = _declare(session, keys.messages(edge, self.vehicle_id))
+        # events are rare and each one counts: a queue of their own, ahead of the states
+        self._events = _declare(session, keys.events(edge, self.vehicle_id), _EVENTS)
+        self._messages = _declare(session, keys.messages(edge, self.vehicle_id), _EVENTS)
         self._stream = _declare(session, keys.stream(edge, self.vehicle_id))
         self._token: zenoh.LivelinessToken | None = None
         self._tasks: list[asyncio.Task[None]] = []

@@ -1,6 +1,7 @@
 """The edge's api queryable against a small app of its own (no vehicle): what of a query
 reaches the app, what of the app's answer goes back, and the answers the edge gives itself
-(bad path or payload, a call too slow, too many at once), over real Zenoh on loopback."""
+(bad path or payload, a call too slow, too many at once), over real Zenoh on loopback; and
+how the edge numbers a vehicle's state samples."""
 
 from __future__ import annotations
 
@@ -14,7 +15,9 @@ import pytest_asyncio
 import zenoh
 from fastapi import FastAPI, Request, Response
 
+from server.api.publisher import Published
 from server.fleet.edge_api import EdgeApi, check_path
+from server.fleet.edge_publish import Sequence
 from server.fleet.session import open_session
 from tests.fleet.fake_edge import free_tcp_endpoint, loopback_options
 from tests.waiting import eventually
@@ -166,3 +169,17 @@ async def test_every_query_is_answered_even_when_busy_or_stopping() -> None:
         queryable.undeclare()  # type: ignore[no-untyped-call]
         await asyncio.to_thread(caller.close)
         await asyncio.to_thread(edge_session.close)
+
+
+async def test_samples_are_numbered_by_tick_never_going_back() -> None:
+    def tick(version: int, taken_s: float) -> Published:
+        return Published(None, version, (None, None), taken_s, lambda _: b"{}")  # type: ignore[arg-type]
+
+    sequence = Sequence(1000)
+    first, second = tick(5, 1.0), tick(7, 1.1)
+    assert sequence.stamp(first) == (1001, first)
+    assert sequence.stamp(first) == (1001, first)  # the same tick on the other tier
+    assert sequence.stamp(second) == (1002, second)
+    assert sequence.stamp(first) == (1002, second)  # older: the newest is sent instead
+    retaken = tick(7, 1.5)  # the same version taken again for a read: the age grew
+    assert sequence.stamp(retaken) == (1003, retaken)
