@@ -18,9 +18,6 @@ from tests.api.test_security_routes import READ, REFUSALS, expected
 from tests.fleet.rig import EDGES, FLEET, FleetRig, fleet_rig
 from tests.waiting import holds_for_blocking, wait_for_blocking
 
-# the edges are `skyhelm serve --zenoh`: server/fleet/edge.py
-pytest.importorskip("server.fleet.edge", reason="no edge side (server/fleet/edge.py) here yet")
-
 Json = dict[str, Any]
 KEYS = [f"{edge}/1" for edge in EDGES]
 TAKEOFF_ALT_M = 4.0
