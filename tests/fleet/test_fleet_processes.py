@@ -46,7 +46,13 @@ def test_the_fleet_lists_every_edge_and_vehicle(rig: FleetRig) -> None:
     assert {e["edge"]: (e["alive"], e["vehicles"]) for e in fleet["edges"]} == {
         edge: (True, [1]) for edge in EDGES
     }
-    rows = {row["key"]: row for row in rig.fleet_get("/fleet/vehicles", rig.observer)}
+
+    # a vehicle's token comes with its link; its first state a tick later
+    def rows_with_states() -> dict[str, Json] | None:
+        rows = {row["key"]: row for row in rig.fleet_get("/fleet/vehicles", rig.observer)}
+        return rows if all(rows.get(key, {}).get("connected") for key in KEYS) else None
+
+    rows = wait_for_blocking("a state of every vehicle", rows_with_states, 30.0)
     assert set(rows) == set(KEYS)
     for key, row in rows.items():
         assert row["alive"] is True, key
@@ -75,7 +81,8 @@ def fly(rig: FleetRig, edge: str) -> str:
 
     wait_for_blocking(
         f"{edge}/1 ready to arm",
-        lambda: (s := fleet_state(rig, edge))["global"] is not None and s["home"] is not None,
+        lambda: (s := fleet_state(rig, edge)).get("global") is not None
+        and s.get("home") is not None,
         60.0,
     )
     lease = call("POST", "control", {"client_name": f"fleet test {edge}"})["lease_id"]
