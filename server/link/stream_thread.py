@@ -17,6 +17,7 @@ import heapq
 import itertools
 import logging
 import math
+import os
 import sys
 import threading
 import time
@@ -25,8 +26,9 @@ from collections.abc import Callable
 log = logging.getLogger(__name__)
 
 # The GIL switch interval while the sender thread runs: the most a due send waits for a busy
-# loop thread to let go of the GIL (CPython's default is 5 ms).
-SWITCH_INTERVAL_S = 0.0005
+# loop thread to let go of the GIL (CPython's default is 5 ms). The environment's
+# SKYHELM_STREAM_SWITCH_INTERVAL_MS overrides it (benches measure the default against it).
+SWITCH_INTERVAL_S = float(os.environ.get("SKYHELM_STREAM_SWITCH_INTERVAL_MS", "0.5")) / 1e3
 
 # A job: called with the time it fires at, sends, answers its next deadline or None (done).
 Job = Callable[[float], float | None]

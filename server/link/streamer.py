@@ -7,13 +7,15 @@ comes too late to matter is skipped and shows up as a gap. A new setpoint goes o
 Who keeps the time: on a real clock, the process's sender thread (server.link.stream_thread),
 where the event loop's load cannot delay a tick; under a virtual loop clock (looptime in
 tests) the event loop itself (loop.call_at), so virtual time drives the stream exactly.
-``SENDER_THREAD = False`` keeps every stream on the loop (benches compare the two).
+``SENDER_THREAD = False`` (or SKYHELM_STREAM_SENDER=loop in the environment) keeps every
+stream on the loop; bench/stream_vs_mavsdk.py compares the two.
 """
 
 from __future__ import annotations
 
 import asyncio
 import math
+import os
 import threading
 import time
 from array import array
@@ -30,7 +32,7 @@ DEFAULT_RATE_HZ = 20.0
 # An interval longer than this many periods counts as a gap.
 GAP_PERIODS = 2.0
 # Streams on a real clock are timed by the sender thread (False: by the event loop).
-SENDER_THREAD = True
+SENDER_THREAD = os.environ.get("SKYHELM_STREAM_SENDER", "thread") != "loop"
 
 
 def _real_time_loop(loop: asyncio.AbstractEventLoop) -> bool:
