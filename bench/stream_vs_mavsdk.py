@@ -1,7 +1,8 @@
 """Setpoint stream regularity at the receiver: SkyHelm's server vs MAVSDK, idle and loaded.
 
 A stand-in vehicle in its own process (bench/_receiver.py) timestamps every
-SET_POSITION_TARGET_LOCAL_NED as it arrives, per sender. Two senders stream to it at once:
+SET_POSITION_TARGET_LOCAL_NED as it arrives, per sender, and sends attitude and position at
+50 Hz (live telemetry for the server to decode and fan out). Two senders stream to it at once:
 ``skyhelm serve --connect udpout:…`` at 50 Hz (a PUT /setpoint through the REST API, as a
 user would) and MAVSDK's offboard plugin (mavsdk_server) at its fixed 20 Hz. Each phase
 measures both in the same seconds:
@@ -55,6 +56,8 @@ WS_CLIENTS = 50
 TELEMETRY_RATE_HZ = 10.0
 REST_READS_HZ = 50.0
 LOAD_NICE = 10
+# the stand-in vehicle's attitude and position rate: live telemetry for the server to fan out
+VEHICLE_TELEMETRY_HZ = 50.0
 LOAD_WARMUP_S = 2.0
 # the server's send path per variant: environment of `skyhelm serve`
 VARIANTS: dict[str, dict[str, str]] = {
@@ -76,7 +79,7 @@ class ReceiverProcess:
     @contextlib.asynccontextmanager
     async def running(cls) -> AsyncIterator[ReceiverProcess]:
         proc = await asyncio.create_subprocess_exec(
-            sys.executable, "-m", "bench._receiver",
+            sys.executable, "-m", "bench._receiver", "--telemetry-hz", str(VEHICLE_TELEMETRY_HZ),
             stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE,
             cwd=PROJECT_ROOT,
         )
@@ -370,6 +373,7 @@ def report(result: dict[str, Any]) -> Section | None:
         ax.legend(fontsize=8)
     axes[0].set_ylabel("fraction of intervals above")
     fig.suptitle("Setpoint stream lateness, SkyHelm vs MAVSDK in the same run")
+    fig.tight_layout(rect=(0, 0.04, 1, 1))
     figure = save_figure(fig, "stream_vs_mavsdk", "Stream lateness distribution (receiver side)",
                          machine)
     plt.close(fig)
