@@ -202,7 +202,7 @@ async def test_concurrent_sends_keep_sequence_contiguous_signed_and_recorded(
 
     reader = threading.Thread(target=receive, daemon=True)
     reader.start()
-    per_sender = 1500
+    per_sender = 3000
     link = await Link.open(f"udpout:127.0.0.1:{receiver.getsockname()[1]}",
                            log_dir=tmp_path / "logs", signing_store=store)
     try:
