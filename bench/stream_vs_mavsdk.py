@@ -18,6 +18,12 @@ with CPython's default 5 ms GIL switch interval). Figures per row: p50/p99 of
 |interval − period|, the largest interval, gaps over 100 ms, and the lateness samples
 for the report's distribution.
 
+The send-path options themselves are measured first, in this process and under the same
+synthetic load (its event loop JSON-encoding ~80% of the time and making garbage for the
+collector, as a busy server does): the stream timed by the event loop (``loop``), by the
+sender thread (``thread``) and by a separate process sending a precomputed frame on its own
+deadlines (``process``: what a sender process fed by the server would achieve at best).
+
 Goal (issue 14): loaded, SkyHelm's 50 Hz p99 |interval − period| ≤ MAVSDK's 20 Hz in the
 same run; no gap > 100 ms.
 
@@ -246,6 +252,90 @@ async def loaded(base: str, seconds: float) -> AsyncIterator[dict[str, Any]]:
         facts.update(json.loads(lines[-1]) if lines else {})
 
 
+# -- the send-path options, under synthetic load in this process --
+
+OPTION_SYSIDS = {"loop": 201, "thread": 202, "process": 203}
+SYNTHETIC_BUSY_S = 0.008
+SYNTHETIC_IDLE_S = 0.002
+
+
+def _frame(sysid: int) -> bytes:
+    from pymavlink.dialects.v20 import development as mavlink
+
+    mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=190)
+    return bytes(mav.set_position_target_local_ned_encode(
+        0, 1, 1, 1, 2552, 0, 0, -5, 0, 0, 0, 0, 0, 0, 0, 0).pack(mav))
+
+
+async def synthetic_load(stop: asyncio.Event) -> None:
+    """Runs Python on the loop ~80% of the time (JSON of a vehicle-sized document) and
+    leaves cyclic garbage behind, so the collector runs too."""
+    document = {"vehicles": [{"id": i, "state": {f"k{j}": j * 0.5 for j in range(60)},
+                              "events": [str(j) for j in range(20)]} for i in range(20)]}
+    while not stop.is_set():
+        until = time.perf_counter() + SYNTHETIC_BUSY_S
+        while time.perf_counter() < until:
+            json.dumps(document)
+            cycle: list[Any] = [document]
+            cycle.append(cycle)
+        await asyncio.sleep(SYNTHETIC_IDLE_S)
+
+
+def process_sender(port: int, frame_hex: str, rate_hz: float, seconds: float) -> None:
+    """The sender process: one precomputed frame on absolute deadlines, nothing else."""
+    from server.link.stream_thread import Deadlines
+
+    frame = bytes.fromhex(frame_hex)
+    deadlines = Deadlines(1.0 / rate_hz)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        start = time.monotonic()
+        next_s = deadlines.rephase(start)
+        sock.sendto(frame, ("127.0.0.1", port))
+        while next_s < start + seconds:
+            time.sleep(max(0.0, next_s - time.monotonic()))
+            now = time.monotonic()
+            sock.sendto(frame, ("127.0.0.1", port))
+            next_s = deadlines.after_tick(now)
+
+
+async def measure_sender_options(receiver: ReceiverProcess, seconds: float
+                                 ) -> list[dict[str, Any]]:
+    from pymavlink.dialects.v20 import development as mavlink
+
+    from server.link import streamer as streamer_module
+    from server.link.streamer import SetpointStreamer
+
+    rows = []
+    dummy = mavlink.MAVLink(None).set_position_target_local_ned_encode(
+        0, 1, 1, 1, 2552, 0, 0, -5, 0, 0, 0, 0, 0, 0, 0, 0)
+    for option, sysid in OPTION_SYSIDS.items():
+        frame = _frame(sysid)
+        stop = asyncio.Event()
+        load = asyncio.create_task(synthetic_load(stop))
+        await asyncio.sleep(0.3)
+        await receiver.reset()
+        if option == "process":
+            proc = await asyncio.create_subprocess_exec(
+                sys.executable, "-m", "bench.stream_vs_mavsdk", "--process-sender",
+                f"{receiver.port}:{frame.hex()}:{SKYHELM_RATE_HZ}:{seconds}", cwd=PROJECT_ROOT)
+            await proc.wait()
+        else:
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+                streamer_module.SENDER_THREAD = option == "thread"
+                streamer = SetpointStreamer(
+                    lambda _m, s=sock, f=frame: s.sendto(f, ("127.0.0.1", receiver.port)),
+                    rate_hz=SKYHELM_RATE_HZ)
+                streamer.stream(dummy)
+                await asyncio.sleep(seconds)
+                streamer.stop()
+        stop.set()
+        await load
+        arrivals = (await receiver.arrivals()).get(f"{sysid}/190", [])
+        rows.append({"option": option, **interval_figures(arrivals, SKYHELM_RATE_HZ)})
+    streamer_module.SENDER_THREAD = True
+    return rows
+
+
 # -- MAVSDK --
 
 @contextlib.asynccontextmanager
@@ -284,6 +374,8 @@ async def measure(receiver: ReceiverProcess, seconds: float, mavsdk_key: str,
 async def run(seconds: float, variants: Sequence[str]) -> dict[str, Any]:
     load_average_before = os.getloadavg()
     phases: list[dict[str, Any]] = []
+    async with ReceiverProcess.running() as receiver:
+        options = await measure_sender_options(receiver, seconds / 2)
     async with ReceiverProcess.running() as receiver, \
             mavsdk_streaming(receiver.port) as mavsdk_key:
         for variant in variants:
@@ -307,6 +399,9 @@ async def run(seconds: float, variants: Sequence[str]) -> dict[str, Any]:
         "load": {"ws_clients": WS_CLIENTS, "telemetry_rate_hz": TELEMETRY_RATE_HZ,
                  "rest_reads_hz": REST_READS_HZ, "nice": LOAD_NICE},
         "phases": phases,
+        "sender_options": options,
+        "sender_options_load": {"busy_ms": SYNTHETIC_BUSY_S * 1e3,
+                                "idle_ms": SYNTHETIC_IDLE_S * 1e3},
         "goal": {
             "variant": first_loaded["variant"],
             "skyhelm_50hz_loaded_p99_abs_error_ms": ours,
@@ -322,6 +417,12 @@ async def run(seconds: float, variants: Sequence[str]) -> dict[str, Any]:
 
 
 def print_table(result: dict[str, Any]) -> None:
+    print("send path under synthetic load (this process's loop ~80% busy), 50 Hz:")
+    for row in result["sender_options"]:
+        print(f"  {row['option']:8} recv {row['received']:4d}  p50|err| "
+              f"{row.get('abs_error_p50_ms', float('nan')):7.3f} ms  p99|err| "
+              f"{row.get('abs_error_p99_ms', float('nan')):7.3f} ms  max "
+              f"{row.get('interval_max_ms', float('nan')):6.1f} ms")
     header = (f"{'variant':11} {'load':7} {'client':8} {'Hz':>4} {'recv':>5} "
               f"{'p50|err| ms':>12} {'p99|err| ms':>12} {'max ms':>8} {'gaps':>5} "
               f"{'server cpu':>10}")
@@ -350,8 +451,8 @@ def report(result: dict[str, Any]) -> Section | None:
     if not phases:
         return None
     machine = result.get("machine", {})
-    fig, axes = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
-    for ax, load in zip(axes, ("idle", "loaded"), strict=True):
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4), sharey=True)
+    for ax, load in zip(axes[:2], ("idle", "loaded"), strict=True):
         for phase in (p for p in phases if p["load"] == load):
             for client, style in (("skyhelm", "-"), ("mavsdk", ":")):
                 errors = phase[client].get("abs_errors_ms") or []
@@ -371,6 +472,20 @@ def report(result: dict[str, Any]) -> Section | None:
         ax.set_xlabel("|interval − period| at the receiver (ms)")
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=8)
+    options = result.get("sender_options") or []
+    for row in options:
+        errors = row.get("abs_errors_ms") or []
+        if errors:
+            ys = [1.0 - (i + 1) / len(errors) for i in range(len(errors))]
+            axes[2].step([max(e, 1e-3) for e in errors], [max(y, 1e-4) for y in ys],
+                         where="post", label=f"{row['option']}")
+    axes[2].set_xscale("log")
+    axes[2].set_yscale("log")
+    axes[2].set_title("send paths, 50 Hz, one process's loop ~80% busy", fontsize=9)
+    axes[2].set_xlabel("|interval − period| at the receiver (ms)")
+    axes[2].grid(True, which="both", alpha=0.3)
+    if options:
+        axes[2].legend(fontsize=8)
     axes[0].set_ylabel("fraction of intervals above")
     fig.suptitle("Setpoint stream lateness, SkyHelm vs MAVSDK in the same run")
     fig.tight_layout(rect=(0, 0.04, 1, 1))
@@ -390,6 +505,14 @@ def report(result: dict[str, Any]) -> Section | None:
                 f"{r.get('interval_max_ms', float('nan')):.1f} | "
                 f"{r.get('gaps_over_100ms', 0)} | "
                 f"{phase['server_cpu_share_of_one_core'] * 100:.0f}% |")
+    if options:
+        rows += ["", "Send paths under synthetic load (one process, its loop ~80% busy "
+                 "encoding JSON; 50 Hz):", "",
+                 "| send path | p50 \\|err\\| ms | p99 \\|err\\| ms | max interval ms |",
+                 "|---|---|---|---|"]
+        rows += [f"| {r['option']} | {r.get('abs_error_p50_ms', float('nan')):.2f} | "
+                 f"{r.get('abs_error_p99_ms', float('nan')):.2f} | "
+                 f"{r.get('interval_max_ms', float('nan')):.1f} |" for r in options]
     ratio = goal.get("ratio_skyhelm_over_mavsdk")
     ratio_text = f"{ratio:.2f}" if ratio is not None else "n/a"
     markdown = (
@@ -410,7 +533,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--variants", default=",".join(DEFAULT_VARIANTS),
                         help=f"server send paths, from {','.join(VARIANTS)}")
     parser.add_argument("--load-url", help=argparse.SUPPRESS)
+    parser.add_argument("--process-sender", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    if args.process_sender:
+        port, frame_hex, rate_hz, seconds = args.process_sender.split(":")
+        process_sender(int(port), frame_hex, float(rate_hz), float(seconds))
+        return 0
     if args.load_url:
         asyncio.run(load_worker(args.load_url, args.seconds))
         return 0
