@@ -27,7 +27,7 @@ deadlines (``process``: what a sender process fed by the server would achieve at
 Goal (issue 14): loaded, SkyHelm's 50 Hz p99 |interval − period| ≤ MAVSDK's 20 Hz in the
 same run; no gap > 100 ms.
 
-    .venv/bin/python -m bench.stream_vs_mavsdk [--seconds 10] [--quick]
+    .venv/bin/python -m bench.stream_vs_mavsdk [--seconds 8] [--quick]
 """
 
 from __future__ import annotations
@@ -528,7 +528,7 @@ def report(result: dict[str, Any]) -> Section | None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seconds", type=float, default=10.0, help="measuring time per phase")
+    parser.add_argument("--seconds", type=float, default=8.0, help="measuring time per phase")
     parser.add_argument("--quick", action="store_true", help="a 2 s smoke run per phase")
     parser.add_argument("--variants", default=",".join(DEFAULT_VARIANTS),
                         help=f"server send paths, from {','.join(VARIANTS)}")
