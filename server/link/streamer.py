@@ -182,6 +182,10 @@ class SetpointStreamer:
         with self._lock:
             if generation != self._generation:
                 return None
+            if self._loop is not None and self._loop.is_closed():
+                # its owner's loop is gone (a stream nobody stopped): it ends with it
+                self._active = False
+                return None
             now = self._clock()
             self._emit(now)
             return self._deadlines.after_tick(now)

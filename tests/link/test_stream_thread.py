@@ -256,3 +256,19 @@ async def test_concurrent_sends_keep_sequence_contiguous_signed_and_recorded(
     # every frame sent went to the tlog once, whichever thread sent it
     assert tlog_path is not None
     assert sorted(frame for _, frame in iter_tlog(tlog_path)) == sorted(frames)
+
+
+def test_a_stream_nobody_stopped_ends_when_its_loop_closes() -> None:
+    clock = FakeClock()
+    sender = SenderThread(clock, threaded=False)
+    sent: list[float] = []
+    streamer = SetpointStreamer(lambda _m: sent.append(clock.now_s), rate_hz=10, sender=sender)
+
+    async def start() -> None:
+        streamer.stream(_msg(1))
+
+    asyncio.run(start())  # runs the loop, then closes it
+    _run_until(sender, clock, 101.0)
+    assert sent == [100.0]
+    assert sender.pending() == 0
+    assert not streamer.active
