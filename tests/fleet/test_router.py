@@ -52,7 +52,8 @@ def router() -> Iterator[tuple[subprocess.Popen[str], str]]:
         lines = _lines_until_ready(process, 30.0)
         listening = [line.removeprefix("SkyHelm router listening: ") for line in lines
                      if line.startswith("SkyHelm router listening: ")]
-        assert len(listening) == 1 and listening[0].startswith("tcp/127.0.0.1:")
+        assert len(listening) == 1
+        assert listening[0].startswith("tcp/127.0.0.1:")
         assert not listening[0].endswith(":0"), "the router must say which port it took"
         yield process, listening[0]
     finally:
@@ -91,7 +92,8 @@ def test_two_sessions_meet_through_the_router(
         wait_for_blocking("a state put by one client reaching the other", delivered, 20.0, 0.2)
         assert received[0] == (state_key, b'{"seq": 1}')
         replies = list(fleet_side.get(keys.api("edge-a"), timeout=10.0))
-        assert [r.ok.payload.to_bytes() for r in replies if r.ok is not None] == [b'{"status": 200}']
+        answers = [r.ok.payload.to_bytes() for r in replies if r.ok is not None]
+        assert answers == [b'{"status": 200}']
         subscriber.undeclare()
 
 
