@@ -7,7 +7,9 @@ that dies shows LOST until it is back."""
 
 from __future__ import annotations
 
+import os
 import secrets
+import signal
 import socket
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -165,7 +167,9 @@ def test_an_edge_that_dies_shows_lost_and_comes_back(page: Any, fleet: Fleet) ->
     edge_a = fleet.edges["edge-a"]
     process = edge_a._process
     assert process is not None
-    process.kill()  # no goodbye: only Zenoh's liveliness can tell
+    # killed with its simulated vehicle (its process group), no goodbye: only Zenoh's
+    # liveliness can tell
+    os.killpg(process.pid, signal.SIGKILL)
     process.wait()
     wait_for("edge-a/1 LOST in the panel",
              lambda: _rows(page)["edge-a/1"]["alive"] == "false", 15.0)
