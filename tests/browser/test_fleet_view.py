@@ -80,8 +80,10 @@ def _rows(page: Any) -> dict[str, dict[str, str]]:
 
 
 def _both_listed(page: Any) -> bool:
+    """Both vehicles alive with a state (presence may come first)."""
     rows = _rows(page)
-    return all(rows.get(k, {}).get("alive") == "true" for k in ("edge-a/1", "edge-b/1"))
+    return all(rows.get(k, {}).get("alive") == "true" and rows[k]["age"]
+               for k in ("edge-a/1", "edge-b/1"))
 
 
 def test_the_panel_lists_every_edges_vehicle_fresh_and_the_map_draws_them(page: Any) -> None:
