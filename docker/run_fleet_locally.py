@@ -49,16 +49,25 @@ def local_command(command: list[str], router_port: int) -> list[str]:
     return out
 
 
-def _environment(service: dict[str, Any], token: str) -> dict[str, str]:
-    env = dict(os.environ)
-    for name, value in (service.get("environment") or {}).items():
-        # the compose file's ${VAR:?…} / ${VAR:-default}: the token, or the default
-        text = str(value)
-        if text.startswith("${SKYHELM_TOKEN"):
-            text = token
-        elif text.startswith("${") and ":-" in text:
-            text = text.split(":-", 1)[1].rstrip("}")
-        env[name] = text
+def compose_environment(service: dict[str, Any], host: dict[str, str]) -> dict[str, str]:
+    """What compose puts in a service's environment from ``host``'s variables: ``NAME=value``
+    with ``${VAR:?…}`` / ``${VAR:-default}`` resolved, and a bare ``NAME`` only when set."""
+    env: dict[str, str] = {}
+    for entry in service.get("environment") or []:
+        name, sep, value = str(entry).partition("=")
+        if not sep:
+            if name in host:
+                env[name] = host[name]
+            continue
+        if value.startswith("${") and value.endswith("}"):
+            variable, _, rest = value[2:-1].partition(":")
+            if host.get(variable):
+                value = host[variable]
+            elif rest.startswith("-"):
+                value = rest[1:]
+            else:
+                raise SystemExit(f"{variable}: {rest[1:] or 'must be set'}")
+        env[name] = value
     return env
 
 
@@ -85,7 +94,8 @@ def main(argv: list[str] | None = None) -> int:
             process = subprocess.Popen(
                 [str(SKYHELM), *command], stdout=subprocess.PIPE,
                 stderr=(logs / f"{name}.stderr.log").open("w"), text=True,
-                env=_environment(service, token),
+                env={**os.environ, **compose_environment(
+                    service, {**os.environ, "SKYHELM_TOKEN": token})},
             )
             processes[name] = process
             stdout = process.stdout

@@ -3,7 +3,9 @@ accepts, and the Zenoh TLS + access-control example really keeps a stranger out.
 
 from __future__ import annotations
 
+import importlib.util
 import json
+import os
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -29,11 +31,24 @@ def services() -> dict[str, Any]:
     return loaded["services"]
 
 
+def _run_fleet_locally() -> Any:
+    spec = importlib.util.spec_from_file_location("run_fleet_locally",
+                                                  DOCKER / "run_fleet_locally.py")
+    assert spec is not None
+    assert spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.parametrize("observer", [None, "an-observer-token-long-enough"])
 def test_the_fleet_compose_has_a_router_two_edges_and_a_fleet_server(
-    monkeypatch: pytest.MonkeyPatch,
+    monkeypatch: pytest.MonkeyPatch, observer: str | None,
 ) -> None:
-    monkeypatch.setenv("SKYHELM_TOKEN", "a-pilot-token-long-enough-for-the-checks")
-    monkeypatch.setenv("SKYHELM_FLEET_NAME", "default")
+    compose_environment = _run_fleet_locally().compose_environment
+    host = {"SKYHELM_TOKEN": "a-pilot-token-long-enough-for-the-checks"}
+    if observer is not None:
+        host["SKYHELM_OBSERVER_TOKEN"] = observer
     roles: dict[str, list[str]] = {"router": [], "edge": [], "fleet": []}
     edge_names = []
     for name, service in services().items():
@@ -42,11 +57,19 @@ def test_the_fleet_compose_has_a_router_two_edges_and_a_fleet_server(
             roles["router"].append(name)
             assert args.listen == ["tcp/0.0.0.0:7447"]
             continue
+        # the service's environment as compose gives it, and nothing else of SkyHelm's
+        for variable in [v for v in os.environ if v.startswith("SKYHELM_")]:
+            monkeypatch.delenv(variable)
+        for variable, value in compose_environment(service, host).items():
+            monkeypatch.setenv(variable, value)
         settings = settings_from_args(args)
+        given = settings.observer_token
+        assert (given.get_secret_value() if given is not None else None) == observer
         # everything meets at the router, by name on the compose network
         assert settings.zenoh_mode == "client"
         assert settings.zenoh_connect == ["tcp/router:7447"]
         assert not settings.zenoh_multicast_scouting
+        assert settings.fleet_name == "default"
         assert service["depends_on"] == ["router"]
         if settings.fleet:
             roles["fleet"].append(name)
