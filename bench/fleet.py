@@ -308,12 +308,16 @@ def main(argv: Sequence[str] | None = None) -> int:
           f"server {trip['fleet_median_ms']:.1f} ms: ratio "
           f"{trip['median_ratio_fleet_over_direct']:.2f}")
     for name, figures in result["stream"].items():
-        print(f"stream {name}: p99 {figures.get('interval_p99_ms')} ms, largest gap "
-              f"{figures.get('max_gap_ms')} ms, gaps {figures.get('gaps')}")
+        print(f"stream {name}: p99 {_ms(figures.get('interval_p99_ms'))} ms, largest gap "
+              f"{_ms(figures.get('max_gap_ms'))} ms, gaps {figures.get('gaps')}")
     for goal, met in result["goals_met"].items():
         print(f"goal {goal}: {'met' if met else 'NOT met'}")
     write_results("fleet", result)
     return 0
+
+
+def _ms(value: float | None) -> str:
+    return "n/a" if value is None else f"{value:.1f}"
 
 
 def report(result: dict[str, Any]) -> Section | None:
@@ -338,7 +342,8 @@ def report(result: dict[str, Any]) -> Section | None:
         ordered = sorted(values)
         ax_trip.step(ordered, [(i + 1) / len(ordered) for i in range(len(ordered))], where="post",
                      label=f"{name} (median {statistics.median(ordered):.1f} ms)")
-    ax_trip.set_xlabel("arm round trip (ms)")
+    ax_trip.set_xscale("log")
+    ax_trip.set_xlabel("arm round trip (ms, log)")
     ax_trip.legend(loc="lower right", fontsize=8)
     labels = ["interval p99", "largest gap"]
     for offset, (name, figures) in enumerate((("with fleet", stream["with_fleet"]),
@@ -364,8 +369,8 @@ def report(result: dict[str, Any]) -> Section | None:
          f"{trip['fleet_median_ms']:.1f} / {trip['direct_median_ms']:.1f} ms",
          f"{ratio:.2f}× (goal ≤ 2×)"),
         ("edge stream interval p99, with / without the fleet",
-         f"{stream['with_fleet'].get('interval_p99_ms')} / "
-         f"{stream['without_fleet'].get('interval_p99_ms')} ms",
+         f"{_ms(stream['with_fleet'].get('interval_p99_ms'))} / "
+         f"{_ms(stream['without_fleet'].get('interval_p99_ms'))} ms",
          f"{stream_ratio:.2f}×" if stream_ratio else "n/a"),
     ]
     table = "| figure | value | ratio |\n|---|---|---|\n" + "\n".join(
