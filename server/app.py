@@ -40,6 +40,7 @@ from server.api.routes import signing as signing_routes
 from server.api.security import install_security
 from server.fleet import routes as fleet_routes
 from server.fleet import ws as fleet_ws
+from server.fleet.edge import EdgeService
 from server.fleet.view import FleetVehicle
 from server.fleet.view_service import FleetService
 from server.link import Envelope, Link
@@ -80,6 +81,7 @@ def create_app(settings: Settings) -> FastAPI:
     fleet = FleetService.from_settings(settings) if settings.fleet else None
     if fleet is not None and hub is not None:
         fleet.view.on_change.append(_show_in_scene(hub.fleet))
+    edge = EdgeService.from_settings(settings, registry.all, publishers) if settings.zenoh else None
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
@@ -105,11 +107,15 @@ def create_app(settings: Settings) -> FastAPI:
             await publishers.start(registry.links)
             if fleet is not None:
                 await _start_fleet(fleet)
+            if edge is not None:
+                await _start_edge(edge, app)
             if hub is not None:
                 hub.on_click = _on_loop(publishers.publish_click)
                 await hub.start(publishers)
             yield
         finally:
+            if edge is not None:
+                await edge.stop()
             if fleet is not None:
                 await fleet.stop()
             if hub is not None:
@@ -132,6 +138,7 @@ def create_app(settings: Settings) -> FastAPI:
     app.state.publishers = publishers
     app.state.signing_store = None  # the lifespan reads the key file
     app.state.fleet = fleet
+    app.state.edge = edge
     install_error_handlers(app)
     if settings.cors_origins:
         app.add_middleware(
@@ -201,6 +208,13 @@ async def _start_fleet(fleet: FleetService) -> None:
         await fleet.start()
     except Exception as exc:  # zenoh.ZError: a bad endpoint, config or port in use
         raise StartupError(f"cannot join the fleet over Zenoh: {exc}") from exc
+
+
+async def _start_edge(edge: EdgeService, app: FastAPI) -> None:
+    try:
+        await edge.start(app)
+    except Exception as exc:  # zenoh.ZError: a bad endpoint, config or port in use
+        raise StartupError(f"cannot publish to the fleet over Zenoh: {exc}") from exc
 
 
 def is_replay(urls: list[str]) -> bool:
