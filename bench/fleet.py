@@ -2,9 +2,9 @@
 and an edge's setpoint stream with and without the fleet's traffic.
 
 Several ``skyhelm serve --zenoh --sim-count N`` edges (each with N simulated vehicles) and
-one ``skyhelm serve --fleet`` run as separate processes on 127.0.0.1, in peer mode: the
-fleet server listens on a loopback port, the edges connect to it (multicast scouting off,
-every Zenoh endpoint on loopback). The figures:
+one ``skyhelm serve --fleet`` run as separate processes on 127.0.0.1, in peer mode: each
+edge listens on a loopback port, the fleet server connects to them all (multicast scouting
+off, every Zenoh endpoint on loopback). The figures:
 
 - **state age at arrival**: for every vehicle row of ``GET /api/v1/fleet/vehicles``,
   ``state_age_s - age_s`` = (now - sent_unix_s) - (now - arrival) = arrival - sent: how old
@@ -16,9 +16,9 @@ every Zenoh endpoint on loopback). The figures:
   (``POST /api/v1/fleet/edges/<edge>/vehicles/1/arm``), both with the same lease; the ratio
   of the medians of the arm calls' wall times.
 - **stream quality**: the edge's own figures (``GET /vehicles/1/stream``: interval p99,
-  largest gap) for a setpoint stream of one vehicle on the first edge while the fleet
-  server subscribes and a client polls it, then again with the fleet server stopped (no
-  subscriber: no fleet traffic), the rest unchanged.
+  largest gap) for a setpoint stream of one vehicle on the first edge, first with the edges
+  alone (no fleet server yet: nobody subscribes, no fleet traffic), then while the fleet
+  server subscribes to every edge and a client polls it, the rest unchanged.
 
 Goals (issue 16): arrival age p99 ≤ 100 ms; fleet/direct median ≤ 2; stream unchanged.
 
@@ -122,29 +122,43 @@ def _await_ready(servers: list[Server], timeout_s: float, log_dir: Path) -> None
             waiting.pop(name).base_url = line.removeprefix(READY_PREFIX).split("/?token=")[0]
 
 
+@dataclass
+class Rig:
+    edges: list[Server]
+    token: str
+    fleet_args: list[str]
+    log_dir: Path
+    fleet: Server | None = None
+
+    def start_fleet(self) -> Server:
+        self.fleet = _start("fleet", self.fleet_args, self.token, self.log_dir)
+        _await_ready([self.fleet], READY_TIMEOUT_S, self.log_dir)
+        return self.fleet
+
+
 @contextlib.contextmanager
-def fleet_rig(edges: int, per_edge: int, log_dir: Path) -> Iterator[tuple[Server, list[Server],
-                                                                          str, str]]:
+def fleet_rig(edges: int, per_edge: int, log_dir: Path) -> Iterator[Rig]:
+    """The edges, each listening on its own loopback port; the fleet server, started later
+    (Rig.start_fleet), connects to them all (peer mode, multicast scouting off)."""
     token = secrets.token_urlsafe(24)
     fleet_name = f"bench{secrets.token_hex(4)}"
-    port = _free_port()
+    ports = [_free_port() for _ in range(edges)]
     zenoh = ["--fleet-name", fleet_name, "--no-zenoh-multicast-scouting"]
-    fleet = _start("fleet", ["--fleet", *zenoh, "--zenoh-listen", f"tcp/127.0.0.1:{port}"],
-                   token, log_dir)
     edge_servers = [
         _start(f"edge{k}", ["--zenoh", "--edge-name", f"edge{k}", "--sim-count", str(per_edge),
-                            *zenoh, "--zenoh-listen", "tcp/127.0.0.1:0",
-                            "--zenoh-connect", f"tcp/127.0.0.1:{port}",
+                            *zenoh, "--zenoh-listen", f"tcp/127.0.0.1:{port}",
                             "--control-rate-per-s", "1000", "--control-burst", "1000"],
                token, log_dir)
-        for k in range(edges)
+        for k, port in enumerate(ports)
     ]
-    everyone = [fleet, *edge_servers]
+    fleet_args = ["--fleet", *zenoh, "--zenoh-listen", "tcp/127.0.0.1:0",
+                  *(arg for port in ports for arg in ("--zenoh-connect", f"tcp/127.0.0.1:{port}"))]
+    rig = Rig(edge_servers, token, fleet_args, log_dir)
     try:
-        _await_ready(everyone, READY_TIMEOUT_S, log_dir)
-        yield fleet, edge_servers, token, fleet_name
+        _await_ready(edge_servers, READY_TIMEOUT_S, log_dir)
+        yield rig
     finally:
-        for server in reversed(everyone):
+        for server in ([rig.fleet] if rig.fleet else []) + edge_servers[::-1]:
             server.stop()
 
 
@@ -274,20 +288,24 @@ def run(edges: int, per_edge: int, phase_s: float, count: int) -> dict[str, Any]
     result: dict[str, Any] = {"edges": edges, "vehicles_per_edge": per_edge,
                               "vehicles": edges * per_edge, "phase_s": phase_s}
     started = time.monotonic()
-    with fleet_rig(edges, per_edge, log_dir) as (fleet, edge_servers, token, _):
-        result["startup_s"] = time.monotonic() - started
-        with httpx.Client(headers={"Authorization": f"Bearer {token}"}, timeout=30.0) as client:
+    with fleet_rig(edges, per_edge, log_dir) as rig:
+        edge = rig.edges[0]
+        with httpx.Client(headers={"Authorization": f"Bearer {rig.token}"},
+                          timeout=30.0) as client:
+            _wait_ready_to_arm(client, f"{edge.api}/vehicles/1")
+            lease = client.post(f"{edge.api}/vehicles/1/control",
+                                json={"client_name": "bench"}).json()["lease_id"]
+            # first the edges alone: nobody subscribes, no fleet traffic
+            without = _stream_phase(client, edge, lease, phase_s, poll=None)
+            fleet = rig.start_fleet()
+            result["startup_s"] = time.monotonic() - started
             result["all_alive_after_s"] = _wait_all_alive(client, fleet, edges * per_edge, 120.0)
             result["state_age"] = measure_state_age(client, fleet, phase_s)
             print(f"state age at arrival p99 {_ms(result['state_age']['arrival_p99_ms'])} ms",
                   flush=True)
-            edge = edge_servers[0]
-            lease = client.post(f"{fleet.api}/fleet/edges/{edge.name}/vehicles/1/control",
-                                json={"client_name": "bench"}).json()["lease_id"]
+            # the same lease at the edge, whichever way the call comes
             result["round_trip"] = measure_round_trip(client, fleet, edge, count, lease)
             with_fleet = _stream_phase(client, edge, lease, phase_s, poll=fleet)
-            fleet.stop()
-            without = _stream_phase(client, edge, lease, phase_s, poll=None)
     result["stream"] = {"with_fleet": with_fleet, "without_fleet": without}
     p99_with, p99_without = with_fleet.get("interval_p99_ms"), without.get("interval_p99_ms")
     result["stream_p99_ratio_with_over_without"] = (
