@@ -40,6 +40,7 @@ import contextlib
 import os
 import queue
 import secrets
+import shutil
 import signal
 import socket
 import statistics
@@ -306,6 +307,7 @@ def run(edges: int, per_edge: int, phase_s: float, count: int) -> dict[str, Any]
             # the same lease at the edge, whichever way the call comes
             result["round_trip"] = measure_round_trip(client, fleet, edge, count, lease)
             with_fleet = _stream_phase(client, edge, lease, phase_s, poll=fleet)
+    shutil.rmtree(log_dir, ignore_errors=True)  # kept only when a run fails, to read
     result["stream"] = {"with_fleet": with_fleet, "without_fleet": without}
     p99_with, p99_without = with_fleet.get("interval_p99_ms"), without.get("interval_p99_ms")
     result["stream_p99_ratio_with_over_without"] = (
