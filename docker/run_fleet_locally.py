@@ -12,6 +12,7 @@ import argparse
 import os
 import queue
 import secrets
+import shutil
 import signal
 import socket
 import subprocess
@@ -84,6 +85,7 @@ def main(argv: list[str] | None = None) -> int:
     urls: dict[str, str] = {}
     # the router first, as compose's depends_on orders them
     order = sorted(services, key=lambda name: name != "router")
+    ok = False
     try:
         for name in order:
             service = services[name]
@@ -128,7 +130,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"fleet vehicle {row['key']}: alive {row['alive']}, {row['type']}, "
                   f"{row['mode']}, state age {row['state_age_s']} s")
         ok = {r["edge"] for r in rows if r["alive"]} >= set(edges)
-        print("the fleet server lists every edge's vehicle" if ok else "MISSING edges")
+        print("the fleet server lists every edge's vehicle" if ok else f"MISSING edges: {logs}")
         if ok and args.keep:
             print(f"fleet dashboard: {fleet_url}/?token={token}  (Ctrl-C stops)")
             try:
@@ -146,6 +148,8 @@ def main(argv: list[str] | None = None) -> int:
                 process.wait(timeout=30)
             except subprocess.TimeoutExpired:
                 process.kill()
+        if ok:
+            shutil.rmtree(logs, ignore_errors=True)
 
 
 if __name__ == "__main__":
