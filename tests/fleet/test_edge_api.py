@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import logging
 import socket
 from collections.abc import AsyncIterator
 from typing import Any
@@ -200,3 +201,18 @@ async def test_an_edge_that_cannot_open_zenoh_is_a_startup_error() -> None:
         with pytest.raises(StartupError, match="cannot publish to the fleet over Zenoh"):
             async with app_running(settings):
                 pass
+
+
+async def test_no_log_line_carries_the_callers_token(
+    edge_api: EdgeApi, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.DEBUG)
+    secret = "s3cret-token-value"
+    call = {"method": "POST", "path": "/api/v1/echo", "query": f"token={secret}",
+            "headers": {"authorization": f"Bearer {secret}"}, "body": {}}
+    reply = await edge_api.run(json.dumps(call).encode())
+    assert reply["status"] == 200
+    assert any("zenoh call POST /api/v1/echo" in r.getMessage() for r in caplog.records)
+    assert secret not in caplog.text
+    # nothing logs the call's URL (a token in its query), even where no redaction is set up
+    assert not [r for r in caplog.records if r.name.startswith(("httpx", "httpcore"))]
