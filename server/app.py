@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
+import gc
 import logging
 import time
 from collections.abc import AsyncIterator, Callable
@@ -58,7 +59,11 @@ class StartupError(RuntimeError):
     """The server cannot start: a link would not open or a vehicle never appeared."""
 
 
-def create_app(settings: Settings) -> FastAPI:
+def create_app(settings: Settings, *, freeze_gc_at_start: bool = False) -> FastAPI:
+    """``freeze_gc_at_start`` (the served process, not tests that build many apps): what
+    start-up built moves out of the collector's reach (gc.freeze), so a later full
+    collection walks less and holds the GIL, and with it the stream's sender thread, for
+    less time."""
     tokens = TokenChecker.from_settings(settings)
     envelope = Envelope(
         max_alt_rel_m=settings.max_alt_rel_m,
@@ -109,6 +114,9 @@ def create_app(settings: Settings) -> FastAPI:
             if hub is not None:
                 hub.on_click = _on_loop(publishers.publish_click)
                 await hub.start(publishers)
+            if freeze_gc_at_start:
+                gc.collect()
+                gc.freeze()
             yield
         finally:
             if edge is not None:
