@@ -4,7 +4,7 @@ simulated vehicle), Zenoh on loopback only with explicit endpoints and multicast
 
 Two topologies:
 - peer: the fleet server listens, the edges connect to it (peer mode, brokerless);
-- router: a Zenoh router (router_process.py) listens, everyone connects to it as a client.
+- router: `skyhelm router` listens, everyone connects to it as a client.
 
 Every process can be killed the hard way (SIGKILL) and an edge restarted under its name.
 """
@@ -14,9 +14,9 @@ from __future__ import annotations
 import contextlib
 import os
 import secrets
+import select
 import signal
 import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -88,7 +88,7 @@ class FleetRig:
     edges: dict[str, Process]
     fleet_endpoint: str
     router_endpoint: str | None = None
-    router: subprocess.Popen[str] | None = None
+    router: subprocess.Popen[bytes] | None = None
     http: httpx.Client = field(default_factory=lambda: httpx.Client(timeout=30.0))
 
     def auth(self, token: str | None = None, lease_id: str | None = None) -> dict[str, str]:
@@ -139,7 +139,14 @@ class FleetRig:
         for process in (self.fleet, *self.edges.values()):
             process.stop()
         if self.router is not None:
-            _stop(self.router)
+            self.router.terminate()  # SIGTERM: the router closes its session and exits
+            try:
+                self.router.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                self.router.kill()
+                self.router.wait()
+            if self.router.stdout is not None:
+                self.router.stdout.close()
         self.http.close()
 
 
@@ -179,7 +186,7 @@ def edge_process(
 def fleet_rig(topology: Topology, log_dir: Path) -> Iterator[FleetRig]:
     pilot, observer = secrets.token_urlsafe(16), secrets.token_urlsafe(16)
     fleet_endpoint = free_tcp_endpoint()
-    router: subprocess.Popen[str] | None = None
+    router: subprocess.Popen[bytes] | None = None
     router_endpoint: str | None = None
     if topology == "router":
         router_endpoint = free_tcp_endpoint()
@@ -210,17 +217,26 @@ def fleet_rig(topology: Topology, log_dir: Path) -> Iterator[FleetRig]:
         rig.close()
 
 
-def start_router(endpoint: str, log_path: Path) -> subprocess.Popen[str]:
-    """A Zenoh router on ``endpoint`` (router_process.py); returns once it listens."""
+def start_router(endpoint: str, log_path: Path) -> subprocess.Popen[bytes]:
+    """`skyhelm router` listening on ``endpoint``; returns once it says it is ready."""
     with log_path.open("a") as log:
+        # unbuffered bytes: select() then sees every line not yet read
         router = subprocess.Popen(
-            [sys.executable, "-m", "tests.fleet.router_process", endpoint],
-            stdout=subprocess.PIPE, stderr=log, text=True, cwd=REPO,
-            env={**os.environ, "PYTHONPATH": str(REPO)},
+            [str(SKYHELM), "router", "--listen", endpoint],
+            stdout=subprocess.PIPE, stderr=log, bufsize=0, cwd=REPO,
         )
     assert router.stdout is not None
-    deadline = time.monotonic() + 30.0
-    line = router.stdout.readline()
-    assert line.startswith("router ready"), f"router said {line!r}: {log_path.read_text()}"
-    assert time.monotonic() < deadline
-    return router
+    deadline = time.monotonic() + 60.0
+    seen: list[str] = []
+    while time.monotonic() < deadline:
+        readable, _, _ = select.select([router.stdout], [], [], 0.2)
+        if not readable:
+            assert router.poll() is None, f"router exited: {log_path.read_text()[-2000:]}"
+            continue
+        line = router.stdout.readline().decode(errors="replace")
+        assert line, f"router closed its output after {seen}: {log_path.read_text()[-2000:]}"
+        seen.append(line.strip())
+        if line.startswith("SkyHelm router ready"):
+            return router
+    router.kill()
+    raise AssertionError(f"router not ready within 60 s; it said {seen}")
