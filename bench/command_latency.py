@@ -24,6 +24,8 @@ import time
 from collections.abc import AsyncIterator, Sequence
 from typing import Any
 
+from bench._markdown import table
+from bench._report import Section, save_figure
 from bench._results import machine_info, write_results
 from server.link import Link, Vehicle
 from server.simproc import SimInstance, SimProcess
@@ -148,3 +150,45 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 if __name__ == "__main__":
     raise SystemExit(main())
+
+
+def report(result: dict[str, Any]) -> Section | None:
+    """The round trips of both clients as distributions, and the ratio of their medians."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    ours, theirs = result["skyhelm_arm_wall"], result["mavsdk_arm_wall"]
+    samples = result.get("samples_ms", {})
+    figures = []
+    if samples.get("skyhelm") and samples.get("mavsdk"):
+        fig = Figure(figsize=(6.4, 3.4))
+        ax = fig.add_subplot()
+        for name, values in (("SkyHelm", samples["skyhelm"]), ("MAVSDK", samples["mavsdk"])):
+            ordered = sorted(values)
+            ax.step(ordered, [(i + 1) / len(ordered) for i in range(len(ordered))],
+                    where="post", label=f"{name} (median {statistics.median(ordered):.2f} ms)")
+        ax.set_xscale("log")
+        ax.set_xlabel("arm → COMMAND_ACK, wall time (ms, log)")
+        ax.set_ylabel("fraction of commands")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(loc="lower right")
+        figures.append(save_figure(
+            fig, "command_latency",
+            f"Arm round trip on one simulated vehicle, {result['count']} commands per client, "
+            "alternating", result["machine"]))
+    rows = [
+        ["SkyHelm (`await vehicle.arm()`)", *(f"{ours[k]:.2f}" for k in
+                                               ("median_ms", "p90_ms", "max_ms"))],
+        ["MAVSDK (`drone.action.arm()`)", *(f"{theirs[k]:.2f}" for k in
+                                            ("median_ms", "p90_ms", "max_ms"))],
+    ]
+    ratio = result["median_ratio_skyhelm_over_mavsdk"]
+    markdown = (
+        f"SkyHelm's arm round trip takes **{ratio:.2f}×** MAVSDK's (median over "
+        f"{result['count']} arms each, alternating on the same simulated vehicle; goal ≤ 1: "
+        f"{'met' if ratio <= 1 else 'NOT met'}).\n\n"
+        + table(["client", "median ms", "p90 ms", "max ms"], rows)
+    )
+    return Section("Command round trip: SkyHelm vs MAVSDK", 20, markdown, figures)
