@@ -231,7 +231,8 @@ def _stream_target(results: dict[str, dict[str, Any] | None]) -> TargetRow:
 
 
 def _clients_target(results: dict[str, dict[str, Any] | None]) -> TargetRow:
-    target = "100 WS telemetry clients at 10 Hz: vehicle → client p99 ≤ 20 ms, server ≤ 50 % of one core"
+    target = ("100 WS telemetry clients at 10 Hz: vehicle → client p99 ≤ 20 ms, server ≤ 50 % "
+              "of one core")
     r = results.get("ws_clients")
     if r is not None:
         row = find_row(r, ("clients", "telemetry_clients", "ws_clients"), 100)

@@ -196,8 +196,9 @@ def report(result: dict[str, Any]) -> Section | None:
     rows = [[r["subscribers"], r["ticks"], r["encodes"], r["encodes_per_tick"],
              r["messages_sent"], r["messages_per_encode"]] for r in result["fan_out"]]
     first, last = result["fan_out"][0], result["fan_out"][-1]
+    cost = ratio(enc["ws_message_us"], enc["asdict_json_dumps_us"])
     markdown = (
-        f"A WebSocket state message costs **{ratio(enc['ws_message_us'], enc['asdict_json_dumps_us'])}"
+        f"A WebSocket state message costs **{cost}"
         f"** of `json.dumps(dataclasses.asdict(state))` ({enc['ws_message_us']} µs vs "
         f"{enc['asdict_json_dumps_us']} µs; goal ≤ {result['goal_us']:.0f} µs: "
         f"{'met' if result['within_goal'] else 'NOT met'}). With {last['subscribers']} "
