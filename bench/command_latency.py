@@ -88,8 +88,19 @@ def _summary(values_ms: Sequence[float]) -> dict[str, float]:
     }
 
 
+def _import_mavsdk() -> Any:
+    """mavsdk_grpc, without the uvloop event-loop policy its import installs when uvloop is
+    there: a policy swapped under a running default loop breaks its child processes (the
+    simulated vehicle), and both clients must be measured on the same loop."""
+    policy = asyncio.get_event_loop_policy()
+    import mavsdk_grpc
+
+    asyncio.set_event_loop_policy(policy)
+    return mavsdk_grpc
+
+
 async def run(count: int) -> dict[str, Any]:
-    import mavsdk_grpc as mavsdk
+    mavsdk = _import_mavsdk()
 
     load_average_before = os.getloadavg()
     async with simulated_vehicle() as instance:

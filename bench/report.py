@@ -315,8 +315,23 @@ def _section_for(module: Any, bench: BenchResult) -> tuple[Section, str | None]:
     return (section if section is not None else Section(bench.title, order, "")), None
 
 
+def run_markdown(run: dict[str, Any] | None) -> str:
+    """How long each benchmark of the run took (bench/results/run_all.json)."""
+    if not run:
+        return ("Written from the results in bench/results without `bench/run_all.py`: each "
+                "section says when its figures were measured.")
+    rows = "\n".join(f"| `{b['bench']}` | {' '.join(b.get('args', [])) or 'defaults'} | "
+                     f"{b['seconds']:.0f} | {'ok' if b['exit'] == 0 else b['exit']} |"
+                     for b in run.get("benches", []))
+    kind = "a quick run (smaller sizes)" if run.get("quick") else "default sizes"
+    return (f"Started {run['started_at']}, {kind}, {run['total_seconds']:.0f} s in all "
+            f"(budget {run['budget_seconds']:.0f} s).\n\n"
+            "| Benchmark | Arguments | Seconds | Exit |\n|---|---|---|---|\n" + rows)
+
+
 def render(sections: Sequence[tuple[str, Section, dict[str, Any] | None]],
-           targets: Sequence[TargetRow], machine: dict[str, Any], now: dt.datetime) -> str:
+           targets: Sequence[TargetRow], machine: dict[str, Any], now: dt.datetime,
+           run: dict[str, Any] | None = None) -> str:
     out = [
         "# Performance",
         "",
@@ -339,6 +354,10 @@ def render(sections: Sequence[tuple[str, Section, dict[str, Any] | None]],
         "## Done-when targets (issue 14)",
         "",
         targets_markdown(targets),
+        "",
+        "## This run",
+        "",
+        run_markdown(run),
         "",
         "## Contents",
         "",
@@ -378,6 +397,16 @@ def _measured_line(name: str, result: dict[str, Any] | None) -> str:
     return "<sub>" + ", ".join(parts) + "</sub>"
 
 
+def _this_run(path: Path, since: dt.datetime | None) -> dict[str, Any] | None:
+    """bench/run_all.py's timings, when they are those of the run being reported."""
+    try:
+        run = json.loads(path.read_text())
+        started = dt.datetime.fromisoformat(run["started_at"].replace("Z", "+00:00"))
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return None
+    return run if since is None or started >= since else None
+
+
 def write_report(results_dir: Path = RESULTS_DIR, docs_dir: Path = DOCS_DIR,
                  since: dt.datetime | None = None,
                  names: Sequence[str] | None = None) -> tuple[Path, list[str]]:
@@ -415,7 +444,8 @@ def write_report(results_dir: Path = RESULTS_DIR, docs_dir: Path = DOCS_DIR,
     now = dt.datetime.now(dt.UTC)
     path = docs_dir / "PERFORMANCE.md"
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(render(sections, targets, machine_now(), now))
+    path.write_text(render(sections, targets, machine_now(), now,
+                           _this_run(results_dir / "run_all.json", since)))
     return path, failed
 
 
