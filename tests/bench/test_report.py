@@ -106,6 +106,33 @@ def test_targets_read_pass_fail_or_not_measured(tmp_path: Path) -> None:
     assert report.NOT_MEASURED in vehicles
 
 
+def test_targets_from_the_issue_benches(tmp_path: Path) -> None:
+    """The shapes stream_vs_mavsdk, ws_clients and many_vehicles write."""
+    results = tmp_path / "results"
+    _write(results, "stream_vs_mavsdk", {
+        "goal": {"variant": "thread", "skyhelm_50hz_loaded_p99_abs_error_ms": 2.0,
+                 "mavsdk_20hz_loaded_p99_abs_error_ms": 4.0, "no_gap_over_100ms": True},
+        "phases": [{"variant": "thread", "load": "idle", "skyhelm": {"interval_max_ms": 21.0}},
+                   {"variant": "thread", "load": "loaded",
+                    "skyhelm": {"interval_max_ms": 31.0}}],
+        "written_at": STAMP})
+    _write(results, "ws_clients", {"rows": [
+        {"clients": 1, "probe_latency": {"p99_ms": 1.0}, "server_cpu_share_of_one_core": 0.01},
+        {"clients": 100, "probe_latency": {"p99_ms": 25.0}, "latency": {"p99_ms": 40.0},
+         "server_cpu_share_of_one_core": 0.2}], "written_at": STAMP})
+    _write(results, "many_vehicles", {"rows": [
+        {"vehicles": 50, "streams_silent": ["27", "32"], "stream_p99_error_ms_worst": None,
+         "stream_max_gap_ms": None, "page_live": True}], "written_at": STAMP})
+    out, _ = report.write_report(results, tmp_path / "docs", since=NOW,
+                                 names=["stream_vs_mavsdk", "ws_clients", "many_vehicles"])
+    text = out.read_text()
+    assert ("SkyHelm 2.0 ms vs MAVSDK 4.0 ms (ratio 0.50); largest gap 31.0 ms | pass | "
+            "`stream_vs_mavsdk`") in text
+    assert "p99 25.0 ms (1.25 × the limit), server 20% of a core | **FAIL** |" in text
+    assert ("worst p99 error ?, largest gap ?, 2 streams silent, page live | **FAIL** |"
+            in text)
+
+
 def test_a_missing_or_older_result_is_not_measured_in_this_run(tmp_path: Path) -> None:
     results = tmp_path / "results"
     old = _command_latency(0.5)
