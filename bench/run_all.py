@@ -53,6 +53,10 @@ QUICK_ARGS: dict[str, list[str]] = {
 }
 
 
+# --quick leaves out what is no performance figure: the docs' screenshots (~100 s).
+QUICK_SKIP = {"screenshots"}
+
+
 def discover(bench_dir: Path = BENCH_DIR) -> list[str]:
     return sorted(p.stem for p in bench_dir.glob("*.py")
                   if not p.stem.startswith("_") and p.stem not in NOT_BENCHES)
@@ -88,7 +92,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                      if args.soak or os.environ.get(env) == "1"}
     names = [n for n in discover()
              if (n not in OPT_IN or n in wanted_opt_in or (args.only and n in args.only))
-             and (args.only is None or n in args.only) and n not in args.skip]
+             and (args.only is None or n in args.only) and n not in args.skip
+             and not (args.quick and n in QUICK_SKIP and not (args.only and n in args.only))]
     started_at = dt.datetime.now(dt.UTC).replace(microsecond=0)
     run_start = time.monotonic()
     timings: list[dict[str, Any]] = []
