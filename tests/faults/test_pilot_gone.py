@@ -20,7 +20,6 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-import pytest_asyncio
 from websockets.asyncio.client import ClientConnection, connect
 
 from tests.api.conftest import OBSERVER, api_for, sim_cluster
@@ -44,13 +43,8 @@ def _speed(state: dict[str, Any]) -> float:
     return math.hypot(velocity["north_m_s"], velocity["east_m_s"])
 
 
-# One hovering quad serves the module: each test starts from it hovering in OFFBOARD on the
-# server's stream with no lease holder, and leaves it so (the tab's lease ends either way).
-pytestmark = pytest.mark.asyncio(loop_scope="module")
-
-
-@pytest_asyncio.fixture(loop_scope="module", scope="module")
-async def hovering_quad() -> AsyncIterator[Served]:
+@pytest.fixture
+async def quad() -> AsyncIterator[Served]:
     # the sim in real time: the times to stop are real seconds, and a loaded machine does
     # not starve a sim running 8x faster in the same process
     async with (
@@ -62,19 +56,6 @@ async def hovering_quad() -> AsyncIterator[Served]:
             s = Served(api, host)
             await _hover_in_offboard(s)
             yield s
-
-
-@pytest_asyncio.fixture(loop_scope="module")
-async def quad(hovering_quad: Served) -> AsyncIterator[Served]:
-    """The shared quad once it hovers in OFFBOARD with nobody holding its lease."""
-
-    async def ready() -> bool:
-        state = await hovering_quad.api.state()
-        return (state["mode"] == "OFFBOARD" and state["lease"]["holder"] is None
-                and _speed(state) < STOPPED_M_S)
-
-    await eventually(ready, 20.0, "the quad hovering in OFFBOARD without a lease holder")
-    yield hovering_quad
 
 
 async def _hover_in_offboard(s: Served) -> None:
