@@ -146,12 +146,14 @@ class EdgeService:
         for vehicle in self._vehicles():
             publication = self.publications.get(vehicle.sysid)
             if publication is None or publication.vehicle is not vehicle:
+                seq_start = self._seq_start
                 if publication is not None:  # the link made a new Vehicle for this sysid
                     del self.publications[vehicle.sysid]
                     await publication.close()
+                    seq_start = publication.last_seq  # its samples go on numbering upwards
                 publication = VehiclePublication(
                     session, self.keys, self.name, vehicle,
-                    self._publishers.for_vehicle(vehicle), self._seq_start,
+                    self._publishers.for_vehicle(vehicle), seq_start,
                 )
                 self.publications[vehicle.sysid] = publication
                 publication.start()

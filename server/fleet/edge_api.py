@@ -153,11 +153,10 @@ class EdgeApi:
         self.max_in_flight = max_in_flight
         self.calls = 0
         self.refused = 0  # malformed or refused before the app saw them
-        self._client = httpx.AsyncClient(
-            transport=httpx.ASGITransport(
-                app=app, raise_app_exceptions=False, client=ZENOH_CLIENT
-            ),
-            base_url="http://edge",
+        # the transport without a client: httpx's client logs every URL, query (and so a
+        # token in it) included
+        self._transport = httpx.ASGITransport(
+            app=app, raise_app_exceptions=False, client=ZENOH_CLIENT
         )
         self._loop: asyncio.AbstractEventLoop | None = None
         self._tasks: set[asyncio.Task[None]] = set()
@@ -170,12 +169,12 @@ class EdgeApi:
         self._loop = asyncio.get_running_loop()
 
     async def close(self) -> None:
-        """Answer calls still running with 503, then close the client."""
+        """Answer calls still running with 503, then close the transport."""
         self._closing = True
         for task in list(self._tasks):
             task.cancel()
         await asyncio.gather(*self._tasks, return_exceptions=True)
-        await self._client.aclose()
+        await self._transport.aclose()
         await asyncio.to_thread(self._replies.shutdown)
 
     async def run(self, data: bytes | None) -> dict[str, Any]:
@@ -194,12 +193,12 @@ class EdgeApi:
             except ValueError:
                 return CallError(422, "body: numbers must be finite", "body").reply()
             headers["content-type"] = "application/json"
-        url = call["path"] + (f"?{call['query']}" if call["query"] else "")
+        url = "http://edge" + call["path"] + (f"?{call['query']}" if call["query"] else "")
+        request = httpx.Request(call["method"], url, headers=headers, content=content)
         try:
             async with asyncio.timeout(self.call_timeout_s):
-                response = await self._client.request(
-                    call["method"], url, headers=headers, content=content
-                )
+                response = await self._transport.handle_async_request(request)
+                await response.aread()
         except TimeoutError:
             reason = f"the call did not finish within {self.call_timeout_s:g} s"
             return CallError(504, reason).reply()

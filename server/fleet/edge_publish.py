@@ -129,6 +129,10 @@ class VehiclePublication:
                 token.undeclare()  # type: ignore[no-untyped-call]
 
     @property
+    def last_seq(self) -> int:
+        return self._sequence.seq
+
+    @property
     def alive(self) -> bool:
         return self._token is not None
 

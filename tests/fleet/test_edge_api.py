@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import asyncio
 import json
+import logging
+import socket
 from collections.abc import AsyncIterator
 from typing import Any
 
@@ -16,9 +18,11 @@ import zenoh
 from fastapi import FastAPI, Request, Response
 
 from server.api.publisher import Published
+from server.app import StartupError
 from server.fleet.edge_api import EdgeApi, check_path
 from server.fleet.edge_publish import Sequence
 from server.fleet.session import open_session
+from tests.api.conftest import app_running, make_settings
 from tests.fleet.fake_edge import free_tcp_endpoint, loopback_options
 from tests.waiting import eventually
 
@@ -183,3 +187,32 @@ async def test_samples_are_numbered_by_tick_never_going_back() -> None:
     assert sequence.stamp(first) == (1002, second)  # older: the newest is sent instead
     retaken = tick(7, 1.5)  # the same version taken again for a read: the age grew
     assert sequence.stamp(retaken) == (1003, retaken)
+
+
+async def test_an_edge_that_cannot_open_zenoh_is_a_startup_error() -> None:
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        endpoint = f"tcp/127.0.0.1:{taken.getsockname()[1]}"
+        settings = make_settings(
+            "udpout:127.0.0.1:9", zenoh=True, edge_name="edge-x", zenoh_listen=[endpoint],
+            zenoh_multicast_scouting=False,
+        )
+        with pytest.raises(StartupError, match="cannot publish to the fleet over Zenoh"):
+            async with app_running(settings):
+                pass
+
+
+async def test_no_log_line_carries_the_callers_token(
+    edge_api: EdgeApi, caplog: pytest.LogCaptureFixture
+) -> None:
+    caplog.set_level(logging.DEBUG)
+    secret = "s3cret-token-value"
+    call = {"method": "POST", "path": "/api/v1/echo", "query": f"token={secret}",
+            "headers": {"authorization": f"Bearer {secret}"}, "body": {}}
+    reply = await edge_api.run(json.dumps(call).encode())
+    assert reply["status"] == 200
+    assert any("zenoh call POST /api/v1/echo" in r.getMessage() for r in caplog.records)
+    assert secret not in caplog.text
+    # nothing logs the call's URL (a token in its query), even where no redaction is set up
+    assert not [r for r in caplog.records if r.name.startswith(("httpx", "httpcore"))]
