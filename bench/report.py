@@ -35,7 +35,6 @@ NOT_MEASURED = "Not measured in this run."
 # of a benchmark sets its own order.
 DEFAULT_ORDER = {
     "stream_vs_mavsdk": 10,
-    "stream_jitter": 15,
     "command_latency": 20,
     "ws_clients": 30,
     "api_load": 35,

@@ -36,10 +36,7 @@ PER_BENCH_BUDGET_S = 90.0
 PER_BENCH_TIMEOUT_S = 600.0
 # Arguments this run gives a benchmark in place of its own defaults, to keep it within
 # PER_BENCH_BUDGET_S (the bench's own defaults stay its long run).
-DEFAULT_ARGS: dict[str, list[str]] = {
-    # four 30 s measurements by default; 15 s each still gives 750 intervals at 50 Hz
-    "stream_jitter": ["--seconds", "15"],
-}
+DEFAULT_ARGS: dict[str, list[str]] = {}
 # --quick: smaller sizes for benchmarks without a --quick flag of their own.
 QUICK_ARGS: dict[str, list[str]] = {
     "api_load": ["--seconds", "5", "--clients", "20"],
@@ -49,7 +46,6 @@ QUICK_ARGS: dict[str, list[str]] = {
     "map_render": ["--seconds", "3"],
     "sim_cost": ["--seconds", "2", "--counts", "1,5"],
     "soak": ["--minutes", "1"],
-    "stream_jitter": ["--seconds", "3"],
 }
 
 
