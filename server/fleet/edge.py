@@ -24,7 +24,8 @@ from collections.abc import Callable
 import zenoh
 
 from server.api.publisher import StatePublishers
-from server.fleet.edge_api import Asgi, EdgeApi
+from server.fleet.asgi_call import Asgi
+from server.fleet.edge_api import EdgeApi
 from server.fleet.edge_publish import VehiclePublication
 from server.fleet.keys import FleetKeys, check_name
 from server.fleet.session import ZenohOptions, open_session

@@ -16,6 +16,10 @@ anything else answers 404, a payload that is not such an object 422. The app see
 as coming from the client address ``zenoh`` (its lockout and logs say so). Tokens are never
 logged.
 
+The call runs straight through the app's ASGI interface (asgi_call.py: no HTTP client in
+between), and the app's JSON answer goes into the reply as the app wrote it (checked, not
+decoded and encoded again).
+
 Threads: Zenoh calls back on its own thread; the payload is read there and the call handed
 to the event loop, which runs it; the reply goes out from a small thread pool (a reply may
 wait while the querier's link is congested; the loop never does). Every query is answered
@@ -29,22 +33,15 @@ import asyncio
 import contextlib
 import json
 import logging
-from collections.abc import Awaitable, Callable, MutableMapping
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 from urllib.parse import unquote
 
-import httpx
 import zenoh
 
-log = logging.getLogger(__name__)
+from server.fleet.asgi_call import Asgi, AsgiAnswer, call_app
 
-Scope = MutableMapping[str, Any]
-Message = MutableMapping[str, Any]
-Asgi = Callable[
-    [Scope, Callable[[], Awaitable[Message]], Callable[[Message], Awaitable[None]]],
-    Awaitable[None],
-]
+log = logging.getLogger(__name__)
 
 API_PREFIX = "/api/v1/"
 # routes a remote caller may not reach through an edge: another hop of the fleet
@@ -153,11 +150,7 @@ class EdgeApi:
         self.max_in_flight = max_in_flight
         self.calls = 0
         self.refused = 0  # malformed or refused before the app saw them
-        # the transport without a client: httpx's client logs every URL, query (and so a
-        # token in it) included
-        self._transport = httpx.ASGITransport(
-            app=app, raise_app_exceptions=False, client=ZENOH_CLIENT
-        )
+        self._app = app
         self._loop: asyncio.AbstractEventLoop | None = None
         self._tasks: set[asyncio.Task[None]] = set()
         self._running = 0
@@ -169,47 +162,45 @@ class EdgeApi:
         self._loop = asyncio.get_running_loop()
 
     async def close(self) -> None:
-        """Answer calls still running with 503, then close the transport."""
+        """Answer calls still running with 503; stop the reply threads."""
         self._closing = True
         for task in list(self._tasks):
             task.cancel()
         await asyncio.gather(*self._tasks, return_exceptions=True)
-        await self._transport.aclose()
         await asyncio.to_thread(self._replies.shutdown)
 
     async def run(self, data: bytes | None) -> dict[str, Any]:
+        """The reply payload for a query payload, decoded (see encoded_reply)."""
+        reply: dict[str, Any] = json.loads(await self.encoded_reply(data))
+        return reply
+
+    async def encoded_reply(self, data: bytes | None) -> bytes:
         """The reply payload for a query payload: the app's answer, or why not."""
         try:
             call = parse_call(data)
         except CallError as exc:
             self.refused += 1
-            return exc.reply()
+            return _encode(exc.reply())
         self.calls += 1
         headers = dict(call["headers"])
-        content: bytes | None = None
+        content = b""
         if call["body"] is not None:
             try:
                 content = json.dumps(call["body"], allow_nan=False).encode()
             except ValueError:
-                return CallError(422, "body: numbers must be finite", "body").reply()
+                return _encode(CallError(422, "body: numbers must be finite", "body").reply())
             headers["content-type"] = "application/json"
-        url = "http://edge" + call["path"] + (f"?{call['query']}" if call["query"] else "")
-        request = httpx.Request(call["method"], url, headers=headers, content=content)
         try:
             async with asyncio.timeout(self.call_timeout_s):
-                response = await self._transport.handle_async_request(request)
-                await response.aread()
+                answer = await call_app(
+                    self._app, call["method"], call["path"], call["query"], headers, content,
+                    ZENOH_CLIENT,
+                )
         except TimeoutError:
             reason = f"the call did not finish within {self.call_timeout_s:g} s"
-            return CallError(504, reason).reply()
-        log.debug("zenoh call %s %s: %d", call["method"], call["path"], response.status_code)
-        return {
-            "status": response.status_code,
-            "headers": {
-                name: response.headers[name] for name in REPLY_HEADERS if name in response.headers
-            },
-            "body": _body(response),
-        }
+            return _encode(CallError(504, reason).reply())
+        log.debug("zenoh call %s %s: %d", call["method"], call["path"], answer.status)
+        return encode_answer(answer)
 
     # --- on Zenoh's thread ---------------------------------------------------------------
 
@@ -221,35 +212,33 @@ class EdgeApi:
             with contextlib.suppress(RuntimeError):  # the loop closed: refused below
                 loop.call_soon_threadsafe(self._begin, query, data)
                 return
-        send_reply(query, self.reply_key, _stopping())
+        send_reply(query, self.reply_key, _encode(_stopping()))
 
     # --- on the loop ---------------------------------------------------------------------
 
     def _begin(self, query: zenoh.Query, data: bytes | None) -> None:
-        refusal: dict[str, Any] | None = None
+        refusal: bytes | None = None
         if self._closing:
-            refusal = _stopping()
+            refusal = _encode(_stopping())
         elif self._running >= self.max_in_flight:
             self.refused += 1
             reason = f"the edge is running {self.max_in_flight} calls; try again"
-            refusal = CallError(503, reason).reply()
+            refusal = _encode(CallError(503, reason).reply())
         task = asyncio.create_task(self._answer(query, data, refusal), name="zenoh-api-call")
         self._tasks.add(task)
         task.add_done_callback(self._tasks.discard)
 
-    async def _answer(
-        self, query: zenoh.Query, data: bytes | None, refusal: dict[str, Any] | None
-    ) -> None:
+    async def _answer(self, query: zenoh.Query, data: bytes | None, refusal: bytes | None) -> None:
         reply = refusal
         if reply is None:
             self._running += 1
             try:
-                reply = await self.run(data)
+                reply = await self.encoded_reply(data)
             except asyncio.CancelledError:
-                reply = _stopping()  # answered all the same, below
-            except Exception:  # the client failed, not the app (its errors are answers)
+                reply = _encode(_stopping())  # answered all the same, below
+            except Exception:  # the edge failed, not the app (its errors are answers)
                 log.exception("zenoh api call failed")
-                reply = CallError(500, "the edge failed to run the call").reply()
+                reply = _encode(CallError(500, "the edge failed to run the call").reply())
             finally:
                 self._running -= 1
         # a reply may wait for a congested link: never on the loop
@@ -257,13 +246,10 @@ class EdgeApi:
         await loop.run_in_executor(self._replies, send_reply, query, self.reply_key, reply)
 
 
-def send_reply(query: zenoh.Query, key: str, reply: dict[str, Any]) -> None:
+def send_reply(query: zenoh.Query, key: str, reply: bytes) -> None:
     """Answer a query and drop it (finalising it for the querier); errors only logged."""
     try:
-        query.reply(
-            key, json.dumps(reply, allow_nan=False).encode(),
-            encoding=zenoh.Encoding.APPLICATION_JSON,
-        )
+        query.reply(key, reply, encoding=zenoh.Encoding.APPLICATION_JSON)
     except zenoh.ZError as exc:  # the session closed, or the querier gave up
         log.debug("zenoh api reply not sent: %s", exc)
     finally:
@@ -275,10 +261,35 @@ def _stopping() -> dict[str, Any]:
     return CallError(503, "the edge is stopping").reply()
 
 
-def _body(response: httpx.Response) -> Any:
-    if not response.content:
-        return None
+def _encode(reply: dict[str, Any]) -> bytes:
+    return json.dumps(reply, allow_nan=False).encode()
+
+
+def encode_answer(answer: AsgiAnswer) -> bytes:
+    """The reply payload for the app's answer: its status, the headers a caller may act on,
+    and its body: JSON as the app wrote it (after checking it is JSON), other text as a
+    JSON string, nothing as null."""
+    headers = {name: answer.headers[name] for name in REPLY_HEADERS if name in answer.headers}
+    head = json.dumps({"status": answer.status, "headers": headers})
+    body = answer.body
+    if not body:
+        encoded_body = b"null"
+    elif _is_json(body):
+        encoded_body = body.strip()
+    else:
+        encoded_body = json.dumps(body.decode("utf-8", "replace")).encode()
+    # {"status": .., "headers": {..}, "body": <body>}: the head without its closing brace
+    return head[:-1].encode() + b', "body": ' + encoded_body + b"}"
+
+
+def _is_json(body: bytes) -> bool:
+    """One JSON value, without NaN or infinities (what json.loads of Python would let by)."""
     try:
-        return response.json()
-    except ValueError:
-        return response.text
+        json.loads(body, parse_constant=_refuse_constant)
+    except ValueError:  # also bad UTF-8
+        return False
+    return True
+
+
+def _refuse_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not JSON")

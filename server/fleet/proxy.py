@@ -2,8 +2,19 @@
 ``skyhelm/<fleet>/<edge>/api`` (fleet-spec, docs/fleet.md), answered by the edge's own app.
 
 The query never blocks the loop: Zenoh calls back with the reply on its thread, and once
-more (the handler's drop) when the query is over; both resolve a Future on the loop. No
-reply within the timeout is an EdgeTimeout (the route answers 504).
+more (the handler's drop) when the query is over; the first reply, or the end of a query
+that got none, resolves a Future on the loop (one hand-over per call). No reply within the
+timeout is an EdgeTimeout (the route answers 504).
+
+Query options, for a command's round trip: no consolidation (the one edge's reply is handed
+over as it arrives, not held until the query is finalised), express (sent at once, not
+batched), interactive-high priority (ahead of the states the edges publish), and BLOCK
+congestion control (a command or its answer waits for a congested link rather than being
+dropped; the edge's reply inherits the query's QoS).
+
+Timeouts: 5 s for a call, and for an ask for control (POST .../control with "takeover" and
+without "force"), which the edge holds until the holder answers or its takeover_ask_s is
+over, that wait on top (call_timeout_s).
 """
 
 from __future__ import annotations
@@ -20,6 +31,7 @@ import zenoh
 from server.fleet.keys import FleetKeys
 
 QUERY_TIMEOUT_S = 5.0
+QUERY_PRIORITY = zenoh.Priority.INTERACTIVE_HIGH
 
 
 class EdgeTimeout(Exception):
@@ -48,6 +60,7 @@ async def edge_call(
     api queryable; its answer, or EdgeTimeout / EdgeReplyError."""
     loop = asyncio.get_running_loop()
     answer: asyncio.Future[bytes | None] = loop.create_future()
+    replied: list[bool] = []  # on Zenoh's thread only: a reply came, the end needs no hop
 
     def settle(value: bytes | None) -> None:
         if not answer.done():
@@ -55,6 +68,7 @@ async def edge_call(
 
     def on_reply(reply: zenoh.Reply) -> None:
         # the payload is read here, on Zenoh's thread; the first reply wins
+        replied.append(True)
         ok = reply.ok
         if ok is not None:
             _on_loop(loop, settle, ok.payload.to_bytes())
@@ -65,7 +79,8 @@ async def edge_call(
 
     def on_done() -> None:
         # the query is over (every reply in, or its timeout): no reply means None
-        _on_loop(loop, settle, None)
+        if not replied:
+            _on_loop(loop, settle, None)
 
     session.get(
         keys.api(edge),
@@ -73,6 +88,10 @@ async def edge_call(
         payload=json.dumps(request, allow_nan=False).encode(),
         timeout=timeout_s,
         target=zenoh.QueryTarget.BEST_MATCHING,
+        consolidation=zenoh.ConsolidationMode.NONE,
+        congestion_control=zenoh.CongestionControl.BLOCK,
+        priority=QUERY_PRIORITY,
+        express=True,
     )
     try:
         # Zenoh's own timeout ends the query; this one only guards against a lost drop
@@ -83,6 +102,22 @@ async def edge_call(
     if data is None:
         raise EdgeTimeout(f"edge {edge} did not answer within {timeout_s:g} s")
     return parse_answer(edge, data)
+
+
+def call_timeout_s(
+    method: str, rest: str, body: Any, takeover_ask_s: float, base_s: float = QUERY_TIMEOUT_S
+) -> float:
+    """How long the edge has to answer a call on ``.../vehicles/{id}/{rest}``: ``base_s``,
+    plus ``takeover_ask_s`` for an ask for control, which the edge holds that long for the
+    holder's answer (a forced takeover is answered at once)."""
+    asks = (
+        method == "POST"
+        and rest.strip("/") == "control"
+        and isinstance(body, dict)
+        and body.get("takeover") is True
+        and body.get("force") is not True
+    )
+    return base_s + takeover_ask_s if asks else base_s
 
 
 def _on_loop(loop: asyncio.AbstractEventLoop, call: Callable[..., None], *args: Any) -> None:

@@ -26,7 +26,7 @@ from server.api.errors import (
     refuse_non_finite,
 )
 from server.api.schemas import ErrorOut
-from server.fleet.proxy import EdgeReplyError, EdgeTimeout, edge_call
+from server.fleet.proxy import EdgeReplyError, EdgeTimeout, call_timeout_s, edge_call
 from server.fleet.view_service import FleetService
 from server.settings import FLEET_NAME_PATTERN
 
@@ -43,7 +43,8 @@ PROXY_RESPONSES: dict[int | str, dict[str, Any]] = {
     **CONTROL_RESPONSES,
     502: {"model": ErrorOut, "description": "the edge answered with a Zenoh error"},
     503: {"model": ErrorOut, "description": "the edge is not alive (lost)"},
-    504: {"model": ErrorOut, "description": "the edge did not answer within 5 s"},
+    504: {"model": ErrorOut, "description": "the edge did not answer within 5 s (an ask "
+          "for control: takeover_ask_s + 5 s)"},
 }
 
 
@@ -134,10 +135,11 @@ async def call_fleet_vehicle(
         "headers": _forwarded_headers(request),
         "body": await _json_body(request),
     }
+    timeout_s = call_timeout_s(
+        request.method, rest, call["body"], service.takeover_ask_s, service.query_timeout_s
+    )
     try:
-        answer = await edge_call(
-            service.session, service.keys, edge, call, service.query_timeout_s
-        )
+        answer = await edge_call(service.session, service.keys, edge, call, timeout_s)
     except EdgeTimeout as exc:
         raise ApiError(504, str(exc)) from None
     except EdgeReplyError as exc:

@@ -32,7 +32,13 @@ def zenoh_options(settings: Settings) -> ZenohOptions:
 class FleetService:
     """The view is there from the start (empty); the session once started."""
 
-    def __init__(self, fleet: str, options: ZenohOptions, tier: StateTier = "fast") -> None:
+    def __init__(
+        self,
+        fleet: str,
+        options: ZenohOptions,
+        tier: StateTier = "fast",
+        takeover_ask_s: float = 10.0,
+    ) -> None:
         self.keys = FleetKeys(fleet)
         self.options = options
         self.tier: StateTier = tier
@@ -41,10 +47,15 @@ class FleetService:
         self.feed: FleetFeed | None = None
         # how long an edge has to answer a proxied call (504 after)
         self.query_timeout_s = QUERY_TIMEOUT_S
+        # how long an edge holds an ask for control for the holder's answer: the fleet and
+        # its edges share this setting, as they share tokens (added to that call's timeout)
+        self.takeover_ask_s = takeover_ask_s
 
     @classmethod
     def from_settings(cls, settings: Settings) -> FleetService:
-        return cls(settings.fleet_name, zenoh_options(settings))
+        return cls(
+            settings.fleet_name, zenoh_options(settings), takeover_ask_s=settings.takeover_ask_s
+        )
 
     async def start(self) -> None:
         """Open the session (a ZError when Zenoh cannot start) and subscribe."""
