@@ -33,7 +33,8 @@ import asyncio
 import contextlib
 import json
 import logging
-from concurrent.futures import ThreadPoolExecutor
+import queue
+import threading
 from typing import Any
 from urllib.parse import unquote
 
@@ -57,8 +58,6 @@ ZENOH_CLIENT = ("zenoh", 0)
 CALL_TIMEOUT_S = 60.0
 # calls run at once; more are refused with 503 (the app's rate limit counts the rest)
 MAX_IN_FLIGHT = 64
-# threads that send replies (a reply may wait while the querier's link is congested)
-REPLY_THREADS = 2
 # a REST call's JSON is small; a larger query payload is refused before it is parsed
 MAX_PAYLOAD_BYTES = 1 << 20
 
@@ -155,7 +154,7 @@ class EdgeApi:
         self._tasks: set[asyncio.Task[None]] = set()
         self._running = 0
         self._closing = False
-        self._replies = ThreadPoolExecutor(REPLY_THREADS, thread_name_prefix="zenoh-reply")
+        self._replies = Replier()
 
     def bind(self) -> None:
         """Remember the loop calls are handed to (call on the loop, before declaring)."""
@@ -167,7 +166,7 @@ class EdgeApi:
         for task in list(self._tasks):
             task.cancel()
         await asyncio.gather(*self._tasks, return_exceptions=True)
-        await asyncio.to_thread(self._replies.shutdown)
+        await asyncio.to_thread(self._replies.close)
 
     async def run(self, data: bytes | None) -> dict[str, Any]:
         """The reply payload for a query payload, decoded (see encoded_reply)."""
@@ -241,9 +240,38 @@ class EdgeApi:
                 reply = _encode(CallError(500, "the edge failed to run the call").reply())
             finally:
                 self._running -= 1
-        # a reply may wait for a congested link: never on the loop
-        loop = asyncio.get_running_loop()
-        await loop.run_in_executor(self._replies, send_reply, query, self.reply_key, reply)
+        # a reply may wait for a congested link: never on the loop, and nothing comes back
+        self._replies.send(query, self.reply_key, reply)
+
+
+class Replier:
+    """One thread that sends replies in order: the loop hands a reply over and goes on (a
+    reply may wait while the querier's link is congested; the loop never does). A reply
+    handed over after close() is sent at once on the caller's thread."""
+
+    def __init__(self) -> None:
+        self._queue: queue.SimpleQueue[tuple[zenoh.Query, str, bytes] | None] = (
+            queue.SimpleQueue()
+        )
+        self._closed = False
+        self._thread = threading.Thread(target=self._run, name="zenoh-reply", daemon=True)
+        self._thread.start()
+
+    def send(self, query: zenoh.Query, key: str, reply: bytes) -> None:
+        if self._closed:
+            send_reply(query, key, reply)
+        else:
+            self._queue.put((query, key, reply))
+
+    def close(self) -> None:
+        """Send what is queued, then stop the thread (blocks: call off the loop)."""
+        self._closed = True
+        self._queue.put(None)
+        self._thread.join()
+
+    def _run(self) -> None:
+        while (item := self._queue.get()) is not None:
+            send_reply(*item)
 
 
 def send_reply(query: zenoh.Query, key: str, reply: bytes) -> None:

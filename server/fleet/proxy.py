@@ -84,7 +84,9 @@ async def edge_call(
 
     session.get(
         keys.api(edge),
-        zenoh.handlers.Callback(on_reply, on_done),
+        # called on Zenoh's own thread (both only hand a value to the loop): no Python
+        # thread started for each query
+        zenoh.handlers.Callback(on_reply, on_done, indirect=False),
         payload=json.dumps(request, allow_nan=False).encode(),
         timeout=timeout_s,
         target=zenoh.QueryTarget.BEST_MATCHING,
