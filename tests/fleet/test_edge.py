@@ -16,6 +16,7 @@ from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 from typing import Any
 
+import httpx
 import pytest
 import pytest_asyncio
 import zenoh
@@ -24,10 +25,21 @@ from server.api.schemas import VehicleStateOut
 from server.fleet.edge import EdgeService, default_edge_name
 from server.fleet.keys import FleetKeys
 from server.fleet.session import open_session
+from server.fleet.view_service import FleetService
 from sim.runner import SimCluster
-from tests.api.conftest import OBSERVER, PILOT, SIM_SPEED, Api, api_at, sim_cluster
+from tests.api.conftest import (
+    OBSERVER,
+    PILOT,
+    SIM_SPEED,
+    Api,
+    api_at,
+    app_running,
+    auth,
+    make_settings,
+    sim_cluster,
+)
 from tests.fleet.fake_edge import free_tcp_endpoint, loopback_options
-from tests.waiting import holds_for, wait_for
+from tests.waiting import eventually, holds_for, wait_for
 
 pytestmark = pytest.mark.asyncio(loop_scope="module")
 
@@ -71,6 +83,7 @@ class Rig:
     session: zenoh.Session
     seen: Seen
     late_port: int  # where the server looks for a vehicle that is not there yet
+    endpoint: str  # where the edge listens
 
     @property
     def edge(self) -> EdgeService:
@@ -123,7 +136,7 @@ async def rig() -> AsyncIterator[Rig]:
                 session.liveliness().declare_subscriber(
                     KEYS.all_alive(), zenoh.handlers.Callback(seen.on_alive), history=True
                 )
-                yield Rig(api, sim, session, seen, late_port)
+                yield Rig(api, sim, session, seen, late_port, endpoint)
             finally:
                 await asyncio.to_thread(session.close)
 
@@ -291,6 +304,60 @@ async def test_a_vehicle_seen_later_is_published_while_its_link_is_connected(rig
     await wait_for(lambda: not rig.seen.is_alive(late_key), 10.0, "the late token gone")
     assert rig.seen.is_alive(KEYS.vehicle_alive(EDGE, 1))
     assert rig.seen.is_alive(KEYS.edge_alive(EDGE))
+
+
+async def test_an_ask_for_control_through_the_fleet_waits_for_the_holders_answer(
+    rig: Rig,
+) -> None:
+    """The edge holds an ask for control until the holder answers (up to takeover_ask_s);
+    the fleet server waits that long too, not just its usual call timeout (shortened here
+    so that the holder answers after it)."""
+    holder = await rig.api.client.post(
+        "/api/v1/vehicles/1/control",
+        json={"takeover": True, "force": True, "client_name": "holder"},
+    )
+    assert holder.status_code == 200, holder.text
+    holder_lease = {"X-Lease-Id": holder.json()["lease_id"]}
+    settings = make_settings(
+        None, fleet=True, fleet_name=FLEET, zenoh_connect=[rig.endpoint],
+        zenoh_listen=[free_tcp_endpoint()], zenoh_multicast_scouting=False,
+    )
+    async with app_running(settings) as fleet_app, httpx.AsyncClient(
+        transport=httpx.ASGITransport(app=fleet_app), base_url="http://fleet",
+        headers=auth(), timeout=60.0,
+    ) as fleet:
+        service: FleetService = fleet_app.state.fleet
+        await wait_for(lambda: (e := service.view.edge(EDGE)) is not None and e.alive,
+                       10.0, "the edge seen by the fleet server")
+        service.query_timeout_s = 1.0
+        asking = asyncio.create_task(fleet.post(
+            f"/api/v1/fleet/edges/{EDGE}/vehicles/1/control",
+            json={"takeover": True, "client_name": "asker"},
+        ))
+
+        async def pending_request() -> str | None:
+            status = (await rig.api.client.get("/api/v1/vehicles/1/control")).json()
+            request = status.get("request")
+            return None if request is None else str(request["request_id"])
+
+        request_id = await eventually(pending_request, 10.0, "the ask at the holder")
+        # the holder answers once the fleet server's usual timeout is over
+        await asyncio.sleep(service.query_timeout_s + 0.5)
+        assert not asking.done()
+        granted = await rig.api.client.post(
+            f"/api/v1/vehicles/1/control/requests/{request_id}", json={"grant": True},
+            headers=holder_lease,
+        )
+        assert granted.status_code == 200, granted.text
+        answer = await asyncio.wait_for(asking, 30.0)
+        assert answer.status_code == 200, answer.text
+        assert "asker" in answer.json()["holder"]
+        # the new lease is the one the edge holds now: it flies there
+        rig.api.lease_headers = {"X-Lease-Id": answer.json()["lease_id"]}
+        renewed = await rig.api.client.put(
+            "/api/v1/vehicles/1/control", headers=rig.api.lease_headers
+        )
+        assert renewed.status_code == 200, renewed.text
 
 
 async def test_tokens_go_when_the_edge_stops(rig: Rig) -> None:

@@ -21,6 +21,7 @@ from server.api.publisher import Published
 from server.app import StartupError
 from server.fleet.edge_api import EdgeApi, check_path
 from server.fleet.edge_publish import Sequence
+from server.fleet.proxy import call_timeout_s
 from server.fleet.session import open_session
 from tests.api.conftest import app_running, make_settings
 from tests.fleet.fake_edge import free_tcp_endpoint, loopback_options
@@ -56,6 +57,10 @@ def echo_app() -> FastAPI:
     async def slow() -> dict[str, bool]:
         await asyncio.sleep(30.0)
         return {"late": True}
+
+    @app.get("/api/v1/boom")
+    async def boom() -> None:
+        raise RuntimeError("the app failed")
 
     @app.delete("/api/v1/empty", status_code=204)
     async def empty() -> Response:
@@ -107,6 +112,9 @@ async def test_the_apps_answer_goes_back_with_its_status_and_selected_headers(
     assert empty["body"] is None
     missing = await edge_api.run(b'{"method": "GET", "path": "/api/v1/nothing-here"}')
     assert missing["status"] == 404
+    failed = await edge_api.run(b'{"method": "GET", "path": "/api/v1/boom"}')
+    assert failed["status"] == 500  # the app's own answer to its error; the edge goes on
+    assert (await edge_api.run(b'{"method": "DELETE", "path": "/api/v1/empty"}'))["status"] == 204
 
 
 async def test_a_call_that_does_not_finish_is_504(edge_api: EdgeApi) -> None:
@@ -138,6 +146,18 @@ async def test_what_is_not_a_call_is_answered_with_why(
     reply = await edge_api.run(payload)
     assert reply["status"] == status, reply
     assert reply["body"]["detail"]["field"] == field
+
+
+async def test_an_ask_for_control_has_the_holders_time_on_top_of_the_call_timeout() -> None:
+    ask = {"takeover": True, "client_name": "me"}
+    assert call_timeout_s("POST", "control", ask, takeover_ask_s=10.0) == 15.0
+    assert call_timeout_s("POST", "control", ask, takeover_ask_s=3.0, base_s=1.0) == 4.0
+    # answered at once: a forced takeover, a plain acquire, anything else
+    assert call_timeout_s("POST", "control", {**ask, "force": True}, 10.0) == 5.0
+    assert call_timeout_s("POST", "control", {}, 10.0) == 5.0
+    assert call_timeout_s("POST", "control", None, 10.0) == 5.0
+    assert call_timeout_s("PUT", "control", ask, 10.0) == 5.0
+    assert call_timeout_s("POST", "arm", ask, 10.0) == 5.0
 
 
 async def test_paths_under_the_api_only() -> None:
