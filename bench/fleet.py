@@ -15,6 +15,9 @@ off, every Zenoh endpoint on loopback). The figures:
   directly (``POST /api/v1/vehicles/1/arm``) and through the fleet server
   (``POST /api/v1/fleet/edges/<edge>/vehicles/1/arm``), both with the same lease; the ratio
   of the medians of the arm calls' wall times.
+- **read round trip** (the fleet's own overhead, no vehicle in it): ``GET .../vehicles/1/
+  control`` (answered by the edge's app without MAVLink), alternately direct and through the
+  fleet server; the medians, their ratio and their difference.
 - **stream quality**: the edge's own figures (``GET /vehicles/1/stream``: interval p99,
   largest gap) for a setpoint stream of one vehicle on the first edge, first with the edges
   alone (no fleet server yet: nobody subscribes, no fleet traffic), then while the fleet
@@ -254,6 +257,31 @@ def measure_round_trip(client: httpx.Client, fleet: Server, edge: Server, count:
     }
 
 
+def measure_read_round_trip(client: httpx.Client, fleet: Server, edge: Server,
+                            count: int) -> dict[str, Any]:
+    """A read the edge's app answers itself, alternately direct and through the fleet."""
+    paths = {"direct": f"{edge.api}/vehicles/1/control",
+             "fleet": f"{fleet.api}/fleet/edges/{edge.name}/vehicles/1/control"}
+    samples: dict[str, list[float]] = {"direct": [], "fleet": []}
+    for i in range(count):
+        for name in (("direct", "fleet") if i % 2 else ("fleet", "direct")):
+            begin = time.perf_counter()
+            answer = client.get(paths[name])
+            took_ms = (time.perf_counter() - begin) * 1e3
+            if answer.status_code != 200:
+                raise RuntimeError(f"GET {paths[name]}: {answer.status_code} {answer.text[:300]}")
+            samples[name].append(took_ms)
+    direct, through = (statistics.median(samples[k]) for k in ("direct", "fleet"))
+    return {
+        "count": count, "direct_median_ms": direct, "fleet_median_ms": through,
+        "median_ratio_fleet_over_direct": through / direct,
+        "fleet_overhead_median_ms": through - direct,
+        "direct_p90_ms": _percentile(samples["direct"], 0.9),
+        "fleet_p90_ms": _percentile(samples["fleet"], 0.9),
+        "samples_ms": samples,
+    }
+
+
 def _wait_disarmed(client: httpx.Client, url: str, lease: str, timeout_s: float = 30.0) -> None:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline and client.get(url).json().get("armed"):
@@ -306,6 +334,7 @@ def run(edges: int, per_edge: int, phase_s: float, count: int) -> dict[str, Any]
                   flush=True)
             # the same lease at the edge, whichever way the call comes
             result["round_trip"] = measure_round_trip(client, fleet, edge, count, lease)
+            result["read_round_trip"] = measure_read_round_trip(client, fleet, edge, 10 * count)
             with_fleet = _stream_phase(client, edge, lease, phase_s, poll=fleet)
     shutil.rmtree(log_dir, ignore_errors=True)  # kept only when a run fails, to read
     result["stream"] = {"with_fleet": with_fleet, "without_fleet": without}
@@ -351,6 +380,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"arm round trip median direct {_ms(trip['direct_median_ms'])} ms, through the "
           f"fleet server {_ms(trip['fleet_median_ms'])} ms: ratio "
           f"{_ratio(trip['median_ratio_fleet_over_direct'])} (unacknowledged: {trip['failed']})")
+    read = result["read_round_trip"]
+    print(f"read round trip (GET control, no MAVLink) median direct "
+          f"{_ms(read['direct_median_ms'])} ms, through the fleet server "
+          f"{_ms(read['fleet_median_ms'])} ms: ratio "
+          f"{_ratio(read['median_ratio_fleet_over_direct'])}, the fleet adds "
+          f"{_ms(read['fleet_overhead_median_ms'])} ms ({read['count']} each)")
     for name, figures in result["stream"].items():
         print(f"stream {name}: p99 {_ms(figures.get('interval_p99_ms'))} ms, largest gap "
               f"{_ms(figures.get('max_gap_ms'))} ms, gaps {figures.get('gaps')}")
@@ -385,15 +420,20 @@ def report(result: dict[str, Any]) -> Section | None:
     ax_age.set_xlabel("state age on arrival at the fleet server (ms)")
     ax_age.set_ylabel("fraction of states")
     ax_age.legend(loc="lower right", fontsize=8)
-    for name, values in (("direct", trip["samples_ms"]["direct"]),
-                         ("via fleet", trip["samples_ms"]["fleet"])):
+    read = result.get("read_round_trip")
+    series = [("arm direct", trip["samples_ms"]["direct"]),
+              ("arm via fleet", trip["samples_ms"]["fleet"])]
+    if read:
+        series += [("read direct", read["samples_ms"]["direct"]),
+                   ("read via fleet", read["samples_ms"]["fleet"])]
+    for name, values in series:
         ordered = sorted(values)
         if not ordered:
             continue
         ax_trip.step(ordered, [(i + 1) / len(ordered) for i in range(len(ordered))], where="post",
                      label=f"{name} (median {statistics.median(ordered):.1f} ms)")
     ax_trip.set_xscale("log")
-    ax_trip.set_xlabel("arm round trip (ms, log)")
+    ax_trip.set_xlabel("round trip: arm, and a read without MAVLink (ms, log)")
     ax_trip.legend(loc="lower right", fontsize=8)
     labels = ["interval p99", "largest gap"]
     for offset, (name, figures) in enumerate((("with fleet", stream["with_fleet"]),
@@ -419,6 +459,10 @@ def report(result: dict[str, Any]) -> Section | None:
         ("arm round trip, median via fleet / direct",
          f"{_ms(trip['fleet_median_ms'])} / {_ms(trip['direct_median_ms'])} ms",
          f"{_ratio(ratio)} (goal ≤ 2×)"),
+        *([("read round trip (GET control), median via fleet / direct",
+            f"{_ms(read['fleet_median_ms'])} / {_ms(read['direct_median_ms'])} ms",
+            f"{_ratio(read['median_ratio_fleet_over_direct'])} (the fleet adds "
+            f"{_ms(read['fleet_overhead_median_ms'])} ms)")] if read else []),
         ("edge stream interval p99, with / without the fleet",
          f"{_ms(stream['with_fleet'].get('interval_p99_ms'))} / "
          f"{_ms(stream['without_fleet'].get('interval_p99_ms'))} ms",

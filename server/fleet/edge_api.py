@@ -20,11 +20,12 @@ The call runs straight through the app's ASGI interface (asgi_call.py: no HTTP c
 between), and the app's JSON answer goes into the reply as the app wrote it (checked, not
 decoded and encoded again).
 
-Threads: Zenoh calls back on its own thread; the payload is read there and the call handed
-to the event loop, which runs it; the reply goes out from a small thread pool (a reply may
-wait while the querier's link is congested; the loop never does). Every query is answered
-(503 when the edge is stopping or too busy) and then dropped, so the querier never waits
-for its timeout.
+Threads: Zenoh calls back on its own network thread (the queryable is declared with
+``indirect=False``: no Python thread in between); the payload is read there and the call
+handed to the event loop, which runs it; the reply is handed to one reply thread and the
+loop goes on (a reply may wait while the querier's link is congested; the loop never does).
+Every query is answered (503 when the edge is stopping or too busy) and then dropped, so
+the querier never waits for its timeout.
 """
 
 from __future__ import annotations
@@ -211,7 +212,7 @@ class EdgeApi:
             with contextlib.suppress(RuntimeError):  # the loop closed: refused below
                 loop.call_soon_threadsafe(self._begin, query, data)
                 return
-        send_reply(query, self.reply_key, _encode(_stopping()))
+        self._replies.send(query, self.reply_key, _encode(_stopping()))
 
     # --- on the loop ---------------------------------------------------------------------
 
