@@ -103,11 +103,12 @@ class EdgeService:
         try:
             self.api = EdgeApi(app, self.keys.api(self.name))
             self.api.bind()
-            # on_query runs on Zenoh's own thread (it only hands the call to the loop): no
-            # Python thread in between, one hand-over less per call
+            # on Zenoh's Python callback thread (indirect): measured under load, calling back
+            # on Zenoh's network thread itself was slower (the GIL taken from the network
+            # thread that also carries the states)
             self._queryable = session.declare_queryable(
                 self.keys.api(self.name),
-                zenoh.handlers.Callback(self.api.on_query, indirect=False),
+                zenoh.handlers.Callback(self.api.on_query),
                 complete=True,
             )
             await self.refresh()

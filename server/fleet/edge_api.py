@@ -20,8 +20,7 @@ The call runs straight through the app's ASGI interface (asgi_call.py: no HTTP c
 between), and the app's JSON answer goes into the reply as the app wrote it (checked, not
 decoded and encoded again).
 
-Threads: Zenoh calls back on its own network thread (the queryable is declared with
-``indirect=False``: no Python thread in between); the payload is read there and the call
+Threads: Zenoh calls back on its callback thread; the payload is read there and the call
 handed to the event loop, which runs it; the reply is handed to one reply thread and the
 loop goes on (a reply may wait while the querier's link is congested; the loop never does).
 Every query is answered (503 when the edge is stopping or too busy) and then dropped, so

@@ -172,7 +172,7 @@ async def test_every_query_is_answered_even_when_busy_or_stopping() -> None:
     api = EdgeApi(echo_app(), KEY, max_in_flight=0)
     api.bind()
     queryable = edge_session.declare_queryable(
-        KEY, zenoh.handlers.Callback(api.on_query, indirect=False), complete=True
+        KEY, zenoh.handlers.Callback(api.on_query), complete=True
     )
 
     def ask() -> list[dict[str, Any]]:
