@@ -117,10 +117,11 @@ class TapProcess:
 
 @contextlib.asynccontextmanager
 async def skyhelm_serve(
-    urls: list[str], scene: bool
+    urls: list[str], scene: bool, profile: Path | None = None
 ) -> AsyncIterator[tuple[asyncio.subprocess.Process, str]]:
+    profiler = ["-m", "cProfile", "-o", str(profile)] if profile is not None else []
     proc = await asyncio.create_subprocess_exec(
-        sys.executable, "-m", "server.cli", "serve", "--port", "0", "--token", TOKEN,
+        sys.executable, *profiler, "-m", "server.cli", "serve", "--port", "0", "--token", TOKEN,
         "--rate-hz", str(STREAM_RATE_HZ), "--no-tlog", "--log-level", "warning",
         *([] if scene else ["--no-scene"]),
         *(arg for url in urls for arg in ("--connect", url)),
@@ -183,7 +184,9 @@ async def take_control_and_stream(client: httpx.AsyncClient, sysid: int) -> None
     sent.raise_for_status()
 
 
-async def measure(count: int, seconds: float, scene: bool) -> dict[str, Any]:
+async def measure(
+    count: int, seconds: float, scene: bool, profile: Path | None = None
+) -> dict[str, Any]:
     processes = math.ceil(count / VEHICLES_PER_PROCESS)
     taps = [await TapProcess.start(first, n)
             for first, n in split_instances(0, count, processes)]
@@ -192,7 +195,7 @@ async def measure(count: int, seconds: float, scene: bool) -> dict[str, Any]:
         urls = [f"udpout:127.0.0.1:{inst['api_local_port']}"
                 for ready in readies for inst in ready["instances"]]
         sysids = [int(inst["sysid"]) for ready in readies for inst in ready["instances"]]
-        async with skyhelm_serve(urls, scene) as (server, base):
+        async with skyhelm_serve(urls, scene, profile) as (server, base):
             headers = {"Authorization": f"Bearer {TOKEN}"}
             async with httpx.AsyncClient(base_url=base, headers=headers, timeout=30) as client:
                 deadline = time.monotonic() + 60
@@ -275,6 +278,8 @@ def main() -> int:
     parser.add_argument("--counts", default="1,5,10,25,50")
     parser.add_argument("--seconds", type=float, default=8.0)
     parser.add_argument("--no-scene", action="store_true", help="serve without the 3D scene")
+    parser.add_argument("--profile", type=Path,
+                        help="run the server under cProfile, writing FILE.<vehicles>")
     parser.add_argument("--quick", action="store_true", help="smoke run: 1 and 5 vehicles, 3 s")
     args = parser.parse_args()
     counts = [1, 5] if args.quick else [int(c) for c in args.counts.split(",")]
@@ -282,7 +287,8 @@ def main() -> int:
     load_before = os.getloadavg()
     rows = []
     for count in counts:
-        row = asyncio.run(measure(count, seconds, scene=not args.no_scene))
+        profile = args.profile.with_suffix(f".{count}") if args.profile else None
+        row = asyncio.run(measure(count, seconds, scene=not args.no_scene, profile=profile))
         rows.append(row)
         print(
             f"{count:3d} vehicles in {row['vehicle_processes']} processes: stream p99 error "

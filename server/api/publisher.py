@@ -108,7 +108,8 @@ class _Tier:
         self._deliver(loop_time_s())
 
     def _deliver(self, now_s: float) -> None:
-        published = self._publisher.current
+        # the snapshot is taken here, when a tier is due, not on every change of the vehicle
+        published = self._publisher.latest()
         if published is None or published is self._sent:
             return
         self._sent = published
@@ -241,7 +242,8 @@ class StatePublisher:
             while await subscription.changed():
                 self._check_listing()
                 if self._tiers:
-                    self._take()
+                    if self.current is None:
+                        self._take()
                     now_s = loop_time_s()
                     for tier in list(self._tiers.values()):
                         tier.offer(now_s)
