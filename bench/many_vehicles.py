@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import itertools
 import json
 import math
 import os
@@ -70,7 +71,7 @@ def cpu_seconds(pid: int) -> float:
 
 
 def stream_figures(arrivals: list[float], period_s: float) -> dict[str, Any]:
-    intervals = [b - a for a, b in zip(arrivals, arrivals[1:], strict=False)]
+    intervals = [b - a for a, b in itertools.pairwise(arrivals)]
     errors_ms = [abs(i - period_s) * 1000.0 for i in intervals]
     return {
         "setpoints": len(arrivals),
@@ -294,8 +295,9 @@ def main() -> int:
             f"{count:3d} vehicles in {row['vehicle_processes']} processes: stream p99 error "
             f"worst {_ms(row['stream_p99_error_ms_worst'])} (median "
             f"{_ms(row['stream_p99_error_ms_median'])}), max gap "
-            f"{_ms(row['stream_max_gap_ms'])}; server {100 * row['server_cpu_share_of_one_core']:.0f}"
-            f" % of a core, vehicles {100 * row['sims_cpu_share_of_one_core']:.0f} %; page: "
+            f"{_ms(row['stream_max_gap_ms'])}; server "
+            f"{100 * row['server_cpu_share_of_one_core']:.0f} % of a core, vehicles "
+            f"{100 * row['sims_cpu_share_of_one_core']:.0f} %; page: "
             f"{row['page_all_states_per_vehicle_hz_min']} states/s per vehicle (min), p99 "
             f"{_ms(row['page_all_latency_p99_ms'])}, live: {row['page_live']}; "
             f"goal met: {row['goal_met']}",
@@ -345,6 +347,7 @@ def report(result: dict[str, Any]) -> Section | None:
     figure = save_figure(fig, "many_vehicles", "Stream quality and CPU vs vehicles", machine)
     plt.close(fig)
     first, last = rows[0], rows[-1]
+    growth = last["server_cpu_share_of_one_core"] / max(first["server_cpu_share_of_one_core"], 1e-9)
     per_vehicle = ((last["server_cpu_share_of_one_core"] - first["server_cpu_share_of_one_core"])
                    / max(1, last["vehicles"] - first["vehicles"]))
     lines = [
@@ -354,7 +357,7 @@ def report(result: dict[str, Any]) -> Section | None:
         f"largest gap {last['stream_max_gap_ms'] or float('nan'):.0f} ms "
         f"({(last['stream_max_gap_ms'] or 0) / GOAL_MAX_GAP_MS:.2f}× the 200 ms goal).",
         f"Server CPU grows by {100 * per_vehicle:.2f} % of a core per vehicle "
-        f"({last['server_cpu_share_of_one_core'] / max(first['server_cpu_share_of_one_core'], 1e-9):.1f}× "
+        f"({growth:.1f}× "
         f"from {first['vehicles']} to {last['vehicles']} vehicles).",
         f"The page's map socket got every vehicle's state at ≥ "
         f"{last['page_all_states_per_vehicle_hz_min']} Hz of {PAGE_ALL_RATE_HZ:g} Hz asked "

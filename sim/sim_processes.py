@@ -109,11 +109,11 @@ async def run_processes(
         )
         _report(args, instances, [proc.pid for proc in children])
         drains = [asyncio.create_task(_drain(proc)) for proc in children]
-        stopped = asyncio.create_task(stop.wait())
-        exited = [asyncio.create_task(proc.wait()) for proc in children]
-        await asyncio.wait([stopped, *exited], return_when=asyncio.FIRST_COMPLETED)
-        for task in (stopped, *exited):
-            task.cancel()
+        watched: list[asyncio.Future[object]] = [asyncio.ensure_future(stop.wait())]
+        watched += [asyncio.ensure_future(proc.wait()) for proc in children]
+        await asyncio.wait(watched, return_when=asyncio.FIRST_COMPLETED)
+        for waiter in watched:
+            waiter.cancel()
         if not stop.is_set():
             dead = [proc for proc in children if proc.returncode is not None]
             print(f"sim: process {dead[0].pid} exited with code {dead[0].returncode}; "
