@@ -199,10 +199,10 @@ async def measure(
         async with skyhelm_serve(urls, scene, profile) as (server, base):
             headers = {"Authorization": f"Bearer {TOKEN}"}
             async with httpx.AsyncClient(base_url=base, headers=headers, timeout=30) as client:
-                deadline = time.monotonic() + 60
-                while len((await client.get("/api/v1/vehicles")).json()) < count:
+                deadline = time.monotonic() + 90
+                while len(heard := (await client.get("/api/v1/vehicles")).json()) < count:
                     if time.monotonic() > deadline:
-                        raise RuntimeError("the server did not hear every vehicle")
+                        raise RuntimeError(f"the server heard {len(heard)} of {count} vehicles")
                     await asyncio.sleep(0.2)
                 await asyncio.gather(*(take_control_and_stream(client, s) for s in sysids))
                 ws_base = base.replace("http://", "ws://") + "/api/v1/ws/telemetry"
