@@ -152,8 +152,11 @@ class PageProbe:
         self.latencies_ms: list[float] = []
         self.panel_states = 0
         self.panel_latencies_ms: list[float] = []
+        # events the page shows: a vehicle lost, a stream stopped (kind -> count)
+        self.events: dict[str, int] = {}
 
     def reset(self) -> None:
+        self.events.clear()
         self.counts.clear()
         self.latencies_ms.clear()
         self.panel_states = 0
@@ -164,6 +167,11 @@ class PageProbe:
             async for text in ws:
                 now = time.monotonic()
                 message = json.loads(text)
+                if message.get("type") == "event" and not panel:
+                    kind = str(message.get("kind"))
+                    if kind == "connection" and message["data"].get("connected") is False:
+                        kind = "link_lost"
+                    self.events[kind] = self.events.get(kind, 0) + 1
                 if message.get("type") != "state":
                     continue
                 latency_ms = (now - message["updated_s"]) * 1000.0
@@ -265,6 +273,7 @@ def summarise(
         "page_panel_states_hz": round(probe.panel_states / wall_s, 2),
         "page_panel_latency_p99_ms": percentile(probe.panel_latencies_ms, 99),
         "page_live": page_live,
+        "page_events": dict(probe.events),
         "goal_met": worst_p99 is not None and worst_gap is not None
         and worst_p99 <= GOAL_P99_ERROR_MS and worst_gap <= GOAL_MAX_GAP_MS and page_live,
     }
@@ -299,7 +308,8 @@ def main() -> int:
             f"{100 * row['server_cpu_share_of_one_core']:.0f} % of a core, vehicles "
             f"{100 * row['sims_cpu_share_of_one_core']:.0f} %; page: "
             f"{row['page_all_states_per_vehicle_hz_min']} states/s per vehicle (min), p99 "
-            f"{_ms(row['page_all_latency_p99_ms'])}, live: {row['page_live']}; "
+            f"{_ms(row['page_all_latency_p99_ms'])}, live: {row['page_live']}, events "
+            f"{row['page_events']}; "
             f"goal met: {row['goal_met']}",
             flush=True,
         )
