@@ -41,6 +41,7 @@ class ArrivalTap:
         self.arrivals: dict[int, list[float]] = {}
         self.cpu0_s = time.process_time()
         self.wall0_s = time.monotonic()
+        self.sim0_s = 0.0
 
     def watch(self, sysid: int, link: UdpLink) -> None:
         transport = link._transport  # the link's own socket: the bench reads its timestamps
@@ -56,17 +57,24 @@ class ArrivalTap:
 
         link.observe(observe)
 
-    def reset(self) -> None:
+    def reset(self, cluster: SimCluster) -> None:
         for times in self.arrivals.values():
             times.clear()
         self.cpu0_s = time.process_time()
         self.wall0_s = time.monotonic()
+        self.sim0_s = cluster.instances[0].vehicle.now_s
+        cluster.loop_stats.reset()
 
-    def report(self) -> dict[str, Any]:
+    def report(self, cluster: SimCluster) -> dict[str, Any]:
+        wall_s = time.monotonic() - self.wall0_s
         return {
             "arrivals": {str(k): v for k, v in self.arrivals.items()},
             "cpu_s": time.process_time() - self.cpu0_s,
-            "wall_s": time.monotonic() - self.wall0_s,
+            "wall_s": wall_s,
+            # how well the vehicles kept real time: sim seconds per wall second, the
+            # stepping loop's worst lateness
+            "sim_over_wall": (cluster.instances[0].vehicle.now_s - self.sim0_s) / wall_s,
+            "loop_max_lag_s": cluster.loop_stats.max_lag_s,
         }
 
 
@@ -89,9 +97,9 @@ async def run(first: int, count: int) -> None:
         print(json.dumps(ready), flush=True)
         while line := (await reader.readline()).decode().strip():
             if line == "reset":
-                tap.reset()
+                tap.reset(cluster)
             elif line == "report":
-                print(json.dumps(tap.report()), flush=True)
+                print(json.dumps(tap.report(cluster)), flush=True)
 
 
 def main() -> None:

@@ -254,6 +254,8 @@ def summarise(
     silent = [sysid for sysid, s in streams.items() if s["p99_error_ms"] is None]
     rates = [probe.counts.get(int(sysid), 0) / wall_s for sysid in streams]
     sims_cpu_share = sum(r["cpu_s"] / r["wall_s"] for r in reports)
+    sim_over_wall = min(r["sim_over_wall"] for r in reports)
+    sim_max_lag_ms = max(r["loop_max_lag_s"] for r in reports) * 1000.0
     worst_p99 = max(p99s) if p99s and not silent else None
     worst_gap = max(gaps) if gaps and not silent else None
     page_live = bool(rates) and min(rates) >= PAGE_LIVE_SHARE * PAGE_ALL_RATE_HZ
@@ -267,6 +269,9 @@ def summarise(
         "stream_max_gap_ms": worst_gap,
         "server_cpu_share_of_one_core": round(server_cpu_share, 4),
         "sims_cpu_share_of_one_core": round(sims_cpu_share, 4),
+        # the slowest vehicle process: sim time per wall time, its stepping loop's worst lag
+        "sims_sim_over_wall_min": round(sim_over_wall, 4),
+        "sims_loop_max_lag_ms": round(sim_max_lag_ms, 1),
         "page_all_states_per_vehicle_hz_min": round(min(rates), 2) if rates else None,
         "page_all_latency_p50_ms": percentile(probe.latencies_ms, 50),
         "page_all_latency_p99_ms": percentile(probe.latencies_ms, 99),
@@ -306,7 +311,9 @@ def main() -> int:
             f"{_ms(row['stream_p99_error_ms_median'])}), max gap "
             f"{_ms(row['stream_max_gap_ms'])}; server "
             f"{100 * row['server_cpu_share_of_one_core']:.0f} % of a core, vehicles "
-            f"{100 * row['sims_cpu_share_of_one_core']:.0f} %; page: "
+            f"{100 * row['sims_cpu_share_of_one_core']:.0f} % (sim/wall "
+            f"{row['sims_sim_over_wall_min']}, loop lag max {row['sims_loop_max_lag_ms']} ms); "
+            "page: "
             f"{row['page_all_states_per_vehicle_hz_min']} states/s per vehicle (min), p99 "
             f"{_ms(row['page_all_latency_p99_ms'])}, live: {row['page_live']}, events "
             f"{row['page_events']}; "
