@@ -2,8 +2,11 @@
 at rate tiers to every telemetry socket, REST read and the scene.
 
 Data path: the vehicle's SubscriptionHub wakes the publisher on a change, at most
-max_rate_hz; the publisher takes one snapshot (a tick, a `Published`) and hands that same
-object to the consumers whose rate tier is due. Its JSON is made on first use and kept on
+max_rate_hz; when a rate tier is due (then, or when its slot on the grid comes) the
+publisher takes one snapshot (a tick, a `Published`) if the vehicle changed since the last,
+and hands that same object to the consumers of every tier due. No tier due, no snapshot:
+a vehicle whose telemetry changes 50 times a second but is watched at 4 Hz costs 4
+snapshots a second, which matters with 50 vehicles on one server. Its JSON is made on first use and kept on
 the object, so a tick is encoded at most once however many sockets send it, and not at all
 when only the scene (which wants the snapshot itself) is watching.
 
