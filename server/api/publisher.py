@@ -6,9 +6,9 @@ max_rate_hz; when a rate tier is due (then, or when its slot on the grid comes) 
 publisher takes one snapshot (a tick, a `Published`) if the vehicle changed since the last,
 and hands that same object to the consumers of every tier due. No tier due, no snapshot:
 a vehicle whose telemetry changes 50 times a second but is watched at 4 Hz costs 4
-snapshots a second, which matters with 50 vehicles on one server. Its JSON is made on first use and kept on
-the object, so a tick is encoded at most once however many sockets send it, and not at all
-when only the scene (which wants the snapshot itself) is watching.
+snapshots a second, which matters with 50 vehicles on one server. Its JSON is made on
+first use and kept on the object, so a tick is encoded at most once however many sockets
+send it, and not at all when only the scene (which wants the snapshot itself) is watching.
 
 Slow consumers: every consumer reads through a latest-wins slot (slots.py, where the policy
 is written down): a `Slot`, or the scene's `FleetWatch`, one slot per vehicle.
