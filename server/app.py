@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
+import gc
 import logging
 import time
 from collections.abc import AsyncIterator, Callable
@@ -40,6 +41,7 @@ from server.api.routes import signing as signing_routes
 from server.api.security import install_security
 from server.fleet import routes as fleet_routes
 from server.fleet import ws as fleet_ws
+from server.fleet.edge import EdgeService
 from server.fleet.view_service import FleetService
 from server.link import Envelope, Link
 from server.link.signing import SigningKeyError, SigningKeyStore
@@ -57,7 +59,11 @@ class StartupError(RuntimeError):
     """The server cannot start: a link would not open or a vehicle never appeared."""
 
 
-def create_app(settings: Settings) -> FastAPI:
+def create_app(settings: Settings, *, freeze_gc_at_start: bool = False) -> FastAPI:
+    """``freeze_gc_at_start`` (the served process, not tests that build many apps): what
+    start-up built moves out of the collector's reach (gc.freeze), so a later full
+    collection walks less and holds the GIL, and with it the stream's sender thread, for
+    less time."""
     tokens = TokenChecker.from_settings(settings)
     envelope = Envelope(
         max_alt_rel_m=settings.max_alt_rel_m,
@@ -77,6 +83,7 @@ def create_app(settings: Settings) -> FastAPI:
     )
 
     fleet = FleetService.from_settings(settings) if settings.fleet else None
+    edge = EdgeService.from_settings(settings, registry.all, publishers) if settings.zenoh else None
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
@@ -102,11 +109,18 @@ def create_app(settings: Settings) -> FastAPI:
             await publishers.start(registry.links)
             if fleet is not None:
                 await _start_fleet(fleet)
+            if edge is not None:
+                await _start_edge(edge, app)
             if hub is not None:
                 hub.on_click = _on_loop(publishers.publish_click)
                 await hub.start(publishers)
+            if freeze_gc_at_start:
+                gc.collect()
+                gc.freeze()
             yield
         finally:
+            if edge is not None:
+                await edge.stop()
             if fleet is not None:
                 await fleet.stop()
             if hub is not None:
@@ -129,6 +143,7 @@ def create_app(settings: Settings) -> FastAPI:
     app.state.publishers = publishers
     app.state.signing_store = None  # the lifespan reads the key file
     app.state.fleet = fleet
+    app.state.edge = edge
     install_error_handlers(app)
     if settings.cors_origins:
         app.add_middleware(
@@ -188,6 +203,13 @@ async def _start_fleet(fleet: FleetService) -> None:
         await fleet.start()
     except Exception as exc:  # zenoh.ZError: a bad endpoint, config or port in use
         raise StartupError(f"cannot join the fleet over Zenoh: {exc}") from exc
+
+
+async def _start_edge(edge: EdgeService, app: FastAPI) -> None:
+    try:
+        await edge.start(app)
+    except Exception as exc:  # zenoh.ZError: a bad endpoint, config or port in use
+        raise StartupError(f"cannot publish to the fleet over Zenoh: {exc}") from exc
 
 
 def is_replay(urls: list[str]) -> bool:

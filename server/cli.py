@@ -190,7 +190,7 @@ def uvicorn_server(settings: Settings) -> uvicorn.Server:
     from server.app import create_app
 
     config = uvicorn.Config(
-        create_app(settings),
+        create_app(settings, freeze_gc_at_start=True),
         host=settings.host,
         port=settings.port,
         log_config=None,
