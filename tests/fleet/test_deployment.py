@@ -151,10 +151,10 @@ def test_a_certificate_outside_the_access_list_reads_and_writes_nothing(
 
         wait_for_blocking("a member's state reaching the fleet server", edge_heard, 20.0, 0.2)
         stranger.put(state_key, b'{"from": "stranger"}')
-        edge.put(state_key, b'{"from": "edge-a"}')
+        last = b'{"from": "edge-a", "last": true}'
+        edge.put(state_key, last)
         # the edge's later put arrives; the stranger's (sent before it) never does
-        seen = len(fleet_got)
-        wait_for_blocking("the edge's next state", lambda: len(fleet_got) > seen, 20.0)
+        wait_for_blocking("the edge's next state", lambda: last in fleet_got, 20.0)
         time.sleep(0.3)
         assert b'{"from": "stranger"}' not in fleet_got
         # what the stranger hears is only what it put itself (a session delivers its own
