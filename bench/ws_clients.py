@@ -25,22 +25,19 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import json
 import os
 import sys
 import time
-from typing import Any
+from collections.abc import AsyncIterator
+from typing import TYPE_CHECKING, Any
 
 from bench._results import machine_info, write_results
-from bench.api_load import (
-    CLIENT_NICE,
-    PROJECT_ROOT,
-    cpu_seconds,
-    percentile,
-    runqueue_wait_s,
-    skyhelm_serve,
-)
-from bench.api_load import TOKEN as TOKEN
+from bench.api_load import CLIENT_NICE, PROJECT_ROOT, TOKEN, cpu_seconds, percentile, runqueue_wait_s
+
+if TYPE_CHECKING:
+    from bench._report import Section
 
 COUNTS = (1, 10, 50, 100, 200)
 RATE_HZ = 10.0
@@ -193,9 +190,48 @@ async def measure(pid: int, url: str, clients: int, seconds: float) -> dict[str,
     }
 
 
-async def run(counts: list[int], seconds: float) -> list[dict[str, Any]]:
+# `skyhelm serve` as the CLI runs it (asyncio's loop), or with uvloop's loop installed first
+_SERVE = "import sys; from server.cli import main; raise SystemExit(main(sys.argv[1:]))"
+_SERVE_UVLOOP = (
+    "import sys, uvloop; uvloop.install(); from server.cli import main; "
+    "raise SystemExit(main(sys.argv[1:]))"
+)
+
+
+@contextlib.asynccontextmanager
+async def serve(loop: str) -> AsyncIterator[tuple[asyncio.subprocess.Process, str]]:
+    proc = await asyncio.create_subprocess_exec(
+        sys.executable,
+        "-c",
+        _SERVE_UVLOOP if loop == "uvloop" else _SERVE,
+        "serve",
+        "--port",
+        "0",
+        "--token",
+        TOKEN,
+        "--no-scene",
+        "--no-tlog",
+        "--no-access-log",
+        "--log-level",
+        "warning",
+        stdout=asyncio.subprocess.PIPE,
+        cwd=PROJECT_ROOT,
+    )
+    try:
+        assert proc.stdout is not None
+        line = (await asyncio.wait_for(proc.stdout.readline(), 60)).decode()
+        if not line.startswith("SkyHelm ready: "):
+            raise RuntimeError(f"skyhelm serve did not start: {line!r}")
+        yield proc, line.split("SkyHelm ready: ")[1].split("/?token=")[0]
+    finally:
+        if proc.returncode is None:
+            proc.send_signal(2)
+            await asyncio.wait_for(proc.wait(), 20)
+
+
+async def run(counts: list[int], seconds: float, loop: str) -> list[dict[str, Any]]:
     rows = []
-    async with skyhelm_serve() as (proc, base):
+    async with serve(loop) as (proc, base):
         import httpx
 
         headers = {"Authorization": f"Bearer {TOKEN}"}
@@ -255,6 +291,9 @@ def main() -> int:
     parser.add_argument("--seconds", type=float, default=SECONDS, help="window per count")
     parser.add_argument("--counts", default=",".join(map(str, COUNTS)))
     parser.add_argument("--quick", action="store_true", help="1 and 10 clients, 3 s each")
+    parser.add_argument(
+        "--loop", choices=("asyncio", "uvloop"), default="asyncio", help="the server's loop"
+    )
     parser.add_argument("--worker-url", help=argparse.SUPPRESS)
     parser.add_argument("--worker-clients", type=int, help=argparse.SUPPRESS)
     parser.add_argument("--worker-window", help=argparse.SUPPRESS)
@@ -266,15 +305,16 @@ def main() -> int:
     counts = [1, 10] if args.quick else [int(x) for x in args.counts.split(",")]
     seconds = 3.0 if args.quick else args.seconds
     load_before = os.getloadavg()
-    rows = asyncio.run(run(counts, seconds))
+    rows = asyncio.run(run(counts, seconds, args.loop))
     met = goals(rows)
     result = {
         "rate_hz": RATE_HZ,
+        "server_loop": args.loop,
         "rows": rows,
         "goals_met": met,
         "machine": machine_info(load_before),
     }
-    write_results("ws_clients", result)
+    write_results("ws_clients" if args.loop == "asyncio" else f"ws_clients_{args.loop}", result)
     for name, ok in met.items():
         print(f"{'met' if ok else 'MISSED'}: {name}")
     return 0 if all(met.values()) else 1

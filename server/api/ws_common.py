@@ -56,6 +56,11 @@ class Sender:
             except TimeoutError:
                 await close_socket(self._websocket, 1008, "client too slow")
                 raise WebSocketDisconnect(1008) from None
+            except RuntimeError as exc:
+                # the socket was closed meanwhile (a timed-out send, the control socket's
+                # lease loss): starlette refuses further sends (WebSocketDisconnected, a
+                # RuntimeError); that ends this client, it is not a server error
+                raise WebSocketDisconnect(1006) from exc
 
     async def send_json(self, message: dict[str, Any]) -> None:
         await self.send_text(json.dumps(message, allow_nan=False))
