@@ -34,7 +34,14 @@ from collections.abc import AsyncIterator
 from typing import TYPE_CHECKING, Any
 
 from bench._results import machine_info, write_results
-from bench.api_load import CLIENT_NICE, PROJECT_ROOT, TOKEN, cpu_seconds, percentile, runqueue_wait_s
+from bench.api_load import (
+    CLIENT_NICE,
+    PROJECT_ROOT,
+    TOKEN,
+    cpu_seconds,
+    percentile,
+    runqueue_wait_s,
+)
 
 if TYPE_CHECKING:
     from bench._report import Section
@@ -157,7 +164,11 @@ async def measure(pid: int, url: str, clients: int, seconds: float) -> dict[str,
         procs.append(await _spawn(url, share, start_s, end_s, CLIENT_NICE))
         rest -= share
     await asyncio.sleep(max(0.0, start_s - time.monotonic()))
-    cpu_start_s, wait_start_s, wall_start_s = cpu_seconds(pid), runqueue_wait_s(pid), time.monotonic()
+    cpu_start_s, wait_start_s, wall_start_s = (
+        cpu_seconds(pid),
+        runqueue_wait_s(pid),
+        time.monotonic(),
+    )
     await asyncio.sleep(max(0.0, end_s - time.monotonic()))
     wall_s = time.monotonic() - wall_start_s
     cpu_share = (cpu_seconds(pid) - cpu_start_s) / wall_s
@@ -322,3 +333,91 @@ def main() -> int:
 
 if __name__ == "__main__":
     raise SystemExit(main())
+
+
+def report(result: dict[str, Any]) -> Section | None:
+    """Latency and server CPU against the number of clients, for docs/PERFORMANCE.md."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from bench._report import Section, save_figure
+
+    rows = sorted(result.get("rows", []), key=lambda row: row["clients"])
+    if not rows:
+        return None
+    machine = result.get("machine", {})
+    clients = [row["clients"] for row in rows]
+
+    def series(part: str, key: str) -> list[float]:
+        return [row[part][key] if row[part][key] is not None else float("nan") for row in rows]
+
+    fig, ax = plt.subplots(figsize=(6.4, 3.6))
+    ax.plot(clients, series("probe_latency", "p50_ms"), "o-", label="p50 (probe clients)")
+    ax.plot(clients, series("probe_latency", "p99_ms"), "s-", label="p99 (probe clients)")
+    ax.plot(clients, series("latency", "p99_ms"), "^--", label="p99 (every client)")
+    ax.axhline(GOAL_P99_MS, color="#c44", linestyle=":", label=f"goal p99 {GOAL_P99_MS:g} ms")
+    ax.set_xscale("log")
+    ax.set_xlabel(f"WebSocket telemetry clients ({result.get('rate_hz', RATE_HZ):g} Hz each)")
+    ax.set_ylabel("vehicle → client latency (ms)")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    latency = save_figure(
+        fig,
+        "ws_clients_latency",
+        "Telemetry latency (server took in the vehicle's message → client received the "
+        "state) against the number of clients",
+        machine,
+    )
+    plt.close(fig)
+
+    fig, ax = plt.subplots(figsize=(6.4, 3.6))
+    cpu = [100 * row["server_cpu_share_of_one_core"] for row in rows]
+    ax.plot(clients, cpu, "o-", label="server process")
+    ax.axhline(100 * GOAL_CPU_SHARE, color="#c44", linestyle=":", label="goal at 100 clients")
+    ax.set_xscale("log")
+    ax.set_xlabel(f"WebSocket telemetry clients ({result.get('rate_hz', RATE_HZ):g} Hz each)")
+    ax.set_ylabel("server CPU (% of one core)")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    cpu_figure = save_figure(
+        fig, "ws_clients_cpu", "Server CPU against the number of telemetry clients", machine
+    )
+    plt.close(fig)
+
+    first, last = rows[0], rows[-1]
+    messages_ratio = last["clients"] / first["clients"]
+    cpu_ratio = last["server_cpu_share_of_one_core"] / max(
+        first["server_cpu_share_of_one_core"], 1e-9
+    )
+    lines = [
+        f"One vehicle, {', '.join(map(str, clients))} WebSocket telemetry clients at "
+        f"{result.get('rate_hz', RATE_HZ):g} Hz each, server and clients in separate "
+        "processes (`python -m bench.ws_clients`). Each tick is snapshotted and encoded once "
+        "and the same text goes to every socket, so going from "
+        f"{first['clients']} to {last['clients']} clients ({messages_ratio:.0f}× the "
+        f"messages) cost the server {cpu_ratio:.1f}× the CPU "
+        f"({100 * first['server_cpu_share_of_one_core']:.1f} % → "
+        f"{100 * last['server_cpu_share_of_one_core']:.1f} % of one core).",
+        "",
+        "| clients | p50 ms | p99 ms | p99 ms (all) | received | server CPU |",
+        "|---:|---:|---:|---:|---:|---:|",
+    ]
+    for row in rows:
+        probe, every = row["probe_latency"], row["latency"]
+        lines.append(
+            f"| {row['clients']} | {_ms(probe['p50_ms']).strip()} | "
+            f"{_ms(probe['p99_ms']).strip()} | {_ms(every['p99_ms']).strip()} | "
+            f"{100 * row['received_share']:.1f} % | "
+            f"{100 * row['server_cpu_share_of_one_core']:.1f} % |"
+        )
+    lines.append("")
+    for name, ok in result.get("goals_met", {}).items():
+        lines.append(f"- {'met' if ok else 'missed'}: {name}")
+    return Section(
+        title="Telemetry fan-out to WebSocket clients",
+        order=30,
+        markdown="\n".join(lines),
+        figures=[latency, cpu_figure],
+    )

@@ -244,7 +244,9 @@ class StatePublisher:
                     wake_s = now_s + LISTING_CHECK_S
                     await self._sleep_until(wake_s if due_s is None else min(due_s, wake_s))
                     continue
-                fastest_s = min(t.grid.interval_s for t in self._tiers.values() if t.grid.due(now_s))
+                fastest_s = min(
+                    t.grid.interval_s for t in self._tiers.values() if t.grid.due(now_s)
+                )
                 if not await self._next_change(subscription, fastest_s / 2):
                     break
                 self._deliver_due(loop_time_s() + DUE_SLACK_S)
