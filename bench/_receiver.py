@@ -5,7 +5,9 @@ HEARTBEAT at 1 Hz (quadrotor, PX4, starting in Hold), COMMAND_ACK ACCEPTED to ev
 for it, and DO_SET_MODE switches the mode it reports (so clients that stop streaming when
 the vehicle is not in OFFBOARD, as MAVSDK does, keep going). It timestamps each
 SET_POSITION_TARGET_LOCAL_NED on arrival (time.perf_counter), per sending
-system/component, so clients can be compared with the same clock and socket.
+system/component, so clients can be compared with the same clock and socket. With
+``--telemetry-hz N`` it also sends ATTITUDE, LOCAL_POSITION_NED and GLOBAL_POSITION_INT at
+N Hz to its peers, so the server has live telemetry to decode and fan out, as with a vehicle.
 
 Protocol on stdio, one line each: it prints ``{"event": "ready", "port": N}`` once bound;
 ``reset`` forgets the arrivals so far; ``report`` prints
@@ -15,7 +17,9 @@ Protocol on stdio, one line each: it prints ``{"event": "ready", "port": N}`` on
 
 from __future__ import annotations
 
+import argparse
 import json
+import math
 import selectors
 import socket
 import sys
@@ -39,6 +43,20 @@ class Receiver:
         self.peers: dict[tuple[str, int], None] = {}
         self.custom_mode = HOLD_CUSTOM_MODE
         self.arrivals: dict[str, list[float]] = {}
+        self.started = time.monotonic()
+
+    def send_telemetry(self) -> None:
+        t = time.monotonic() - self.started
+        boot_ms = int(t * 1000)
+        north, east = 10 * math.cos(t / 10), 10 * math.sin(t / 10)
+        for addr in self.peers:
+            self.send(self.mav.attitude_encode(boot_ms, 0.01, -0.02, t / 10 % 6.28, 0, 0, 0.1),
+                      addr)
+            self.send(self.mav.local_position_ned_encode(boot_ms, north, east, -5.0, 0, 0, 0),
+                      addr)
+            self.send(self.mav.global_position_int_encode(
+                boot_ms, 473977420 + int(north * 90), 85455940 + int(east * 130), 493000,
+                5000, 0, 0, 0, 0), addr)
 
     @property
     def port(self) -> int:
@@ -95,15 +113,20 @@ class Receiver:
 
 
 def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--telemetry-hz", type=float, default=0.0)
+    args = parser.parse_args()
     receiver = Receiver()
     selector = selectors.DefaultSelector()
     selector.register(receiver.sock, selectors.EVENT_READ, "socket")
     selector.register(sys.stdin, selectors.EVENT_READ, "stdin")
     print(json.dumps({"event": "ready", "port": receiver.port}), flush=True)
     next_heartbeat = time.monotonic()
+    telemetry_period_s = 1.0 / args.telemetry_hz if args.telemetry_hz > 0 else math.inf
+    next_telemetry = time.monotonic() + telemetry_period_s
     running = True
     while running:
-        timeout = max(0.0, next_heartbeat - time.monotonic())
+        timeout = max(0.0, min(next_heartbeat, next_telemetry) - time.monotonic())
         for key, _ in selector.select(timeout):
             if key.data == "socket":
                 receiver.read_socket()
@@ -112,6 +135,9 @@ def main() -> None:
         if time.monotonic() >= next_heartbeat:
             receiver.send_heartbeat()
             next_heartbeat += HEARTBEAT_PERIOD_S
+        if time.monotonic() >= next_telemetry:
+            receiver.send_telemetry()
+            next_telemetry = max(next_telemetry + telemetry_period_s, time.monotonic())
 
 
 if __name__ == "__main__":

@@ -22,11 +22,14 @@ import socket
 import statistics
 import time
 from collections.abc import AsyncIterator, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from bench._results import machine_info, write_results
 from server.link import Link, Vehicle
 from server.simproc import SimInstance, SimProcess
+
+if TYPE_CHECKING:
+    from bench._report import Section
 
 READY_TIMEOUT_S = 30.0
 
@@ -126,6 +129,47 @@ async def run(count: int) -> dict[str, Any]:
         "samples_ms": {"skyhelm": ours_wall, "mavsdk": theirs},
         "machine": machine_info(load_average_before),
     }
+
+
+def report(result: dict[str, Any]) -> Section | None:
+    """The round trip's distribution per client, and the ratio of medians."""
+    samples = result.get("samples_ms") or {}
+    if not samples.get("skyhelm") or not samples.get("mavsdk"):
+        return None
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from bench._report import Section, save_figure
+
+    fig, ax = plt.subplots(figsize=(7, 3.2))
+    labels = ["SkyHelm (Vehicle.arm)", "MAVSDK (action.arm)"]
+    data = [samples["skyhelm"], samples["mavsdk"]]
+    ax.boxplot(data, vert=False, showfliers=True, widths=0.5)
+    for row, values in enumerate(data, start=1):
+        ax.plot(values, [row] * len(values), "o", alpha=0.35, markersize=3)
+    ax.set_yticks([1, 2], labels)
+    ax.set_xlabel("arm → COMMAND_ACK round trip (ms), simulated vehicle in its own process")
+    ax.grid(True, axis="x", alpha=0.3)
+    ax.set_title(f"Command round trip, {result['count']} alternating rounds per client",
+                 fontsize=10)
+    figure = save_figure(fig, "command_latency", "Arm → ACK round trip, SkyHelm vs MAVSDK",
+                         result.get("machine", {}))
+    plt.close(fig)
+    ours, theirs = result["skyhelm_arm_wall"], result["mavsdk_arm_wall"]
+    markdown = (
+        f"Arm → COMMAND_ACK: SkyHelm's median round trip is "
+        f"**{result['median_ratio_skyhelm_over_mavsdk']:.2f}×** MAVSDK's in the same run "
+        f"(goal ≤ 1: {'met' if result['goal_met'] else 'not met'}).\n\n"
+        "| client | median ms | p90 ms | min ms | max ms |\n|---|---|---|---|---|\n"
+        f"| SkyHelm | {ours['median_ms']:.2f} | {ours['p90_ms']:.2f} | {ours['min_ms']:.2f} "
+        f"| {ours['max_ms']:.2f} |\n"
+        f"| MAVSDK | {theirs['median_ms']:.2f} | {theirs['p90_ms']:.2f} "
+        f"| {theirs['min_ms']:.2f} | {theirs['max_ms']:.2f} |\n"
+    )
+    return Section(title="Command round trip vs MAVSDK", order=11, markdown=markdown,
+                   figures=[figure])
 
 
 def main(argv: Sequence[str] | None = None) -> int:

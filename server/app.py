@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
+import gc
 import logging
 import time
 from collections.abc import AsyncIterator, Callable
@@ -38,6 +39,10 @@ from server.api.routes import (
 )
 from server.api.routes import signing as signing_routes
 from server.api.security import install_security
+from server.fleet import routes as fleet_routes
+from server.fleet import ws as fleet_ws
+from server.fleet.edge import EdgeService
+from server.fleet.view_service import FleetService
 from server.link import Envelope, Link
 from server.link.signing import SigningKeyError, SigningKeyStore
 from server.link.urls import parse_link_url
@@ -54,7 +59,11 @@ class StartupError(RuntimeError):
     """The server cannot start: a link would not open or a vehicle never appeared."""
 
 
-def create_app(settings: Settings) -> FastAPI:
+def create_app(settings: Settings, *, freeze_gc_at_start: bool = False) -> FastAPI:
+    """``freeze_gc_at_start`` (the served process, not tests that build many apps): what
+    start-up built moves out of the collector's reach (gc.freeze), so a later full
+    collection walks less and holds the GIL, and with it the stream's sender thread, for
+    less time."""
     tokens = TokenChecker.from_settings(settings)
     envelope = Envelope(
         max_alt_rel_m=settings.max_alt_rel_m,
@@ -73,6 +82,9 @@ def create_app(settings: Settings) -> FastAPI:
         registry.all, leases.status, max_rate_hz=settings.telemetry_max_rate_hz
     )
 
+    fleet = FleetService.from_settings(settings) if settings.fleet else None
+    edge = EdgeService.from_settings(settings, registry.all, publishers) if settings.zenoh else None
+
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         sim: SimProcess | None = None
@@ -80,7 +92,7 @@ def create_app(settings: Settings) -> FastAPI:
             signing_store = app.state.signing_store = _signing_store(settings)
             if settings.connect:
                 await _open_links(registry, settings, settings.connect, signing_store)
-            else:
+            elif starts_sim(settings):  # a fleet server may have no vehicle of its own
                 sim = SimProcess(
                     airframe=settings.sim_airframe,
                     count=settings.sim_count,
@@ -95,11 +107,22 @@ def create_app(settings: Settings) -> FastAPI:
                 await _wait_for_vehicles(registry, [i.sysid for i in instances], settings)
             await deadman.start()
             await publishers.start(registry.links)
+            if fleet is not None:
+                await _start_fleet(fleet)
+            if edge is not None:
+                await _start_edge(edge, app)
             if hub is not None:
                 hub.on_click = _on_loop(publishers.publish_click)
                 await hub.start(publishers)
+            if freeze_gc_at_start:
+                gc.collect()
+                gc.freeze()
             yield
         finally:
+            if edge is not None:
+                await edge.stop()
+            if fleet is not None:
+                await fleet.stop()
             if hub is not None:
                 await hub.stop()
             await publishers.close()
@@ -119,6 +142,8 @@ def create_app(settings: Settings) -> FastAPI:
     app.state.sim = None
     app.state.publishers = publishers
     app.state.signing_store = None  # the lifespan reads the key file
+    app.state.fleet = fleet
+    app.state.edge = edge
     install_error_handlers(app)
     if settings.cors_origins:
         app.add_middleware(
@@ -143,6 +168,9 @@ def create_app(settings: Settings) -> FastAPI:
         api.include_router(module.router)
     api.include_router(signing_routes.router)
     api.include_router(ws.router)
+    if fleet is not None:
+        api.include_router(fleet_routes.router)
+        api.include_router(fleet_ws.router)
     app.include_router(api)
     if hub is not None:
         hub.mount(app, check_token=tokens.is_valid)
@@ -160,6 +188,28 @@ def _on_loop(publish: Callable[[dict[str, object]], None]) -> Callable[[ClickPoi
         loop.call_soon_threadsafe(publish, dataclasses.asdict(click))
 
     return on_click
+
+
+def starts_sim(settings: Settings) -> bool:
+    """No --connect starts the simulated vehicle(s); but a fleet server (--fleet) starts
+    none unless --sim-count (or SKYHELM_SIM_COUNT) asks for some."""
+    if settings.connect:
+        return False
+    return not settings.fleet or "sim_count" in settings.model_fields_set
+
+
+async def _start_fleet(fleet: FleetService) -> None:
+    try:
+        await fleet.start()
+    except Exception as exc:  # zenoh.ZError: a bad endpoint, config or port in use
+        raise StartupError(f"cannot join the fleet over Zenoh: {exc}") from exc
+
+
+async def _start_edge(edge: EdgeService, app: FastAPI) -> None:
+    try:
+        await edge.start(app)
+    except Exception as exc:  # zenoh.ZError: a bad endpoint, config or port in use
+        raise StartupError(f"cannot publish to the fleet over Zenoh: {exc}") from exc
 
 
 def is_replay(urls: list[str]) -> bool:

@@ -100,7 +100,8 @@ def _fleet_flags(parser: argparse.ArgumentParser) -> None:
     fleet.add_argument("--zenoh", action="store_true",
                        help="publish this server's vehicles to the fleet (an edge)")
     fleet.add_argument("--fleet", action="store_true",
-                       help="see and fly every vehicle of the fleet")
+                       help="see and fly every vehicle of the fleet (no simulated vehicle of its "
+                       "own unless --sim-count is given)")
     fleet.add_argument("--fleet-name", help="the fleet's name (default 'default')")
     fleet.add_argument("--edge-name", help="this edge's name (default: the host name)")
     fleet.add_argument("--zenoh-mode", help="peer (default) or client (through a router)")
@@ -189,7 +190,7 @@ def uvicorn_server(settings: Settings) -> uvicorn.Server:
     from server.app import create_app
 
     config = uvicorn.Config(
-        create_app(settings),
+        create_app(settings, freeze_gc_at_start=True),
         host=settings.host,
         port=settings.port,
         log_config=None,

@@ -11,6 +11,14 @@ import zenoh
 
 ZenohMode = Literal["peer", "client", "router"]
 
+# The link lease this node announces, and keep-alives per lease: a peer that dies or is cut
+# off is dropped (and its liveliness tokens with it) within LEASE_MS of its last message,
+# so the fleet sees an edge lost within 2 s. Zenoh's default is 10 s. A config file's own
+# transport/link/tx/lease wins.
+LEASE_MS = 1000
+KEEP_ALIVES_PER_LEASE = 4
+_DEFAULT_LEASE_MS = 10000
+
 
 @dataclass(frozen=True)
 class ZenohOptions:
@@ -36,6 +44,9 @@ def zenoh_config(options: ZenohOptions) -> zenoh.Config:
     if options.listen:
         config.insert_json5("listen/endpoints", json.dumps(options.listen))
     config.insert_json5("scouting/multicast/enabled", json.dumps(options.multicast_scouting))
+    if json.loads(config.get_json("transport/link/tx/lease")) == _DEFAULT_LEASE_MS:
+        config.insert_json5("transport/link/tx/lease", json.dumps(LEASE_MS))
+        config.insert_json5("transport/link/tx/keep_alive", json.dumps(KEEP_ALIVES_PER_LEASE))
     return config
 
 

@@ -11,6 +11,8 @@ import asyncio
 import contextlib
 import itertools
 import logging
+import threading
+import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -77,6 +79,10 @@ class Link:
         self.frames_dropped_out = 0  # frames send() could not write (no peer, not connected)
         # taken once: stats() may be called from other threads (the scene)
         self._loop = asyncio.get_running_loop()
+        self._loop_thread = threading.get_ident()
+        # send() packs (sequence, signing), writes and counts under this lock: the setpoint
+        # sender thread sends too (server.link.stream_thread)
+        self._send_lock = threading.Lock()
         self._transport = transport
         self._tlog = tlog
         self._vehicle_factory = vehicle_factory
@@ -151,7 +157,8 @@ class Link:
     async def close(self) -> None:
         if self._closed:
             return
-        self._closed = True
+        with self._send_lock:
+            self._closed = True  # the sender thread's next send is dropped, not written
         for task in self._tasks:
             await cancel_and_wait(task)
         for vehicle in list(self._vehicles.values()):
@@ -216,17 +223,38 @@ class Link:
 
     def send(self, msg: mavlink.MAVLink_message) -> None:
         """Pack with this link's sequence and ids (MAVLink 2), write, record. Never blocks:
-        a frame the transport cannot take now is dropped and counted."""
-        frame = bytes(msg.pack(self.mav))
-        self.mav.seq = (self.mav.seq + 1) % 256
+        a frame the transport cannot take now is dropped and counted. Thread-safe: off the
+        loop (the setpoint sender thread) the transport's thread writer writes and the
+        tlog record is handed to the loop."""
+        on_loop = threading.get_ident() == self._loop_thread
         target_system = getattr(msg, "target_system", None)
-        if self._closed or not self._transport.write(frame, target_system):
-            self.frames_dropped_out += 1
-            return
-        self._frames_out += 1
-        self._bytes_out += len(frame)
+        with self._send_lock:
+            frame = bytes(msg.pack(self.mav))
+            self.mav.seq = (self.mav.seq + 1) % 256
+            if self._closed or not (
+                self._transport.write(frame, target_system) if on_loop
+                else self._write_off_loop(frame, target_system)
+            ):
+                self.frames_dropped_out += 1
+                return
+            self._frames_out += 1
+            self._bytes_out += len(frame)
         if self._tlog is not None and msg.get_msgId() != MAVLINK_MSG_ID_SETUP_SIGNING:
-            self._tlog.record(frame)  # a key never goes to the tlog
+            if on_loop:
+                self._tlog.record(frame)  # a key never goes to the tlog
+            else:
+                with contextlib.suppress(RuntimeError):  # the loop has closed
+                    self._loop.call_soon_threadsafe(self._tlog.record, frame, time.time())
+
+    def _write_off_loop(self, frame: bytes, target_system: int | None) -> bool:
+        writer = self._transport.thread_writer()
+        if writer is not None:
+            return writer(frame, target_system)
+        try:  # a transport without one writes on the loop, soon
+            self._loop.call_soon_threadsafe(self._transport.write, frame, target_system)
+        except RuntimeError:
+            return False
+        return True
 
     def send_gcs_heartbeat(self) -> None:
         self.send(self.mav.heartbeat_encode(

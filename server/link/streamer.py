@@ -1,26 +1,44 @@
 """The offboard setpoint streamer: one per vehicle, on absolute deadlines.
 
-Ticks fall on t0 + k·period on the event loop's clock (loop.call_at), so a late tick does
-not push every later one back; a tick that comes too late to matter is skipped and shows
-up as a gap. A new setpoint goes out at once and re-phases the schedule.
+Ticks fall on t0 + k·period, so a late tick does not push every later one back; a tick that
+comes too late to matter is skipped and shows up as a gap. A new setpoint goes out at once
+(from the caller, on the loop) and re-phases the schedule.
+
+Who keeps the time: on a real clock, the process's sender thread (server.link.stream_thread),
+where the event loop's load cannot delay a tick; under a virtual loop clock (looptime in
+tests) the event loop itself (loop.call_at), so virtual time drives the stream exactly.
+``SENDER_THREAD = False`` (or SKYHELM_STREAM_SENDER=loop in the environment) keeps every
+stream on the loop; bench/stream_vs_mavsdk.py compares the two.
 """
 
 from __future__ import annotations
 
 import asyncio
 import math
+import os
+import threading
+import time
 from array import array
 from collections.abc import Callable
 
 from pymavlink.dialects.v20 import development as mavlink
 
 from server.link.state import StreamStats
+from server.link.stream_thread import Deadlines, SenderThread, shared_sender
 
 MIN_RATE_HZ = 2.0
 MAX_RATE_HZ = 100.0
 DEFAULT_RATE_HZ = 20.0
 # An interval longer than this many periods counts as a gap.
 GAP_PERIODS = 2.0
+# Streams on a real clock are timed by the sender thread (False: by the event loop).
+SENDER_THREAD = os.environ.get("SKYHELM_STREAM_SENDER", "thread") != "loop"
+
+
+def _real_time_loop(loop: asyncio.AbstractEventLoop) -> bool:
+    """Whether the loop keeps real time (asyncio's and uvloop's loops do): not a clock
+    patched on the instance, nor looptime's virtual time (its loops say ``looptime_on``)."""
+    return "time" not in vars(loop) and not getattr(loop, "looptime_on", False)
 
 
 class SetpointStreamer:
@@ -30,18 +48,31 @@ class SetpointStreamer:
         *,
         rate_hz: float = DEFAULT_RATE_HZ,
         window: int = 1024,
+        sender: SenderThread | None = None,
     ) -> None:
         self._send = send
-        self._period_s = 1.0 / self._checked_rate(rate_hz)
+        self._deadlines = Deadlines(1.0 / self._checked_rate(rate_hz))
         self._msg: mavlink.MAVLink_message | None = None
+        self._active = False
+        # the loop-timed schedule's timer; the thread's jobs carry the generation they
+        # were scheduled in and end when it has moved on (stop, re-phase)
         self._handle: asyncio.TimerHandle | None = None
+        self._generation = 0
+        self._sender = sender
+        self._threaded = False
+        self._clock: Callable[[], float] = time.monotonic
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._t0 = 0.0
-        self._k = 0
+        # the loop (stream, update, stop, stats) and the sender thread (ticks) share the
+        # state below; the sends themselves are serialised by the link
+        self._lock = threading.RLock()
         self._started_s: float | None = None
         # statistics; the interval window is preallocated and overwritten in a ring
         self._intervals = array("d", bytes(8 * window))
         self._reset_stats()
+
+    @property
+    def _period_s(self) -> float:
+        return self._deadlines.period_s
 
     @staticmethod
     def _checked_rate(rate_hz: float) -> float:
@@ -55,32 +86,54 @@ class SetpointStreamer:
 
     @rate_hz.setter
     def rate_hz(self, rate_hz: float) -> None:
-        self._period_s = 1.0 / self._checked_rate(rate_hz)
-        if self.active:
-            self._rephase()
+        period_s = 1.0 / self._checked_rate(rate_hz)
+        with self._lock:
+            self._deadlines.period_s = period_s
+            if self.active:
+                self._rephase()
 
     @property
     def active(self) -> bool:
-        return self._handle is not None
+        return self._active
+
+    @property
+    def threaded(self) -> bool:
+        """Whether the sender thread (not the event loop) times this stream."""
+        return self._threaded
 
     def stream(self, msg: mavlink.MAVLink_message) -> None:
         """Send ``msg`` now and then every period until stop() or the next stream()."""
-        self._msg = msg
-        self._loop = asyncio.get_running_loop()
-        if self._started_s is None:
-            # statistics describe the stream since it last started
-            self._reset_stats()
-            self._started_s = self._loop.time()
-        self._emit(self._loop.time())
-        self._rephase()
+        loop = asyncio.get_running_loop()
+        with self._lock:
+            if not self._active:
+                self._choose_clock(loop)
+            self._msg = msg
+            if self._started_s is None:
+                # statistics describe the stream since it last started
+                self._reset_stats()
+                self._started_s = self._clock()
+            self._active = True
+            self._emit(self._clock())
+            self._rephase()
+
+    def _choose_clock(self, loop: asyncio.AbstractEventLoop) -> None:
+        self._loop = loop
+        self._threaded = SENDER_THREAD and _real_time_loop(loop)
+        if self._threaded:
+            if self._sender is None:
+                self._sender = shared_sender()
+            self._clock = self._sender.clock
+        else:
+            self._clock = loop.time
 
     def update(self, msg: mavlink.MAVLink_message) -> None:
         """Send ``msg`` from the next tick on without moving the schedule (a stream that
         must keep its rate whatever the rate of its updates); stream() it when stopped."""
-        if not self.active:
-            self.stream(msg)
-            return
-        self._msg = msg
+        with self._lock:
+            if self.active:
+                self._msg = msg
+                return
+        self.stream(msg)
 
     def _reset_stats(self) -> None:
         self._ring_next = 0
@@ -94,35 +147,54 @@ class SetpointStreamer:
         self._percentiles: tuple[int, float, float] | None = None
 
     def stop(self) -> None:
-        if self._handle is not None:
-            self._handle.cancel()
-            self._handle = None
-        self._msg = None
-        self._started_s = None
+        with self._lock:
+            self._generation += 1
+            if self._handle is not None:
+                self._handle.cancel()
+                self._handle = None
+            self._active = False
+            self._msg = None
+            self._started_s = None
 
     def streaming_for_s(self) -> float:
         """How long the current stream has run without a stop (0 when stopped)."""
-        if self._started_s is None or self._loop is None:
+        if self._started_s is None:
             return 0.0
-        return self._loop.time() - self._started_s
+        return self._clock() - self._started_s
 
     def _rephase(self) -> None:
-        assert self._loop is not None
+        self._generation += 1
         if self._handle is not None:
             self._handle.cancel()
-        self._t0 = self._last_s if self._last_s is not None else self._loop.time()
-        self._k = 1
-        self._handle = self._loop.call_at(self._t0 + self._period_s, self._tick)
+            self._handle = None
+        first_s = self._deadlines.rephase(
+            self._last_s if self._last_s is not None else self._clock())
+        if self._threaded:
+            assert self._sender is not None
+            generation = self._generation
+            self._sender.at(first_s, lambda now_s: self._thread_tick(generation))
+        else:
+            assert self._loop is not None
+            self._handle = self._loop.call_at(first_s, self._loop_tick)
 
-    def _tick(self) -> None:
+    def _thread_tick(self, generation: int) -> float | None:
+        """A tick on the sender thread; its next deadline, or None once stopped/re-phased."""
+        with self._lock:
+            if generation != self._generation:
+                return None
+            if self._loop is not None and self._loop.is_closed():
+                # its owner's loop is gone (a stream nobody stopped): it ends with it
+                self._active = False
+                return None
+            now = self._clock()
+            self._emit(now)
+            return self._deadlines.after_tick(now)
+
+    def _loop_tick(self) -> None:
         assert self._loop is not None
         now = self._loop.time()
         self._emit(now)
-        self._k += 1
-        if self._t0 + self._k * self._period_s <= now:
-            # late by more than a period: skip the missed ticks instead of bursting them
-            self._k = math.floor((now - self._t0) / self._period_s) + 1
-        self._handle = self._loop.call_at(self._t0 + self._k * self._period_s, self._tick)
+        self._handle = self._loop.call_at(self._deadlines.after_tick(now), self._loop_tick)
 
     def _emit(self, now: float) -> None:
         if self._msg is None:
@@ -140,10 +212,13 @@ class SetpointStreamer:
         self._sent += 1
 
     def stats(self) -> StreamStats:
+        with self._lock:
+            return self._stats()
+
+    def _stats(self) -> StreamStats:
         since_last_ms = None
         if self._last_s is not None:
-            now = self._loop.time() if self._loop is not None else self._last_s
-            since_last_ms = (now - self._last_s) * 1000.0
+            since_last_ms = (self._clock() - self._last_s) * 1000.0
         if not self._ring_len:
             return StreamStats(active=self.active, sent=self._sent, since_last_ms=since_last_ms)
         # the rate over the last ~1 s, so it follows a rate change; percentiles use the window

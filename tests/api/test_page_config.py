@@ -17,7 +17,9 @@ async def test_config_gives_the_tile_url_to_observers_and_not_without_a_token() 
     ) as api:
         answer = await api.client.get("/api/v1/config", headers=auth(OBSERVER))
         assert answer.status_code == 200
-        assert answer.json() == {"map_tile_url": TILES, "map_tile_attribution": "© Example"}
+        assert answer.json() == {
+            "map_tile_url": TILES, "map_tile_attribution": "© Example", "fleet": False,
+        }
         async with httpx.AsyncClient(
             transport=httpx.ASGITransport(app=api.app), base_url="http://testserver"
         ) as anonymous:

@@ -24,7 +24,10 @@ from tests.api.test_ws import Served, close_code, receive, receive_until, served
 from tests.serving import uvicorn_serving
 
 API_MD = Path(__file__).resolve().parents[2] / "docs" / "api.md"
-PATH_VALUES = {"vehicle_id": "1", "name": "MPC_XY_VEL_MAX", "request_id": "no-such-request"}
+PATH_VALUES = {
+    "vehicle_id": "1", "name": "MPC_XY_VEL_MAX", "request_id": "no-such-request",
+    "edge": "edge-a", "rest": "arm",
+}
 # What each caller gets where the rule by method does not hold: health is public; a session
 # cookie may be had by any token; POST /control is how a pilot asks for the lease (409 while
 # another holds it).
@@ -49,6 +52,9 @@ SOCKETS: dict[str, tuple[int, int | None, int]] = {
     "/api/v1/ws/telemetry": (4401, None, 0),
     "/api/v1/ws/control": (4401, 4403, 4409),
 }
+# a fleet server's (--fleet) own socket; its routes follow the rule by method
+# (tests/fleet/test_fleet_processes.py tries them against real edges)
+FLEET_SOCKETS: dict[str, tuple[int, int | None, int]] = {"/api/v1/fleet/ws": (4401, None, 0)}
 
 
 def expected(method: str, path: str) -> tuple[int, int, int]:
@@ -130,8 +136,10 @@ def test_docs_list_every_route_with_its_refusals() -> None:
     from server.app import create_app
     from tests.api.conftest import make_settings
 
-    app = create_app(make_settings(None, connect=["udpin:127.0.0.1:0"]))
-    rest, _ = routes(app)
+    # a fleet server has every route of a server, and the fleet's
+    app = create_app(make_settings(None, connect=["udpin:127.0.0.1:0"], fleet=True))
+    rest, sockets = routes(app)
+    assert set(sockets) == set(SOCKETS) | set(FLEET_SOCKETS)
     text = API_MD.read_text()
     missing = []
     for method, path in rest:
@@ -139,7 +147,7 @@ def test_docs_list_every_route_with_its_refusals() -> None:
         row = f"| `{method} {path}` | {' | '.join(answers)} |"
         if row not in text:
             missing.append(row)
-    for path, (no_token, observer, pilot) in SOCKETS.items():
+    for path, (no_token, observer, pilot) in {**SOCKETS, **FLEET_SOCKETS}.items():
         row = (
             f"| `WS {path}` | close {no_token} | "
             f"{'admitted' if observer is None else f'close {observer}'} | "

@@ -1,5 +1,5 @@
-"""What the page needs to know of the server's settings: the 2D map's tiles. Behind the
-token, since a tile URL may carry the tile provider's key."""
+"""What the page needs to know of the server's settings: the 2D map's tiles, and whether
+it is a fleet server. Behind the token, since a tile URL may carry the tile provider's key."""
 
 from __future__ import annotations
 
@@ -17,6 +17,7 @@ class PageConfigOut(BaseModel):
         description="Leaflet tile template ({z}/{x}/{y}); null: the map draws a metre grid"
     )
     map_tile_attribution: str
+    fleet: bool = Field(description="a fleet server (--fleet): /api/v1/fleet and its socket")
 
 
 @router.get("/config", response_model=PageConfigOut, responses=AUTH_RESPONSES)
@@ -25,4 +26,5 @@ async def page_config(context: Context, _role: Reader) -> PageConfigOut:
     return PageConfigOut(
         map_tile_url=settings.map_tile_url,
         map_tile_attribution=settings.map_tile_attribution,
+        fleet=settings.fleet,
     )

@@ -133,6 +133,11 @@ class PeerRouter:
         peer = self._peer_by_system.get(target_system)
         return peer if peer in self._last_heard else None
 
+    def every_peer(self) -> list[Peer]:
+        """Every peer known, whatever its age: broadcasts sent off the loop, whose clock
+        ages peers, go to these."""
+        return list(self._last_heard)
+
     def destinations(self, target_system: int | None) -> list[Peer]:
         peer = self.peer_of(target_system)
         if peer is not None:
@@ -176,6 +181,11 @@ class Transport(ABC):
 
     @abstractmethod
     async def close(self) -> None: ...
+
+    def thread_writer(self) -> Callable[[bytes, int | None], bool] | None:
+        """A write() that threads other than the loop's may call (the setpoint sender
+        thread), or None: then the link hands their frames to the loop."""
+        return None
 
     def _opened(self) -> None:
         """A connection is up: count it if it is a reconnect, and retry quickly next time."""

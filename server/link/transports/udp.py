@@ -14,6 +14,9 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import os
+import socket
+from collections.abc import Callable
 from typing import Any, cast
 
 from pymavlink.dialects.v20 import development as mavlink
@@ -47,6 +50,9 @@ class _UdpTransport(Transport):
         super().__init__(address)
         self._endpoint: asyncio.DatagramTransport | None = None
         self._decoder = FrameDecoder()
+        # a duplicate of the endpoint's socket for writes off the loop (asyncio's transport
+        # is not thread-safe); it shares the non-blocking mode, so it never blocks either
+        self._thread_socket: socket.socket | None = None
 
     @property
     def local_address(self) -> tuple[str, int] | None:
@@ -62,6 +68,25 @@ class _UdpTransport(Transport):
             lambda: _DatagramReceiver(self), **kwargs
         )
         self._endpoint = endpoint
+        sock = endpoint.get_extra_info("socket")
+        self._thread_socket = socket.socket(
+            sock.family, sock.type, sock.proto, fileno=os.dup(sock.fileno()))
+
+    def thread_writer(self) -> Callable[[bytes, int | None], bool] | None:
+        return self._write_off_loop
+
+    def _write_off_loop(self, frame: bytes, target_system: int | None) -> bool:
+        sock = self._thread_socket
+        if sock is None:
+            return False
+        try:
+            return self._send_off_loop(sock, frame, target_system)
+        except OSError:  # buffer full (non-blocking), or closed under us: dropped, counted
+            return False
+
+    def _send_off_loop(self, sock: socket.socket, frame: bytes, target_system: int | None
+                       ) -> bool:
+        raise NotImplementedError
 
     def datagram_received(self, data: bytes, addr: tuple[str | Any, int]) -> None:
         if self._sink is None:
@@ -80,6 +105,9 @@ class _UdpTransport(Transport):
         return None
 
     async def close(self) -> None:
+        if self._thread_socket is not None:
+            self._thread_socket.close()
+            self._thread_socket = None
         if self._endpoint is not None:
             self._endpoint.close()
             self._endpoint = None
@@ -103,6 +131,14 @@ class UdpInTransport(_UdpTransport):
         destinations = self._router.destinations(target_system)
         for addr in destinations:
             self._endpoint.sendto(frame, cast(tuple[str, int], addr))
+        return bool(destinations)
+
+    def _send_off_loop(self, sock: socket.socket, frame: bytes, target_system: int | None
+                       ) -> bool:
+        peer = self._router.peer_of(target_system)
+        destinations = [peer] if peer is not None else self._router.every_peer()
+        for addr in destinations:
+            sock.sendto(frame, cast(tuple[str, int], addr))
         return bool(destinations)
 
     def _frame_heard(self, msg: mavlink.MAVLink_message, peer: Peer) -> bool | None:
@@ -136,4 +172,9 @@ class UdpOutTransport(_UdpTransport):
         if self._endpoint is None:
             return False
         self._endpoint.sendto(frame)
+        return True
+
+    def _send_off_loop(self, sock: socket.socket, frame: bytes, target_system: int | None
+                       ) -> bool:
+        sock.send(frame)  # connected to the one peer
         return True

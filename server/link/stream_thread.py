@@ -1,0 +1,141 @@
+"""The setpoint sender thread: every stream of the process on absolute deadlines, off the loop.
+
+The web server's event loop encodes JSON, answers REST reads and collects garbage; a stream
+timed by that loop is late whenever it is busy. One daemon thread per process instead keeps a
+heap of (deadline, job) on ``time.monotonic`` and sleeps on a condition until the earliest
+is due; a job sends its frame and answers its next deadline (or None: it is over). Deadline
+math (:class:`Deadlines`) is shared with the loop-timed streamer used under a virtual clock.
+
+A thread still needs the GIL to send, and CPython hands it over only every switch interval
+(5 ms by default) while the loop thread runs Python code. Starting the thread lowers the
+process's switch interval to ``SWITCH_INTERVAL_S`` so a due send waits at most that long.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import logging
+import math
+import os
+import sys
+import threading
+import time
+from collections.abc import Callable
+
+log = logging.getLogger(__name__)
+
+# The GIL switch interval while the sender thread runs: the most a due send waits for a busy
+# loop thread to let go of the GIL (CPython's default is 5 ms). The environment's
+# SKYHELM_STREAM_SWITCH_INTERVAL_MS overrides it (benches measure the default against it).
+SWITCH_INTERVAL_S = float(os.environ.get("SKYHELM_STREAM_SWITCH_INTERVAL_MS", "0.5")) / 1e3
+
+# A job: called with the time it fires at, sends, answers its next deadline or None (done).
+Job = Callable[[float], float | None]
+
+
+class Deadlines:
+    """Ticks at t0 + k·period: a late tick does not push later ones back, and a tick later
+    than a whole period skips the missed ones instead of bursting them."""
+
+    def __init__(self, period_s: float) -> None:
+        self.period_s = period_s
+        self.t0_s = 0.0
+        self.k = 1
+
+    def rephase(self, at_s: float) -> float:
+        """Count ticks from ``at_s`` (a send just made); answers the first deadline."""
+        self.t0_s = at_s
+        self.k = 1
+        return self.next_s
+
+    @property
+    def next_s(self) -> float:
+        return self.t0_s + self.k * self.period_s
+
+    def after_tick(self, now_s: float) -> float:
+        """The deadline after a tick that ran at ``now_s``."""
+        self.k += 1
+        if self.next_s <= now_s:
+            self.k = math.floor((now_s - self.t0_s) / self.period_s) + 1
+        return self.next_s
+
+
+class SenderThread:
+    """Runs jobs at their deadlines on one daemon thread, started at the first job.
+    ``threaded=False`` starts none: whoever owns it calls run_due (tests, on a fake clock)."""
+
+    def __init__(
+        self, clock: Callable[[], float] = time.monotonic, *, threaded: bool = True
+    ) -> None:
+        self.clock = clock
+        self._threaded = threaded
+        self._cond = threading.Condition(threading.Lock())
+        self._heap: list[tuple[float, int, Job]] = []
+        self._order = itertools.count()  # ties keep their order; jobs are never compared
+        self._thread: threading.Thread | None = None
+        self.jobs_failed = 0
+
+    def at(self, deadline_s: float, job: Job) -> None:
+        """Run ``job`` at ``deadline_s`` on the clock (at once when it is past)."""
+        with self._cond:
+            heapq.heappush(self._heap, (deadline_s, next(self._order), job))
+            if self._heap[0][2] is job:
+                self._cond.notify()
+            if self._thread is None and self._threaded:
+                self._start()
+
+    def pending(self) -> int:
+        with self._cond:
+            return len(self._heap)
+
+    def run_due(self, now_s: float) -> float | None:
+        """Run every job due by ``now_s`` and reschedule those that go on; answers the next
+        deadline (None: nothing left). The thread's body; tests call it on a fake clock."""
+        due: list[Job] = []
+        with self._cond:
+            while self._heap and self._heap[0][0] <= now_s:
+                due.append(heapq.heappop(self._heap)[2])
+        for job in due:
+            try:
+                deadline_s = job(now_s)
+            except Exception:
+                # one stream's failure must not stop every other stream of the process
+                self.jobs_failed += 1
+                log.exception("setpoint stream job failed; it stops")
+                continue
+            if deadline_s is not None:
+                with self._cond:
+                    heapq.heappush(self._heap, (deadline_s, next(self._order), job))
+        with self._cond:
+            return self._heap[0][0] if self._heap else None
+
+    def _start(self) -> None:
+        sys.setswitchinterval(min(sys.getswitchinterval(), SWITCH_INTERVAL_S))
+        self._thread = threading.Thread(target=self._run, name="setpoint-sender", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                while not self._heap:
+                    self._cond.wait()
+                wait_s = self._heap[0][0] - self.clock()
+                if wait_s > 0:
+                    # woken early by an earlier job, or on time: look again either way
+                    self._cond.wait(wait_s)
+                    continue
+            self.run_due(self.clock())
+
+
+_shared: SenderThread | None = None
+_shared_lock = threading.Lock()
+
+
+def shared_sender() -> SenderThread:
+    """The process's sender thread (one for every link and vehicle)."""
+    global _shared
+    with _shared_lock:
+        if _shared is None:
+            _shared = SenderThread()
+        return _shared
