@@ -5,6 +5,7 @@ PY      := $(VENV)/bin/python
 PIP     := $(PY) -m pip
 STAMP   := $(VENV)/.installed
 TSTAMP  := $(VENV)/.installed-test
+BSTAMP  := $(VENV)/.installed-bench
 ARGS    ?=
 
 .PHONY: run test test-px4 lint audit bench sim chromium clean
@@ -19,6 +20,10 @@ $(STAMP): pyproject.toml | $(PY)
 
 $(TSTAMP): pyproject.toml $(STAMP)
 	$(PIP) install -q -e '.[test]'
+	touch $@
+
+$(BSTAMP): pyproject.toml $(TSTAMP)
+	$(PIP) install -q -e '.[test,bench]'
 	touch $@
 
 ## Start the server with the embedded simulated vehicle and print the URL.
@@ -67,8 +72,11 @@ test-px4: $(TSTAMP)
 	  SKYHELM_PX4_SITL_DIR="$$dir" $(VENV)/bin/pytest -q -p no:cacheprovider -m px4 -rs tests/px4; \
 	fi
 
-bench: $(TSTAMP)
-	$(PY) -m bench.run_all
+## Every benchmark at its default size (~15 min on 2 cores; each prints its time), then
+## docs/PERFORMANCE.md and its figures (docs/img/perf/). ARGS="--quick" for a smoke run,
+## ARGS="--only api_load,signing" for some; bench/run_all.py --help for the rest.
+bench: $(BSTAMP) chromium
+	$(PY) -m bench.run_all $(ARGS)
 
 clean:
 	rm -rf $(VENV) .mypy_cache .ruff_cache .pytest_cache

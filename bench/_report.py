@@ -9,6 +9,8 @@ names the machine it ran on (``machine_caption``).
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -18,6 +20,18 @@ if TYPE_CHECKING:
 
 DOCS_DIR = Path(__file__).resolve().parent.parent / "docs"
 FIGURE_DIR = DOCS_DIR / "img" / "perf"
+# Where save_figure writes: docs/ unless bench.report renders elsewhere (output_to).
+_docs_dir = [DOCS_DIR]
+
+
+@contextlib.contextmanager
+def output_to(docs_dir: Path) -> Iterator[None]:
+    """Save figures under ``docs_dir``/img/perf while the block runs."""
+    _docs_dir.append(docs_dir)
+    try:
+        yield
+    finally:
+        _docs_dir.pop()
 
 
 @dataclass(frozen=True)
@@ -47,9 +61,12 @@ def machine_caption(machine: dict[str, Any]) -> str:
 
 def save_figure(fig: MplFigure, name: str, caption: str, machine: dict[str, Any]) -> Figure:
     """Save ``fig`` as docs/img/perf/<name>.png with the machine in its footer."""
-    FIGURE_DIR.mkdir(parents=True, exist_ok=True)
-    fig.text(0.99, 0.005, machine_caption(machine), ha="right", va="bottom",
+    docs_dir = _docs_dir[-1]
+    figure_dir = docs_dir / FIGURE_DIR.relative_to(DOCS_DIR)
+    figure_dir.mkdir(parents=True, exist_ok=True)
+    # below the axes' labels; bbox_inches="tight" takes it in
+    fig.text(0.99, -0.02, machine_caption(machine), ha="right", va="top",
              fontsize=7, color="#666666")
-    path = FIGURE_DIR / f"{name}.png"
+    path = figure_dir / f"{name}.png"
     fig.savefig(path, dpi=110, bbox_inches="tight")
-    return Figure(path=str(path.relative_to(DOCS_DIR)), caption=caption)
+    return Figure(path=path.relative_to(docs_dir).as_posix(), caption=caption)

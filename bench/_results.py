@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import platform
+import time
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +27,9 @@ def machine_info(load_average_before: tuple[float, float, float] | None = None) 
 
 
 def write_results(name: str, result: dict[str, Any]) -> Path:
-    """Write bench/results/<name>.json and say so."""
+    """Write bench/results/<name>.json and say so, stamped with when it was written (UTC),
+    which tells the report (bench/report.py) what the current run measured."""
+    result = {**result, "written_at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
     path = RESULTS_DIR / f"{name}.json"
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(result, indent=2) + "\n")

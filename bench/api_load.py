@@ -31,7 +31,6 @@ import asyncio
 import contextlib
 import json
 import os
-import platform
 import statistics
 import sys
 import time
@@ -42,8 +41,11 @@ from typing import Any
 import httpx
 from websockets.asyncio.client import connect
 
+from bench._markdown import ratio, table
+from bench._report import Section
+from bench._results import machine_info, write_results
+
 PROJECT_ROOT = Path(__file__).resolve().parent.parent
-RESULTS = PROJECT_ROOT / "bench" / "results" / "api_load.json"
 TOKEN = "bench-token-0123456789"
 STREAM_RATE_HZ = 50.0
 TELEMETRY_RATE_HZ = 10.0
@@ -236,6 +238,7 @@ async def rest_load(
 
 
 async def run(seconds: float, clients: int, workers: int, client_nice: int) -> dict[str, Any]:
+    load_average_before = os.getloadavg()
     async with skyhelm_serve() as (proc, base):
         headers = {"Authorization": f"Bearer {TOKEN}"}
         async with httpx.AsyncClient(base_url=base, headers=headers, timeout=10) as client:
@@ -309,11 +312,7 @@ async def run(seconds: float, clients: int, workers: int, client_nice: int) -> d
         "server_loop_runqueue_wait_ms_per_s": wait_ms_per_s,
         "telemetry_clients_cpu_share_of_one_core": clients_cpu_share,
         # other processes on the machine share its cores: the figures depend on them too
-        "machine": {
-            "cpus": os.cpu_count(),
-            "python": platform.python_version(),
-            "load_average_1min": os.getloadavg()[0],
-        },
+        "machine": machine_info(load_average_before),
     }
 
 
@@ -344,8 +343,6 @@ def main() -> int:
         "server_cpu_share < 0.5": result["server_cpu_share_of_one_core"] < 0.5,
     }
     result["goals_met"] = goals
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    RESULTS.write_text(json.dumps(result, indent=2) + "\n")
     stream = result["stream"]
     print(
         f"stream: {stream.get('rate_hz', 0):.1f} Hz, interval p50 "
@@ -364,16 +361,54 @@ def main() -> int:
         f"p99 {_ms(result['rest_latency_p99_ms'])}, errors {result['rest_errors']}"
     )
     machine = result["machine"]
-    print(f"machine: load average {machine['load_average_1min']:.2f} on {machine['cpus']} cpus")
+    print(f"machine: load average {machine['load_average_before'][0]:.2f} before, "
+          f"{machine['load_average_after'][0]:.2f} after, on {machine['cpus']} cpus")
     print(f"server loop waited for a core {result['server_loop_runqueue_wait_ms_per_s']:.1f} ms/s")
     print(
         f"server CPU: {100 * result['server_cpu_share_of_one_core']:.0f} % of one core "
         f"(telemetry clients: {100 * result['telemetry_clients_cpu_share_of_one_core']:.0f} %)"
     )
     print("goals:", ", ".join(f"{k}: {'met' if v else 'MISSED'}" for k, v in goals.items()))
-    print(f"wrote {RESULTS.relative_to(PROJECT_ROOT)}")
+    write_results("api_load", result)
     return 0
 
 
 if __name__ == "__main__":
     raise SystemExit(main())
+
+
+def report(result: dict[str, Any]) -> Section | None:
+    """The three latencies and the server's CPU, each against its goal."""
+    stream = result["stream"]
+    period_ms = 1000.0 / result["stream_rate_hz_target"]
+    rows = [
+        [f"stream interval ({result['stream_rate_hz_target']:.0f} Hz, server's own figures)",
+         _ms(stream.get("interval_p50_ms")), _ms(stream.get("interval_p99_ms")),
+         f"p99 error {_ms(result['stream_p99_error_ms'])} (goal ≤ 2 ms); "
+         f"max gap {_ms(stream.get('max_gap_ms'))}"],
+        [f"telemetry vehicle → client ({result['telemetry_probe_clients']} probe clients)",
+         _ms(result["telemetry_latency_p50_ms"]), _ms(result["telemetry_latency_p99_ms"]),
+         "goal p99 ≤ 20 ms"],
+        ["telemetry vehicle → client (niced clients)",
+         _ms(result["telemetry_latency_niced_clients_p50_ms"]),
+         _ms(result["telemetry_latency_niced_clients_p99_ms"]), ""],
+        [f"REST GET ({result['rest_rate_hz']:.0f}/s)", _ms(result["rest_latency_p50_ms"]),
+         _ms(result["rest_latency_p99_ms"]), f"{result['rest_errors']} errors"],
+    ]
+    cpu = result["server_cpu_share_of_one_core"]
+    error = result["stream_p99_error_ms"]
+    markdown = (
+        f"{result['telemetry_clients']} WebSocket clients at {result['telemetry_rate_hz']:.0f} Hz "
+        f"and {result['rest_rate_hz']:.0f} REST reads/s against one `skyhelm serve` streaming "
+        f"{result['stream_rate_hz_target']:.0f} Hz setpoints, for {result['seconds']:.0f} s. "
+        f"The stream's p99 error is {ratio(error, period_ms) if error is not None else 'n/a'} "
+        f"of its period; telemetry p99 is "
+        f"{ratio(result['telemetry_latency_p99_ms'] or 0.0, 20.0)} of its 20 ms limit; the "
+        f"server used {cpu:.0%} of one core (limit 50 %: "
+        f"{ratio(cpu, 0.5)}) and its loop waited "
+        f"{result['server_loop_runqueue_wait_ms_per_s']:.0f} ms per second for a core.\n\n"
+        + table(["path", "p50", "p99", ""], rows)
+        + "\n\nGoals: " + ", ".join(f"{k}: {'met' if v else '**not met**'}"
+                                     for k, v in result.get("goals_met", {}).items())
+    )
+    return Section("API under load: telemetry, REST and the stream together", 35, markdown)

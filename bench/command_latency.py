@@ -22,14 +22,13 @@ import socket
 import statistics
 import time
 from collections.abc import AsyncIterator, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
+from bench._markdown import table
+from bench._report import Section, save_figure
 from bench._results import machine_info, write_results
 from server.link import Link, Vehicle
 from server.simproc import SimInstance, SimProcess
-
-if TYPE_CHECKING:
-    from bench._report import Section
 
 READY_TIMEOUT_S = 30.0
 
@@ -89,8 +88,19 @@ def _summary(values_ms: Sequence[float]) -> dict[str, float]:
     }
 
 
+def _import_mavsdk() -> Any:
+    """mavsdk_grpc, without the uvloop event-loop policy its import installs when uvloop is
+    there: a policy swapped under a running default loop breaks its child processes (the
+    simulated vehicle), and both clients must be measured on the same loop."""
+    policy = asyncio.get_event_loop_policy()
+    import mavsdk_grpc
+
+    asyncio.set_event_loop_policy(policy)
+    return mavsdk_grpc
+
+
 async def run(count: int) -> dict[str, Any]:
-    import mavsdk_grpc as mavsdk
+    mavsdk = _import_mavsdk()
 
     load_average_before = os.getloadavg()
     async with simulated_vehicle() as instance:
@@ -131,47 +141,6 @@ async def run(count: int) -> dict[str, Any]:
     }
 
 
-def report(result: dict[str, Any]) -> Section | None:
-    """The round trip's distribution per client, and the ratio of medians."""
-    samples = result.get("samples_ms") or {}
-    if not samples.get("skyhelm") or not samples.get("mavsdk"):
-        return None
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from bench._report import Section, save_figure
-
-    fig, ax = plt.subplots(figsize=(7, 3.2))
-    labels = ["SkyHelm (Vehicle.arm)", "MAVSDK (action.arm)"]
-    data = [samples["skyhelm"], samples["mavsdk"]]
-    ax.boxplot(data, vert=False, showfliers=True, widths=0.5)
-    for row, values in enumerate(data, start=1):
-        ax.plot(values, [row] * len(values), "o", alpha=0.35, markersize=3)
-    ax.set_yticks([1, 2], labels)
-    ax.set_xlabel("arm → COMMAND_ACK round trip (ms), simulated vehicle in its own process")
-    ax.grid(True, axis="x", alpha=0.3)
-    ax.set_title(f"Command round trip, {result['count']} alternating rounds per client",
-                 fontsize=10)
-    figure = save_figure(fig, "command_latency", "Arm → ACK round trip, SkyHelm vs MAVSDK",
-                         result.get("machine", {}))
-    plt.close(fig)
-    ours, theirs = result["skyhelm_arm_wall"], result["mavsdk_arm_wall"]
-    markdown = (
-        f"Arm → COMMAND_ACK: SkyHelm's median round trip is "
-        f"**{result['median_ratio_skyhelm_over_mavsdk']:.2f}×** MAVSDK's in the same run "
-        f"(goal ≤ 1: {'met' if result['goal_met'] else 'not met'}).\n\n"
-        "| client | median ms | p90 ms | min ms | max ms |\n|---|---|---|---|---|\n"
-        f"| SkyHelm | {ours['median_ms']:.2f} | {ours['p90_ms']:.2f} | {ours['min_ms']:.2f} "
-        f"| {ours['max_ms']:.2f} |\n"
-        f"| MAVSDK | {theirs['median_ms']:.2f} | {theirs['p90_ms']:.2f} "
-        f"| {theirs['min_ms']:.2f} | {theirs['max_ms']:.2f} |\n"
-    )
-    return Section(title="Command round trip vs MAVSDK", order=11, markdown=markdown,
-                   figures=[figure])
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--count", type=int, default=30, help="arms per client (≥ 30)")
@@ -192,3 +161,45 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 if __name__ == "__main__":
     raise SystemExit(main())
+
+
+def report(result: dict[str, Any]) -> Section | None:
+    """The round trips of both clients as distributions, and the ratio of their medians."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    ours, theirs = result["skyhelm_arm_wall"], result["mavsdk_arm_wall"]
+    samples = result.get("samples_ms", {})
+    figures = []
+    if samples.get("skyhelm") and samples.get("mavsdk"):
+        fig = Figure(figsize=(6.4, 3.4))
+        ax = fig.add_subplot()
+        for name, values in (("SkyHelm", samples["skyhelm"]), ("MAVSDK", samples["mavsdk"])):
+            ordered = sorted(values)
+            ax.step(ordered, [(i + 1) / len(ordered) for i in range(len(ordered))],
+                    where="post", label=f"{name} (median {statistics.median(ordered):.2f} ms)")
+        ax.set_xscale("log")
+        ax.set_xlabel("arm → COMMAND_ACK, wall time (ms, log)")
+        ax.set_ylabel("fraction of commands")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(loc="lower right")
+        figures.append(save_figure(
+            fig, "command_latency",
+            f"Arm round trip on one simulated vehicle, {result['count']} commands per client, "
+            "alternating", result["machine"]))
+    rows = [
+        ["SkyHelm (`await vehicle.arm()`)", *(f"{ours[k]:.2f}" for k in
+                                               ("median_ms", "p90_ms", "max_ms"))],
+        ["MAVSDK (`drone.action.arm()`)", *(f"{theirs[k]:.2f}" for k in
+                                            ("median_ms", "p90_ms", "max_ms"))],
+    ]
+    ratio = result["median_ratio_skyhelm_over_mavsdk"]
+    markdown = (
+        f"SkyHelm's arm round trip takes **{ratio:.2f}×** MAVSDK's (median over "
+        f"{result['count']} arms each, alternating on the same simulated vehicle; goal ≤ 1: "
+        f"{'met' if ratio <= 1 else 'NOT met'}).\n\n"
+        + table(["client", "median ms", "p90 ms", "max ms"], rows)
+    )
+    return Section("Command round trip: SkyHelm vs MAVSDK", 20, markdown, figures)

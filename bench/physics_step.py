@@ -12,7 +12,10 @@ from __future__ import annotations
 
 import statistics
 import time
+from typing import Any
 
+from bench._markdown import table
+from bench._report import Section, save_figure
 from bench._results import machine_info, write_results
 from sim.airframes import AirframeModel, default_params, make_airframe
 from sim.sim_run import PHYSICS_DT_S, fly
@@ -97,3 +100,42 @@ def main() -> None:
 
 if __name__ == "__main__":
     main()
+
+
+def report(result: dict[str, Any]) -> Section | None:
+    """CPU per step per airframe, as a share of the step's real-time budget."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    airframes = result["airframes"]
+    rate_hz = result["physics_rate_hz"]
+    budget_us = 1e6 / rate_hz
+    names = list(airframes)
+    fig = Figure(figsize=(6.4, 3.0))
+    ax = fig.add_subplot()
+    medians = [airframes[n]["step_us_median"] for n in names]
+    bars = ax.bar(names, medians, color="#4c72b0")
+    ax.errorbar(names, medians, yerr=[[m - airframes[n]["step_us_min"] for n, m in
+                                       zip(names, medians, strict=True)],
+                                      [airframes[n]["step_us_max"] - m for n, m in
+                                       zip(names, medians, strict=True)]],
+                fmt="none", ecolor="#333333", capsize=3)
+    ax.bar_label(bars, labels=[f"{100 * m / budget_us:.1f} %" for m in medians], padding=2,
+                 fontsize=8)
+    ax.set_ylabel(f"CPU µs per step (labels: share of {budget_us:.0f} µs)")
+    ax.set_ylim(0, max(airframes[n]["step_us_max"] for n in names) * 1.25)
+    figure = save_figure(fig, "physics_step",
+                         f"CPU per {rate_hz} Hz physics step, median of blocks (bars: min–max)",
+                         result["machine"])
+    quad = airframes.get("quad")
+    rows = [[n, f"{a['step_us_median']:.1f}", f"{a['core_percent_at_250_hz']:.2f}",
+             a["vehicles_per_core_physics_only"]] for n, a in airframes.items()]
+    lead = (f"A quad's physics step costs {quad['step_us_median'] / budget_us:.3f}× its "
+            f"{budget_us:.0f} µs real-time budget: one core could step "
+            f"{quad['vehicles_per_core_physics_only']} quads (physics only; see the sim cost "
+            f"for MAVLink on top).\n\n") if quad else ""
+    return Section("Physics step per airframe", 60, lead + table(
+        ["airframe", "CPU µs/step", "% of a core at 250 Hz", "vehicles per core"], rows),
+        [figure])

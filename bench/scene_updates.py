@@ -18,6 +18,8 @@ from fastapi import FastAPI
 from websockets.asyncio.client import connect
 from websockets.typing import Subprotocol
 
+from bench._markdown import ratio, table
+from bench._report import Section
 from bench._results import machine_info, write_results
 from server.link import VehicleState
 from server.scene import SceneHub
@@ -108,3 +110,23 @@ def main() -> int:
 
 if __name__ == "__main__":
     raise SystemExit(main())
+
+
+def report(result: dict[str, Any]) -> Section | None:
+    """Tick cost and CPU at 1 and at 4 vehicles."""
+    rows = result["rows"]
+    markdown = table(
+        ["vehicles", "updates/s per vehicle (limit 30)", "tick p50 ms", "tick p99 ms",
+         "server CPU % of one core", "kB/s to one client"],
+        [[r["vehicles"], r["update_rate_per_vehicle_hz"], r["tick_p50_ms"], r["tick_p99_ms"],
+          r["process_cpu_pct_of_one_core"], r["client_kbytes_per_s"]] for r in rows])
+    if len(rows) >= 2:
+        first, last = rows[0], rows[-1]
+        markdown = (
+            f"From {first['vehicles']} to {last['vehicles']} vehicles "
+            f"({ratio(last['vehicles'], first['vehicles'])} the vehicles), the scene's CPU grows "
+            f"{ratio(last['process_cpu_pct_of_one_core'], first['process_cpu_pct_of_one_core'])}"
+            f" and its p99 tick {ratio(last['tick_p99_ms'], first['tick_p99_ms'])}; each "
+            f"vehicle stays at ≤ 30 updates/s ({result['measure_s']:.0f} s per row, one "
+            f"browser-like client).\n\n" + markdown)
+    return Section("3D scene updates", 70, markdown)

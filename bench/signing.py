@@ -23,6 +23,8 @@ from typing import Any
 
 from pymavlink.dialects.v20 import development as mavlink
 
+from bench._markdown import ratio, table
+from bench._report import Section
 from bench._results import machine_info, write_results
 from server.link import Link, Vehicle
 from server.link.signing import SigningKeyStore, provision, signing_timestamp
@@ -119,3 +121,32 @@ def main() -> None:
 
 if __name__ == "__main__":
     main()
+
+
+def report(result: dict[str, Any]) -> Section | None:
+    """Signed vs unsigned, per frame and against the simulated vehicle."""
+    codec, sim = result["codec"], result["sim"]
+    rows = [
+        ["pack SET_POSITION_TARGET_LOCAL_NED (µs)", f"{codec['pack_unsigned_us']:.1f}",
+         f"{codec['pack_signed_us']:.1f}",
+         ratio(codec["pack_signed_us"], codec["pack_unsigned_us"])],
+        ["decode (µs; signed: HMAC + window)", f"{codec['decode_unsigned_us']:.1f}",
+         f"{codec['decode_signed_us']:.1f}",
+         ratio(codec["decode_signed_us"], codec["decode_unsigned_us"])],
+        ["vehicle frames/s reaching the link", f"{sim['frames_per_s_unsigned']:.0f}",
+         f"{sim['frames_per_s_signed']:.0f}",
+         ratio(sim["frames_per_s_signed"], sim["frames_per_s_unsigned"])],
+        ["arm → ACK (ms)", f"{sim['arm_ack_ms_unsigned']:.2f}", f"{sim['arm_ack_ms_signed']:.2f}",
+         ratio(sim["arm_ack_ms_signed"], sim["arm_ack_ms_unsigned"])],
+    ]
+    decode = ratio(codec["decode_signed_us"], codec["decode_unsigned_us"])
+    markdown = (
+        f"Signing makes a frame's decode {decode}"
+        f" as costly and leaves the vehicle's frame rate at "
+        f"{ratio(sim['frames_per_s_signed'], sim['frames_per_s_unsigned'])} of unsigned. The "
+        f"first key is confirmed in {sim['provision_first_key_ms']:.0f} ms, a rotation in "
+        f"{sim['rotation_ms']:.0f} ms, with {sim['frames_rejected_during_rotation']} frames "
+        f"rejected while switching (vehicle still connected: "
+        f"{'yes' if sim['vehicle_connected_after_rotation'] else 'NO'}).\n\n"
+        + table(["", "unsigned", "signed", "signed / unsigned"], rows))
+    return Section("MAVLink 2 signing", 95, markdown)

@@ -16,6 +16,8 @@ import statistics
 import time
 from typing import Any
 
+from bench._markdown import ratio, table
+from bench._report import Section, save_figure
 from bench._results import machine_info, write_results
 from server.api.publisher import Published, StatePublisher
 from server.api.slots import Slot
@@ -166,3 +168,44 @@ def main() -> int:
 
 if __name__ == "__main__":
     raise SystemExit(main())
+
+
+def report(result: dict[str, Any]) -> Section | None:
+    """Encode cost against the naive encode, and encodes per tick with 1 and 50 readers."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    enc = result["encode"]
+    labels = ["encode_state", "WS message", "REST body", "asdict + json.dumps"]
+    values = [enc["encode_us"], enc["ws_message_us"], enc["rest_body_us"],
+              enc["asdict_json_dumps_us"]]
+    fig = Figure(figsize=(6.4, 3.0))
+    ax = fig.add_subplot()
+    bars = ax.barh(labels[::-1], values[::-1],
+                   color=["#999999", "#4c72b0", "#4c72b0", "#4c72b0"])
+    ax.bar_label(bars, fmt="%.1f µs", padding=3)
+    ax.axvline(result["goal_us"], color="#c44e52", linestyle="--",
+               label=f"goal {result['goal_us']:.0f} µs")
+    ax.set_xlabel(f"µs per full vehicle snapshot ({enc['bytes']} bytes)")
+    ax.set_xlim(0, max(values) * 1.25)
+    ax.legend(loc="upper right")
+    figure = save_figure(fig, "state_encode", "Cost of one state snapshot as the API sends it",
+                         result["machine"])
+    rows = [[r["subscribers"], r["ticks"], r["encodes"], r["encodes_per_tick"],
+             r["messages_sent"], r["messages_per_encode"]] for r in result["fan_out"]]
+    first, last = result["fan_out"][0], result["fan_out"][-1]
+    cost = ratio(enc["ws_message_us"], enc["asdict_json_dumps_us"])
+    markdown = (
+        f"A WebSocket state message costs **{cost}"
+        f"** of `json.dumps(dataclasses.asdict(state))` ({enc['ws_message_us']} µs vs "
+        f"{enc['asdict_json_dumps_us']} µs; goal ≤ {result['goal_us']:.0f} µs: "
+        f"{'met' if result['within_goal'] else 'NOT met'}). With {last['subscribers']} "
+        f"subscribers the publisher encodes {last['encodes_per_tick']} times per tick, as with "
+        f"{first['subscribers']} ({first['encodes_per_tick']}): one encode per tick shared by "
+        f"every reader ({'met' if result['one_encode_per_tick'] else 'NOT met'}).\n\n"
+        + table(["subscribers", "ticks", "encodes", "encodes/tick", "messages sent",
+                 "messages/encode"], rows)
+    )
+    return Section("State encoding and fan-out", 40, markdown, [figure])

@@ -42,11 +42,12 @@ from server.api.security import install_security
 from server.fleet import routes as fleet_routes
 from server.fleet import ws as fleet_ws
 from server.fleet.edge import EdgeService
+from server.fleet.view import FleetVehicle
 from server.fleet.view_service import FleetService
 from server.link import Envelope, Link
 from server.link.signing import SigningKeyError, SigningKeyStore
 from server.link.urls import parse_link_url
-from server.scene import ClickPoint, SceneHub
+from server.scene import ClickPoint, FleetScene, SceneHub
 from server.settings import Settings
 from server.simproc import SimProcess
 
@@ -83,6 +84,8 @@ def create_app(settings: Settings, *, freeze_gc_at_start: bool = False) -> FastA
     )
 
     fleet = FleetService.from_settings(settings) if settings.fleet else None
+    if fleet is not None and hub is not None:
+        fleet.view.on_change.append(_show_in_scene(hub.fleet))
     edge = EdgeService.from_settings(settings, registry.all, publishers) if settings.zenoh else None
 
     @asynccontextmanager
@@ -188,6 +191,16 @@ def _on_loop(publish: Callable[[dict[str, object]], None]) -> Callable[[ClickPoi
         loop.call_soon_threadsafe(publish, dataclasses.asdict(click))
 
     return on_click
+
+
+def _show_in_scene(scene: FleetScene) -> Callable[[FleetVehicle], None]:
+    """The fleet view tells the 3D scene of every fleet vehicle's state and presence."""
+
+    def show(vehicle: FleetVehicle) -> None:
+        if vehicle.state is not None:
+            scene.show(vehicle.key, vehicle.state, vehicle.alive)
+
+    return show
 
 
 def starts_sim(settings: Settings) -> bool:

@@ -1,5 +1,5 @@
 """The `skyhelm` command: `serve` (the dashboard), `replay` (the dashboard, read-only, from a
-recorded .tlog), `sim` (the simulated vehicle alone)."""
+recorded .tlog), `sim` (the simulated vehicle alone), `router` (a Zenoh router for a fleet)."""
 
 from __future__ import annotations
 
@@ -148,7 +148,40 @@ def build_parser() -> argparse.ArgumentParser:
     _replay_parser(sub)
     # `skyhelm sim` hands every argument to `python -m sim`, see main().
     sub.add_parser("sim", help="run the simulated PX4 vehicle alone, like PX4 SITL (sim --help)")
+    _router_parser(sub)
     return parser
+
+
+def _router_parser(sub: Any) -> None:
+    router = sub.add_parser(
+        "router", help="run a Zenoh router that edges and fleet servers connect to (docs/fleet.md)"
+    )
+    router.add_argument("--listen", action="append", metavar="ENDPOINT",
+                        help="an endpoint to listen on (repeatable; default tcp/[::]:7447; "
+                             "port 0 picks a free one)")
+    router.add_argument("--connect", action="append", metavar="ENDPOINT",
+                        help="another router to join (repeatable)")
+    router.add_argument("--zenoh-config", type=Path,
+                        help="Zenoh JSON5 configuration file (TLS, access control)")
+    router.add_argument("--multicast-scouting", action="store_true",
+                        help="also answer multicast scouting on the LAN (default off)")
+    router.add_argument("--log-level", default="info", help="debug|info|warning|error")
+
+
+def run_router_command(args: argparse.Namespace) -> int:
+    from server.fleet.router import DEFAULT_LISTEN, RouterOptions, run_router
+
+    options = RouterOptions(
+        listen=args.listen or list(DEFAULT_LISTEN),
+        connect=args.connect or [],
+        config_file=args.zenoh_config,
+        multicast_scouting=args.multicast_scouting,
+    )
+    try:
+        return run_router(options)
+    except Exception as exc:  # zenoh raises ZError on a bad endpoint or config
+        print(f"skyhelm router: {exc}", file=sys.stderr)
+        return 2
 
 
 def replay_url(file: Path, speed: float, loop: bool) -> str:
@@ -228,6 +261,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         os.execv(sys.executable, [sys.executable, "-m", "sim", *argv[1:]])
     args = build_parser().parse_args(argv)
     configure_logging(getattr(args, "log_level", "info"))
+    if args.command == "router":
+        return run_router_command(args)
     try:
         settings = settings_from_args(args)
     except SettingsError as exc:

@@ -13,12 +13,13 @@ import {
   setClientLabel, tabId, takeControl, takeControlClicked, updateControls,
 } from "./handover.js";
 import { confirmAction, wireConfirm } from "./confirm.js";
+import { FleetView } from "./fleet.js";
 import { deadmanText } from "./format.js";
 import { wireLayout } from "./layout.js";
 import { VehicleMap } from "./map.js";
 import { modeMenu, modesFor } from "./modes.js";
 import { SETPOINT_TYPES } from "./offboard.js";
-import { freshness, page, plots } from "./page.js";
+import { freshness, page, plots, vehiclePath } from "./page.js";
 import { instruments, render } from "./render.js";
 import { $, banner, log, nowS, num, setText } from "./ui.js";
 
@@ -41,15 +42,19 @@ function onTelemetry(message) {
   } else if (message.type === "state") {
     map.onState(message);
     if (message.vehicle !== page.vehicleId) return; // a socket for every vehicle, before one is chosen
-    render(message);
-    alerts.fromState(message);
-    renderHolder(message.lease);
-    modeMenu.follow(message.vehicle_type || page.vehicleType, message.mode);
+    showState(message);
   } else if (message.type === "vehicles") {
     showVehicles(message.vehicles);
   } else if (message.type === "scene_click") {
     onSceneClick(message);
   }
+}
+
+function showState(message) {
+  render(message);
+  alerts.fromState(message);
+  renderHolder(message.lease);
+  modeMenu.follow(message.vehicle_type || page.vehicleType, message.mode);
 }
 
 function onEvent(message) {
@@ -170,6 +175,10 @@ function showVehicles(vehicles) {
     option.textContent = `${v.id} · ${v.type}${v.connected ? "" : " (lost)"}`;
     return option;
   }));
+  if (page.fleetVehicle) { // another edge's vehicle is shown: the local list stays a list
+    select.value = "";
+    return;
+  }
   const keep = vehicles.find((v) => v.id === previous);
   const chosen = keep || vehicles[0];
   if (!chosen) {
@@ -190,6 +199,7 @@ function watchTelemetry(vehicleId) {
 function selectVehicle(id) {
   if (page.rejected) return;
   releaseControl();
+  page.fleetVehicle = null;
   page.vehicleId = Number(id);
   page.vehicleType = page.vehicles.find((v) => v.id === page.vehicleId)?.type || "";
   page.state = null;
@@ -200,6 +210,35 @@ function selectVehicle(id) {
   watchTelemetry(page.vehicleId);
   loadParams();
 }
+
+// ---- the fleet (a fleet server) ---------------------------------------------------------------
+
+const fleet = new FleetView($("fleet-panel"), map, {
+  onSelect: selectFleetVehicle,
+  onSelectedState: showState,
+  onSelectedEvent: (event) => onEvent(event),
+});
+
+/** Another edge's vehicle: shown like a local one, flown through the fleet server. */
+function selectFleetVehicle(vehicle) {
+  if (page.rejected) return;
+  releaseControl();
+  page.fleetVehicle = vehicle;
+  page.vehicleId = vehicle.key;
+  page.vehicleType = vehicle.type;
+  page.state = null;
+  $("vehicle-select").value = "";
+  map.vehicleChanged();
+  plots.clear();
+  instruments.reset();
+  alerts.clearAll();
+  // the local socket stays, for every local vehicle on the map and the server's status
+  if (!page.telemetry || page.telemetry.vehicleId !== null) watchTelemetry(null);
+  log("INFO", `fleet vehicle ${vehicle.key} selected`);
+  loadParams();
+}
+
+document.addEventListener("skyhelm-fleet-select", (e) => fleet.select(e.detail));
 
 // ---- 3D scene -----------------------------------------------------------------------------
 
@@ -232,7 +271,7 @@ async function loadParams() {
   if (page.vehicleId === null || page.rejected) return;
   let values = {};
   try {
-    values = (await request("GET", `/vehicles/${page.vehicleId}/params?names=${OFFBOARD_PARAMS.join(",")}`)).params || {};
+    values = (await request("GET", vehiclePath(`/params?names=${OFFBOARD_PARAMS.join(",")}`))).params || {};
   } catch (err) {
     log("WARNING", `parameters: ${err.message}`);
   }
@@ -254,7 +293,7 @@ async function setParam(name) {
   const value = Number(raw);
   if (raw === "" || !Number.isFinite(value)) return;
   try {
-    const answer = await request("PUT", `/vehicles/${page.vehicleId}/params/${name}`, { value },
+    const answer = await request("PUT", vehiclePath(`/params/${name}`), { value },
       { "X-Lease-Id": page.control?.leaseId || "" });
     $(`param-${name}`).textContent = answer.value;
     showResult(`${name}`, { ok: true, body: { result: `= ${answer.value}` } });
@@ -353,6 +392,7 @@ async function main() {
   await loadServerMode();
   await map.loadConfig();
   await modeMenu.load();
+  await fleet.start();
   await loadVehicles();
   drawLoop();
   log("INFO", "dashboard ready");
@@ -363,5 +403,5 @@ main();
 // The page's state, for the browser console and the browser tests.
 window.skyhelm = {
   page, SETPOINT_TYPES, keyboard, modesFor, reconnectDelayMs, alerts, alertLog, plots, freshness,
-  map,
+  map, fleet,
 };

@@ -3,7 +3,8 @@
 // what the page shows when control is taken from it.
 
 import { ControlSession, describeError, reconnectDelayMs, request } from "./api.js";
-import { page } from "./page.js";
+import { FleetControlSession } from "./fleet-control.js";
+import { page, vehiclePath } from "./page.js";
 import { $, banner, log, setText } from "./ui.js";
 
 const LABEL_KEY = "skyhelm.clientLabel";
@@ -51,7 +52,7 @@ export async function setClientLabel(text) {
   log("NOTICE", `this tab is called "${clientName()}"`);
   if (!inControl()) return;
   try {
-    const lease = await request("PUT", `/vehicles/${page.vehicleId}/control`, { client_name: clientName() },
+    const lease = await request("PUT", vehiclePath("/control"), { client_name: clientName() },
       { "X-Lease-Id": page.control.leaseId });
     page.control.holder = lease.holder;
     renderHolder();
@@ -77,7 +78,7 @@ export function takeControl(how = "take") {
   page.wantControl = true;
   const asking = how === "ask";
   if (asking) showNote(`asking ${page.state?.lease?.holder || "the holder"} for control…`, "warn");
-  const session = new ControlSession(page.vehicleId, {
+  const options = {
     takeover: how !== "take",
     force: how === "force",
     clientName: clientName(),
@@ -90,7 +91,11 @@ export function takeControl(how = "take") {
     },
     onClosed: (info) => closed(session, info),
     onMessage: (message) => onControlMessage(message),
-  });
+  };
+  // a vehicle of another edge is flown through the fleet server's REST routes
+  const session = page.fleetVehicle
+    ? new FleetControlSession(page.fleetVehicle, options)
+    : new ControlSession(page.vehicleId, options);
   page.control = session;
   updateControls();
 }
@@ -236,7 +241,7 @@ export function renderHolder(lease = page.state?.lease) {
 // The state names the holder; since when, and over which session, the control resource says.
 async function readHolderSince(holder) {
   try {
-    const status = await request("GET", `/vehicles/${page.vehicleId}/control`);
+    const status = await request("GET", vehiclePath("/control"));
     if (status.holder !== holder || shownHolder.name !== holder) return;
     if (Number.isFinite(status.since_s)) shownHolder.since = Date.now() - status.since_s * 1000;
     shownHolder.session = status.session;

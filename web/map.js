@@ -325,9 +325,9 @@ export class VehicleMap {
     if (here) this.map.panTo(here, { animate: false });
   }
 
-  /** Every state message of the page's socket, and of the others' socket. */
-  onState(state) {
-    const id = state.vehicle ?? state.id;
+  /** Every state message of the page's socket, and of the others' socket; a fleet
+   * vehicle's (fleet.js) under its key "edge/id". */
+  onState(state, id = state.vehicle ?? state.id) {
     if (!this.knows(id)) return;
     let layer = this.layers.get(id);
     if (!layer) {
@@ -348,6 +348,7 @@ export class VehicleMap {
   }
 
   knows(id) {
+    if (typeof id === "string") return true; // a fleet vehicle: the fleet view lists them
     return page.vehicles.length === 0 || page.vehicles.some((v) => v.id === id);
   }
 
@@ -356,7 +357,7 @@ export class VehicleMap {
   showVehicles(vehicles) {
     const ids = new Set(vehicles.map((v) => v.id));
     for (const [id, layer] of this.layers) {
-      if (!ids.has(id)) { layer.remove(); this.layers.delete(id); }
+      if (typeof id === "number" && !ids.has(id)) { layer.remove(); this.layers.delete(id); }
     }
     if (vehicles.length > 1 && !this.others && !page.rejected) {
       this.others = new TelemetrySocket(null, {
@@ -378,6 +379,10 @@ export class VehicleMap {
 
   selectVehicle(id) {
     if (id === page.vehicleId) return;
+    if (typeof id === "string") { // a fleet vehicle
+      document.dispatchEvent(new CustomEvent("skyhelm-fleet-select", { detail: id }));
+      return;
+    }
     const select = $("vehicle-select");
     select.value = String(id);
     select.dispatchEvent(new Event("change"));

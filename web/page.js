@@ -18,7 +18,17 @@ export const page = {
   vtol: { state: null, since: 0 },
   readOnly: false, // a replayed recording: nobody may take control
   rejected: false, // the server refused the token: the page stops asking
+  // a fleet server (--fleet): the selected vehicle may be another edge's, {key, edge, id};
+  // then vehicleId is its key ("edge/id") and every call goes through the fleet's routes
+  fleetVehicle: null,
 };
+
+/** The REST path of the selected vehicle: its own, or the fleet server's proxy to its edge. */
+export function vehiclePath(suffix = "") {
+  const v = page.fleetVehicle;
+  if (v) return `/fleet/edges/${encodeURIComponent(v.edge)}/vehicles/${v.id}${suffix}`;
+  return `/vehicles/${page.vehicleId}${suffix}`;
+}
 
 // Any telemetry field can be picked; these two (with their setpoints) are computed by render.js.
 export const plots = new Plots($("plots"), {

@@ -1,23 +1,23 @@
 """One state publisher per vehicle: a snapshot taken once per tick, encoded once, fanned out
 at rate tiers to every telemetry socket, REST read and the scene.
 
-Data path: the vehicle's SubscriptionHub wakes the publisher on a change, at most
-max_rate_hz; the publisher takes one snapshot (a tick, a `Published`) and hands that same
-object to the consumers whose rate tier is due. Its JSON is made on first use and kept on
-the object, so a tick is encoded at most once however many sockets send it, and not at all
-when only the scene (which wants the snapshot itself) is watching.
+Data path: the publisher sleeps until the next slot of a rate tier, then takes one
+snapshot (a tick, a `Published`) just after the vehicle's next message, and hands that same
+object to the consumers of every tier due. No tier due, no snapshot and no wake-up per
+message: a vehicle whose telemetry changes 50 times a second but is watched at 4 Hz costs 4
+snapshots a second, which matters with 50 vehicles on one server. Its JSON is made on
+first use and kept on the object, so a tick is encoded at most once however many sockets
+send it, and not at all when only the scene (which wants the snapshot itself) is watching.
 
 Slow consumers: every consumer reads through a latest-wins slot (slots.py, where the policy
 is written down): a `Slot`, or the scene's `FleetWatch`, one slot per vehicle.
 
-Rate tiers: consumers that ask for the same rate share one tier: one RateGrid, one decision
-per change. A due tier delivers at once; a tier not yet due books its slot on the grid and
-delivers then. Either way the tick it hands out is the state as it is at that moment (a new
-snapshot if the state changed since the last tick): a snapshot taken at an earlier change
-would add its age to every client's latency. Ticks are taken only when a tier delivers (or
-a REST read asks), so a vehicle whose consumers all ask for 10 Hz is snapshotted and
-encoded at most about 10 times a second, whatever its telemetry rate and however many
-sockets watch it.
+Rate tiers: consumers that ask for the same rate share one tier, one RateGrid. When a
+tier's slot comes the publisher waits for the vehicle's next message (at most half the
+tier's interval; the grid keeps the rate however late within it a delivery is) and takes
+the tick right after it: a snapshot taken at an earlier change would add its age to every
+client's latency. With nothing new in that time it sends what changed since the last tick,
+and nothing at all when nothing changed.
 
 The tick's encoded state, for consumers that are not telemetry sockets (a fleet edge): a
 `Slot[Published]` from subscribe(rate_hz) yields ticks; `Published.version` orders them

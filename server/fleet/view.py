@@ -237,10 +237,9 @@ class FleetView:
         state = payload.get("state")
         if not isinstance(state, dict):
             return
+        # Zenoh delivers one publisher's samples in order; a restarted edge counts seq anew
         vehicle = self._vehicle(edge, vehicle_id)
         seq = payload.get("seq")
-        if isinstance(seq, int) and isinstance(vehicle.seq, int) and 0 < vehicle.seq - seq < 1000:
-            return  # an older sample overtaken by a newer one (e.g. fast after slow)
         vehicle.state = state
         vehicle.seq = seq if isinstance(seq, int) else None
         sent = payload.get("sent_unix_s")

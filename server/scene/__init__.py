@@ -1,5 +1,6 @@
 """The live 3D scene (viser), fed from vehicle snapshots and served through the app."""
 
+from .fleet_view import FleetScene
 from .hub import ClickPoint, SceneHub
 
-__all__ = ["ClickPoint", "SceneHub"]
+__all__ = ["ClickPoint", "FleetScene", "SceneHub"]

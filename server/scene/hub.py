@@ -20,6 +20,7 @@ from fastapi import FastAPI
 from server.link.aio import cancel_and_wait
 
 from .compass import CompassRose
+from .fleet_view import FleetPose, FleetScene, FleetVehicleView
 from .frames import Vec3, enu_to_geodetic, geodetic_offset_enu, ray_hits_plane_z
 from .proxy import SceneProxy
 from .vehicle_view import VehicleView
@@ -32,7 +33,13 @@ _log = logging.getLogger(__name__)
 # With nobody watching, the scene still follows (a client that connects gets the current
 # picture at once) but at a trickle, to leave the CPU to the streamer.
 _IDLE_RATE_HZ = 2.0
+# Vehicles updated in one go before the loop gets a turn: one update costs ~0.5 ms, so 50
+# vehicles at once held the loop (and the setpoint streams on it) ~25 ms.
+_VEHICLES_PER_SLICE = 8
 _FOLLOW_OFF = "off"
+_FLEET_PREFIX = "fleet "
+# fleet vehicles arrive at most at 10 Hz each (state/fast); the scene draws them in batches
+_FLEET_RATE_HZ = 10.0
 _CAMERA_OFFSET_ENU = np.array([-6.0, -6.0, 4.0])
 
 
@@ -102,6 +109,10 @@ class SceneHub:
         self._compass: CompassRose | None = None
         self._proxy: SceneProxy | None = None
         self.updates_applied = 0
+        # a fleet server's other-edge vehicles (fleet_view.py): its fleet view feeds this
+        self.fleet = FleetScene()
+        self._fleet_views: dict[str, FleetVehicleView] = {}
+        self._fleet_task: asyncio.Task[None] | None = None
         # Told of every click (in viser's thread), after it is stored.
         self.on_click: Callable[[ClickPoint], None] | None = None
 
@@ -127,15 +138,18 @@ class SceneHub:
         self._set_up_scene(self._server)
         if states is not None:
             self._task = asyncio.create_task(self._follow_states(states), name="scene-hub")
+        self._fleet_task = asyncio.create_task(self._follow_fleet(), name="scene-fleet")
 
     async def stop(self) -> None:
         await cancel_and_wait(self._task)
-        self._task = None
+        await cancel_and_wait(self._fleet_task)
+        self._task = self._fleet_task = None
         if self._server is not None:
             server, self._server = self._server, None
             with contextlib.redirect_stdout(io.StringIO()):
                 await asyncio.to_thread(server.stop)
         self._views.clear()
+        self._fleet_views.clear()
 
     def mount(self, app: FastAPI, *, path: str = "/scene",
               check_token: Callable[[str | None], bool]) -> None:
@@ -148,6 +162,7 @@ class SceneHub:
             "viser_clients": len(self._server.get_clients()) if self._server else 0,
             "proxied_sockets": self._proxy.open_sockets if self._proxy else 0,
             "vehicles": sorted(self._views),
+            "fleet_vehicles": sorted(self._fleet_views),
             "max_rate_hz": self.max_rate_hz,
             "updates_applied": self.updates_applied,
         }
@@ -194,21 +209,68 @@ class SceneHub:
             self.on_click(click)
 
     async def _follow_states(self, states: StateSource) -> None:
-        watch = states.watch_states(self.max_rate_hz)
+        # Unwatched, the scene asks for states at the idle rate only: every vehicle's
+        # publisher then takes its snapshots that rarely too (with 50 vehicles, 30 Hz each
+        # cost ~15 % of a core for a scene nobody saw). Watched again, it asks for the full
+        # rate, and the new watch brings every vehicle's current state at once.
+        watched = self._watched()
+        watch = states.watch_states(self.max_rate_hz if watched else _IDLE_RATE_HZ)
         loop = asyncio.get_running_loop()
         try:
             while True:
+                if self._watched() != watched:
+                    watched = not watched
+                    watch.close()
+                    watch = states.watch_states(self.max_rate_hz if watched else _IDLE_RATE_HZ)
                 changed = await watch.next_states()
-                try:
-                    self._apply_states(changed, loop.time())
-                except Exception:
-                    # A bad snapshot must not kill the scene for the whole session.
-                    _log.exception("scene update failed")
-                if not self._watched():
-                    # the watch keeps only the newest state meanwhile, so nothing piles up
-                    await asyncio.sleep(1.0 / _IDLE_RATE_HZ)
+                for first in range(0, len(changed), _VEHICLES_PER_SLICE):
+                    if first:
+                        await asyncio.sleep(0)
+                    try:
+                        self._apply_states(changed[first:first + _VEHICLES_PER_SLICE],
+                                           loop.time())
+                    except Exception:
+                        # A bad snapshot must not kill the scene for the whole session.
+                        _log.exception("scene update failed")
         finally:
             watch.close()
+
+    async def _follow_fleet(self) -> None:
+        while True:
+            await asyncio.sleep(1.0 / _FLEET_RATE_HZ)
+            changes = self.fleet.take()
+            if not changes or self._server is None:
+                continue
+            try:
+                self._apply_fleet(self._server, changes)
+            except Exception:
+                _log.exception("scene fleet update failed")
+
+    def _apply_fleet(self, server: viser.ViserServer, changes: dict[str, FleetPose | None]) -> None:
+        listed = False
+        with server.atomic():
+            for key, pose in changes.items():
+                view = self._fleet_views.get(key)
+                if pose is None or (view is not None and view.mav_type != pose.mav_type):
+                    if view is not None:
+                        view.remove()
+                        del self._fleet_views[key]
+                        listed = True
+                    if pose is None:
+                        continue
+                if self._reference is None:
+                    # no local vehicle yet: the first fleet vehicle's home (or itself) is 0,0,0
+                    self._reference = pose.home or (pose.lat_deg, pose.lon_deg, pose.alt_amsl_m)
+                view = self._fleet_views.get(key)
+                if view is None:
+                    view = self._fleet_views[key] = FleetVehicleView(server.scene, key,
+                                                                     pose.mav_type)
+                    listed = True
+                view.update(pose, self._reference)
+                self.updates_applied += 1
+            if listed:
+                self._refresh_follow_options()
+            self._follow_camera(server)
 
     def _watched(self) -> bool:
         if self._proxy is not None and self._proxy.open_sockets > 0:
@@ -264,21 +326,30 @@ class SceneHub:
         if self._follow is None:
             return
         first_vehicle = self._follow.value == _FOLLOW_OFF and len(self._views) == 1
-        self._follow.options = (_FOLLOW_OFF, *(f"vehicle {s}" for s in sorted(self._views)))
+        self._follow.options = (
+            _FOLLOW_OFF, *(f"vehicle {s}" for s in sorted(self._views)),
+            *(f"{_FLEET_PREFIX}{key}" for key in sorted(self._fleet_views)),
+        )
         if first_vehicle:
             # viser's setter is typed on a generic base that mypy sees as read-only.
             self._follow.value = f"vehicle {min(self._views)}"  # type: ignore[misc]
+
+    def _followed_position(self, choice: str) -> Vec3 | None:
+        if choice.startswith(_FLEET_PREFIX):
+            fleet_view = self._fleet_views.get(choice.removeprefix(_FLEET_PREFIX))
+            return None if fleet_view is None else fleet_view.position_enu
+        view = self._views.get(int(choice.split()[-1]))
+        return None if view is None else view.position_enu
 
     def _follow_camera(self, server: viser.ViserServer) -> None:
         """Moves every client's camera with the followed vehicle, keeping the user's view angle."""
         if self._follow is None or self._follow.value == _FOLLOW_OFF:
             self._followed_at = None
             return
-        sysid = int(self._follow.value.split()[-1])
-        view = self._views.get(sysid)
-        if view is None or view.position_enu is None:
+        position = self._followed_position(self._follow.value)
+        if position is None:
             return
-        target = np.array(view.position_enu)
+        target = np.array(position)
         previous = self._followed_at
         self._followed_at = target
         moved = previous is None or float(np.abs(target - previous).max()) >= 0.01

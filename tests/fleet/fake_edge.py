@@ -28,6 +28,9 @@ def free_tcp_endpoint() -> str:
 def loopback_options(
     listen: list[str] | None = None, connect: list[str] | None = None, mode: str = "peer"
 ) -> ZenohOptions:
+    if mode == "peer" and not listen:
+        # a peer listens somewhere: on loopback, not Zenoh's default of every interface
+        listen = [free_tcp_endpoint()]
     return ZenohOptions(
         mode=mode,  # type: ignore[arg-type]
         listen=listen or [],
@@ -45,12 +48,13 @@ class FakeEdge:
     answer: dict[str, Any] | str = field(default_factory=lambda: {"status": 200, "body": {}})
     queries: list[dict[str, Any]] = field(default_factory=list)
     tokens: dict[int | None, zenoh.LivelinessToken] = field(default_factory=dict)
+    listen: list[str] = field(default_factory=list)
     seq: int = 0
     _lock: threading.Lock = field(default_factory=threading.Lock)
 
     @classmethod
     def open(cls, keys: FleetKeys, name: str, options: ZenohOptions) -> FakeEdge:
-        edge = cls(keys, name, open_session(options))
+        edge = cls(keys, name, open_session(options), listen=list(options.listen))
         edge.session.declare_queryable(keys.api(name), zenoh.handlers.Callback(edge._on_query))
         edge.tokens[None] = edge.session.liveliness().declare_token(keys.edge_alive(name))
         return edge

@@ -141,6 +141,18 @@ async def test_lists_edges_and_vehicles_with_freshness_and_controller(fleet_rig:
     r.edge.vehicle_up(1)
     await wait_for(lambda: vehicle_alive(r, "edge-a", 1), 5.0, "the vehicle back")
 
+    # a fleet server started after the edge sees who is alive at once (liveliness history)
+    late = FleetService(FLEET, loopback_options(connect=r.edge.listen))
+    await late.start()
+    try:
+        await wait_for(
+            lambda: (found := late.view.vehicle("edge-a", 1)) is not None and found.alive,
+            10.0, "the late fleet server to see the vehicle",
+        )
+        assert late.view.summary() == fleet
+    finally:
+        await late.stop()
+
 
 async def test_an_edge_that_goes_away_is_lost_and_comes_back(fleet_rig: Rig) -> None:
     r = fleet_rig
@@ -260,17 +272,20 @@ async def test_a_fleet_server_may_fly_its_own_vehicles_too() -> None:
     assert not starts_sim(make_settings("udpin:127.0.0.1:0", fleet=True, sim_count=2))
 
 
-def test_messages_are_json() -> None:
+def test_the_view_keeps_the_newest_state_and_presence() -> None:
     from server.fleet.view import FleetView
 
     view = FleetView(FLEET)
     view.set_alive("e", 3, True)
     view.set_state("e", 3, {"seq": 5, "sent_unix_s": 1.0, "state": STATE})
-    view.set_state("e", 3, {"seq": 4, "sent_unix_s": 0.5, "state": {**STATE, "mode": "OLD"}})
+    view.set_state("e", 3, {"seq": 1, "sent_unix_s": 2.0, "state": {**STATE, "mode": "LAND"}})
     vehicle = view.vehicle("e", 3)
     assert vehicle is not None
     assert vehicle.state is not None
-    assert vehicle.state["mode"] == "HOLD"  # the older sample did not overwrite the newer
+    assert vehicle.state["mode"] == "LAND"  # a restarted edge's seq starts again
+    assert (vehicle.seq, vehicle.sent_unix_s) == (1, 2.0)
+    view.set_state("e", 3, {"seq": 2, "state": "not an object"})  # ignored
+    assert vehicle.seq == 1
     message: dict[str, Any] = json.loads(vehicle.state_message())
     assert message["type"] == "fleet_state"
     assert message["key"] == "e/3"

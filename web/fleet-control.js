@@ -1,0 +1,153 @@
+// Flying a fleet vehicle: the same interface as the control socket's ControlSession (api.js),
+// over the fleet server's proxied REST routes (/api/v1/fleet/edges/{edge}/vehicles/{id}/…),
+// so every panel of the page flies a vehicle of another edge exactly as a local one. The
+// lease is REST's: taken with POST /control, carried as X-Lease-Id on every call (which
+// renews it) and renewed with PUT /control while the tab is open; the edge checks all of it.
+
+import { ApiError, request } from "./api.js";
+
+// what the control socket's command names are on REST (docs/api.md, "Endpoints")
+const COMMANDS = {
+  arm: ["POST", "/arm"], disarm: ["POST", "/disarm"], takeoff: ["POST", "/takeoff"],
+  land: ["POST", "/land"], rtl: ["POST", "/rtl"], hold: ["POST", "/hold"],
+  mode: ["POST", "/mode"], reposition: ["POST", "/reposition"],
+  vtol_transition: ["POST", "/vtol/transition"], origin: ["POST", "/origin"],
+  home: ["POST", "/home"], offboard_start: ["POST", "/offboard/start"],
+  offboard_stop: ["POST", "/offboard/stop"], brake: ["POST", "/intents/brake"],
+  velocity: ["PUT", "/intents/velocity"], offset: ["POST", "/intents/offset"],
+  goto: ["POST", "/intents/goto"],
+};
+// renew at a third of the TTL: two renewals may be lost before the lease lapses
+const RENEW_FRACTION = 1 / 3;
+// commands the edge takes without a body
+const NO_BODY = new Set(["land", "rtl", "hold", "brake"]);
+
+/** "/fleet/edges/edge-a/vehicles/1" */
+function fleetVehiclePath(vehicle, suffix = "") {
+  return `/fleet/edges/${encodeURIComponent(vehicle.edge)}/vehicles/${vehicle.id}${suffix}`;
+}
+
+export class FleetControlSession {
+  constructor(vehicle, { takeover = false, force = false, clientName, onLease, onClosed, onMessage }) {
+    this.vehicle = vehicle;
+    this.onLease = onLease;
+    this.onClosed = onClosed;
+    this.onMessage = onMessage || (() => {});
+    this.leaseId = null;
+    this.lease = null;
+    this.holder = null;
+    this.ended = false;
+    this.renewTimer = null;
+    this.clientName = clientName;
+    this.acquire({ client_name: clientName, ...(takeover ? { takeover: true } : {}), ...(force ? { force: true } : {}) });
+  }
+
+  path(suffix) {
+    return fleetVehiclePath(this.vehicle, suffix);
+  }
+
+  async acquire(body) {
+    try {
+      const lease = await request("POST", this.path("/control"), body);
+      if (this.ended) { // closed while the edge was answering: give it back
+        request("DELETE", this.path("/control"), undefined, { "X-Lease-Id": lease.lease_id }).catch(() => {});
+        return;
+      }
+      this.leaseId = lease.lease_id;
+      this.lease = lease;
+      this.holder = lease.holder;
+      this.scheduleRenew(lease.ttl_s);
+      this.onLease(lease);
+    } catch (err) {
+      const reason = err.body?.detail?.reason || err.message;
+      // the control socket's close codes, so handover.js tells the pilot the same things
+      const code = { 409: 4409, 403: 4403, 401: 4401 }[err.status] ?? 1011;
+      this.finish({ code, reason, refusal: { reason } });
+    }
+  }
+
+  scheduleRenew(ttlS) {
+    clearTimeout(this.renewTimer);
+    const everyMs = Math.max(500, (Number(ttlS) || 30) * 1000 * RENEW_FRACTION);
+    this.renewTimer = setTimeout(() => this.renew(), everyMs);
+  }
+
+  async renew() {
+    if (this.ended || !this.leaseId) return;
+    try {
+      const lease = await request("PUT", this.path("/control"), {}, { "X-Lease-Id": this.leaseId });
+      this.holder = lease.holder;
+      this.scheduleRenew(lease.ttl_s);
+    } catch (err) {
+      this.lostLease(err);
+    }
+  }
+
+  /** A 423 from the edge: the lease is gone (lapsed, released elsewhere, taken over). */
+  lostLease(err) {
+    if (err.status === 423) {
+      const by = err.body?.detail?.holder;
+      this.finish({ code: 4408, reason: err.message, ended: by ? { state: "taken_over", by } : { state: "expired" } });
+    } else if (!this.ended) {
+      this.scheduleRenew(this.lease?.ttl_s); // a blip of the fleet link: try again
+    }
+  }
+
+  finish(info) {
+    if (this.ended) return;
+    this.ended = true;
+    clearTimeout(this.renewTimer);
+    this.leaseId = null;
+    this.onClosed({ byUs: false, ...info });
+  }
+
+  get open() {
+    return !this.ended && this.leaseId !== null;
+  }
+
+  async call(method, suffix, body) {
+    if (!this.open) return { ok: false, status: 0, body: { detail: { reason: "not in control" } } };
+    try {
+      const answer = await request(method, this.path(suffix), body, { "X-Lease-Id": this.leaseId });
+      this.scheduleRenew(this.lease?.ttl_s); // every control call renews the lease
+      return { ok: true, status: 200, body: answer };
+    } catch (err) {
+      if (!(err instanceof ApiError)) throw err;
+      if (err.status === 423) this.lostLease(err);
+      return { ok: false, status: err.status, body: err.body };
+    }
+  }
+
+  /** A command or an intent, by its control-socket name. */
+  command(name, args = {}) {
+    const route = COMMANDS[name];
+    if (!route) return Promise.resolve({ ok: false, status: 422, body: { detail: { reason: `unknown command ${name}`, field: "name" } } });
+    const [method, suffix] = route;
+    return this.call(method, suffix, NO_BODY.has(name) ? undefined : args);
+  }
+
+  setpoint(setpoint) {
+    return this.call("PUT", "/setpoint", setpoint);
+  }
+
+  /** The control socket's other messages: sticks (PUT / DELETE /sticks). */
+  send(message) {
+    if (message.type === "command") return this.command(message.name, message.args);
+    if (message.type === "setpoint") return this.setpoint(message.setpoint);
+    if (message.type === "sticks") {
+      return message.stop ? this.call("DELETE", "/sticks") : this.call("PUT", "/sticks", message.sticks);
+    }
+    return Promise.resolve({ ok: false, status: 422, body: { detail: { reason: `not over the fleet: ${message.type}` } } });
+  }
+
+  answerTakeover(requestId, grant) {
+    return this.call("POST", `/control/requests/${encodeURIComponent(requestId)}`, { grant });
+  }
+
+  close() {
+    if (this.ended) return;
+    const leaseId = this.leaseId;
+    this.finish({ code: 1000, byUs: true });
+    if (leaseId) request("DELETE", this.path("/control"), undefined, { "X-Lease-Id": leaseId }).catch(() => {});
+  }
+}
