@@ -81,6 +81,10 @@ def stream_figures(arrivals: list[float], period_s: float) -> dict[str, Any]:
     }
 
 
+# A tap's report is one JSON line with every interval it timed (tens of thousands).
+TAP_LINE_LIMIT_BYTES = 64 * 1024 * 1024
+
+
 class TapProcess:
     """One bench._sim_tap process and its line protocol."""
 
@@ -92,6 +96,7 @@ class TapProcess:
         proc = await asyncio.create_subprocess_exec(
             sys.executable, "-m", "bench._sim_tap", "--first", str(first), "--count", str(count),
             stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE, cwd=PROJECT_ROOT,
+            limit=TAP_LINE_LIMIT_BYTES,
         )
         return cls(proc)
 
