@@ -1,29 +1,35 @@
 """CPU cost of the simulated vehicle: share of one core per hovering quad in real time,
 and the most quads one process keeps in real time.
 
-For N = 1, 5, 10, 20, 30 quads in one SimCluster (speed 1, both links streaming to UDP
-sinks, every quad armed and hovering at 2.5 m) it measures the process CPU time over
-wall time for MEASURE_S seconds, the sim-time/wall-time ratio and the stepping loop's
-lag behind its 250 Hz deadlines. "Real time" means sim time keeps up with wall time
-(ratio ≥ 0.98) and the mean lag stays below one step (4 ms).
+For N = 1, 10, 20, 30 quads in one SimCluster (speed 1, both links streaming PX4's default
+rates to UDP sinks) it measures the process CPU time over wall time, first with every quad
+landed and disarmed (LANDED_S seconds, as the vehicles of bench.many_vehicles are), then
+armed and hovering at 2.5 m (--seconds), with the sim-time/wall-time ratio and the
+stepping loop's lag behind its 250 Hz deadlines. "Real time" means sim time keeps up with
+wall time (ratio ≥ 0.98) and the mean lag stays below one step (4 ms).
 
-    .venv/bin/python -m bench.sim_cost [--seconds 10] [--counts 1,5,10,20,30]
+    .venv/bin/python -m bench.sim_cost [--seconds 6] [--counts 1,10,20,30] [--quick]
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import os
 import socket
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from bench._results import machine_info, write_results
 from sim import modes
 from sim.runner import SimCluster
 from sim.vehicle import PHYSICS_DT_S
 
+if TYPE_CHECKING:
+    from bench._report import Section
+
 GOAL_CPU_SHARE_PER_QUAD = 0.03
+LANDED_S = 4.0
 GOAL_VEHICLES = 20
 REAL_TIME_RATIO = 0.98
 
@@ -64,6 +70,10 @@ async def measure(count: int, seconds: float) -> dict[str, Any]:
     gcs_base, gcs_sinks = bind_sinks(1)
     try:
         async with SimCluster(count=count, api_port=api_base, gcs_port=gcs_base) as sim:
+            await sim.wait_ready(60.0)
+            cpu0, wall0 = time.process_time(), time.perf_counter()
+            await asyncio.sleep(min(LANDED_S, seconds))
+            landed_share = (time.process_time() - cpu0) / (time.perf_counter() - wall0)
             await hover_all(sim, timeout_s=60.0)
             stats = sim.loop_stats
             stats.reset()
@@ -83,6 +93,8 @@ async def measure(count: int, seconds: float) -> dict[str, Any]:
         "wall_s": round(wall, 2),
         "cpu_share_of_one_core": round(cpu_share, 4),
         "cpu_share_per_quad": round(cpu_share / count, 5),
+        "landed_cpu_share_of_one_core": round(landed_share, 4),
+        "landed_cpu_share_per_quad": round(landed_share / count, 5),
         "sim_over_wall": round(ratio, 4),
         "loop_mean_lag_ms": round(mean_lag_s * 1000, 3),
         "loop_max_lag_ms": round(stats.max_lag_s * 1000, 2),
@@ -105,17 +117,22 @@ def fit_cost(rows: list[dict[str, Any]]) -> tuple[float | None, float]:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--seconds", type=float, default=10.0)
-    parser.add_argument("--counts", default="1,5,10,20,30")
+    parser.add_argument("--seconds", type=float, default=6.0)
+    parser.add_argument("--counts", default="1,10,20,30")
+    parser.add_argument("--quick", action="store_true", help="smoke run: 1 and 5 quads, 2 s")
     args = parser.parse_args()
-    counts = [int(c) for c in args.counts.split(",")]
+    counts = [1, 5] if args.quick else [int(c) for c in args.counts.split(",")]
+    if args.quick:
+        args.seconds = 2.0
+    load_before = os.getloadavg()
     rows = []
     for count in counts:
         row = asyncio.run(measure(count, args.seconds))
         rows.append(row)
         print(
             f"{count:3d} quads: {100 * row['cpu_share_of_one_core']:6.1f} % of a core, "
-            f"{100 * row['cpu_share_per_quad']:5.2f} % per quad, sim/wall "
+            f"{100 * row['cpu_share_per_quad']:5.2f} % per quad (landed "
+            f"{100 * row['landed_cpu_share_per_quad']:5.2f} %), sim/wall "
             f"{row['sim_over_wall']:.3f}, loop lag mean {row['loop_mean_lag_ms']:.2f} ms "
             f"max {row['loop_max_lag_ms']:.1f} ms, real time: {row['real_time']}",
             flush=True,
@@ -124,7 +141,7 @@ def main() -> int:
     real_time_counts = [r["quads"] for r in rows if r["real_time"]]
     marginal, fixed = fit_cost([r for r in rows if r["real_time"]])
     result = {
-        "machine": machine_info(),
+        "machine": machine_info(load_before),
         "seconds_per_point": args.seconds,
         "rows": rows,
         "cpu_share_per_quad_single": single,
@@ -141,6 +158,65 @@ def main() -> int:
               f"(fixed overhead of the process and its event loop {100 * fixed:.1f} %)")
     print(f"largest N in real time: {result['max_real_time_quads_measured']} (goal ≥ 20)")
     return 0
+
+
+def report(result: dict[str, Any]) -> Section | None:
+    rows = result.get("rows") or []
+    if not rows:
+        return None
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from bench._report import Section, save_figure
+
+    n = [r["quads"] for r in rows]
+    fig, (total, each) = plt.subplots(1, 2, figsize=(10, 3.8))
+    total.plot(n, [100 * r["cpu_share_of_one_core"] for r in rows], "o-", label="hovering")
+    landed = [r for r in rows if "landed_cpu_share_of_one_core" in r]
+    if landed:
+        total.plot([r["quads"] for r in landed],
+                   [100 * r["landed_cpu_share_of_one_core"] for r in landed], "s-",
+                   label="landed, disarmed")
+    total.axhline(100, color="#999", lw=0.8, ls=":", label="one core")
+    total.set_xlabel("quads in one process")
+    total.set_ylabel("% of one core")
+    total.legend(fontsize=7)
+    each.bar([str(q) for q in n], [100 * r["cpu_share_per_quad"] for r in rows],
+             label="hovering", width=0.4, align="edge")
+    if landed:
+        each.bar([str(r["quads"]) for r in landed],
+                 [100 * r["landed_cpu_share_per_quad"] for r in landed],
+                 label="landed, disarmed", width=-0.4, align="edge")
+    each.axhline(100 * GOAL_CPU_SHARE_PER_QUAD, color="#c33", lw=0.8, ls=":", label="goal")
+    each.set_xlabel("quads in one process")
+    each.set_ylabel("% of one core per quad")
+    each.legend(fontsize=7)
+    fig.tight_layout()
+    figure = save_figure(fig, "sim_cost", "Simulated quad CPU cost per vehicle",
+                         result["machine"])
+    plt.close(fig)
+    marginal = result.get("cpu_share_per_additional_quad")
+    lines = [
+        f"One sim process keeps {result['max_real_time_quads_measured']} hovering quads in real "
+        "time (largest N measured).",
+    ]
+    if marginal:
+        lines.append(
+            f"Each additional hovering quad costs {100 * marginal:.2f} % of one core "
+            f"({marginal / GOAL_CPU_SHARE_PER_QUAD:.2f}× the 3 % goal), streaming PX4's "
+            "default rates on both links."
+        )
+    if landed:
+        last = landed[-1]
+        ratio = last["cpu_share_per_quad"] / max(last["landed_cpu_share_per_quad"], 1e-9)
+        lines.append(
+            f"At {last['quads']} quads a hovering quad costs {ratio:.1f}× a landed, disarmed one "
+            f"({100 * last['landed_cpu_share_per_quad']:.2f} % of a core)."
+        )
+    return Section(title="Simulated vehicle cost", order=50, markdown="\n".join(lines),
+                   figures=[figure])
 
 
 if __name__ == "__main__":

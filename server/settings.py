@@ -87,7 +87,7 @@ class Settings(BaseSettings):
         default_factory=list, description="MAVLink URLs of real vehicles; none = start the sim"
     )
     sim_airframe: Airframe = "quad"
-    sim_count: int = Field(1, ge=1, le=32)
+    sim_count: int = Field(1, ge=1, le=100)
     sim_speed: float = Field(1.0, gt=0.0, le=50.0)
     rate_hz: float = Field(
         DEFAULT_RATE_HZ, ge=MIN_RATE_HZ, le=MAX_RATE_HZ, description="offboard setpoint rate"

@@ -40,9 +40,11 @@ class SimInstance:
 class SimProcess:
     def __init__(
         self, *, airframe: str = "quad", count: int = 1, speed: float = 1.0,
-        signing_dir: Path | None = None,
+        signing_dir: Path | None = None, processes: int = 0,
     ) -> None:
         self.airframe = airframe
+        # `python -m sim --processes`: 0 lets it spread the vehicles (one process per 16)
+        self.processes = processes
         self.signing_dir = signing_dir  # where the simulated vehicles keep signing keys
         self.count = count
         self.speed = speed
@@ -63,6 +65,8 @@ class SimProcess:
             self.airframe,
             "--count",
             str(self.count),
+            "--processes",
+            str(self.processes),
             "--speed",
             repr(self.speed),
             "--ready-json",

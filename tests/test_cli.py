@@ -125,6 +125,14 @@ def test_connect_flag_repeats_and_env_takes_a_comma_list(monkeypatch: pytest.Mon
     assert env_only.connect == ["udpin:127.0.0.1:0", "udpout:127.0.0.1:9"]
 
 
+def test_serve_takes_up_to_a_hundred_simulated_vehicles() -> None:
+    for count in (33, 50, 100):
+        args = build_parser().parse_args(["serve", "--sim-count", str(count)])
+        assert settings_from_args(args).sim_count == count
+    with pytest.raises(SettingsError, match="sim_count"):
+        settings_from_args(build_parser().parse_args(["serve", "--sim-count", "101"]))
+
+
 def test_bad_connect_url_and_missing_config_are_refused(tmp_path: Path) -> None:
     with pytest.raises(SettingsError, match="connect"):
         settings_from_args(build_parser().parse_args(["serve", "--connect", "carrier-pigeon"]))

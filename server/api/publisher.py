@@ -1,18 +1,28 @@
 """One state publisher per vehicle: a snapshot taken once per tick, encoded once, fanned out
 at rate tiers to every telemetry socket, REST read and the scene.
 
-Data path: the vehicle's SubscriptionHub wakes the publisher on a change, at most
-max_rate_hz; the publisher takes one snapshot (a tick, a `Published`) and hands that same
-object to the consumers whose rate tier is due. Its JSON is made on first use and kept on
-the object, so a tick is encoded at most once however many sockets send it, and not at all
-when only the scene (which wants the snapshot itself) is watching.
+Data path: the publisher sleeps until the next slot of a rate tier, then takes one
+snapshot (a tick, a `Published`) just after the vehicle's next message, and hands that same
+object to the consumers of every tier due. No tier due, no snapshot and no wake-up per
+message: a vehicle whose telemetry changes 50 times a second but is watched at 4 Hz costs 4
+snapshots a second, which matters with 50 vehicles on one server. Its JSON is made on
+first use and kept on the object, so a tick is encoded at most once however many sockets
+send it, and not at all when only the scene (which wants the snapshot itself) is watching.
 
 Slow consumers: every consumer reads through a latest-wins slot (slots.py, where the policy
 is written down): a `Slot`, or the scene's `FleetWatch`, one slot per vehicle.
 
-Rate tiers: consumers that ask for the same rate share one tier: one RateGrid, one decision
-per tick. A due tier delivers at once; a tier not yet due delivers the newest tick when its
-slot on the grid comes, so what a consumer receives is never older than one tick.
+Rate tiers: consumers that ask for the same rate share one tier, one RateGrid. When a
+tier's slot comes the publisher waits for the vehicle's next message (at most half the
+tier's interval; the grid keeps the rate however late within it a delivery is) and takes
+the tick right after it: a snapshot taken at an earlier change would add its age to every
+client's latency. With nothing new in that time it sends what changed since the last tick,
+and nothing at all when nothing changed.
+
+The tick's encoded state, for consumers that are not telemetry sockets (a fleet edge): a
+`Slot[Published]` from subscribe(rate_hz) yields ticks; `Published.version` orders them
+and `Published.body` is the state JSON (bytes, without `type`, `id`, `lease`), made once
+per tick and shared with every socket; `Published.message` the telemetry socket's text.
 """
 
 from __future__ import annotations
@@ -30,6 +40,12 @@ from server.link.aio import cancel_and_wait, loop_time_s
 from server.link.state import WAKE_BATCH, RateGrid, StateSubscription
 
 DEFAULT_MAX_RATE_HZ = 50.0
+# How often the vehicle's connection is checked (for the vehicle list) when no tier is due
+# sooner: the publisher sleeps between deliveries instead of waking at every message.
+LISTING_CHECK_S = 0.25
+# A timer may fire a little before its time (the loop's clock resolution, a virtual clock's
+# rounding): a tier this close to its slot counts as due.
+DUE_SLACK_S = 0.001
 
 
 class PublishedVehicle(Protocol):
@@ -83,37 +99,12 @@ class Sink(Protocol):
 
 
 class _Tier:
-    def __init__(self, publisher: StatePublisher, interval_s: float) -> None:
-        self._publisher = publisher
+    """Consumers that asked for the same rate: one grid, one delivery decision for all."""
+
+    def __init__(self, interval_s: float) -> None:
         self.grid = RateGrid(interval_s)
         self.sinks: set[Sink] = set()
-        self._sent: Published | None = None
-        self._timer: asyncio.TimerHandle | None = None
-
-    def offer(self, now_s: float) -> None:
-        if self._timer is not None:
-            return  # a delivery is booked; it takes the newest tick when it runs
-        if self.grid.due(now_s):
-            self._deliver(now_s)
-        else:
-            self._timer = asyncio.get_running_loop().call_at(self.grid.next_s, self._booked)
-
-    def cancel(self) -> None:
-        if self._timer is not None:
-            self._timer.cancel()
-            self._timer = None
-
-    def _booked(self) -> None:
-        self._timer = None
-        self._deliver(loop_time_s())
-
-    def _deliver(self, now_s: float) -> None:
-        published = self._publisher.current
-        if published is None or published is self._sent:
-            return
-        self._sent = published
-        self.grid.take(now_s)
-        self._publisher.fan_out(published, self.sinks)
+        self.sent: Published | None = None
 
 
 class StatePublisher:
@@ -141,6 +132,7 @@ class StatePublisher:
         self._tiers: dict[float, _Tier] = {}
         self._tier_of: dict[Sink, _Tier] = {}
         self._to_put: deque[tuple[Sink, Published]] = deque()
+        self._rescheduled = asyncio.Event()
         self._task: asyncio.Task[None] | None = None
 
     def start(self) -> None:
@@ -161,12 +153,16 @@ class StatePublisher:
         """Deliver ticks to sink at most rate_hz (and the current state at once)."""
         self.remove(sink)
         interval_s = round(1.0 / min(rate_hz, self.max_rate_hz), 6)
+        published = self.latest()
         tier = self._tiers.get(interval_s)
         if tier is None:
-            tier = self._tiers[interval_s] = _Tier(self, interval_s)
+            tier = self._tiers[interval_s] = _Tier(interval_s)
+            tier.sent = published
+            tier.grid.take(loop_time_s())
+            self._rescheduled.set()
         tier.sinks.add(sink)
         self._tier_of[sink] = tier
-        sink.put(self.latest())
+        sink.put(published)
 
     def remove(self, sink: Sink) -> None:
         tier = self._tier_of.pop(sink, None)
@@ -174,7 +170,6 @@ class StatePublisher:
             return
         tier.sinks.discard(sink)
         if not tier.sinks:
-            tier.cancel()
             del self._tiers[tier.grid.interval_s]
 
     def unsubscribe(self, slot: Slot[Published]) -> None:
@@ -236,18 +231,65 @@ class StatePublisher:
         return self._encode_state(state)
 
     async def _run(self) -> None:
-        subscription = self.vehicle.subscribe(min_interval_s=1.0 / self.max_rate_hz)
+        # min_interval 0: woken by the first change after each read, at once. The
+        # publisher reads only while a tier is due, so between deliveries the vehicle's
+        # messages cost it nothing (the hub sees the signal is already set).
+        subscription = self.vehicle.subscribe()
         try:
-            while await subscription.changed():
+            while not subscription.closed:
                 self._check_listing()
-                if self._tiers:
-                    self._take()
-                    now_s = loop_time_s()
-                    for tier in list(self._tiers.values()):
-                        tier.offer(now_s)
+                now_s = loop_time_s() + DUE_SLACK_S
+                due_s = min((tier.grid.next_s for tier in self._tiers.values()), default=None)
+                if due_s is None or due_s > now_s:
+                    wake_s = now_s + LISTING_CHECK_S
+                    await self._sleep_until(wake_s if due_s is None else min(due_s, wake_s))
+                    continue
+                fastest_s = min(
+                    t.grid.interval_s for t in self._tiers.values() if t.grid.due(now_s)
+                )
+                if not await self._next_change(subscription, fastest_s / 2):
+                    break
+                self._deliver_due(loop_time_s() + DUE_SLACK_S)
         finally:
             subscription.close()
             self._close_sinks()
+
+    async def _sleep_until(self, when_s: float) -> None:
+        """Until when_s (loop time), or until a consumer is added with a sooner rate."""
+        self._rescheduled.clear()
+        try:
+            async with asyncio.timeout_at(when_s):
+                await self._rescheduled.wait()
+        except TimeoutError:
+            pass
+
+    async def _next_change(self, subscription: StateSubscription, wait_s: float) -> bool:
+        """A tier is due: wait for the vehicle's next message, so the tick is taken just
+        after it (its age adds nothing to the clients' latency); if none comes within
+        wait_s (half the tier's interval: the grid keeps the rate however late a delivery
+        is within it), go with what changed since the last tick. False once closed."""
+        version = self.vehicle.state_version
+        current = self.current
+        nothing_new = current is not None and current.version == version
+        try:
+            async with asyncio.timeout(LISTING_CHECK_S if nothing_new else wait_s):
+                while self.vehicle.state_version == version:
+                    if not await subscription.changed():
+                        return False
+        except TimeoutError:
+            pass
+        return True
+
+    def _deliver_due(self, now_s: float) -> None:
+        for tier in list(self._tiers.values()):
+            if not tier.grid.due(now_s):
+                continue
+            published = self.latest()
+            if published is tier.sent:
+                continue  # nothing new: the tier stays due and takes the next change
+            tier.sent = published
+            tier.grid.take(now_s)
+            self.fan_out(published, tier.sinks)
 
     def _check_listing(self) -> None:
         if self.vehicle.connected != self._listing:
@@ -256,8 +298,6 @@ class StatePublisher:
                 self._on_listing_change()
 
     def _close_sinks(self) -> None:
-        for tier in self._tiers.values():
-            tier.cancel()
         for sink in list(self._tier_of):
             self.remove(sink)
             if isinstance(sink, Slot):

@@ -41,24 +41,61 @@ CLOSE_BAD_REQUEST = 4422
 
 
 class Sender:
-    """Serialises sends on one socket, with the send timeout of the policy above."""
+    """Serialises sends on one socket, with the send timeout of the policy above.
+
+    The timeout is a watchdog per socket, not a timer per message: a timer armed and
+    cancelled around every send (asyncio.timeout) costs more than the send itself when a
+    tick goes to a hundred sockets. The watchdog is armed when a send starts and none is
+    armed, and when it fires it either cancels a send pending for SEND_TIMEOUT_S (closing
+    the client with 1008) or re-arms for the pending one, or goes idle."""
 
     def __init__(self, websocket: WebSocket) -> None:
         self._websocket = websocket
         self._lock = asyncio.Lock()
+        self._sending: asyncio.Task[Any] | None = None
+        self._started_s = 0.0
+        self._watchdog: asyncio.TimerHandle | None = None
+        self._timed_out = False
 
     async def send_text(self, text: str) -> None:
         async with self._lock:
+            loop = asyncio.get_running_loop()
+            self._sending = asyncio.current_task()
+            self._started_s = loop.time()
+            if self._watchdog is None:
+                self._watchdog = loop.call_at(self._started_s + SEND_TIMEOUT_S, self._check)
             try:
-                # asyncio.timeout, unlike wait_for, adds no task per message
-                async with asyncio.timeout(SEND_TIMEOUT_S):
-                    await self._websocket.send_text(text)
-            except TimeoutError:
+                await self._websocket.send_text(text)
+            except asyncio.CancelledError:
+                if not self._timed_out:
+                    raise
+                self._timed_out = False
+                if self._sending is not None:
+                    self._sending.uncancel()
                 await close_socket(self._websocket, 1008, "client too slow")
                 raise WebSocketDisconnect(1008) from None
+            except RuntimeError as exc:
+                # the socket was closed meanwhile (a timed-out send, the control socket's
+                # lease loss): starlette refuses further sends (WebSocketDisconnected, a
+                # RuntimeError); that ends this client, it is not a server error
+                raise WebSocketDisconnect(1006) from exc
+            finally:
+                self._sending = None
 
     async def send_json(self, message: dict[str, Any]) -> None:
         await self.send_text(json.dumps(message, allow_nan=False))
+
+    def _check(self) -> None:
+        self._watchdog = None
+        if self._sending is None:
+            return  # idle: the next send arms it again
+        loop = asyncio.get_running_loop()
+        due_s = self._started_s + SEND_TIMEOUT_S
+        if loop.time() >= due_s - 0.001:
+            self._timed_out = True
+            self._sending.cancel()
+        else:  # a later send than the one that armed it
+            self._watchdog = loop.call_at(due_s, self._check)
 
 
 async def close_socket(websocket: WebSocket, code: int, reason: str = "") -> None:

@@ -42,6 +42,8 @@ GCS_HEARTBEAT_PERIOD_S = 1.0
 HEARTBEAT_CHECK_PERIOD_S = 0.1
 # A check later than this was held up by the loop itself (see Liveness.forgive).
 LOOP_STALL_S = 0.25
+# While frames wait unread, a vehicle is not judged silent for up to this long.
+MAX_VERDICT_DELAY_S = 1.0
 # subscribe_vehicles() queues hold this many announcements and drop the oldest beyond it.
 VEHICLE_QUEUE_SIZE = 32
 
@@ -88,6 +90,8 @@ class Link:
         self._vehicle_factory = vehicle_factory
         self._vehicles: dict[int, Vehicle] = {}
         self._liveness = Liveness(heartbeat_timeout_s, silence_timeout_s)
+        # since when the loop has been behind reading this link (frames waiting)
+        self._behind_since_s: float | None = None
         self._connected_sysids: set[int] = set()
         self._last_vehicle_heartbeat_s: float | None = None
         self._vehicle_queues: list[asyncio.Queue[Vehicle]] = []
@@ -373,6 +377,16 @@ class Link:
 
     def _mark_silent_vehicles(self) -> None:
         now = self.now()
+        if self._transport.input_pending():
+            # Frames wait unread: the loop is behind, and a vehicle whose heartbeat is
+            # queued is not silent. The verdict waits for the reads, but not for ever (a
+            # flood must not hide a vehicle that really went quiet).
+            if self._behind_since_s is None:
+                self._behind_since_s = now
+            if now - self._behind_since_s < MAX_VERDICT_DELAY_S:
+                return
+        else:
+            self._behind_since_s = None
         for sysid in list(self._connected_sysids):
             why = self._liveness.silent_for(sysid, now)
             if why is not None:

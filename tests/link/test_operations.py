@@ -185,6 +185,9 @@ async def test_telemetry_is_requested_on_connection_and_refusals_are_noted() -> 
         }
         assert set(intervals) == set(DEFAULT_TELEMETRY_RATES_HZ)
         assert intervals[mavlink.MAVLINK_MSG_ID_CURRENT_MODE] <= 200_000  # >= 5 Hz
+        # PX4's 50 Hz onboard streams nothing reads are asked off (interval -1)
+        assert intervals[mavlink.MAVLINK_MSG_ID_HIGHRES_IMU] == -1
+        assert intervals[mavlink.MAVLINK_MSG_ID_ATTITUDE_QUATERNION] == -1
         assert session.vehicle.snapshot().telemetry_refused == ("SERVO_OUTPUT_RAW",)
 
 

@@ -1,6 +1,7 @@
 import asyncio
 import contextlib
 import os
+import socket
 from collections.abc import AsyncIterator
 from typing import Any
 
@@ -272,3 +273,27 @@ async def test_serial_port_carries_frames_both_ways_and_reports_the_device_lost(
         if controller_fd >= 0:
             os.close(controller_fd)
         os.close(device_fd)
+
+
+async def test_a_udp_link_reads_a_backlog_in_a_few_turns_of_the_loop() -> None:
+    """A loop busy with many links must not read one datagram per wakeup: 200 frames queued
+    while the loop was held up are all read within a few turns of it."""
+    transport = UdpInTransport(parse_link_url("udpin:127.0.0.1:0"))
+    sink = _Sink()
+    await transport.start(sink)
+    assert transport.local_address is not None
+    sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        for seq in range(200):
+            sender.sendto(_frame(7, seq % 256), transport.local_address)
+        assert transport.input_pending()
+        turns = 0
+        while len(sink.frames) < 200 and turns < 100:
+            await asyncio.sleep(0)
+            turns += 1
+        assert len(sink.frames) == 200
+        assert turns <= 20, f"{turns} turns of the loop to read 200 queued datagrams"
+        assert not transport.input_pending()
+    finally:
+        sender.close()
+        await transport.close()

@@ -125,6 +125,24 @@ async def test_scene_updates_stay_under_the_rate_limit_per_vehicle(served: Serve
     assert received > 0
 
 
+async def test_an_unwatched_scene_asks_for_states_at_its_idle_rate() -> None:
+    """Nobody watching: the scene follows every vehicle at the idle rate (2 Hz), and asks
+    their publishers for no more, so they take ~2 snapshots a second, not 20."""
+    vehicles = [pushing(FakeVehicle(1)), pushing(FakeVehicle(2))]
+    hub = SceneHub(max_rate_hz=20.0)
+    async with scene_fed_by(hub, vehicles) as publishers:
+        feeds = [publishers.for_vehicle(v) for v in vehicles]  # type: ignore[arg-type]
+        await wait_for(lambda: hub.updates_applied >= 2, 10.0, "first scene updates")
+        applied, ticks = hub.updates_applied, [feed.ticks for feed in feeds]
+        t0 = time.monotonic()
+        await asyncio.sleep(2.0)
+        elapsed = time.monotonic() - t0
+        applied_hz = (hub.updates_applied - applied) / len(vehicles) / elapsed
+        snapshots_hz = [(feed.ticks - n) / elapsed for feed, n in zip(feeds, ticks, strict=True)]
+    assert 0.5 <= applied_hz <= 2.0 * 1.5
+    assert all(hz <= 2.0 * 1.5 for hz in snapshots_hz), snapshots_hz
+
+
 async def test_click_endpoint_reports_the_ground_point_with_lat_lon(served: Served) -> None:
     async with httpx.AsyncClient(base_url=f"http://{served.base}") as client:
         assert (await client.get("/scene/api/click", params={"token": TOKEN})).json() == {"seq": 0}

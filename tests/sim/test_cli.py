@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import math
+import os
 import signal
 import socket
 import subprocess
@@ -19,8 +21,12 @@ from sim.cli import (
     SITL_API_REMOTE_PORT,
     SITL_GCS_LOCAL_PORT,
     SITL_GCS_REMOTE_PORT,
+    VEHICLES_PER_PROCESS,
+    _child_arguments,
     build_parser,
+    process_count,
 )
+from sim.sim_processes import split_instances
 
 README = Path(__file__).resolve().parents[2] / "README.md"
 
@@ -100,5 +106,84 @@ def test_stops_cleanly_on_signal(sig: signal.Signals) -> None:
         read_ready(proc)
         proc.send_signal(sig)
         assert proc.wait(10) == 0
+    finally:
+        stop(proc)
+
+
+def _heartbeat_from(port: int) -> int:
+    """Say HEARTBEAT to a sim port; the sysid of the first HEARTBEAT that comes back."""
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.bind(("127.0.0.1", 0))
+    sock.settimeout(5.0)
+    try:
+        mav = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+        sock.sendto(mavlink.MAVLink_heartbeat_message(6, 8, 0, 0, 0, 3).pack(mav),
+                    ("127.0.0.1", port))
+        parser = mavlink.MAVLink(None)
+        deadline = time.monotonic() + 20.0
+        while time.monotonic() < deadline:
+            for msg in parser.parse_buffer(sock.recv(65536)) or []:
+                if msg.get_type() == "HEARTBEAT":
+                    return int(msg.get_srcSystem())
+        raise AssertionError(f"no HEARTBEAT from port {port}")
+    finally:
+        sock.close()
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(") ", 1)[1][0]
+    except FileNotFoundError:
+        return False
+    return state != "Z"
+
+
+def test_process_count_and_split_keep_instance_numbers_and_base_ports() -> None:
+    assert process_count(50, 0) == math.ceil(50 / VEHICLES_PER_PROCESS)
+    assert process_count(1, 0) == 1
+    assert process_count(3, 2) == 2
+    assert process_count(2, 5) == 2  # never a process without a vehicle
+    assert split_instances(4, 7, 3) == [(4, 3), (7, 2), (9, 2)]
+    args = build_parser().parse_args(
+        ["--instance", "4", "--count", "7", "--processes", "3", "--api-port", "20000",
+         "--gcs-port", "20100", "--api-local-port", "20200", "--gcs-local-port", "0",
+         "--speed", "2.5", "--airframe", "hexa"])
+    child = build_parser().parse_args(_child_arguments(args, 7, 2))
+    assert (child.instance, child.count, child.processes) == (7, 2, 1)
+    assert (child.airframe, child.speed, child.ready_json, child.exit_on_stdin_eof) == (
+        "hexa", 2.5, True, True)
+    # the child adds its first instance to the same bases: instance 7 keeps its ports
+    assert (child.api_port, child.gcs_port, child.api_local_port, child.gcs_local_port) == (
+        20000, 20100, 20200, 0)
+
+
+def test_count_over_processes_reports_all_instances_answers_and_stops_them_all() -> None:
+    proc = start_sim("--count", "3", "--processes", "2", "--exit-on-stdin-eof")
+    try:
+        ready = read_ready(proc)
+        instances = ready["instances"]
+        assert [(i["instance"], i["sysid"]) for i in instances] == [(0, 1), (1, 2), (2, 3)]
+        ports = [i[key] for i in instances for key in ("api_local_port", "gcs_local_port")]
+        assert len(set(ports)) == 6
+        pids = ready["pids"]
+        assert len(pids) == 2
+        assert all(_alive(pid) for pid in pids)
+        # a vehicle of each process answers as itself
+        assert _heartbeat_from(instances[0]["api_local_port"]) == 1
+        assert _heartbeat_from(instances[2]["gcs_local_port"]) == 3
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(15) == 0
+        assert not any(_alive(pid) for pid in pids)
+    finally:
+        stop(proc)
+
+
+def test_a_process_that_dies_takes_the_others_down() -> None:
+    proc = start_sim("--count", "2", "--processes", "2")
+    try:
+        pids = read_ready(proc)["pids"]
+        os.kill(pids[1], signal.SIGKILL)
+        assert proc.wait(15) == 1
+        assert not _alive(pids[0])
     finally:
         stop(proc)

@@ -182,6 +182,11 @@ class Transport(ABC):
     @abstractmethod
     async def close(self) -> None: ...
 
+    def input_pending(self) -> bool:
+        """Whether bytes wait, received but not read yet (the loop is behind). A transport
+        that cannot tell says False."""
+        return False
+
     def thread_writer(self) -> Callable[[bytes, int | None], bool] | None:
         """A write() that threads other than the loop's may call (the setpoint sender
         thread), or None: then the link hands their frames to the loop."""

@@ -13,9 +13,12 @@ new port). ``udpout:`` sockets are connected, so the OS delivers only its peer's
 from __future__ import annotations
 
 import asyncio
+import fcntl
 import logging
 import os
 import socket
+import sys
+import termios
 from collections.abc import Callable
 from typing import Any, cast
 
@@ -31,6 +34,9 @@ log = logging.getLogger(__name__)
 UDP_PEER_EXPIRY_S = 10.0
 # A system heard from one address is not taken from another until the first is this quiet.
 UDP_PEER_HANDOVER_S = 2.0
+# Datagrams read per wakeup of a socket (the rest wait for the next turn of the loop).
+DRAIN_PER_WAKEUP = 64
+MAX_DATAGRAM_BYTES = 65535
 
 
 class _DatagramReceiver(asyncio.DatagramProtocol):
@@ -75,6 +81,17 @@ class _UdpTransport(Transport):
     def thread_writer(self) -> Callable[[bytes, int | None], bool] | None:
         return self._write_off_loop
 
+    def input_pending(self) -> bool:
+        # FIONREAD on a datagram socket: the size of the next queued datagram, 0 if none
+        sock = self._thread_socket
+        if sock is None:
+            return False
+        try:
+            size = fcntl.ioctl(sock.fileno(), termios.FIONREAD, b"\0\0\0\0")
+        except OSError:
+            return False
+        return int.from_bytes(size, sys.byteorder) > 0
+
     def _write_off_loop(self, frame: bytes, target_system: int | None) -> bool:
         sock = self._thread_socket
         if sock is None:
@@ -89,6 +106,24 @@ class _UdpTransport(Transport):
         raise NotImplementedError
 
     def datagram_received(self, data: bytes, addr: tuple[str | Any, int]) -> None:
+        self._deliver_datagram(data, addr)
+        # asyncio reads one datagram per wakeup of the socket: a busy loop serving many
+        # links would read each slower than its vehicle sends (PX4: ~100 frames/s) and fall
+        # seconds behind. Read what else is queued now, up to a bound per wakeup.
+        sock = self._thread_socket
+        for _ in range(DRAIN_PER_WAKEUP - 1):
+            if sock is None or self._sink is None:
+                return
+            try:
+                data, addr = sock.recvfrom(MAX_DATAGRAM_BYTES)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError as exc:  # ICMP errors surface here too; the next read goes on
+                log.debug("%s: %s", self.address.url, exc)
+                return
+            self._deliver_datagram(data, addr)
+
+    def _deliver_datagram(self, data: bytes, addr: tuple[str | Any, int]) -> None:
         if self._sink is None:
             return
         try:
