@@ -271,7 +271,10 @@ class Replier:
 
     def _run(self) -> None:
         while (item := self._queue.get()) is not None:
-            send_reply(*item)
+            try:
+                send_reply(*item)
+            except Exception:  # never the end of the thread: the next replies still go out
+                log.exception("zenoh api reply failed")
 
 
 def send_reply(query: zenoh.Query, key: str, reply: bytes) -> None:
