@@ -13,7 +13,7 @@ Slow consumers: every consumer reads through a latest-wins slot (slots.py, where
 is written down): a `Slot`, or the scene's `FleetWatch`, one slot per vehicle.
 
 Rate tiers: consumers that ask for the same rate share one tier, one RateGrid. When a
-tier's slot comes the publisher waits for the vehicle's next message (at most half the
+tier's slot comes the publisher waits for the vehicle's next message (at most 90 % of the
 tier's interval; the grid keeps the rate however late within it a delivery is) and takes
 the tick right after it: a snapshot taken at an earlier change would add its age to every
 client's latency. With nothing new in that time it sends what changed since the last tick,
@@ -46,6 +46,9 @@ LISTING_CHECK_S = 0.25
 # A timer may fire a little before its time (the loop's clock resolution, a virtual clock's
 # rounding): a tier this close to its slot counts as due.
 DUE_SLACK_S = 0.001
+# A due tier waits this share of its interval for the vehicle's next message: a tick taken
+# at an older one would add that message's age (up to a telemetry period) to every client.
+NEXT_MESSAGE_WAIT_SHARE = 0.9
 
 
 class PublishedVehicle(Protocol):
@@ -247,7 +250,7 @@ class StatePublisher:
                 fastest_s = min(
                     t.grid.interval_s for t in self._tiers.values() if t.grid.due(now_s)
                 )
-                if not await self._next_change(subscription, fastest_s / 2):
+                if not await self._next_change(subscription, fastest_s * NEXT_MESSAGE_WAIT_SHARE):
                     break
                 self._deliver_due(loop_time_s() + DUE_SLACK_S)
         finally:
@@ -266,8 +269,9 @@ class StatePublisher:
     async def _next_change(self, subscription: StateSubscription, wait_s: float) -> bool:
         """A tier is due: wait for the vehicle's next message, so the tick is taken just
         after it (its age adds nothing to the clients' latency); if none comes within
-        wait_s (half the tier's interval: the grid keeps the rate however late a delivery
-        is within it), go with what changed since the last tick. False once closed."""
+        wait_s (most of the tier's interval: the grid keeps the rate however late a delivery
+        is within it, and PX4's 20 Hz telemetry gives a 10 Hz tier a message within it),
+        go with what changed since the last tick. False once closed."""
         version = self.vehicle.state_version
         current = self.current
         nothing_new = current is not None and current.version == version

@@ -206,12 +206,14 @@ async def test_control_socket_refuses_observer_and_second_pilot(quad: Served) ->
 
 
 async def test_silent_pilot_loses_the_lease_after_ttl(quad: Served) -> None:
+    # the lease starts once the socket is accepted: after this instant, whatever the
+    # machine's load delays in between
+    started = time.monotonic()
     async with connect(quad.url("control", vehicle=1)) as ws:
         await receive(ws)
-        started = time.monotonic()
         lost = await receive_until(ws, {"type": "lease"}, timeout_s=TTL_S + 2.0)
         assert lost["state"] == "expired"
-        assert time.monotonic() - started >= TTL_S * 0.9
+        assert time.monotonic() - started >= TTL_S - 0.01
         assert await close_code(ws) == 4408
 
 
