@@ -31,6 +31,9 @@ log = logging.getLogger(__name__)
 SWITCH_INTERVAL_S = float(os.environ.get("SKYHELM_STREAM_SWITCH_INTERVAL_MS", "0.5")) / 1e3
 
 # A job: called with the time it fires at, sends, answers its next deadline or None (done).
+# The sender thread's real-time priority (SCHED_FIFO, 1-99; 0 = ordinary scheduling).
+SENDER_RT_PRIORITY = int(os.environ.get("SKYHELM_STREAM_RT_PRIORITY", "10"))
+
 Job = Callable[[float], float | None]
 
 
@@ -116,6 +119,7 @@ class SenderThread:
         self._thread.start()
 
     def _run(self) -> None:
+        _raise_priority()
         while True:
             with self._cond:
                 while not self._heap:
@@ -126,6 +130,20 @@ class SenderThread:
                     self._cond.wait(wait_s)
                     continue
             self.run_due(self.clock())
+
+
+def _raise_priority() -> None:
+    """Ask the OS to run this thread (Linux: the calling thread only) before ordinary ones
+    when its deadline comes (SCHED_FIFO at SENDER_RT_PRIORITY): on a machine whose cores
+    are busy (the vehicles' simulators, other servers) a woken sender otherwise waits for a
+    time slice. It sleeps between sends, so it takes little. Without the privilege
+    (CAP_SYS_NICE) it runs as an ordinary thread and says so once."""
+    if SENDER_RT_PRIORITY <= 0 or not hasattr(os, "sched_setscheduler"):
+        return
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(SENDER_RT_PRIORITY))
+    except OSError as exc:
+        log.info("setpoint sender runs at normal priority (no real-time scheduling: %s)", exc)
 
 
 _shared: SenderThread | None = None

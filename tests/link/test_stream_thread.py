@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import itertools
+import os
 import secrets
 import socket
 import threading
@@ -272,3 +273,31 @@ def test_a_stream_nobody_stopped_ends_when_its_loop_closes() -> None:
     assert sent == [100.0]
     assert sender.pending() == 0
     assert not streamer.active
+
+
+def test_the_sender_thread_runs_real_time_when_the_os_allows_it() -> None:
+    def may_run_real_time() -> bool:
+        allowed: list[bool] = []
+
+        def probe() -> None:
+            try:
+                os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))
+                allowed.append(True)
+            except OSError:
+                allowed.append(False)
+
+        thread = threading.Thread(target=probe)
+        thread.start()
+        thread.join()
+        return allowed[0]
+
+    seen: list[int] = []
+    sender = SenderThread()
+    sender.at(time.monotonic(), lambda _now: seen.append(os.sched_getscheduler(0)) or None)
+    deadline_s = time.monotonic() + 5.0
+    while not seen and time.monotonic() < deadline_s:
+        time.sleep(0.01)
+    expected = os.SCHED_FIFO if may_run_real_time() else os.SCHED_OTHER
+    assert seen == [expected]
+    # the calling thread keeps its ordinary scheduling
+    assert os.sched_getscheduler(0) == os.SCHED_OTHER
