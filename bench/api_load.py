@@ -34,7 +34,6 @@ import os
 import statistics
 import sys
 import time
-from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
 
@@ -44,6 +43,7 @@ from websockets.asyncio.client import connect
 from bench._markdown import ratio, table
 from bench._report import Section
 from bench._results import machine_info, write_results
+from bench._serve import cpu_seconds, percentile, served
 
 PROJECT_ROOT = Path(__file__).resolve().parent.parent
 TOKEN = "bench-token-0123456789"
@@ -65,55 +65,19 @@ PROBE_CLIENTS = 4
 CLK_TCK = os.sysconf("SC_CLK_TCK")
 
 
-def percentile(values: list[float], q: float) -> float | None:
-    if not values:
-        return None
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, round(q / 100 * (len(ordered) - 1)))]
-
-
-def cpu_seconds(pid: int) -> float:
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / CLK_TCK  # utime, stime
-
-
 def runqueue_wait_s(pid: int) -> float:
     """Time the process's main thread (the event loop's) was runnable but not running."""
     return int(Path(f"/proc/{pid}/schedstat").read_text().split()[1]) / 1e9
 
 
-@contextlib.asynccontextmanager
-async def skyhelm_serve() -> AsyncIterator[tuple[asyncio.subprocess.Process, str]]:
-    proc = await asyncio.create_subprocess_exec(
-        sys.executable,
-        "-m",
-        "server.cli",
-        "serve",
-        "--port",
-        "0",
-        "--token",
-        TOKEN,
-        "--rate-hz",
-        str(STREAM_RATE_HZ),
-        "--no-scene",
-        "--no-tlog",
-        "--log-level",
-        "warning",
-        "--lease-ttl-s",
-        "5",
-        stdout=asyncio.subprocess.PIPE,
-        cwd=PROJECT_ROOT,
-    )
-    try:
-        assert proc.stdout is not None
-        line = (await asyncio.wait_for(proc.stdout.readline(), 60)).decode()
-        if not line.startswith("SkyHelm ready: "):
-            raise RuntimeError(f"skyhelm serve did not start: {line!r}")
-        yield proc, line.split("SkyHelm ready: ")[1].split("/?token=")[0]
-    finally:
-        if proc.returncode is None:
-            proc.send_signal(2)
-            await asyncio.wait_for(proc.wait(), 20)
+def skyhelm_serve() -> contextlib.AbstractAsyncContextManager[
+    tuple[asyncio.subprocess.Process, str]
+]:
+    return served([
+        sys.executable, "-m", "server.cli", "serve", "--port", "0", "--token", TOKEN,
+        "--rate-hz", str(STREAM_RATE_HZ), "--no-scene", "--no-tlog", "--log-level", "warning",
+        "--lease-ttl-s", "5",
+    ])
 
 
 async def telemetry_client(

@@ -31,7 +31,6 @@ import math
 import os
 import sys
 import time
-from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -39,6 +38,7 @@ import httpx
 from websockets.asyncio.client import connect
 
 from bench._results import machine_info, write_results
+from bench._serve import cpu_seconds, percentile, served
 from sim.cli import VEHICLES_PER_PROCESS
 from sim.sim_processes import split_instances
 
@@ -57,18 +57,6 @@ GOAL_MAX_GAP_MS = 200.0
 # the page is live when every vehicle's state arrives at ≥ this share of the asked rate
 PAGE_LIVE_SHARE = 0.8
 CLK_TCK = os.sysconf("SC_CLK_TCK")
-
-
-def percentile(values: list[float], q: float) -> float | None:
-    if not values:
-        return None
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, round(q / 100 * (len(ordered) - 1)))]
-
-
-def cpu_seconds(pid: int) -> float:
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / CLK_TCK  # utime, stime
 
 
 def stream_figures(arrivals: list[float], period_s: float) -> dict[str, Any]:
@@ -122,32 +110,16 @@ class TapProcess:
             await self.proc.wait()
 
 
-@contextlib.asynccontextmanager
-async def skyhelm_serve(
+def skyhelm_serve(
     urls: list[str], scene: bool, profile: Path | None = None
-) -> AsyncIterator[tuple[asyncio.subprocess.Process, str]]:
+) -> contextlib.AbstractAsyncContextManager[tuple[asyncio.subprocess.Process, str]]:
     profiler = ["-m", "cProfile", "-o", str(profile)] if profile is not None else []
-    proc = await asyncio.create_subprocess_exec(
+    return served([
         sys.executable, *profiler, "-m", "server.cli", "serve", "--port", "0", "--token", TOKEN,
         "--rate-hz", str(STREAM_RATE_HZ), "--no-tlog", "--log-level", "warning",
         *([] if scene else ["--no-scene"]),
         *(arg for url in urls for arg in ("--connect", url)),
-        stdout=asyncio.subprocess.PIPE, cwd=PROJECT_ROOT,
-    )
-    try:
-        assert proc.stdout is not None
-        line = (await asyncio.wait_for(proc.stdout.readline(), 60)).decode()
-        if not line.startswith("SkyHelm ready: "):
-            raise RuntimeError(f"skyhelm serve did not start: {line!r}")
-        yield proc, line.split("SkyHelm ready: ")[1].split("/?token=")[0]
-    finally:
-        if proc.returncode is None:
-            proc.send_signal(2)
-            try:
-                await asyncio.wait_for(proc.wait(), 20)
-            except TimeoutError:
-                proc.kill()
-                await proc.wait()
+    ])
 
 
 class PageProbe:

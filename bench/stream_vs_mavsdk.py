@@ -49,6 +49,7 @@ from typing import TYPE_CHECKING, Any
 import httpx
 
 from bench._results import machine_info, write_results
+from bench._serve import cpu_seconds, served
 
 if TYPE_CHECKING:
     from bench._report import Section
@@ -151,36 +152,16 @@ def _free_tcp_port() -> int:
         return int(probe.getsockname()[1])
 
 
-def cpu_seconds(pid: int) -> float:
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-
-
 # -- the SkyHelm server --
 
-@contextlib.asynccontextmanager
-async def skyhelm_serve(vehicle_port: int, env: dict[str, str]
-                        ) -> AsyncIterator[tuple[asyncio.subprocess.Process, str]]:
-    proc = await asyncio.create_subprocess_exec(
+def skyhelm_serve(vehicle_port: int, env: dict[str, str]
+                  ) -> contextlib.AbstractAsyncContextManager[
+                      tuple[asyncio.subprocess.Process, str]]:
+    return served([
         sys.executable, "-m", "server.cli", "serve", "--port", "0", "--token", TOKEN,
         "--connect", f"udpout:127.0.0.1:{vehicle_port}", "--rate-hz", str(SKYHELM_RATE_HZ),
         "--no-scene", "--no-tlog", "--log-level", "warning", "--lease-ttl-s", "30",
-        stdout=asyncio.subprocess.PIPE, cwd=PROJECT_ROOT, env={**os.environ, **env},
-    )
-    try:
-        assert proc.stdout is not None
-        line = (await asyncio.wait_for(proc.stdout.readline(), 60)).decode()
-        if not line.startswith("SkyHelm ready: "):
-            raise RuntimeError(f"skyhelm serve did not start: {line!r}")
-        yield proc, line.split("SkyHelm ready: ")[1].split("/?token=")[0]
-    finally:
-        if proc.returncode is None:
-            proc.send_signal(2)
-            try:
-                await asyncio.wait_for(proc.wait(), 20)
-            except TimeoutError:
-                proc.kill()
-                await proc.wait()
+    ], env)
 
 
 async def start_skyhelm_stream(client: httpx.AsyncClient) -> None:

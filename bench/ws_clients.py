@@ -30,18 +30,11 @@ import json
 import os
 import sys
 import time
-from collections.abc import AsyncIterator
 from typing import TYPE_CHECKING, Any
 
 from bench._results import machine_info, write_results
-from bench.api_load import (
-    CLIENT_NICE,
-    PROJECT_ROOT,
-    TOKEN,
-    cpu_seconds,
-    percentile,
-    runqueue_wait_s,
-)
+from bench._serve import cpu_seconds, percentile, served
+from bench.api_load import CLIENT_NICE, PROJECT_ROOT, TOKEN, runqueue_wait_s
 
 if TYPE_CHECKING:
     from bench._report import Section
@@ -231,35 +224,14 @@ _SERVE_UVLOOP = (
 )
 
 
-@contextlib.asynccontextmanager
-async def serve(loop: str) -> AsyncIterator[tuple[asyncio.subprocess.Process, str]]:
-    proc = await asyncio.create_subprocess_exec(
-        sys.executable,
-        "-c",
-        _SERVE_UVLOOP if loop == "uvloop" else _SERVE,
-        "serve",
-        "--port",
-        "0",
-        "--token",
-        TOKEN,
-        "--no-scene",
-        "--no-tlog",
-        "--no-access-log",
-        "--log-level",
-        "warning",
-        stdout=asyncio.subprocess.PIPE,
-        cwd=PROJECT_ROOT,
-    )
-    try:
-        assert proc.stdout is not None
-        line = (await asyncio.wait_for(proc.stdout.readline(), 60)).decode()
-        if not line.startswith("SkyHelm ready: "):
-            raise RuntimeError(f"skyhelm serve did not start: {line!r}")
-        yield proc, line.split("SkyHelm ready: ")[1].split("/?token=")[0]
-    finally:
-        if proc.returncode is None:
-            proc.send_signal(2)
-            await asyncio.wait_for(proc.wait(), 20)
+def serve(loop: str) -> contextlib.AbstractAsyncContextManager[
+    tuple[asyncio.subprocess.Process, str]
+]:
+    return served([
+        sys.executable, "-c", _SERVE_UVLOOP if loop == "uvloop" else _SERVE, "serve",
+        "--port", "0", "--token", TOKEN, "--no-scene", "--no-tlog", "--no-access-log",
+        "--log-level", "warning",
+    ])
 
 
 async def run(counts: list[int], seconds: float, loop: str) -> list[dict[str, Any]]:
