@@ -6,15 +6,13 @@ import argparse
 import asyncio
 import json
 import math
-import os
 import signal
 import sys
-import threading
 from collections.abc import Sequence
 from pathlib import Path
 
 from sim.runner import SimCluster
-from sim.sim_processes import run_processes
+from sim.sim_processes import run_processes, watch_stdin
 
 AIRFRAME_CHOICES = ("quad", "hexa", "octo", "plane", "vtol", "rover")
 # PX4 SITL's ports for instance 0 (instance i adds i, except the shared GCS port).
@@ -79,7 +77,7 @@ async def serve(args: argparse.Namespace) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
     if args.exit_on_stdin_eof:
-        _watch_stdin(loop, stop)
+        watch_stdin(loop, stop)
     cluster = SimCluster(
         airframe=args.airframe,
         count=args.count,
@@ -135,16 +133,6 @@ def _child_arguments(args: argparse.Namespace, first: int, count: int) -> list[s
         "--ready-json", "--exit-on-stdin-eof",
         *(["--signing-dir", str(args.signing_dir)] if args.signing_dir is not None else []),
     ]
-
-
-def _watch_stdin(loop: asyncio.AbstractEventLoop, stop: asyncio.Event) -> None:
-    def read_until_eof() -> None:
-        fd = sys.stdin.fileno()
-        while os.read(fd, 4096):
-            pass
-        loop.call_soon_threadsafe(stop.set)
-
-    threading.Thread(target=read_until_eof, name="stdin-eof", daemon=True).start()
 
 
 def main(argv: Sequence[str] | None = None) -> int:

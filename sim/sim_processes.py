@@ -72,7 +72,8 @@ async def _stop_all(children: list[asyncio.subprocess.Process]) -> None:
             proc.stdin.close()
 
 
-def _watch_stdin(loop: asyncio.AbstractEventLoop, stop: asyncio.Event) -> None:
+def watch_stdin(loop: asyncio.AbstractEventLoop, stop: asyncio.Event) -> None:
+    """Set ``stop`` when stdin reaches end of file (the parent went away)."""
     def read_until_eof() -> None:
         fd = sys.stdin.fileno()
         while os.read(fd, 4096):
@@ -90,7 +91,7 @@ async def run_processes(
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
     if args.exit_on_stdin_eof:
-        _watch_stdin(loop, stop)
+        watch_stdin(loop, stop)
     children: list[asyncio.subprocess.Process] = []
     drains: list[asyncio.Task[None]] = []
     try:

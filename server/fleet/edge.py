@@ -28,7 +28,7 @@ from server.fleet.asgi_call import Asgi
 from server.fleet.edge_api import EdgeApi
 from server.fleet.edge_publish import VehiclePublication
 from server.fleet.keys import FleetKeys, check_name
-from server.fleet.session import ZenohOptions, open_session
+from server.fleet.session import ZenohOptions, open_session, options_from_settings
 from server.link import Vehicle
 from server.link.aio import cancel_and_wait
 from server.settings import Settings
@@ -45,16 +45,6 @@ def default_edge_name(hostname: str | None = None) -> str:
     """The host name as a key chunk: [A-Za-z0-9_-] only, at most 64 characters."""
     name = re.sub(r"[^A-Za-z0-9_-]", "_", hostname or socket.gethostname())[:EDGE_NAME_MAX]
     return name or "edge"
-
-
-def edge_options(settings: Settings) -> ZenohOptions:
-    return ZenohOptions(
-        mode=settings.zenoh_mode,
-        connect=list(settings.zenoh_connect),
-        listen=list(settings.zenoh_listen),
-        multicast_scouting=settings.zenoh_multicast_scouting,
-        config_file=settings.zenoh_config,
-    )
 
 
 class EdgeService:
@@ -92,7 +82,7 @@ class EdgeService:
         return cls(
             settings.fleet_name,
             settings.edge_name or default_edge_name(),
-            edge_options(settings),
+            options_from_settings(settings),
             vehicles,
             publishers,
         )

@@ -9,6 +9,8 @@ from typing import Literal
 
 import zenoh
 
+from server.settings import Settings
+
 ZenohMode = Literal["peer", "client", "router"]
 
 # The link lease this node announces, and keep-alives per lease: a peer that dies or is cut
@@ -31,6 +33,17 @@ class ZenohOptions:
     multicast_scouting: bool = True
     # a Zenoh JSON5 configuration file (TLS, access control); the options above override it
     config_file: Path | None = None
+
+
+def options_from_settings(settings: Settings) -> ZenohOptions:
+    """The Zenoh options a server's settings give (edges and fleet servers alike)."""
+    return ZenohOptions(
+        mode=settings.zenoh_mode,
+        connect=list(settings.zenoh_connect),
+        listen=list(settings.zenoh_listen),
+        multicast_scouting=settings.zenoh_multicast_scouting,
+        config_file=settings.zenoh_config,
+    )
 
 
 def zenoh_config(options: ZenohOptions) -> zenoh.Config:

@@ -11,22 +11,12 @@ import zenoh
 
 from server.fleet.keys import FleetKeys, StateTier
 from server.fleet.proxy import QUERY_TIMEOUT_S
-from server.fleet.session import ZenohOptions, open_session
+from server.fleet.session import ZenohOptions, open_session, options_from_settings
 from server.fleet.view import FleetView
 from server.fleet.view_zenoh import FleetFeed
 from server.settings import Settings
 
 log = logging.getLogger(__name__)
-
-
-def zenoh_options(settings: Settings) -> ZenohOptions:
-    return ZenohOptions(
-        mode=settings.zenoh_mode,
-        connect=list(settings.zenoh_connect),
-        listen=list(settings.zenoh_listen),
-        multicast_scouting=settings.zenoh_multicast_scouting,
-        config_file=settings.zenoh_config,
-    )
 
 
 class FleetService:
@@ -54,7 +44,8 @@ class FleetService:
     @classmethod
     def from_settings(cls, settings: Settings) -> FleetService:
         return cls(
-            settings.fleet_name, zenoh_options(settings), takeover_ask_s=settings.takeover_ask_s
+            settings.fleet_name, options_from_settings(settings),
+            takeover_ask_s=settings.takeover_ask_s,
         )
 
     async def start(self) -> None:
