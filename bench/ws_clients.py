@@ -408,7 +408,7 @@ def report(result: dict[str, Any]) -> Section | None:
         f"{100 * last['server_cpu_share_of_one_core']:.1f} % of one core).",
         "",
         "Latency is vehicle → client (the server took in the vehicle's newest message → a "
-        "probe client received the state); a tier's slot waits at most half an interval for "
+        "probe client received the state); a tier's slot waits at most 90 % of an interval for "
         "a new message, so a vehicle silent for longer shows in it. Snapshot → client is the "
         "server's own path alone.",
         "",
