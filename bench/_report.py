@@ -49,6 +49,17 @@ class Section:
     figures: list[Figure] = field(default_factory=list)
 
 
+def pyplot() -> Any:
+    """matplotlib.pyplot on the Agg backend (no display), imported only when a report is
+    drawn, so a benchmark runs without matplotlib."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
 def machine_caption(machine: dict[str, Any]) -> str:
     """One line naming the machine a figure comes from."""
     load = machine.get("load_average_before") or machine.get("load_average_after")

@@ -322,12 +322,9 @@ def report(result: dict[str, Any]) -> Section | None:
     rows = result.get("rows") or []
     if not rows:
         return None
-    import matplotlib
+    from bench._report import Section, pyplot, save_figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from bench._report import Section, save_figure
+    plt = pyplot()
 
     machine = result["machine"]
     n = [r["vehicles"] for r in rows]

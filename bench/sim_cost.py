@@ -164,12 +164,9 @@ def report(result: dict[str, Any]) -> Section | None:
     rows = result.get("rows") or []
     if not rows:
         return None
-    import matplotlib
+    from bench._report import Section, pyplot, save_figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from bench._report import Section, save_figure
+    plt = pyplot()
 
     n = [r["quads"] for r in rows]
     fig, (total, each) = plt.subplots(1, 2, figsize=(10, 3.8))

@@ -421,12 +421,9 @@ def print_table(result: dict[str, Any]) -> None:
 
 
 def report(result: dict[str, Any]) -> Section | None:
-    import matplotlib
+    from bench._report import Section, pyplot, save_figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from bench._report import Section, save_figure
+    plt = pyplot()
 
     phases = result.get("phases") or []
     if not phases:

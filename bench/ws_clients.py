@@ -336,12 +336,9 @@ if __name__ == "__main__":
 
 def report(result: dict[str, Any]) -> Section | None:
     """Latency and server CPU against the number of clients, for docs/PERFORMANCE.md."""
-    import matplotlib
+    from bench._report import Section, pyplot, save_figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from bench._report import Section, save_figure
+    plt = pyplot()
 
     rows = sorted(result.get("rows", []), key=lambda row: row["clients"])
     if not rows:

@@ -6,13 +6,12 @@ import argparse
 import asyncio
 import json
 import math
-import signal
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
 from sim.runner import SimCluster
-from sim.sim_processes import run_processes, watch_stdin
+from sim.sim_processes import run_processes, stop_event
 
 AIRFRAME_CHOICES = ("quad", "hexa", "octo", "plane", "vtol", "rover")
 # PX4 SITL's ports for instance 0 (instance i adds i, except the shared GCS port).
@@ -72,12 +71,7 @@ def _ports_for_instance(base: int, first: int) -> int:
 
 
 async def serve(args: argparse.Namespace) -> int:
-    loop = asyncio.get_running_loop()
-    stop = asyncio.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        loop.add_signal_handler(sig, stop.set)
-    if args.exit_on_stdin_eof:
-        watch_stdin(loop, stop)
+    stop = stop_event(exit_on_stdin_eof=args.exit_on_stdin_eof)
     cluster = SimCluster(
         airframe=args.airframe,
         count=args.count,

@@ -72,6 +72,17 @@ async def _stop_all(children: list[asyncio.subprocess.Process]) -> None:
             proc.stdin.close()
 
 
+def stop_event(*, exit_on_stdin_eof: bool) -> asyncio.Event:
+    """An event set on SIGINT or SIGTERM, and at stdin's end of file when asked."""
+    loop = asyncio.get_running_loop()
+    stop = asyncio.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    if exit_on_stdin_eof:
+        watch_stdin(loop, stop)
+    return stop
+
+
 def watch_stdin(loop: asyncio.AbstractEventLoop, stop: asyncio.Event) -> None:
     """Set ``stop`` when stdin reaches end of file (the parent went away)."""
     def read_until_eof() -> None:
@@ -86,12 +97,7 @@ def watch_stdin(loop: asyncio.AbstractEventLoop, stop: asyncio.Event) -> None:
 async def run_processes(
     args: argparse.Namespace, processes: int, child_arguments: ChildArguments
 ) -> int:
-    loop = asyncio.get_running_loop()
-    stop = asyncio.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        loop.add_signal_handler(sig, stop.set)
-    if args.exit_on_stdin_eof:
-        watch_stdin(loop, stop)
+    stop = stop_event(exit_on_stdin_eof=args.exit_on_stdin_eof)
     children: list[asyncio.subprocess.Process] = []
     drains: list[asyncio.Task[None]] = []
     try:
