@@ -115,7 +115,11 @@ class Settings(BaseSettings):
     )
     cors_origins: Annotated[list[str], NoDecode] = Field(default_factory=list)
     telemetry_max_rate_hz: float = Field(50.0, gt=0.0, le=200.0)
-    heartbeat_timeout_s: float = Field(3.0, gt=0.0, le=60.0)
+    heartbeat_timeout_s: float = Field(
+        5.0, ge=5.0, le=60.0,
+        description="a vehicle sending little besides its HEARTBEAT is lost after this long "
+        "without a frame (the MAVLink heartbeat protocol's 5 s at least)",
+    )
     silence_timeout_s: float = Field(
         1.0, ge=0.2, le=60.0,
         description="a vehicle streaming telemetry is lost after this long without a frame",

@@ -7,9 +7,12 @@ other socket, so each side sees the proxy as its peer::
     SkyHelm  <->  [server-facing | FaultProxy | vehicle-facing]  <->  vehicle
 
 Per direction (``to_vehicle``: SkyHelm's frames towards the vehicle; ``to_server``: the
-vehicle's frames towards SkyHelm) it can drop (loss %), delay (+ jitter), duplicate,
-reorder (hold one datagram back until the next one has gone) and corrupt (flip bits), and
-it can cut the link for N seconds in one or both directions (a partition). Every datagram is
+vehicle's frames towards SkyHelm) it can drop (loss %, independently per datagram or in
+bursts as a radio loses them: a Gilbert–Elliott channel with ``burst_frames`` mean burst),
+delay (+ jitter), duplicate, reorder (hold one datagram back until the next one has gone)
+and corrupt (flip bits); it can cut the link for N seconds in one or both directions (a
+partition), or drop only the frames of some message ids for N seconds (``drop_messages``:
+the HEARTBEATs alone, say). Every datagram is
 counted per direction; see :class:`DirectionCounters` for how the counters add up. The random
 choices come from a seeded RNG per direction, so a run is repeatable.
 
@@ -22,6 +25,7 @@ From a test (asyncio)::
         proxy.configure(Faults(loss_pct=20))               # both directions
         proxy.configure(Faults(delay_ms=50), "to_vehicle")  # live, one direction
         proxy.partition(5.0)                                # both ways, for 5 s
+        proxy.drop_messages({0}, 3.6, "to_server")          # the vehicle's HEARTBEATs
         print(proxy.counters())
 
 From a shell (a bench tool; PX4 SITL instance 0 sends to 14540, answers on 14580)::
@@ -54,6 +58,8 @@ DIRECTIONS: tuple[Direction, Direction] = ("to_vehicle", "to_server")
 # A datagram held back for reordering is released after the next one, or after this long
 # when no next one comes (so a quiet link does not keep it forever).
 REORDER_MAX_HOLD_S = 0.05
+MAVLINK1_STX, MAVLINK2_STX = 0xFE, 0xFD
+MAVLINK_MSG_ID_HEARTBEAT = 0
 # A tap sees every datagram the proxy sends: (direction, payload).
 Tap = Callable[[Direction, bytes], None]
 
@@ -66,6 +72,10 @@ class Faults:
     """
 
     loss_pct: float = 0.0
+    # 0: each datagram lost on its own with loss_pct; > 0: losses come in bursts of this
+    # mean length (datagrams), loss_pct of them in the long run (a Gilbert–Elliott channel
+    # whose bad state loses every datagram and lasts burst_frames on average)
+    burst_frames: float = 0.0
     delay_ms: float = 0.0
     # each datagram's delay is delay_ms + uniform(-jitter_ms, +jitter_ms), never below 0
     jitter_ms: float = 0.0
@@ -85,6 +95,16 @@ class Faults:
                 raise ValueError(f"{name} must not be negative")
         if self.corrupt_bits < 1:
             raise ValueError("corrupt_bits must be at least 1")
+        if self.burst_frames and (self.burst_frames < 1.0 or self.loss_pct >= 100.0):
+            raise ValueError("burst_frames must be 0 or at least 1, with loss_pct below 100")
+
+    def good_to_bad(self) -> float:
+        """The Gilbert–Elliott chance per datagram of a burst starting: its bad state lasts
+        burst_frames on average (leaves with 1 / burst_frames), and the share of time in it
+        is the loss: p / (p + r) = loss."""
+        leave = 1.0 / self.burst_frames
+        loss = self.loss_pct / 100.0
+        return leave * loss / (1.0 - loss)
 
 
 NO_FAULTS = Faults()
@@ -94,8 +114,9 @@ NO_FAULTS = Faults()
 class DirectionCounters:
     """Datagrams through one direction.
 
-    ``in`` arrived; ``dropped`` were discarded (by loss or by a partition; ``partitioned`` is
-    the partition's share); each survivor goes out once, plus once more if ``duplicated``.
+    ``in`` arrived; ``dropped`` were discarded (by loss, by a partition or by message id;
+    ``partitioned`` and ``filtered`` are those shares); each survivor goes out once, plus
+    once more if ``duplicated``.
     ``corrupted`` had bits flipped, ``delayed`` were held for a delay, ``reordered`` were held
     back and overtaken by a later one (one whose hold ran out first goes in order, uncounted).
     Once nothing is in flight (``pending`` 0):
@@ -105,6 +126,7 @@ class DirectionCounters:
     in_: int = 0
     dropped: int = 0
     partitioned: int = 0
+    filtered: int = 0
     duplicated: int = 0
     corrupted: int = 0
     delayed: int = 0
@@ -141,6 +163,9 @@ class _Lane:
     partition: _Partition = field(default_factory=_Partition)
     held: bytes | None = None
     held_timer: asyncio.TimerHandle | None = None
+    in_burst: bool = False  # the Gilbert–Elliott state: in a burst of losses
+    # message id -> loop time until which its frames are dropped
+    dropped_ids: dict[int, float] = field(default_factory=dict)
 
 
 class _Socket(asyncio.DatagramProtocol):
@@ -273,6 +298,16 @@ class FaultProxy:
         for lane in self._select(direction):
             lane.partition.until = max(lane.partition.until, now + duration_s)
 
+    def drop_messages(
+        self, message_ids: set[int], duration_s: float, direction: DirectionChoice = "both"
+    ) -> None:
+        """Drop only the frames of these MAVLink message ids (one frame per datagram, as PX4
+        and SkyHelm send) for ``duration_s`` from now; everything else passes."""
+        until = self._now() + duration_s
+        for lane in self._select(direction):
+            for message_id in message_ids:
+                lane.dropped_ids[message_id] = max(lane.dropped_ids.get(message_id, 0.0), until)
+
     def heal(self, direction: DirectionChoice = "both") -> None:
         """End a partition now."""
         for lane in self._select(direction):
@@ -317,9 +352,13 @@ class FaultProxy:
             counters.dropped += 1
             counters.partitioned += 1
             return
+        if lane.dropped_ids and lane.dropped_ids.get(_message_id(data), 0.0) > self._now():
+            counters.dropped += 1
+            counters.filtered += 1
+            return
         faults = lane.faults
         rng = lane.rng
-        if faults.loss_pct and rng.random() * 100.0 < faults.loss_pct:
+        if faults.loss_pct and _lost(lane, rng):
             counters.dropped += 1
             return
         if faults.corrupt_pct and rng.random() * 100.0 < faults.corrupt_pct:
@@ -394,6 +433,26 @@ class FaultProxy:
         return handle
 
 
+def _lost(lane: _Lane, rng: random.Random) -> bool:
+    faults = lane.faults
+    if not faults.burst_frames:
+        return rng.random() * 100.0 < faults.loss_pct
+    if lane.in_burst:
+        lane.in_burst = rng.random() >= 1.0 / faults.burst_frames
+    else:
+        lane.in_burst = rng.random() < faults.good_to_bad()
+    return lane.in_burst
+
+
+def _message_id(frame: bytes) -> int | None:
+    """The message id of a MAVLink 1 or 2 frame, None for anything else."""
+    if len(frame) >= 10 and frame[0] == MAVLINK2_STX:
+        return int.from_bytes(frame[7:10], "little")
+    if len(frame) >= 6 and frame[0] == MAVLINK1_STX:
+        return frame[5]
+    return None
+
+
 def _other(direction: Direction) -> Direction:
     return "to_server" if direction == "to_vehicle" else "to_vehicle"
 
@@ -447,6 +506,8 @@ def build_parser() -> argparse.ArgumentParser:
                          ("down-", "towards SkyHelm")):
         group = parser.add_argument_group(f"faults, {what}")
         group.add_argument(f"--{prefix}loss", type=float, metavar="PCT")
+        group.add_argument(f"--{prefix}burst", type=float, metavar="FRAMES",
+                           help="losses in bursts of this mean length (Gilbert–Elliott)")
         group.add_argument(f"--{prefix}delay", type=float, metavar="MS")
         group.add_argument(f"--{prefix}jitter", type=float, metavar="MS")
         group.add_argument(f"--{prefix}duplicate", type=float, metavar="PCT")
@@ -459,12 +520,16 @@ def build_parser() -> argparse.ArgumentParser:
                         help="... starting S seconds after start")
     parser.add_argument("--partition-direction", choices=("both", "to_vehicle", "to_server"),
                         default="both")
+    parser.add_argument("--drop-heartbeats", type=float, default=0.0, metavar="S",
+                        help="drop only the HEARTBEATs towards SkyHelm for S seconds ...")
+    parser.add_argument("--drop-heartbeats-after", type=float, default=0.0, metavar="S",
+                        help="... starting S seconds after start")
     parser.add_argument("--report-every", type=float, default=5.0, metavar="S",
                         help="print the counters as a JSON line every S seconds (0: never)")
     return parser
 
 
-_FIELDS = {"loss": "loss_pct", "delay": "delay_ms", "jitter": "jitter_ms",
+_FIELDS = {"loss": "loss_pct", "burst": "burst_frames", "delay": "delay_ms", "jitter": "jitter_ms",
            "duplicate": "duplicate_pct", "reorder": "reorder_pct", "corrupt": "corrupt_pct"}
 
 
@@ -500,6 +565,9 @@ async def run(args: argparse.Namespace) -> int:
         if args.partition > 0:
             loop.call_later(args.partition_after, proxy.partition, args.partition,
                             args.partition_direction)
+        if args.drop_heartbeats > 0:
+            loop.call_later(args.drop_heartbeats_after, proxy.drop_messages,
+                            {MAVLINK_MSG_ID_HEARTBEAT}, args.drop_heartbeats, "to_server")
         while not stop.is_set():
             with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(stop.wait(), args.report_every or None)

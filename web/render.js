@@ -42,14 +42,28 @@ function setpointSpeed(state) {
   return null;
 }
 
+// The link badge: lost, or degraded (the warning before the verdict, its reasons on hover),
+// with the loss each way from state.link_quality (sequence numbers; "?" where unknown).
+function renderLinkHealth(state) {
+  const quality = state.link_quality;
+  const el = $("link-health");
+  if (!quality) {
+    setText("link-health", state.connected ? "–" : "LOST");
+    el.style.color = state.connected ? "" : "var(--bad)";
+    return;
+  }
+  const pct = (value) => (value === null || value === undefined ? "?" : `${num(value, 0)}%`);
+  const head = !state.connected ? "LOST · " : quality.degraded ? "DEGRADED · " : "";
+  setText("link-health", `${head}loss ↓${pct(quality.loss_in_pct)} ↑${pct(quality.loss_out_pct)}`);
+  el.style.color = !state.connected ? "var(--bad)" : quality.degraded ? "var(--warn)" : "";
+  el.title = quality.warnings.length ? quality.warnings.join("\n") :
+    `heard ${num(quality.silent_s, 1)} s ago, ${num(quality.rate_hz, 0)} frames/s`;
+}
+
 export function render(state) {
   page.state = state;
   if (state.vehicle_type) page.vehicleType = state.vehicle_type;
-  const link = state.link || {};
-  const age = state.last_heartbeat_age_s;
-  const loss = link.frames_in ? (100 * (link.lost_frames || 0)) / (link.frames_in + (link.lost_frames || 0)) : 0;
-  setText("link-health", `${state.connected ? "" : "LOST · "}hb ${num(age, 1)} s · loss ${num(loss, 1)}%`);
-  $("link-health").style.color = state.connected && age < 2 ? "" : "var(--bad)";
+  renderLinkHealth(state);
 
   const failsafe = state.user_mode && state.user_mode !== state.mode && state.armed;
   setText("mode", state.mode || "–");

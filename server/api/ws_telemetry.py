@@ -1,15 +1,23 @@
 """The telemetry socket: anyone with a token watches one vehicle (or all) and the page-wide
-topics. State is latest-wins at the asked rate (slots.py); events are queued."""
+topics. State is latest-wins at the asked rate (slots.py); events are queued.
+
+A socket follows the vehicles as they come: one opened before its vehicle exists (all
+vehicles, or one system id not seen yet) starts sending that vehicle's states and events as
+soon as a link discovers it. A vehicle that restarts keeps its object (the link notices the
+reboot), so its socket goes on."""
 
 from __future__ import annotations
 
+import asyncio
 import json
+from collections.abc import AsyncIterator
 from typing import Any
 
 from fastapi import APIRouter, WebSocket
 
 from server.api.auth import Role
 from server.api.publisher import StatePublisher, StatePublishers
+from server.api.registry import VehicleRegistry
 from server.api.slots import Broadcast
 from server.api.views import finite
 from server.api.ws_common import (
@@ -20,9 +28,11 @@ from server.api.ws_common import (
     close_socket,
     run_until_disconnect,
 )
-from server.link import Vehicle, VehicleEvent
+from server.link import Link, Vehicle, VehicleEvent
 
 MIN_RATE_HZ = 0.1
+# MAVLink system ids a vehicle can have; another id can never appear.
+SYSID_RANGE = range(1, 256)
 
 router = APIRouter()
 
@@ -43,14 +53,9 @@ async def telemetry(
     context = await admit(websocket, Role.OBSERVER)
     if context is None:
         return
-    if vehicle is None:
-        vehicles = context.registry.all()
-    else:
-        found = context.registry.get(vehicle)
-        if found is None:
-            await close_socket(websocket, CLOSE_NOT_FOUND, f"no vehicle {vehicle}")
-            return
-        vehicles = [found]
+    if vehicle is not None and vehicle not in SYSID_RANGE:
+        await close_socket(websocket, CLOSE_NOT_FOUND, f"no vehicle {vehicle}")
+        return
     if not rate_hz > 0:  # also refuses NaN
         rate_hz = MIN_RATE_HZ
     rate_hz = min(max(rate_hz, MIN_RATE_HZ), context.settings.telemetry_max_rate_hz)
@@ -60,10 +65,67 @@ async def telemetry(
         _pump_topic(publishers.vehicle_list, sender, publishers.vehicle_list_message()),
         _pump_topic(publishers.scene_clicks, sender, None),
     ]
-    for each in vehicles:
-        jobs.append(_pump_states(publishers.for_vehicle(each), sender, rate_hz))
-        jobs.append(_pump_events(each, sender))
+    jobs.append(_follow_vehicles(context.registry, vehicle, publishers, sender, rate_hz))
     await run_until_disconnect(websocket, *jobs)
+
+
+async def _follow_vehicles(
+    registry: VehicleRegistry, wanted: int | None, publishers: StatePublishers, sender: Sender,
+    rate_hz: float,
+) -> None:
+    """Pump the states and events of every vehicle (or the one wanted) known now or found
+    later; ends with the first pump that fails (the client went away or was too slow)."""
+    pumps: dict[int, tuple[Vehicle, list[asyncio.Task[None]]]] = {}
+    follower = asyncio.current_task()
+
+    def end_on_failure(task: asyncio.Task[None]) -> None:
+        if not task.cancelled() and task.exception() is not None and follower is not None:
+            follower.cancel()
+
+    try:
+        async for found in _vehicles_as_they_come(registry):
+            if wanted is not None and found.sysid != wanted:
+                continue
+            vehicle = registry.get(found.sysid)  # the first link that saw an id owns it
+            if vehicle is None or (
+                    found.sysid in pumps and pumps[found.sysid][0] is vehicle):
+                continue
+            for task in pumps.pop(vehicle.sysid, (vehicle, []))[1]:
+                task.cancel()
+            running = [
+                asyncio.create_task(_pump_states(publishers.for_vehicle(vehicle), sender, rate_hz)),
+                asyncio.create_task(_pump_events(vehicle, sender)),
+            ]
+            for task in running:
+                task.add_done_callback(end_on_failure)
+            pumps[vehicle.sysid] = (vehicle, running)
+    finally:
+        tasks = [task for _, running in pumps.values() for task in running]
+        for task in tasks:
+            task.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+
+
+async def _vehicles_as_they_come(registry: VehicleRegistry) -> AsyncIterator[Vehicle]:
+    """Every vehicle of every link, the known ones first, then each as it is discovered."""
+    found: asyncio.Queue[Vehicle] = asyncio.Queue()
+
+    async def forward(link: Link) -> None:
+        queue = link.subscribe_vehicles()
+        try:
+            while True:
+                found.put_nowait(await queue.get())
+        finally:
+            link.unsubscribe_vehicles(queue)
+
+    forwarders = [asyncio.create_task(forward(link)) for link in registry.links]
+    try:
+        while True:
+            yield await found.get()
+    finally:
+        for task in forwarders:
+            task.cancel()
+        await asyncio.gather(*forwarders, return_exceptions=True)
 
 
 async def _pump_states(publisher: StatePublisher, sender: Sender, rate_hz: float) -> None:

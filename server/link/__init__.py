@@ -10,6 +10,7 @@ from .commands import CommandOutcome, CommandResult
 from .events import VehicleEvent
 from .link import Link
 from .link_stats import LinkStats
+from .liveness import LinkQuality
 from .manual_control import Sticks
 from .modes import PX4_MODE_NAMES
 from .params import ParamError
@@ -44,6 +45,7 @@ __all__ = [
     "GpsState",
     "HomeState",
     "Link",
+    "LinkQuality",
     "LinkStats",
     "OriginState",
     "ParamError",

@@ -15,6 +15,7 @@ from pymavlink.dialects.v20 import development as mavlink
 
 from server.link.events import EventHub, VehicleEvent
 from server.link.link_stats import LinkStats
+from server.link.liveness import LinkQuality
 from server.link.requests import Requester
 from server.link.state import StateSubscription, SubscriptionHub, VehicleState
 from server.link.statustext import RecentTexts
@@ -55,6 +56,7 @@ class VehicleCore:
         self.autopilot = heartbeat.autopilot if heartbeat is not None else 0
         self.connected = True
         self.lost_s: float | None = None  # when the link last lost the vehicle
+        self.link_quality: LinkQuality | None = None  # the link's figures, 10 times a second
         self.created_s = self.last_heartbeat_s = self.updated_s = self.now()
         self.events = EventHub()
         self.hub = SubscriptionHub(snapshot)
@@ -125,6 +127,24 @@ class VehicleCore:
             self.requests.fail_all()
         for handler in self._on_connection:
             handler(connected)
+        self.changed()
+
+    def set_link_quality(self, quality: LinkQuality) -> None:
+        """The link's figures for this vehicle; a warning that starts, changes or ends is an
+        event (``link_quality``) and a state change."""
+        previous, self.link_quality = self.link_quality, quality
+        before = previous.causes if previous is not None else ()
+        if quality.causes == before:
+            return
+        if quality.degraded:
+            text = "link degraded: " + "; ".join(quality.warnings)
+        else:
+            text = "link quality back to normal"
+        self.publish_event("link_quality", {
+            "degraded": quality.degraded, "causes": list(quality.causes),
+            "loss_in_pct": quality.loss_in_pct, "loss_out_pct": quality.loss_out_pct,
+            "silent_s": round(quality.silent_s, 2), "text": text,
+        })  # fmt: skip
         self.changed()
 
     def changed(self) -> None:

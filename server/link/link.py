@@ -24,7 +24,7 @@ from pymavlink.dialects.v20 import development as mavlink
 from . import px4_messages
 from .aio import cancel_and_wait
 from .link_stats import LinkStats, SequenceGapCounter
-from .liveness import DEFAULT_SILENCE_TIMEOUT_S, Liveness
+from .liveness import DEFAULT_SILENCE_TIMEOUT_S, MAVLINK_HEARTBEAT_TIMEOUT_S, Liveness
 from .signing import MAVLINK_MSG_ID_SETUP_SIGNING, LinkSigning, SigningKeyStore
 from .tlog import TlogWriter
 from .transports import Peer, Transport, create_transport
@@ -114,7 +114,7 @@ class Link:
         gcs_sysid: int = 255,
         gcs_compid: int = 190,
         log_dir: Path | None = None,
-        heartbeat_timeout_s: float = 3.0,
+        heartbeat_timeout_s: float = MAVLINK_HEARTBEAT_TIMEOUT_S,
         silence_timeout_s: float = DEFAULT_SILENCE_TIMEOUT_S,
         vehicle_factory: VehicleFactory | None = None,
         signing_store: SigningKeyStore | None = None,
@@ -123,8 +123,8 @@ class Link:
 
         A ``tcp:`` or serial peer that is not there yet is retried in the background.
         ``vehicle_factory`` replaces the Vehicle class (tests feed links to stand-ins).
-        A vehicle is lost after ``heartbeat_timeout_s`` without HEARTBEAT, or, while it
-        streams telemetry, after ``silence_timeout_s`` without any frame (see liveness).
+        A vehicle is lost after ``silence_timeout_s`` without any valid frame while it
+        streams telemetry, after ``heartbeat_timeout_s`` without one otherwise (liveness).
         ``signing_store`` holds the MAVLink signing key (none: the link signs nothing).
         """
         address = parse_link_url(url)
@@ -280,7 +280,7 @@ class Link:
             return
         self._frames_in += 1
         src_system = msg.get_srcSystem()
-        self._gaps.observe(src_system, msg.get_srcComponent(), msg.get_seq())
+        missing = self._gaps.observe(src_system, msg.get_srcComponent(), msg.get_seq())
         self.signing.note_received(msg)
         if msg.get_msgId() == MAVLINK_MSG_ID_SETUP_SIGNING:
             return  # a key: never recorded, and no vehicle of ours takes one from a peer
@@ -290,7 +290,10 @@ class Link:
                 and msg.get_srcComponent() == MAV_COMP_ID_AUTOPILOT1):
             self._vehicle_heartbeat(msg)
         if msg.get_srcComponent() == MAV_COMP_ID_AUTOPILOT1:
-            self._vehicle_heard(src_system)
+            self._vehicle_heard(src_system, missing)
+            if msg.get_msgId() == px4_messages.MAVLINK_MSG_ID_LINK_NODE_STATUS:
+                self._liveness.node_status(
+                    src_system, self.now(), msg.messages_received, msg.messages_lost)
         vehicle = self._vehicles.get(src_system)
         if vehicle is not None:
             try:
@@ -309,13 +312,13 @@ class Link:
         if sysid not in self._vehicles:
             self._discover(sysid, msg)
 
-    def _vehicle_heard(self, sysid: int) -> None:
+    def _vehicle_heard(self, sysid: int, missing: int) -> None:
         """Any frame of a known vehicle keeps it alive, and brings a lost one back (its
         first frame after a cut is seldom the HEARTBEAT)."""
         if not self._liveness.known(sysid):
             return
         now = self.now()
-        self._liveness.frame(sysid, now)
+        self._liveness.frame(sysid, now, missing)
         vehicle = self._vehicles.get(sysid)
         if vehicle is not None and sysid not in self._connected_sysids:
             self._connected_sysids.add(sysid)
@@ -387,6 +390,10 @@ class Link:
                 return
         else:
             self._behind_since_s = None
+        for sysid, vehicle in self._vehicles.items():
+            set_quality = getattr(vehicle, "set_link_quality", None)
+            if set_quality is not None:  # test stand-ins may lack it
+                set_quality(self._liveness.quality(sysid, now))
         for sysid in list(self._connected_sysids):
             why = self._liveness.silent_for(sysid, now)
             if why is not None:

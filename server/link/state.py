@@ -13,6 +13,7 @@ from typing import Literal
 
 from server.link.aio import loop_time_s
 from server.link.link_stats import LinkStats
+from server.link.liveness import LinkQuality
 
 LandedState = Literal["UNDEFINED", "ON_GROUND", "IN_AIR", "TAKEOFF", "LANDING"]
 VtolState = Literal["UNDEFINED", "MC", "FW", "TRANSITION_TO_FW", "TRANSITION_TO_MC"]
@@ -196,6 +197,9 @@ class VehicleState:
     # seconds since each message type that fills the state was last received, by its
     # MAVLink name (the age of every value: a value is as old as its source message)
     message_ages_s: dict[str, float] = field(default_factory=dict)
+    # how well the vehicle is heard, and the warning before a loss (None before the link's
+    # first look)
+    link_quality: LinkQuality | None = None
 
 
 class StateSubscription:

@@ -123,6 +123,7 @@ class Vehicle:
         # the plugins' operations, callable on the vehicle itself
         self.handle_message = core.handle_message
         self.set_connected = core.set_connected
+        self.set_link_quality = core.set_link_quality
         self.subscribe = core.subscribe
         self.subscribe_events = core.subscribe_events
         self.unsubscribe_events = core.unsubscribe_events
@@ -221,6 +222,7 @@ class Vehicle:
             setpoint=describe(setpoint) if setpoint is not None else None,
             stream=self.offboard.streamer.stats(),
             link=self.link.stats(),
+            link_quality=core.link_quality,
             updated_s=core.updated_s,
             telemetry_refused=tuple(sorted(self.telemetry_requests.refused)),
             message_ages_s=t.ages_at(core.now()),

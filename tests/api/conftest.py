@@ -32,7 +32,6 @@ def make_settings(url: str | None, **overrides: Any) -> Settings:
         "scene": False,
         "log_dir": None,
         "web_dir": None,
-        "heartbeat_timeout_s": 3.0,
     }
     values.update(overrides)
     return load_settings(**values)

@@ -146,7 +146,7 @@ async def test_telemetry_pushes_the_vehicle_list_and_scene_clicks(quad: Served) 
         assert lost["vehicles"][0]["connected"] is False
 
 
-async def test_telemetry_refuses_bad_token_foreign_origin_and_unknown_vehicle(
+async def test_telemetry_refuses_bad_token_foreign_origin_and_impossible_vehicle(
     quad: Served,
 ) -> None:
     async with connect(quad.url("telemetry", token="wrong-token-123")) as ws:
@@ -155,7 +155,7 @@ async def test_telemetry_refuses_bad_token_foreign_origin_and_unknown_vehicle(
         async with connect(quad.url("telemetry"), origin="http://evil.example"):  # type: ignore[arg-type]
             pass
     assert foreign.value.response.status_code == 403
-    async with connect(quad.url("telemetry", vehicle=9)) as ws:
+    async with connect(quad.url("telemetry", vehicle=256)) as ws:  # no MAVLink system id
         assert await close_code(ws) == 4404
     async with connect(quad.url("telemetry"), origin=f"http://{quad.host}") as ws:  # type: ignore[arg-type]
         assert (await receive_until(ws, {"type": "state"}))["vehicle"] == 1

@@ -29,24 +29,80 @@ def _streamed(liveness: Liveness, sysid: int, from_s: float, to_s: float, rate_h
 
 
 def test_a_streaming_vehicle_is_lost_after_the_silence_bound() -> None:
-    liveness = Liveness(heartbeat_timeout_s=3.0, silence_timeout_s=1.0)
+    liveness = Liveness(heartbeat_timeout_s=5.0, silence_timeout_s=1.0)
     _streamed(liveness, 1, 0.0, 2.5, rate_hz=50.0)
     last_s = 2.5
     assert liveness.silent_for(1, last_s + 0.9) is None
     assert liveness.silent_for(1, last_s + 1.1) == "nothing heard for 1.0 s"
 
 
-def test_a_vehicle_sending_only_heartbeats_is_judged_by_its_heartbeat() -> None:
-    liveness = Liveness(heartbeat_timeout_s=3.0, silence_timeout_s=1.0)
+def test_a_vehicle_sending_only_heartbeats_is_judged_by_the_heartbeat_timeout() -> None:
+    liveness = Liveness(heartbeat_timeout_s=5.0, silence_timeout_s=1.0)
     for second in range(4):
         liveness.heartbeat(1, float(second))
         liveness.frame(1, float(second))
-    assert liveness.silent_for(1, 3.0 + 2.5) is None
-    assert liveness.silent_for(1, 3.0 + 3.1) == "no HEARTBEAT for 3.0 s"
+    assert liveness.silent_for(1, 3.0 + 4.9) is None
+    assert liveness.silent_for(1, 3.0 + 5.1) == "nothing heard for 5.0 s"
+
+
+def test_missing_heartbeats_of_a_streaming_vehicle_are_a_warning_never_a_verdict() -> None:
+    liveness = Liveness(heartbeat_timeout_s=5.0, silence_timeout_s=1.0)
+    _streamed(liveness, 1, 0.0, 2.0, rate_hz=50.0)
+    for i in range(1, 500):  # 10 s more of frames, none of them a HEARTBEAT
+        t = 2.0 + i / 50.0
+        liveness.frame(1, t)
+        assert liveness.silent_for(1, t + 0.05) is None
+    quality = liveness.quality(1, 12.0)
+    assert quality.degraded
+    assert quality.causes == ("heartbeat",)
+    assert quality.lost_after_s == 1.0
+
+
+def test_loss_from_sequence_gaps_warns_with_hysteresis_and_silence_warns_first() -> None:
+    liveness = Liveness(heartbeat_timeout_s=5.0, silence_timeout_s=1.0)
+    t = 0.0
+    for i in range(300):  # 6 s at 50 Hz, one frame in five missing: 20 %
+        t = i / 50.0
+        if i % 50 == 0:
+            liveness.heartbeat(1, t)
+        liveness.frame(1, t, missing=1 if i % 4 == 0 else 0)
+    warned = liveness.quality(1, t)
+    assert warned.degraded
+    assert warned.causes == ("loss_in",)
+    assert warned.loss_in_pct is not None
+    assert 15.0 <= warned.loss_in_pct <= 25.0
+    for i in range(300, 600):  # 6 s with 1 in 8 missing (12.5 %): above the clearing 10 %
+        t = i / 50.0
+        if i % 50 == 0:
+            liveness.heartbeat(1, t)
+        liveness.frame(1, t, missing=1 if i % 7 == 0 else 0)
+    assert liveness.quality(1, t).causes == ("loss_in",)
+    for i in range(600, 900):  # 6 s without loss: clear
+        t = i / 50.0
+        if i % 50 == 0:
+            liveness.heartbeat(1, t)
+        liveness.frame(1, t)
+    assert not liveness.quality(1, t).degraded
+    assert liveness.quality(1, t + 0.4).causes == ()
+    assert liveness.quality(1, t + 0.6).causes == ("silence",)  # the warning before...
+    assert liveness.silent_for(1, t + 0.6) is None
+    assert liveness.silent_for(1, t + 1.1) is not None  # ...the verdict
+
+
+def test_the_vehicles_own_count_of_our_lost_frames_is_the_outbound_loss() -> None:
+    liveness = Liveness(heartbeat_timeout_s=5.0, silence_timeout_s=1.0)
+    _streamed(liveness, 1, 0.0, 2.0, rate_hz=50.0)
+    liveness.node_status(1, 1.0, received=1000, lost=10)
+    liveness.node_status(1, 2.0, received=1080, lost=30)
+    quality = liveness.quality(1, 2.0)
+    assert quality.loss_out_pct == 20.0
+    assert quality.causes == ("loss_out",)
+    liveness.node_status(1, 3.0, received=5, lost=0)  # the vehicle restarted its counts
+    assert liveness.quality(1, 3.0).loss_out_pct is None
 
 
 def test_a_stalled_loop_is_not_silence() -> None:
-    liveness = Liveness(heartbeat_timeout_s=3.0, silence_timeout_s=1.0)
+    liveness = Liveness(heartbeat_timeout_s=5.0, silence_timeout_s=1.0)
     _streamed(liveness, 1, 0.0, 2.0, rate_hz=50.0)
     liveness.forgive(1.5)  # the loop stood still: nothing could have been read
     assert liveness.silent_for(1, 2.0 + 1.6) is None

@@ -110,6 +110,26 @@ class LinkOut(_Out):
     signing: SigningOut | None = None
 
 
+class LinkQualityOut(_Out):
+    silent_s: float = Field(description="since the vehicle's last valid frame")
+    lost_after_s: float = Field(
+        description="the silence that makes it lost: silence_timeout_s while it streams, "
+        "heartbeat_timeout_s otherwise"
+    )
+    rate_hz: float = Field(description="valid frames a second from the vehicle")
+    loss_in_pct: float | None = Field(
+        description="vehicle -> server frames lost over the last 5 s (sequence numbers)"
+    )
+    loss_out_pct: float | None = Field(
+        description="server -> vehicle frames lost over the last 5 s, as the vehicle "
+        "reports it (PX4's LINK_NODE_STATUS); null where it does not"
+    )
+    heartbeat_age_s: float
+    degraded: bool = Field(description="a warning before the verdict: see warnings")
+    causes: list[Literal["silence", "loss_in", "loss_out", "heartbeat"]]
+    warnings: list[str]
+
+
 class StatusTextOut(_Out):
     time_s: float
     severity: str
@@ -180,3 +200,4 @@ class VehicleStateOut(_Out):
         default_factory=dict,
         description="seconds since each source message (by MAVLink name) was last received",
     )
+    link_quality: LinkQualityOut | None = None

@@ -1,0 +1,106 @@
+"""Telemetry sockets opened before their vehicle exists follow it: the first state within
+1 s of the vehicle's first frame, again within 1 s after it restarts (boot clock from zero),
+and a vehicle with a new system id on the same link shows on the unfiltered socket."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import socket
+import time
+from collections.abc import AsyncIterator
+
+from websockets.asyncio.client import connect
+
+from sim.runner import SimCluster
+from tests.api.conftest import OBSERVER, SIM_SPEED, api_at
+from tests.faults.linkloss_rig import WsLog
+from tests.serving import uvicorn_serving
+from tests.waiting import wait_for
+
+FIRST_STATE_WITHIN_S = 1.0
+
+
+def _free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        port: int = probe.getsockname()[1]
+    return port
+
+
+@contextlib.asynccontextmanager
+async def _logging(url: str) -> AsyncIterator[WsLog]:
+    async with connect(url) as ws:
+        log = WsLog(ws)
+        pump = asyncio.create_task(log.pump())
+        try:
+            yield log
+        finally:
+            pump.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await pump
+
+
+def _first_state_after(log: WsLog, since: float, vehicle: int) -> float | None:
+    times = [t for t, m in log.states() if t >= since and m["vehicle"] == vehicle]
+    return min(times) if times else None
+
+
+async def _state_within(log: WsLog, since: float, vehicle: int, what: str) -> float:
+    """Seconds from ``since`` to the socket's first state of ``vehicle`` after it."""
+    await wait_for(lambda: _first_state_after(log, since, vehicle) is not None, 10.0, what)
+    first = _first_state_after(log, since, vehicle)
+    assert first is not None
+    return first - since
+
+
+async def _first_frame_seen(vehicle_known: object, timeout_s: float = 20.0) -> float:
+    """When the server's link first knew the vehicle (polled every 5 ms)."""
+    deadline = time.monotonic() + timeout_s
+    while not vehicle_known():  # type: ignore[operator]
+        assert time.monotonic() < deadline, "the vehicle never appeared"
+        await asyncio.sleep(0.005)
+    return time.monotonic()
+
+
+async def test_sockets_opened_before_the_vehicle_follow_it_through_restart_and_new_ids() -> None:
+    port = _free_udp_port()
+    url = f"udpout:127.0.0.1:{port}"
+    async with api_at(None, None, connect=[url]) as api, uvicorn_serving(api.app) as host:
+        base = f"ws://{host}/api/v1/ws/telemetry?token={OBSERVER}&rate_hz=10"
+        registry = api.app.state.api.registry
+        async with _logging(base) as every, _logging(f"{base}&vehicle=1") as one:
+            await asyncio.sleep(0.3)
+            assert not every.states()
+            assert not one.states()
+            figures: list[str] = []
+
+            async with SimCluster("quad", api_local_port=port, speed=SIM_SPEED):
+                seen = await _first_frame_seen(lambda: registry.get(1) is not None)
+                for log, name in ((every, "unfiltered"), (one, "vehicle=1")):
+                    delay_s = await _state_within(log, seen, 1, f"{name}: first state")
+                    figures.append(f"{name} first {delay_s:.2f} s")
+                    assert delay_s < FIRST_STATE_WITHIN_S
+                vehicle = registry.get(1)
+                # long enough for its restart to show as a boot clock going back
+                await wait_for(lambda: (vehicle.reboot_watch.latest_boot_ms or 0) > 20_000,
+                               10.0, "20 s of the vehicle's boot clock")
+            await wait_for(lambda: not vehicle.connected, 5.0, "the vehicle lost")
+
+            async with SimCluster("quad", api_local_port=port, speed=SIM_SPEED):
+                restarted = await _first_frame_seen(lambda: vehicle.connected)
+                for log, name in ((every, "unfiltered"), (one, "vehicle=1")):
+                    delay_s = await _state_within(log, restarted, 1, f"{name}: after restart")
+                    figures.append(f"{name} after restart {delay_s:.2f} s")
+                    assert delay_s < FIRST_STATE_WITHIN_S
+                await wait_for(lambda: any(m.get("kind") == "reboot" for _, m in one.messages),
+                               10.0, "the reboot event on the filtered socket")
+            await wait_for(lambda: not vehicle.connected, 5.0, "the vehicle lost again")
+
+            async with SimCluster("quad", instance=1, api_local_port=port, speed=SIM_SPEED):
+                seen = await _first_frame_seen(lambda: registry.get(2) is not None)
+                delay_s = await _state_within(every, seen, 2, "unfiltered: the new system id")
+                figures.append(f"new sysid {delay_s:.2f} s")
+                assert delay_s < FIRST_STATE_WITHIN_S
+                assert all(m["vehicle"] == 1 for _, m in one.states())
+    print("\nfirst state after the vehicle's first frame: " + ", ".join(figures))
