@@ -228,6 +228,7 @@ class FaultProxy:
         self._sockets: dict[Direction, asyncio.DatagramTransport] = {}
         self._timers: set[asyncio.TimerHandle] = set()
         self._taps: list[Tap] = []
+        self._arrival_taps: list[Tap] = []
         self._loop: asyncio.AbstractEventLoop | None = None
 
     # -- life cycle -------------------------------------------------------------------------
@@ -316,9 +317,10 @@ class FaultProxy:
     def partitioned(self, direction: Direction) -> bool:
         return self._lanes[direction].partition.active(self._now())
 
-    def add_tap(self, tap: Tap) -> None:
-        """Call ``tap(direction, payload)`` for every datagram the proxy sends out."""
-        self._taps.append(tap)
+    def add_tap(self, tap: Tap, *, arriving: bool = False) -> None:
+        """Call ``tap(direction, payload)`` for every datagram the proxy sends out (with
+        ``arriving``: for every datagram that arrives, before any fault)."""
+        (self._arrival_taps if arriving else self._taps).append(tap)
 
     def counters(self) -> dict[Direction, DirectionCounters]:
         """The live counters per direction (the objects themselves, not copies)."""
@@ -348,6 +350,8 @@ class FaultProxy:
         counters = lane.counters
         counters.in_ += 1
         counters.bytes_in += len(data)
+        for tap in self._arrival_taps:
+            tap(direction, data)
         if lane.partition.active(self._now()):
             counters.dropped += 1
             counters.partitioned += 1
