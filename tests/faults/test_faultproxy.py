@@ -393,3 +393,52 @@ def test_the_command_line_tool_refuses_a_remote_address() -> None:
     )
     assert result.returncode == 2
     assert "loopback" in result.stderr
+
+
+@pytest.mark.parametrize("loss_pct", [10.0, 20.0, 40.0])
+async def test_burst_loss_comes_in_bursts_of_the_mean_length_at_the_asked_share(
+    rig: Rig, loss_pct: float
+) -> None:
+    sent, counters = await pass_through(
+        rig, Faults(loss_pct=loss_pct, burst_frames=5.0), "to_server", 6000)
+    arrived = set(rig.server.payloads)
+    lost = [data not in arrived for data in sent]
+    bursts = [len(list(run)) for is_lost, run in itertools.groupby(lost) if is_lost]
+    share_pct = 100.0 * sum(lost) / len(sent)
+    mean_burst = sum(bursts) / len(bursts)
+    # a Markov chain mixes slower than independent draws: wide but telling bounds (the
+    # independent loss of the same share would give bursts of 1.1-1.7)
+    assert abs(share_pct - loss_pct) <= 0.3 * loss_pct, share_pct
+    assert 4.0 <= mean_burst <= 6.0, mean_burst
+    assert counters.dropped == sum(lost)
+
+
+async def test_burst_loss_is_refused_without_a_sane_length() -> None:
+    with pytest.raises(ValueError, match="burst_frames"):
+        Faults(loss_pct=20.0, burst_frames=0.5)
+    with pytest.raises(ValueError, match="burst_frames"):
+        Faults(loss_pct=100.0, burst_frames=5.0)
+
+
+def _mavlink2(message_id: int, seq: int) -> bytes:
+    header = bytes([0xFD, 9, 0, 0, seq % 256, 1, 1]) + message_id.to_bytes(3, "little")
+    return header + bytes(9 + 2)
+
+
+async def test_dropping_a_message_id_drops_only_those_frames_for_the_time_asked(
+    rig: Rig,
+) -> None:
+    heartbeat_id, attitude_id = 0, 30
+    rig.proxy.drop_messages({heartbeat_id}, 0.3, "to_server")
+    frames = [_mavlink2(heartbeat_id if i % 5 == 0 else attitude_id, i) for i in range(50)]
+    await send_all(rig, "to_server", frames)
+    await rig.settle()
+    kinds = [int.from_bytes(data[7:10], "little") for data in rig.server.payloads]
+    assert kinds.count(attitude_id) == 40
+    assert heartbeat_id not in kinds
+    counters = rig.proxy.counters()["to_server"]
+    assert (counters.filtered, counters.dropped) == (10, 10)
+    await asyncio.sleep(0.35)  # the drop ends on its own
+    rig.down(_mavlink2(heartbeat_id, 50))
+    await rig.settle()
+    assert int.from_bytes(rig.server.payloads[-1][7:10], "little") == heartbeat_id
