@@ -49,6 +49,8 @@ class Api:
     client: httpx.AsyncClient
     sim: SimCluster | None
     lease_headers: dict[str, str] = field(default_factory=dict)
+    # the vehicle the calls below mean when given none (PX4 SITL instance N is N + 1)
+    default_vehicle: int = 1
 
     @property
     def inst(self) -> SimInstance:
@@ -61,20 +63,25 @@ class Api:
         assert vehicle is not None, f"no vehicle {vehicle_id}"
         return vehicle
 
-    async def state(self, vehicle_id: int = 1) -> dict[str, Any]:
+    async def state(self, vehicle_id: int | None = None) -> dict[str, Any]:
+        vehicle_id = vehicle_id or self.default_vehicle
         response = await self.client.get(f"/api/v1/vehicles/{vehicle_id}")
         assert response.status_code == 200, response.text
         result: dict[str, Any] = response.json()
         return result
 
-    async def take_control(self, vehicle_id: int = 1) -> dict[str, str]:
+    async def take_control(self, vehicle_id: int | None = None) -> dict[str, str]:
+        vehicle_id = vehicle_id or self.default_vehicle
         response = await self.client.post(f"/api/v1/vehicles/{vehicle_id}/control", json={})
         assert response.status_code == 200, response.text
         self.lease_headers = {"X-Lease-Id": response.json()["lease_id"]}
         return self.lease_headers
 
-    async def control(self, path: str, body: Any = None, vehicle_id: int = 1) -> httpx.Response:
+    async def control(
+        self, path: str, body: Any = None, vehicle_id: int | None = None
+    ) -> httpx.Response:
         """A control call with the lease (POST, or PUT for the setpoint)."""
+        vehicle_id = vehicle_id or self.default_vehicle
         url = f"/api/v1/vehicles/{vehicle_id}/{path}"
         if path == "setpoint":
             return await self.client.put(url, json=body, headers=self.lease_headers)
@@ -92,7 +99,8 @@ class Api:
 
         async def probe() -> dict[str, Any] | None:
             if renew and self.lease_headers:
-                await self.client.put("/api/v1/vehicles/1/control", headers=self.lease_headers)
+                await self.client.put(f"/api/v1/vehicles/{self.default_vehicle}/control",
+                                      headers=self.lease_headers)
             state = await self.state()
             return state if predicate(state) else None
 

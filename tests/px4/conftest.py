@@ -136,3 +136,35 @@ def served_px4(px4: Px4Sitl, tmp_path_factory: pytest.TempPathFactory) -> Iterat
     log_dir = tmp_path_factory.mktemp("px4-serve")
     with skyhelm_serve(log_dir, "--connect", px4.connect_url, "--no-scene") as served:
         yield served
+
+
+@dataclass
+class Px4Process:
+    """One PX4 instance started by the kit's run.sh, which a test may restart."""
+
+    sitl: Px4Sitl
+    pid: int = 0
+
+    def start(self, *, clean: bool) -> None:
+        env = {**os.environ, "PX4_CLEAN": "1" if clean else "0"}
+        started = subprocess.run(
+            [str(self.sitl.sitl_dir / "run.sh"), str(self.sitl.instance), MODEL],
+            env=env, capture_output=True, text=True, timeout=60,
+        )  # fmt: skip
+        assert started.returncode == 0, f"run.sh failed: {started.stdout}{started.stderr}"
+        self.pid = int(started.stdout.strip().splitlines()[-1])
+
+    def stop(self) -> None:
+        if self.pid:
+            _stop(self.pid)
+            self.pid = 0
+
+
+@pytest.fixture
+def px4_process() -> Iterator[Px4Process]:
+    process = Px4Process(find_sitl())
+    process.start(clean=True)
+    try:
+        yield process
+    finally:
+        process.stop()

@@ -11,12 +11,9 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import os
 import signal
-import subprocess
 import time
-from collections.abc import AsyncIterator, Iterator
-from dataclasses import dataclass
+from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
 
@@ -27,7 +24,7 @@ from pymavlink.dialects.v20 import development as mavlink
 from server.link.modes import name_from_custom_mode
 from tests.api.conftest import Api, api_for
 from tests.faults.linkloss_rig import read_tlog, rest_state
-from tests.px4.conftest import MODEL, Px4Sitl, _stop, find_sitl
+from tests.px4.conftest import Px4Process, Px4Sitl
 from tests.serve_process import skyhelm_serve
 from tests.waiting import eventually, holds_for, wait_for
 from tools.faultproxy import FaultProxy
@@ -37,38 +34,6 @@ pytestmark = pytest.mark.px4
 PARTITION_S = 5.0
 CLIMB_TO = {"type": "position_ned", "north_m": 0.0, "east_m": 0.0, "down_m": -5.0}
 LIVE_FIELDS = {"mode", "armed", "position_ned", "global_position", "attitude"}
-
-
-@dataclass
-class Px4Process:
-    """One PX4 instance started by the kit's run.sh, which a test may restart."""
-
-    sitl: Px4Sitl
-    pid: int = 0
-
-    def start(self, *, clean: bool) -> None:
-        env = {**os.environ, "PX4_CLEAN": "1" if clean else "0"}
-        started = subprocess.run(
-            [str(self.sitl.sitl_dir / "run.sh"), str(self.sitl.instance), MODEL],
-            env=env, capture_output=True, text=True, timeout=60,
-        )  # fmt: skip
-        assert started.returncode == 0, f"run.sh failed: {started.stdout}{started.stderr}"
-        self.pid = int(started.stdout.strip().splitlines()[-1])
-
-    def stop(self) -> None:
-        if self.pid:
-            _stop(self.pid)
-            self.pid = 0
-
-
-@pytest.fixture
-def px4_process() -> Iterator[Px4Process]:
-    process = Px4Process(find_sitl())
-    process.start(clean=True)
-    try:
-        yield process
-    finally:
-        process.stop()
 
 
 class Tap:
@@ -115,6 +80,7 @@ async def app_via(proxy: FaultProxy, sysid: int) -> AsyncIterator[Api]:
     async with api_for(None, connect=[_url(proxy)]) as api:
         await wait_for(lambda: api.app.state.api.registry.get(sysid) is not None, 30.0,
                        "PX4 discovered")
+        api.default_vehicle = sysid
         await api.wait_state(
             lambda s: s["global"] is not None and s["home"] is not None, 60.0, "PX4 ready"
         )
