@@ -197,7 +197,8 @@ class Liveness:
         loss_in = heard.loss_in.pct(now_s)
         loss_out = heard.loss_out.pct(now_s)
         warnings: dict[str, str] = {}
-        if silent_s > SILENCE_WARN_SHARE * bound_s:
+        silent = silent_s > SILENCE_WARN_SHARE * bound_s
+        if silent:
             warnings["silence"] = f"nothing heard for {silent_s:.1f} s (lost at {bound_s:.1f} s)"
         # hysteresis: a degraded link warns of loss down to LOSS_CLEAR_PCT
         loss_warn_pct = LOSS_CLEAR_PCT if heard.degraded else LOSS_WARN_PCT
@@ -205,7 +206,7 @@ class Liveness:
             warnings["loss_in"] = f"{loss_in:.0f} % of the vehicle's frames lost"
         if loss_out is not None and loss_out >= loss_warn_pct:
             warnings["loss_out"] = f"{loss_out:.0f} % of our frames lost on the way to it"
-        if heartbeat_age_s > HEARTBEAT_WARN_S and silent_s < heartbeat_age_s:
+        if heartbeat_age_s > HEARTBEAT_WARN_S and not silent:
             warnings["heartbeat"] = (
                 f"no HEARTBEAT for {heartbeat_age_s:.1f} s (other frames arrive)")
         heard.degraded = bool(warnings)
