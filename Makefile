@@ -63,7 +63,8 @@ test: $(TSTAMP) chromium lint audit
 
 ## The REST flight against real PX4 v1.16 SITL (the kit of shared/px4-sitl, built into
 ## SKYHELM_PX4_SITL_DIR or /root/px4sitl); skipped with a message when there is no build.
-## SKYHELM_PX4_INSTANCE=N picks the instance (its ports follow the kit's layout).
+## SKYHELM_PX4_INSTANCE=N picks the instance (its ports follow the kit's layout);
+## SKYHELM_PX4_SOAK_MINUTES=10 adds the hover through 20 % loss (tests/px4/test_px4_radio_loss.py).
 test-px4: $(TSTAMP)
 	@dir="$${SKYHELM_PX4_SITL_DIR:-/root/px4sitl}"; \
 	if [ ! -x "$$dir/build/px4_sitl_default/bin/px4" ]; then \
