@@ -75,6 +75,7 @@ async def _hold(api: Api, sysid: int, tap: Tap, seconds: float,
         await asyncio.sleep(0.5)
 
 
+@pytest.mark.timeout(3600)  # as long as SKYHELM_PX4_SOAK_MINUTES asks, up to most of an hour
 async def test_px4_hovers_through_20pct_loss_and_heartbeat_drops(px4_process: Px4Process) -> None:
     minutes = _soak_minutes()
     sitl = px4_process.sitl
