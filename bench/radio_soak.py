@@ -33,9 +33,8 @@ import contextlib
 import itertools
 import json
 import os
-import sys
 import time
-from collections.abc import AsyncIterator, Callable
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -43,7 +42,7 @@ import httpx
 from websockets.asyncio.client import connect
 
 from bench._results import machine_info, write_results
-from bench.soak import PROJECT_ROOT, TOKEN, percentile, skyhelm_serve
+from bench.soak import TOKEN, percentile, sim_vehicles, skyhelm_serve
 from tools.faultproxy import MAVLINK_MSG_ID_HEARTBEAT, FaultProxy, Faults
 
 SET_POSITION_TARGET_LOCAL_NED = 84
@@ -73,30 +72,6 @@ class Figures:
     def count(self, command: str, outcome: str) -> None:
         per = self.commands.setdefault(command, {})
         per[outcome] = per.get(outcome, 0) + 1
-
-
-@contextlib.asynccontextmanager
-async def one_sim() -> AsyncIterator[int]:
-    """`python -m sim` (one quad, real time) on an ephemeral port; its API port."""
-    proc = await asyncio.create_subprocess_exec(
-        sys.executable, "-m", "sim", "--count", "1", "--speed", "1", "--api-port", "0",
-        "--gcs-port", "0", "--api-local-port", "0", "--gcs-local-port", "0",
-        "--ready-json", "--exit-on-stdin-eof",
-        stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE,
-        stderr=asyncio.subprocess.DEVNULL, cwd=PROJECT_ROOT,
-    )
-    try:
-        assert proc.stdout is not None
-        ready = json.loads(await asyncio.wait_for(proc.stdout.readline(), 60.0))
-        yield int(ready["instances"][0]["api_local_port"])
-    finally:
-        if proc.stdin is not None:
-            proc.stdin.close()
-        try:
-            await asyncio.wait_for(proc.wait(), 20.0)
-        except TimeoutError:
-            proc.kill()
-            await proc.wait()
 
 
 def tap(figures: Figures) -> Callable[[str, bytes], None]:
@@ -243,11 +218,13 @@ async def heartbeat_drops(proxy: FaultProxy, figures: Figures, count: int,
     for _ in range(count):
         lost_before = len(figures.lost_events)
         warned_before = len(figures.quality_events)
+        filtered_before = proxy.counters()["to_server"].filtered
         proxy.drop_messages({MAVLINK_MSG_ID_HEARTBEAT}, drop_s, "to_server")
         await asyncio.sleep(DROP_SPACING_S)
         runs.append({
             "lost_verdicts": len(figures.lost_events) - lost_before,
             "warnings": [e["causes"] for e in figures.quality_events[warned_before:]],
+            "heartbeats_dropped": proxy.counters()["to_server"].filtered - filtered_before,
         })
     return runs
 
@@ -256,7 +233,10 @@ async def run(args: argparse.Namespace) -> dict[str, Any]:
     load_before = os.getloadavg()
     figures = Figures()
     faults = Faults(loss_pct=args.loss, burst_frames=args.burst)
-    async with one_sim() as port, FaultProxy(vehicle=("127.0.0.1", port), seed=args.seed) as proxy:
+    async with (
+        sim_vehicles(1) as (port,),
+        FaultProxy(vehicle=("127.0.0.1", port), seed=args.seed) as proxy,
+    ):
         proxy.add_tap(tap(figures))
         async with (
             skyhelm_serve([f"udpout:127.0.0.1:{proxy.server_facing_address[1]}"]) as (_, base),

@@ -120,10 +120,11 @@ class Soak:
 
 
 @contextlib.asynccontextmanager
-async def sim_vehicles() -> AsyncIterator[list[int]]:
-    """`python -m sim --count 3` on ephemeral ports, answering whoever speaks first."""
+async def sim_vehicles(count: int = VEHICLES) -> AsyncIterator[list[int]]:
+    """`python -m sim --count 3` (real time) on ephemeral ports, answering whoever speaks
+    first; the vehicles' API ports."""
     proc = await asyncio.create_subprocess_exec(
-        sys.executable, "-m", "sim", "--count", str(VEHICLES), "--api-port", "0",
+        sys.executable, "-m", "sim", "--count", str(count), "--api-port", "0",
         "--gcs-port", "0", "--api-local-port", "0", "--gcs-local-port", "0",
         "--ready-json", "--exit-on-stdin-eof",
         stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE,

@@ -5,16 +5,12 @@ and a vehicle with a new system id on the same link shows on the unfiltered sock
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import socket
 import time
-from collections.abc import AsyncIterator
-
-from websockets.asyncio.client import connect
 
 from sim.runner import SimCluster
 from tests.api.conftest import OBSERVER, SIM_SPEED, api_at
-from tests.faults.linkloss_rig import WsLog
+from tests.faults.linkloss_rig import WsLog, ws_logging
 from tests.serving import uvicorn_serving
 from tests.waiting import wait_for
 
@@ -26,19 +22,6 @@ def _free_udp_port() -> int:
         probe.bind(("127.0.0.1", 0))
         port: int = probe.getsockname()[1]
     return port
-
-
-@contextlib.asynccontextmanager
-async def _logging(url: str) -> AsyncIterator[WsLog]:
-    async with connect(url) as ws:
-        log = WsLog(ws)
-        pump = asyncio.create_task(log.pump())
-        try:
-            yield log
-        finally:
-            pump.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await pump
 
 
 def _first_state_after(log: WsLog, since: float, vehicle: int) -> float | None:
@@ -69,7 +52,7 @@ async def test_sockets_opened_before_the_vehicle_follow_it_through_restart_and_n
     async with api_at(None, None, connect=[url]) as api, uvicorn_serving(api.app) as host:
         base = f"ws://{host}/api/v1/ws/telemetry?token={OBSERVER}&rate_hz=10"
         registry = api.app.state.api.registry
-        async with _logging(base) as every, _logging(f"{base}&vehicle=1") as one:
+        async with ws_logging(base) as every, ws_logging(f"{base}&vehicle=1") as one:
             await asyncio.sleep(0.3)
             assert not every.states()
             assert not one.states()

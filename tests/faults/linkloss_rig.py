@@ -10,6 +10,7 @@ the proxy answers the sim at whatever address it last heard it from, so a restar
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import json
 import time
@@ -20,7 +21,7 @@ from typing import Any
 
 import httpx
 from pymavlink import mavutil
-from websockets.asyncio.client import ClientConnection
+from websockets.asyncio.client import ClientConnection, connect
 
 from server.link.tlog import iter_tlog
 from sim.runner import SimCluster
@@ -67,6 +68,20 @@ class Rig:
             "quad", count=1, speed=self.speed, api_port=self.proxy.vehicle_facing_address[1]
         )
         await self.sim.start()
+
+
+@contextlib.asynccontextmanager
+async def ws_logging(url: str) -> AsyncIterator[WsLog]:
+    """A telemetry socket on url whose every message is logged in the background."""
+    async with connect(url) as ws:
+        log = WsLog(ws)
+        pump = asyncio.create_task(log.pump())
+        try:
+            yield log
+        finally:
+            pump.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await pump
 
 
 class WsLog:

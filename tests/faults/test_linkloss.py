@@ -10,15 +10,11 @@ is fresh within 1 s, and an event tells what the vehicle did meanwhile. The leas
 
 from __future__ import annotations
 
-import asyncio
-import contextlib
 import time
 from typing import Any
 
-from websockets.asyncio.client import connect
-
 from tests.api.conftest import OBSERVER, Api, api_for
-from tests.faults.linkloss_rig import Rig, WsLog, proxied_sim, rest_state
+from tests.faults.linkloss_rig import Rig, WsLog, proxied_sim, rest_state, ws_logging
 from tests.serving import uvicorn_serving
 from tests.waiting import eventually, holds_for, wait_for
 
@@ -42,15 +38,8 @@ async def test_partition_in_offboard_stops_the_stream_and_reports_on_heal() -> N
         await api.wait_ready()
         async with uvicorn_serving(api.app) as host:
             url = f"ws://{host}/api/v1/ws/telemetry?token={OBSERVER}&vehicle=1&rate_hz=20"
-            async with connect(url) as ws:
-                log = WsLog(ws)
-                pump = asyncio.create_task(log.pump())
-                try:
-                    await _partition_scenario(rig, api, log)
-                finally:
-                    pump.cancel()
-                    with contextlib.suppress(asyncio.CancelledError):
-                        await pump
+            async with ws_logging(url) as log:
+                await _partition_scenario(rig, api, log)
 
 
 async def _partition_scenario(rig: Rig, api: Api, log: WsLog) -> None:

@@ -9,7 +9,6 @@ docs/RELIABILITY.md."""
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import time
 from collections.abc import AsyncIterator
 from dataclasses import dataclass
@@ -17,14 +16,13 @@ from dataclasses import dataclass
 import pytest
 import pytest_asyncio
 from pymavlink.dialects.v20 import development as mavlink
-from websockets.asyncio.client import connect
 
 from bench.hostile_input import kernel_drops
 from server.link import Vehicle
 from sim.vehicle import SimVehicle
 from tests.api.conftest import OBSERVER, Api, api_for
 from tests.faults.conftest import message_id
-from tests.faults.linkloss_rig import Rig, WsLog, proxied_sim
+from tests.faults.linkloss_rig import Rig, WsLog, proxied_sim, ws_logging
 from tests.serving import uvicorn_serving
 from tests.waiting import wait_for
 from tools.faultproxy import MAVLINK_MSG_ID_HEARTBEAT, NO_FAULTS, DirectionChoice, Faults
@@ -100,24 +98,17 @@ async def flight() -> AsyncIterator[Flight]:
         await api.wait_ready()
         async with uvicorn_serving(api.app) as host:
             url = f"ws://{host}/api/v1/ws/telemetry?token={OBSERVER}&vehicle=1&rate_hz=10"
-            async with connect(url) as ws:
-                log = WsLog(ws)
-                pump = asyncio.create_task(log.pump())
-                try:
-                    await api.take_control()
-                    assert (await api.control("arm")).status_code == 200
-                    start = await api.control("offboard/start", {"setpoint": HOVER})
-                    assert start.status_code == 200, start.text
-                    await api.wait_state(lambda s: s["position_ned"]["down_m"] < -2.5, 20.0,
-                                         "climb to 2.5 m")
-                    flight = Flight(rig, api, log)
-                    rig.proxy.add_tap(flight.count_sent, arriving=True)
-                    rig.proxy.add_tap(flight.count_received)
-                    yield flight
-                finally:
-                    pump.cancel()
-                    with contextlib.suppress(asyncio.CancelledError):
-                        await pump
+            async with ws_logging(url) as log:
+                await api.take_control()
+                assert (await api.control("arm")).status_code == 200
+                start = await api.control("offboard/start", {"setpoint": HOVER})
+                assert start.status_code == 200, start.text
+                await api.wait_state(lambda s: s["position_ned"]["down_m"] < -2.5, 20.0,
+                                     "climb to 2.5 m")
+                flight = Flight(rig, api, log)
+                rig.proxy.add_tap(flight.count_sent, arriving=True)
+                rig.proxy.add_tap(flight.count_received)
+                yield flight
 
 
 async def test_heartbeats_alone_lost_for_3_6_s_warn_but_never_lose_the_vehicle(
