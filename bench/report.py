@@ -50,6 +50,7 @@ DEFAULT_ORDER = {
     "signing": 95,
     "hostile_input": 100,
     "soak": 110,
+    "radio_soak": 111,
     "screenshots": 200,
 }
 

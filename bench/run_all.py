@@ -27,8 +27,8 @@ from typing import Any
 
 BENCH_DIR = Path(__file__).resolve().parent
 NOT_BENCHES = {"__init__", "run_all", "report"}
-# Long runs, only when asked: SKYHELM_BENCH_SOAK=1 (or --soak) adds the 30-minute soak.
-OPT_IN = {"soak": "SKYHELM_BENCH_SOAK"}
+# Long runs, only when asked: SKYHELM_BENCH_SOAK=1 (or --soak) adds the 30-minute soaks.
+OPT_IN = {"soak": "SKYHELM_BENCH_SOAK", "radio_soak": "SKYHELM_BENCH_SOAK"}
 # The whole default run on a 2-core machine, and what one benchmark may take of it.
 BUDGET_S = 15 * 60.0
 PER_BENCH_BUDGET_S = 90.0
@@ -46,6 +46,7 @@ QUICK_ARGS: dict[str, list[str]] = {
     "map_render": ["--seconds", "3"],
     "sim_cost": ["--seconds", "2", "--counts", "1,5"],
     "soak": ["--minutes", "1"],
+    "radio_soak": ["--minutes", "0.5", "--heartbeat-drops", "1"],
 }
 
 
