@@ -30,6 +30,7 @@ from pymavlink.dialects.v20 import development as mavlink
 
 from sim.events import MAVLINK_MSG_ID_REQUEST_EVENT
 from sim.frames import pack_frame
+from sim.mavlink_custom import MAVLINK_MSG_ID_LINK_NODE_STATUS, LinkNodeStatusMessage
 from sim.signing import MAVLINK_MSG_ID_SETUP_SIGNING, VehicleSigning
 
 # pymavlink messages carry their fields as dynamic attributes.
@@ -69,6 +70,11 @@ class LinkCounters:
     tx_errors: int = 0
     # frames that could not be encoded: skipped so the telemetry loop keeps running
     tx_unpackable: int = 0
+    # frames received and found missing by sequence number, counted as PX4's
+    # MavlinkReceiver::update_rx_stats does (a repeated number counts 254 missing, as there)
+    # and reported in this link's LINK_NODE_STATUS
+    rx_seq_received: int = 0
+    rx_seq_lost: int = 0
 
 
 class MavlinkCodec:
@@ -178,6 +184,7 @@ class UdpLink(asyncio.DatagramProtocol):
         self._on_message = on_message
         self._transport: asyncio.DatagramTransport | None = None
         self._observers: list[Callable[[Address, Message], None]] = []
+        self._last_seq: dict[tuple[int, int], int] = {}
         self.local_port = 0
 
     def observe(self, observer: Callable[[Address, Message], None]) -> None:
@@ -212,6 +219,7 @@ class UdpLink(asyncio.DatagramProtocol):
         self._heard_from(sender)
         for msg in messages:
             self.counters.rx_messages += 1
+            self._count_sequence(msg)
             for observer in self._observers:
                 observer(sender, msg)
             if msg.get_msgId() == MAVLINK_MSG_ID_SETUP_SIGNING:
@@ -223,6 +231,16 @@ class UdpLink(asyncio.DatagramProtocol):
                 self._on_message(self, msg)
             except Exception:
                 log.exception("%s: handling %s failed", self.name, msg.get_type())
+
+    def _count_sequence(self, msg: Message) -> None:
+        key = (msg.get_srcSystem(), msg.get_srcComponent())
+        seq = msg.get_seq()
+        last = self._last_seq.get(key)
+        self._last_seq[key] = seq
+        self.counters.rx_seq_received += 1
+        if last is not None:
+            expected = (last + 1) % 256
+            self.counters.rx_seq_lost += seq - expected if seq >= expected else seq + 255 - expected
 
     def _heard_from(self, sender: Address) -> None:
         """A datagram with a checked frame came from ``sender``: is it the partner now?"""
@@ -245,6 +263,8 @@ class UdpLink(asyncio.DatagramProtocol):
     def send(self, msg: Message) -> None:
         if self._transport is None or self.remote is None:
             return
+        if msg.get_msgId() == MAVLINK_MSG_ID_LINK_NODE_STATUS:
+            msg = self._own_node_status(msg)
         try:
             data = self._codec.encode(msg)
         except Exception:  # pymavlink raises struct, value and type errors on bad fields
@@ -253,6 +273,13 @@ class UdpLink(asyncio.DatagramProtocol):
             return
         self._transport.sendto(data, self.remote)
         self.counters.tx_messages += 1
+
+    def _own_node_status(self, msg: Message) -> Message:
+        """LINK_NODE_STATUS is per link in PX4 (each MAVLink instance reports its own)."""
+        return LinkNodeStatusMessage(
+            msg.timestamp, 0, 0, self.counters.tx_messages, self.counters.rx_seq_received,
+            self.counters.rx_seq_lost, 0, 0, 0, msg.tx_buf, msg.rx_buf,
+        )
 
     def close(self) -> None:
         if self._transport is not None:

@@ -176,6 +176,10 @@ async def test_radio_faults_keep_the_vehicle_flying_and_the_loss_figure_true(
     # a duplicate is no loss and a late frame is taken back: the count follows the drops
     assert abs(counted - dropped) <= max(5, 0.05 * dropped), (counted, dropped)
     assert received > 0
+    if direction == "to_vehicle" and faults.loss_pct:
+        # what the vehicle reports missing of ours (LINK_NODE_STATUS, 1 Hz, last 5 s)
+        assert quality.loss_out_pct is not None
+        assert 10.0 <= quality.loss_out_pct <= 30.0
 
 
 async def test_a_real_cut_both_ways_is_shown_within_1_5_s(flight: Flight) -> None:
