@@ -30,7 +30,7 @@ from pymavlink.dialects.v20 import development as mavlink
 
 from sim.events import MAVLINK_MSG_ID_REQUEST_EVENT
 from sim.frames import pack_frame
-from sim.mavlink_custom import MAVLINK_MSG_ID_LINK_NODE_STATUS, LinkNodeStatusMessage
+from sim.mavlink_custom import LinkNodeStatusMessage
 from sim.signing import MAVLINK_MSG_ID_SETUP_SIGNING, VehicleSigning
 
 # pymavlink messages carry their fields as dynamic attributes.
@@ -263,7 +263,7 @@ class UdpLink(asyncio.DatagramProtocol):
     def send(self, msg: Message) -> None:
         if self._transport is None or self.remote is None:
             return
-        if msg.get_msgId() == MAVLINK_MSG_ID_LINK_NODE_STATUS:
+        if isinstance(msg, LinkNodeStatusMessage):
             msg = self._own_node_status(msg)
         try:
             data = self._codec.encode(msg)
