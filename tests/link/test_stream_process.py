@@ -1,0 +1,174 @@
+"""The setpoint sender process: it writes every frame of a UDP link once a stream put the
+link there (sequence contiguous, signed, recorded), the newest setpoint wins, its ticks
+come back as the stream's figures, and it dies with the server."""
+
+from __future__ import annotations
+
+import asyncio
+import itertools
+import secrets
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+from pymavlink.dialects.v20 import development as mavlink
+
+from server.link.link import Link
+from server.link.signing import SigningKeyStore
+from server.link.streamer import SetpointStreamer
+from server.link.tlog import iter_tlog
+from tests.waiting import wait_for
+
+MAV = mavlink.MAVLink(None)
+PROJECT_ROOT = Path(__file__).resolve().parents[2]
+
+
+def _msg(x: float) -> mavlink.MAVLink_message:
+    return MAV.set_position_target_local_ned_encode(
+        0, 1, 1, 1, 2552, x, 0, -5, 0, 0, 0, 0, 0, 0, 0, 0
+    )
+
+
+class Receiver:
+    """A UDP socket read by a thread: every datagram with its arrival time."""
+
+    def __init__(self) -> None:
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 21)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.settimeout(0.1)
+        self.frames: list[tuple[float, bytes]] = []
+        self._done = threading.Event()
+        self._thread = threading.Thread(target=self._read, daemon=True)
+        self._thread.start()
+
+    @property
+    def port(self) -> int:
+        return int(self.sock.getsockname()[1])
+
+    def _read(self) -> None:
+        while not self._done.is_set():
+            try:
+                self.frames.append((time.monotonic(), self.sock.recv(2048)))
+            except TimeoutError:
+                continue
+
+    def close(self) -> None:
+        self._done.set()
+        self._thread.join(5.0)
+        self.sock.close()
+
+
+async def test_every_frame_goes_through_the_process_contiguous_signed_and_recorded(
+    tmp_path: Path,
+) -> None:
+    key = secrets.token_bytes(32)
+    store = SigningKeyStore(tmp_path / "signing.key")
+    store.replace_key(key)
+    receiver = Receiver()
+    per_sender = 1000
+    link = await Link.open(f"udpout:127.0.0.1:{receiver.port}", log_dir=tmp_path / "logs",
+                           signing_store=store)
+    try:
+        streamer = SetpointStreamer(link.send, rate_hz=100, channel=link.stream_channel)
+        streamer.stream(_msg(1))
+        assert streamer.in_process
+        for i in range(per_sender):
+            link.send(MAV.param_request_read_encode(1, 1, b"P", i))
+            if i % 20 == 0:
+                await asyncio.sleep(0.002)
+        streamer.update(_msg(2))  # the next ticks send this: latest wins
+        await asyncio.sleep(0.3)
+        stats = streamer.stats()
+        streamer.stop()
+        tlog_path = link.tlog_path
+    finally:
+        await link.close()  # waits for the process's last report
+    sent = link.stats().frames_out
+    await wait_for(lambda: len(receiver.frames) >= sent, 10.0, "every frame at the receiver")
+    receiver.close()
+
+    checker = mavlink.MAVLink(None)
+    checker.signing.secret_key = key
+    checker.signing.sign_outgoing = False
+    decoded = []
+    for _, frame in receiver.frames:
+        msgs = checker.parse_buffer(frame)  # a bad or replayed signature: BAD_DATA
+        assert msgs is not None and len(msgs) == 1
+        decoded.append(msgs[0])
+    assert [m for m in decoded if m.get_type() == "BAD_DATA"] == []
+    assert all(m._signed for m in decoded)
+    assert checker.signing.badsig_count == 0
+    assert len(decoded) == sent
+    seqs = [m.get_seq() for m in decoded]
+    assert all((b - a) % 256 == 1 for a, b in itertools.pairwise(seqs)), \
+        "sequence numbers skip or repeat"
+    setpoints = [m for m in decoded if m.get_type() == "SET_POSITION_TARGET_LOCAL_NED"]
+    assert [m.get_type() for m in decoded].count("PARAM_REQUEST_READ") == per_sender
+    assert setpoints[-1].x == 2.0 and setpoints[0].x == 1.0
+    # the stream's figures are the process's tick times
+    assert stats.sent >= 20
+    assert 80 <= stats.rate_hz <= 120
+    assert tlog_path is not None
+    assert sorted(frame for _, frame in iter_tlog(tlog_path)) == sorted(
+        frame for _, frame in receiver.frames)
+
+
+_CHILD = """
+import asyncio, sys
+from server.link.link import Link
+from server.link.streamer import SetpointStreamer
+from server.link import stream_channel
+from pymavlink.dialects.v20 import development as mavlink
+
+async def main():
+    link = await Link.open(f"udpout:127.0.0.1:{sys.argv[1]}")
+    mav = mavlink.MAVLink(None)
+    streamer = SetpointStreamer(link.send, rate_hz=50, channel=link.stream_channel)
+    streamer.stream(mav.set_position_target_local_ned_encode(
+        0, 1, 1, 1, 2552, 0, 0, -5, 0, 0, 0, 0, 0, 0, 0, 0))
+    print(stream_channel.shared_process().pid, flush=True)
+    await asyncio.sleep(60)
+
+asyncio.run(main())
+"""
+
+
+@pytest.mark.parametrize("how", [signal.SIGKILL, signal.SIGTERM])
+def test_the_process_stops_sending_when_the_server_dies(how: signal.Signals) -> None:
+    receiver = Receiver()
+    server = subprocess.Popen([sys.executable, "-c", _CHILD, str(receiver.port)],
+                              stdout=subprocess.PIPE, cwd=PROJECT_ROOT)
+    try:
+        assert server.stdout is not None
+        sender_pid = int(server.stdout.readline())
+        wait_for_frames = time.monotonic() + 10
+        while len(receiver.frames) < 20 and time.monotonic() < wait_for_frames:
+            time.sleep(0.05)
+        assert len(receiver.frames) >= 20, "the process never streamed"
+        server.send_signal(how)
+        killed_s = time.monotonic()
+        server.wait(10)
+        time.sleep(1.0)
+    finally:
+        if server.poll() is None:
+            server.kill()
+        receiver.close()
+    after = [t for t, _ in receiver.frames if t > killed_s + 0.2]
+    assert after == [], f"{len(after)} frames more than 0.2 s after the server died"
+    assert not _running(sender_pid), "the sender process outlived the server"
+
+
+def _running(pid: int) -> bool:
+    """Whether ``pid`` runs (a zombie nobody reaped, as PID 1 of a container may leave
+    it, has ended)."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except FileNotFoundError:
+        return False
+    return "State:\tZ" not in status
