@@ -29,7 +29,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import development as mavlink
 
-from server.link.stream_thread import SENDER_RT_PRIORITY
+from server.link.stream_thread import PROCESS_RT_PRIORITY
 
 log = logging.getLogger(__name__)
 
@@ -68,7 +68,7 @@ class SenderProcess:
             try:
                 proc = subprocess.Popen(
                     [sys.executable, "-S", "-E", str(PROCESS_SCRIPT), str(os.getpid()),
-                     str(SENDER_RT_PRIORITY), str(theirs.fileno())],
+                     str(PROCESS_RT_PRIORITY), str(theirs.fileno())],
                     pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL, close_fds=True)
             except OSError as exc:
                 failure.append(exc)

@@ -34,6 +34,10 @@ SWITCH_INTERVAL_S = float(os.environ.get("SKYHELM_STREAM_SWITCH_INTERVAL_MS", "0
 # The sender thread's real-time priority (SCHED_FIFO, 1-99; 0 = ordinary scheduling).
 SENDER_RT_PRIORITY = int(os.environ.get("SKYHELM_STREAM_RT_PRIORITY", "10"))
 
+# The sender process's (server.link.stream_process): above the threads' and other programs'
+# usual real-time work, so only the kernel's own threads (IRQs at 50) come before it.
+PROCESS_RT_PRIORITY = int(os.environ.get("SKYHELM_STREAM_PROCESS_RT_PRIORITY", "30"))
+
 Job = Callable[[float], float | None]
 
 

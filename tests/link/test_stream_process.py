@@ -99,7 +99,8 @@ async def test_every_frame_goes_through_the_process_contiguous_signed_and_record
     decoded = []
     for _, frame in receiver.frames:
         msgs = checker.parse_buffer(frame)  # a bad or replayed signature: BAD_DATA
-        assert msgs is not None and len(msgs) == 1
+        assert msgs is not None
+        assert len(msgs) == 1
         decoded.append(msgs[0])
     assert [m for m in decoded if m.get_type() == "BAD_DATA"] == []
     assert all(m._signed for m in decoded)
@@ -110,7 +111,8 @@ async def test_every_frame_goes_through_the_process_contiguous_signed_and_record
         "sequence numbers skip or repeat"
     setpoints = [m for m in decoded if m.get_type() == "SET_POSITION_TARGET_LOCAL_NED"]
     assert [m.get_type() for m in decoded].count("PARAM_REQUEST_READ") == per_sender
-    assert setpoints[-1].x == 2.0 and setpoints[0].x == 1.0
+    assert setpoints[-1].x == 2.0
+    assert setpoints[0].x == 1.0
     # the stream's figures are the process's tick times
     assert stats.sent >= 20
     assert 80 <= stats.rate_hz <= 120
