@@ -76,10 +76,14 @@ def busy_loops(count: int, cpus: set[int] | None = None) -> Any:
     """``count`` processes spinning in Python at normal priority (on ``cpus`` if given)."""
     import subprocess
 
-    procs = [subprocess.Popen(
-        [sys.executable, "-c", "while True: pass"],
-        preexec_fn=(lambda: os.sched_setaffinity(0, cpus)) if cpus else None,
-    ) for _ in range(count)]
+    def normal_priority() -> None:
+        # never a real-time busy loop, whatever this process's thread runs at
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+        if cpus:
+            os.sched_setaffinity(0, cpus)
+
+    procs = [subprocess.Popen([sys.executable, "-c", "while True: pass"],
+                              preexec_fn=normal_priority) for _ in range(count)]
     try:
         yield procs
     finally:
@@ -213,7 +217,8 @@ async def manual_control_phase(receiver: ReceiverProcess, base: str, lease: str,
         # this thread (the renewals' loop) gets real-time scheduling for the phase
         policy = os.sched_getscheduler(0)
         with contextlib.suppress(OSError):
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))
+            # reset on fork: the busy loops and servers started from here stay ordinary
+            os.sched_setscheduler(0, os.SCHED_FIFO | os.SCHED_RESET_ON_FORK, os.sched_param(1))
         renewing = asyncio.create_task(renew())
         try:
             with busy_loops(BUSY_PER_CORE * (os.cpu_count() or 1)):
