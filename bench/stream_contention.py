@@ -205,12 +205,17 @@ async def manual_control_phase(receiver: ReceiverProcess, base: str, lease: str,
                                seconds: float) -> dict[str, Any]:
     """MANUAL_CONTROL at 25 Hz under busy loops, the sticks renewed as a page does."""
     async with httpx.AsyncClient(base_url=base, headers=HEADERS, timeout=10) as client:
+        # the stream's lease has lapsed by now (no renewals while it streamed): take anew
+        taken = (await client.post("/api/v1/vehicles/1/control")).json()
+        lease = taken.get("lease_id", lease)
         sticks = {"pitch": 0.1, "roll": 0.0, "yaw": 0.0, "throttle": 0.5}
 
         async def renew() -> None:
             while True:
-                await client.put("/api/v1/vehicles/1/sticks", json=sticks,
-                                 headers={"X-Lease-Id": lease})
+                answer = await client.put("/api/v1/vehicles/1/sticks", json=sticks,
+                                          headers={"X-Lease-Id": lease})
+                if answer.status_code != 200:
+                    raise RuntimeError(f"sticks refused: {answer.status_code} {answer.text}")
                 await asyncio.sleep(STICKS_RENEW_S)
 
         # the pilot's page runs on another computer, untouched by this one's busy loops:

@@ -90,6 +90,7 @@ class ReceiverProcess:
         proc = await asyncio.create_subprocess_exec(
             sys.executable, "-m", "bench._receiver", "--telemetry-hz", str(telemetry_hz), *args,
             stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE,
+            limit=1 << 26,  # a report of 50 vehicles' arrivals is one long line
             cwd=PROJECT_ROOT,
         )
         try:
