@@ -43,6 +43,16 @@ SO_TIMESTAMPNS = 35
 _TIMESPEC = struct.Struct("@qq")
 
 
+def kernel_receive_time(ancillary: list[tuple[int, int, bytes]]) -> float:
+    """The kernel's receive time (Unix seconds) in recvmsg()'s ancillary data of a socket
+    with SO_TIMESTAMPNS on; now, where it is missing."""
+    for level, kind, value in ancillary:
+        if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS:
+            seconds, nanoseconds = _TIMESPEC.unpack(value[: _TIMESPEC.size])
+            return float(seconds + nanoseconds * 1e-9)
+    return time.time()
+
+
 class Receiver:
     def __init__(self, sysid: int = VEHICLE_SYSID, key_prefix: str = "") -> None:
         self.sysid = sysid
@@ -97,11 +107,7 @@ class Receiver:
                 data, ancillary, _flags, addr = self.sock.recvmsg(65536, 64)
             except BlockingIOError:
                 return
-            arrived = time.time()
-            for level, kind, value in ancillary:
-                if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS:
-                    seconds, nanoseconds = _TIMESPEC.unpack(value[:_TIMESPEC.size])
-                    arrived = seconds + nanoseconds * 1e-9
+            arrived = kernel_receive_time(ancillary)
             if addr not in self.peers:
                 self.peers[addr] = None
                 self.send_heartbeat()

@@ -10,7 +10,6 @@ import itertools
 import secrets
 import signal
 import socket
-import struct
 import subprocess
 import sys
 import threading
@@ -20,6 +19,7 @@ from pathlib import Path
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
+from bench._receiver import SO_TIMESTAMPNS, kernel_receive_time
 from server.link.link import Link
 from server.link.signing import SigningKeyStore
 from server.link.streamer import SetpointStreamer
@@ -36,8 +36,6 @@ def _msg(x: float) -> mavlink.MAVLink_message:
     )
 
 
-SO_TIMESTAMPNS = 35  # Linux; Python's socket module lacks the name
-_TIMESPEC = struct.Struct("@qq")
 # After the server died, no setpoint may reach the vehicle later than this.
 DEATH_BOUND_S = 0.5
 
@@ -67,12 +65,7 @@ class Receiver:
                 data, ancillary, _flags, _addr = self.sock.recvmsg(2048, 64)
             except TimeoutError:
                 continue
-            arrived = time.time()
-            for level, kind, value in ancillary:
-                if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS:
-                    seconds, nanoseconds = _TIMESPEC.unpack(value[: _TIMESPEC.size])
-                    arrived = seconds + nanoseconds * 1e-9
-            self.frames.append((arrived, data))
+            self.frames.append((kernel_receive_time(ancillary), data))
 
     def close(self) -> None:
         self._done.set()
@@ -183,6 +176,7 @@ async def test_a_link_without_a_socket_to_hand_over_streams_on_the_thread() -> N
 
 _CHILD = """
 import asyncio, sys
+from bench._receiver import SO_TIMESTAMPNS, kernel_receive_time
 from server.link.link import Link
 from server.link.streamer import SetpointStreamer
 from server.link import stream_channel

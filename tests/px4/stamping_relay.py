@@ -20,12 +20,11 @@ import json
 import os
 import select
 import socket
-import struct
 import sys
 import time
 
-SO_TIMESTAMPNS = 35  # Linux; Python's socket module lacks the name
-_TIMESPEC = struct.Struct("@qq")
+from bench._receiver import SO_TIMESTAMPNS, kernel_receive_time
+
 MAVLINK_STX_V2 = 0xFD
 MSG_ID_HEARTBEAT = 0
 MSG_ID_SET_POSITION_TARGET_LOCAL_NED = 84
@@ -64,11 +63,7 @@ def main() -> None:
         readable, _, _ = select.select([to_vehicle, to_server, sys.stdin], [], [])
         if to_server in readable:
             data, ancillary, _flags, server = to_server.recvmsg(65536, 64)
-            arrived = time.time()
-            for level, kind, value in ancillary:
-                if level == socket.SOL_SOCKET and kind == SO_TIMESTAMPNS:
-                    seconds, nanoseconds = _TIMESPEC.unpack(value[:_TIMESPEC.size])
-                    arrived = seconds + nanoseconds * 1e-9
+            arrived = kernel_receive_time(ancillary)
             if vehicle is not None:
                 to_vehicle.sendto(data, vehicle)
             if any(f[0] == MSG_ID_SET_POSITION_TARGET_LOCAL_NED for f in _frames(data)):
