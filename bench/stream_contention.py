@@ -400,9 +400,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--senders", default="process,thread",
                         help="server send paths (SKYHELM_STREAM_SENDER values)")
     parser.add_argument("--no-fleet", action="store_true", help="leave out the 50 vehicles")
+    parser.add_argument("--fleet-only", action="store_true",
+                        help="only the 50 vehicles (printed, not written)")
     args = parser.parse_args(argv)
     senders = ["process"] if args.quick else [s for s in args.senders.split(",") if s]
     import mavsdk_grpc  # noqa: F401  (its loop policy, before the loop starts)
+
+    if args.fleet_only:
+        fleet = asyncio.run(fleet_phase(args.seconds, senders[0]))
+        print({k: v for k, v in fleet.items() if k != "streams"})
+        return 0
 
     started = time.monotonic()
     result = asyncio.run(run(3.0 if args.quick else args.seconds, senders, not args.no_fleet))

@@ -321,6 +321,7 @@ class SenderProcess:
             if not data:
                 return False
             self.handle(pickle.loads(data), fds)
+            self.run_due()  # a burst of the server's frames does not hold a due tick back
 
     def run(self) -> None:
         next_report_s = time.monotonic() + REPORT_PERIOD_S
@@ -328,9 +329,9 @@ class SenderProcess:
             now = time.monotonic()
             until = min(next_report_s, self.heap[0][0] if self.heap else math.inf)
             readable, _, _ = select.select([self.control], [], [], max(0.0, until - now))
+            self.run_due()
             if readable and not self.read_control():
                 return
-            self.run_due()
             if time.monotonic() >= next_report_s:
                 self.report()
                 next_report_s = time.monotonic() + REPORT_PERIOD_S
