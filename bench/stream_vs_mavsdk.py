@@ -68,11 +68,12 @@ VEHICLE_TELEMETRY_HZ = 50.0
 LOAD_WARMUP_S = 2.0
 # the server's send path per variant: environment of `skyhelm serve`
 VARIANTS: dict[str, dict[str, str]] = {
+    "process": {"SKYHELM_STREAM_SENDER": "process"},
     "thread": {"SKYHELM_STREAM_SENDER": "thread"},
     "loop": {"SKYHELM_STREAM_SENDER": "loop"},
     "thread-5ms": {"SKYHELM_STREAM_SENDER": "thread", "SKYHELM_STREAM_SWITCH_INTERVAL_MS": "5"},
 }
-DEFAULT_VARIANTS = ("thread", "loop")
+DEFAULT_VARIANTS = ("process", "thread", "loop")
 
 
 class ReceiverProcess:

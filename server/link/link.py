@@ -26,7 +26,7 @@ from .aio import cancel_and_wait
 from .link_stats import LinkStats, SequenceGapCounter
 from .liveness import DEFAULT_SILENCE_TIMEOUT_S, Liveness
 from .signing import MAVLINK_MSG_ID_SETUP_SIGNING, LinkSigning, SigningKeyStore
-from .stream_channel import ProcessGone, ProcessOut, StreamChannel, shared_process
+from .stream_channel import LinkHandover, StreamChannel
 from .tlog import TlogWriter
 from .transports import Peer, Transport, create_transport
 from .urls import LinkUrl, parse_link_url
@@ -53,10 +53,6 @@ VEHICLE_QUEUE_SIZE = 32
 VehicleFactory = Callable[..., Vehicle]
 # MAVLink signing link ids, one per link of this process
 _signing_link_ids = itertools.count()
-# how the sender process tells this process's links apart
-_process_keys = itertools.count(1)
-# the sender process's last reports of a closing link are waited for this long
-PROCESS_DETACH_WAIT_S = 0.5
 
 
 class Link:
@@ -84,11 +80,7 @@ class Link:
         # one signing state for the packer and every decoder (see server.link.signing)
         self.signing = LinkSigning(signing_store, next(_signing_link_ids))
         self.mav.signing = self.signing.state
-        self.signing.on_key_change = self._signing_changed
         transport.codec_factory = self.signing.codec
-        # every frame goes out through the setpoint sender process once a stream put this
-        # link there (server.link.stream_channel): one sequence, one signing stream
-        self._out: ProcessOut | None = None
         self.frames_dropped_out = 0  # frames send() could not write (no peer, not connected)
         # taken once: stats() may be called from other threads (the scene)
         self._loop = asyncio.get_running_loop()
@@ -97,6 +89,10 @@ class Link:
         # sender thread sends too (server.link.stream_thread)
         self._send_lock = threading.Lock()
         self._transport = transport
+        # every frame goes out through the setpoint sender process once a stream put this
+        # link there (server.link.stream_channel): one sequence, one signing stream
+        self._handover = LinkHandover(name, transport, self.mav, self.signing, self._loop,
+                                      self._process_sent)
         self._tlog = tlog
         self._vehicle_factory = vehicle_factory
         self._vehicles: dict[int, Vehicle] = {}
@@ -174,9 +170,7 @@ class Link:
             return
         with self._send_lock:
             self._closed = True  # the sender thread's next send is dropped, not written
-        if self._out is not None:
-            out, self._out = self._out, None
-            await asyncio.to_thread(out.process.detach, out.key, PROCESS_DETACH_WAIT_S)
+        await self._handover.close()
         for task in self._tasks:
             await cancel_and_wait(task)
         for vehicle in list(self._vehicles.values()):
@@ -245,7 +239,12 @@ class Link:
         loop (the setpoint sender thread) the transport's thread writer writes and the
         tlog record is handed to the loop."""
         target_system = getattr(msg, "target_system", None)
-        if self._out is not None and self._send_through_process(msg, target_system):
+        if self._closed:
+            self.frames_dropped_out += 1
+            return
+        handed = self._handover.send(msg, target_system)
+        if handed is not None:
+            self.frames_dropped_out += not handed
             return
         on_loop = threading.get_ident() == self._loop_thread
         with self._send_lock:
@@ -266,78 +265,21 @@ class Link:
                 with contextlib.suppress(RuntimeError):  # the loop has closed
                     self._loop.call_soon_threadsafe(self._tlog.record, frame, time.time())
 
-    def _send_through_process(self, msg: mavlink.MAVLink_message, target_system: int | None
-                              ) -> bool:
-        """Hand ``msg`` to the sender process; False once it has ended (the link then
-        writes itself again)."""
-        out = self._out
-        if out is None:
-            return False
-        if self._closed:
-            self.frames_dropped_out += 1
-            return True
-        dests = self._transport.destinations_of(target_system)
-        if dests is not None and not dests:
-            self.frames_dropped_out += 1  # no peer has spoken yet
-            return True
-        try:
-            out.send(msg, dests)
-        except ProcessGone:
-            self._out = None
-            return False
-        return True
-
     def stream_channel(self, on_ticks: Callable[[int, list[float]], None]
                        ) -> StreamChannel | None:
         """A stream in the sender process (its ticks reported to ``on_ticks``), or None
-        where there is none: a transport without a socket to hand over (TCP, serial,
-        replay), or a process that cannot run. The first one hands this link's sending
-        over to the process for good."""
+        where there is none (TCP, serial, replay; a process that cannot run). The first one
+        hands this link's sending over to the process for good."""
         if self._closed:
             return None
-        if self._out is None:
-            sock = self._transport.process_socket()
-            if sock is None:
-                return None
-            try:
-                process = shared_process()
-                with self._send_lock:
-                    out = ProcessOut(process, next(_process_keys), self.mav.srcSystem,
-                                     self.mav.srcComponent)
-                    process.attach(out.key, sock, self.mav.seq, self._signing_tuple(),
-                                   self._process_reports)
-                    self._out = out
-            except ProcessGone as exc:
-                log.warning("link %s: setpoints sent by a thread of the server: %s",
-                            self.name, exc)
-                return None
-        return StreamChannel(self._out, self._transport.destinations_of, on_ticks)
-
-    def _signing_tuple(self) -> tuple[bytes, int, int] | None:
-        state = self.signing.state
-        if not state.sign_outgoing or state.secret_key is None:
-            return None
-        return (bytes(state.secret_key), int(state.link_id), int(state.timestamp))
-
-    def _signing_changed(self) -> None:
-        out = self._out
-        if out is not None:
-            with contextlib.suppress(ProcessGone):
-                out.process.post(("sign", out.key, self._signing_tuple()))
-
-    def _process_reports(self, records: list[tuple[float, bytes]], dropped: int,
-                         timestamp: int) -> None:
-        """The sender process's report of what it wrote (on its reader thread)."""
-        with contextlib.suppress(RuntimeError):  # the loop has closed
-            self._loop.call_soon_threadsafe(self._process_sent, records, dropped, timestamp)
+        return self._handover.channel(on_ticks, self._send_lock)
 
     def _process_sent(self, records: list[tuple[float, bytes]], dropped: int,
-                      timestamp: int) -> None:
+                      _timestamp: int) -> None:
+        """What the sender process wrote for this link (on the loop)."""
         self.frames_dropped_out += dropped
         self._frames_out += len(records)
         self._bytes_out += sum(len(frame) for _, frame in records)
-        state = self.signing.state
-        state.timestamp = max(state.timestamp, timestamp)  # persisted from here
         if self._tlog is not None:
             for unix_s, frame in records:
                 if frame[7:10] != _SETUP_SIGNING_ID:  # a key never goes to the tlog

@@ -14,6 +14,7 @@ run on a thread that ends (tests).
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import itertools
 import logging
@@ -25,10 +26,11 @@ import sys
 import threading
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from pymavlink.dialects.v20 import development as mavlink
 
+from server.link.signing import LinkSigning
 from server.link.stream_thread import PROCESS_RT_PRIORITY
 
 log = logging.getLogger(__name__)
@@ -36,6 +38,10 @@ log = logging.getLogger(__name__)
 PROCESS_SCRIPT = Path(__file__).with_name("stream_process.py")
 START_TIMEOUT_S = 5.0
 MAX_REPORT_BYTES = 1 << 22
+# the sender process's last reports of a closing link are waited for this long
+DETACH_WAIT_S = 0.5
+# how the sender process tells this server's links apart
+_link_keys = itertools.count(1)
 
 # (secret key, signing link id, timestamp), or None: not signing
 Signing = tuple[bytes, int, int] | None
@@ -245,3 +251,99 @@ class StreamChannel:
 
     def _dests(self, msg: mavlink.MAVLink_message) -> list[Any] | None:
         return self._destinations(getattr(msg, "target_system", None))
+
+
+class HandOver(Protocol):
+    """What a transport offers the sender process (UDP: its socket and peer routing)."""
+
+    def process_socket(self) -> socket.socket | None: ...
+
+    def destinations_of(self, target_system: int | None) -> list[Any] | None: ...
+
+
+class LinkHandover:
+    """A link's sending, handed to the sender process by the first stream there and kept
+    there: every frame of the link then goes out through the process (one sequence, one
+    signing stream). Reports of what it wrote go to ``on_sent`` on the link's loop."""
+
+    def __init__(self, name: str, transport: HandOver, mav: mavlink.MAVLink,
+                 signing: LinkSigning, loop: asyncio.AbstractEventLoop,
+                 on_sent: LinkReports) -> None:
+        self._name = name
+        self._transport = transport
+        self._mav = mav
+        self._signing = signing
+        self._loop = loop
+        self._on_sent = on_sent
+        self.out: ProcessOut | None = None
+        self._refused = False  # the process could not take this link: not asked again
+        signing.on_key_change = self._signing_changed
+
+    def send(self, msg: mavlink.MAVLink_message, target_system: int | None) -> bool | None:
+        """Through the process: True handed over, False no destination (dropped); None
+        when the link sends itself (not handed over, or the process has ended)."""
+        out = self.out
+        if out is None:
+            return None
+        dests = self._transport.destinations_of(target_system)
+        if dests is not None and not dests:
+            return False  # no peer has spoken yet
+        try:
+            out.send(msg, dests)
+        except ProcessGone:
+            self.out = None
+            return None
+        return True
+
+    def channel(self, on_ticks: Callable[[int, list[float]], None], lock: threading.Lock
+                ) -> StreamChannel | None:
+        """A stream in the process, or None where there is none (a transport without a
+        socket to hand over, or a process that cannot run). ``lock`` is the link's send
+        lock: the sequence number handed over is the last one the link used."""
+        if self._refused:
+            return None
+        if self.out is None:
+            sock = self._transport.process_socket()
+            if sock is None:
+                return None
+            try:
+                process = shared_process()
+                with lock:
+                    out = ProcessOut(process, next(_link_keys), self._mav.srcSystem,
+                                     self._mav.srcComponent)
+                    process.attach(out.key, sock, self._mav.seq, self._signing_now(),
+                                   self._reports)
+                    self.out = out
+            except ProcessGone as exc:
+                self._refused = True
+                log.warning("link %s: setpoints sent by a thread of the server: %s",
+                            self._name, exc)
+                return None
+        return StreamChannel(self.out, self._transport.destinations_of, on_ticks)
+
+    async def close(self) -> None:
+        out, self.out = self.out, None
+        if out is not None:
+            await asyncio.to_thread(out.process.detach, out.key, DETACH_WAIT_S)
+
+    def _signing_now(self) -> Signing:
+        state = self._signing.state
+        if not state.sign_outgoing or state.secret_key is None:
+            return None
+        return (bytes(state.secret_key), int(state.link_id), int(state.timestamp))
+
+    def _signing_changed(self) -> None:
+        out = self.out
+        if out is not None:
+            with contextlib.suppress(ProcessGone):
+                out.process.post(("sign", out.key, self._signing_now()))
+
+    def _reports(self, records: list[tuple[float, bytes]], dropped: int, timestamp: int
+                 ) -> None:
+        with contextlib.suppress(RuntimeError):  # the loop has closed
+            self._loop.call_soon_threadsafe(self._sent, records, dropped, timestamp)
+
+    def _sent(self, records: list[tuple[float, bytes]], dropped: int, timestamp: int) -> None:
+        state = self._signing.state
+        state.timestamp = max(state.timestamp, timestamp)  # persisted from here
+        self._on_sent(records, dropped, timestamp)

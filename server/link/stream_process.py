@@ -70,6 +70,7 @@ SIGNING_EPOCH_UNIX_S = 1_420_070_400
 SIGNING_TICKS_PER_S = 100_000
 # Unsent reports kept while the server does not read them; older tlog records go first.
 MAX_PENDING_RECORDS = 20_000
+MAX_PENDING_NOTES = 1_000  # ~50 s of reports
 
 
 class Deadlines:
@@ -298,6 +299,8 @@ class SenderProcess:
             if stream.ticks:
                 self.notes.append(("ticks", sid, stream.ticks))
                 stream.ticks = []
+        if len(self.notes) > MAX_PENDING_NOTES:  # a server that stopped reading
+            del self.notes[: len(self.notes) - MAX_PENDING_NOTES]
         while self.notes:
             try:
                 self.control.send(pickle.dumps(self.notes[0], pickle.HIGHEST_PROTOCOL))
