@@ -11,9 +11,10 @@ measures both in the same seconds:
 - loaded: another process (niced, as remote clients would not take the server's cores)
   holds 50 WebSocket telemetry clients at 10 Hz and makes 50 REST reads/s on the server.
 
-The server runs once per variant of its send path: ``thread`` (the sender thread of
-server.link.stream_thread, the default), ``loop`` (the stream timed by the event loop, as
-before; SKYHELM_STREAM_SENDER=loop) and, with ``--variants``, ``thread-5ms`` (the thread
+The server runs once per variant of its send path: ``process`` (the sender process of
+server.link.stream_process, the default), ``thread`` (the sender thread of
+server.link.stream_thread), ``loop`` (the stream timed by the event loop;
+SKYHELM_STREAM_SENDER=loop) and, with ``--variants``, ``thread-5ms`` (the thread
 with CPython's default 5 ms GIL switch interval). Figures per row: p50/p99 of
 |interval − period|, the largest interval, gaps over 100 ms, and the lateness samples
 for the report's distribution.

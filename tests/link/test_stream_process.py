@@ -7,7 +7,10 @@ from __future__ import annotations
 import asyncio
 import hashlib
 import itertools
+import os
+import pickle
 import secrets
+import shutil
 import signal
 import socket
 import subprocess
@@ -20,6 +23,7 @@ import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
 from bench._receiver import SO_TIMESTAMPNS, kernel_receive_time
+from server.link import stream_process
 from server.link.link import Link
 from server.link.signing import SigningKeyStore
 from server.link.streamer import SetpointStreamer
@@ -228,3 +232,33 @@ def _running(pid: int) -> bool:
     except FileNotFoundError:
         return False
     return "State:\tZ" not in status
+
+
+@pytest.mark.skipif(shutil.which("setpriv") is None, reason="needs util-linux's setpriv")
+def test_without_cap_sys_nice_the_process_warns_once_and_streams_anyway() -> None:
+    ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+    receiver = Receiver()
+    # the process as a container without CAP_SYS_NICE would run it
+    proc = subprocess.Popen(
+        ["setpriv", "--bounding-set", "-sys_nice", "--inh-caps", "-sys_nice",
+         sys.executable, "-S", str(stream_process.__file__), str(os.getpid()), "30",
+         str(theirs.fileno())], pass_fds=(theirs.fileno(),))
+    theirs.close()
+    try:
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        sock.connect(("127.0.0.1", receiver.port))
+        frame = bytes(_msg(1).pack(mavlink.MAVLink(None, srcSystem=255, srcComponent=190)))
+        socket.send_fds(ours, [pickle.dumps(("link", 1, 0, None))], [sock.fileno()])
+        ours.send(pickle.dumps(("stream", 7, 1, frame, _msg(1).crc_extra, None, 0.02)))
+        ours.settimeout(5.0)
+        notes = [pickle.loads(ours.recv(1 << 20)) for _ in range(3)]
+        warnings = [note[1] for note in notes if note[0] == "warning"]
+        assert len(warnings) == 1
+        assert "normal priority" in warnings[0]
+        assert "--cap-add SYS_NICE" in warnings[0]
+        assert any(note[0] == "ticks" and note[1] == 7 for note in notes)
+    finally:
+        ours.close()  # end of file: the process ends
+        proc.wait(5)
+        receiver.close()
+    assert len(receiver.frames) >= 3
