@@ -360,8 +360,9 @@ def _raise_priority(priority: int) -> str | None:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
     except (OSError, AttributeError) as exc:
         return (f"setpoint sender process runs at normal priority: real-time scheduling "
-                f"(SCHED_FIFO {priority}) refused ({exc}); grant CAP_SYS_NICE (docker: "
-                f"--cap-add SYS_NICE) for steady setpoints on a busy machine")
+                f"(SCHED_FIFO {priority}) refused ({exc}); allow it for steady setpoints on "
+                f"a busy machine: CAP_SYS_NICE (docker: --cap-add SYS_NICE) or an rtprio "
+                f"limit of {priority} (docker: --ulimit rtprio={priority}); see docs/link.md")
     return None
 
 

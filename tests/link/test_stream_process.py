@@ -256,6 +256,7 @@ def test_without_cap_sys_nice_the_process_warns_once_and_streams_anyway() -> Non
         assert len(warnings) == 1
         assert "normal priority" in warnings[0]
         assert "--cap-add SYS_NICE" in warnings[0]
+        assert "--ulimit rtprio=30" in warnings[0]
         assert any(note[0] == "ticks" and note[1] == 7 for note in notes)
     finally:
         ours.close()  # end of file: the process ends
