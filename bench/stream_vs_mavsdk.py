@@ -11,9 +11,10 @@ measures both in the same seconds:
 - loaded: another process (niced, as remote clients would not take the server's cores)
   holds 50 WebSocket telemetry clients at 10 Hz and makes 50 REST reads/s on the server.
 
-The server runs once per variant of its send path: ``thread`` (the sender thread of
-server.link.stream_thread, the default), ``loop`` (the stream timed by the event loop, as
-before; SKYHELM_STREAM_SENDER=loop) and, with ``--variants``, ``thread-5ms`` (the thread
+The server runs once per variant of its send path: ``process`` (the sender process of
+server.link.stream_process, the default), ``thread`` (the sender thread of
+server.link.stream_thread), ``loop`` (the stream timed by the event loop;
+SKYHELM_STREAM_SENDER=loop) and, with ``--variants``, ``thread-5ms`` (the thread
 with CPython's default 5 ms GIL switch interval). Figures per row: p50/p99 of
 |interval − period|, the largest interval, gaps over 100 ms, and the lateness samples
 for the report's distribution.
@@ -68,11 +69,12 @@ VEHICLE_TELEMETRY_HZ = 50.0
 LOAD_WARMUP_S = 2.0
 # the server's send path per variant: environment of `skyhelm serve`
 VARIANTS: dict[str, dict[str, str]] = {
+    "process": {"SKYHELM_STREAM_SENDER": "process"},
     "thread": {"SKYHELM_STREAM_SENDER": "thread"},
     "loop": {"SKYHELM_STREAM_SENDER": "loop"},
     "thread-5ms": {"SKYHELM_STREAM_SENDER": "thread", "SKYHELM_STREAM_SWITCH_INTERVAL_MS": "5"},
 }
-DEFAULT_VARIANTS = ("thread", "loop")
+DEFAULT_VARIANTS = ("process", "thread", "loop")
 
 
 class ReceiverProcess:
@@ -84,10 +86,13 @@ class ReceiverProcess:
 
     @classmethod
     @contextlib.asynccontextmanager
-    async def running(cls) -> AsyncIterator[ReceiverProcess]:
+    async def running(cls, *args: str, telemetry_hz: float = VEHICLE_TELEMETRY_HZ
+                      ) -> AsyncIterator[ReceiverProcess]:
+        """The stand-in vehicle; ``args`` are bench/_receiver.py's options."""
         proc = await asyncio.create_subprocess_exec(
-            sys.executable, "-m", "bench._receiver", "--telemetry-hz", str(VEHICLE_TELEMETRY_HZ),
+            sys.executable, "-m", "bench._receiver", "--telemetry-hz", str(telemetry_hz), *args,
             stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE,
+            limit=1 << 26,  # a report of 50 vehicles' arrivals is one long line
             cwd=PROJECT_ROOT,
         )
         try:
@@ -136,6 +141,8 @@ def interval_figures(arrivals: Sequence[float], rate_hz: float) -> dict[str, Any
         "abs_error_mean_ms": statistics.fmean(errors) * 1e3,
         "interval_max_ms": max(intervals) * 1e3,
         "gaps_over_100ms": sum(i > GAP_LIMIT_S for i in intervals),
+        "gaps_over_250ms": sum(i > 0.250 for i in intervals),
+        "gaps_over_500ms": sum(i > 0.500 for i in intervals),
         # the distribution, for the report (µs resolution is plenty)
         "abs_errors_ms": [round(e * 1e3, 3) for e in errors],
     }
@@ -164,7 +171,8 @@ def skyhelm_serve(vehicle_port: int, env: dict[str, str]
     ], env)
 
 
-async def start_skyhelm_stream(client: httpx.AsyncClient) -> None:
+async def start_skyhelm_stream(client: httpx.AsyncClient) -> str:
+    """Take control of vehicle 1 and stream a hold setpoint; answers the lease id."""
     for _ in range(200):
         if (await client.get("/api/v1/vehicles/1")).status_code == 200:
             break
@@ -175,6 +183,7 @@ async def start_skyhelm_stream(client: httpx.AsyncClient) -> None:
                             headers={"X-Lease-Id": lease})
     if sent.status_code != 200:
         raise RuntimeError(f"setpoint refused: {sent.status_code} {sent.text}")
+    return str(lease)
 
 
 # -- the load, in its own process --
@@ -203,7 +212,7 @@ async def load_worker(base: str, seconds: float) -> None:
             if stop.is_set():
                 return
             task = asyncio.create_task(client.get(paths[k % len(paths)]))
-            task.add_done_callback(lambda t: t.exception())
+            task.add_done_callback(lambda t: t.cancelled() or t.exception())
             await asyncio.sleep(max(0.0, start + k / REST_READS_HZ - time.monotonic()))
 
     headers = {"Authorization": f"Bearer {TOKEN}"}
@@ -217,18 +226,23 @@ async def load_worker(base: str, seconds: float) -> None:
 
 
 @contextlib.asynccontextmanager
-async def loaded(base: str, seconds: float) -> AsyncIterator[dict[str, Any]]:
+async def loaded(base: str, seconds: float, nice: int = LOAD_NICE
+                 ) -> AsyncIterator[dict[str, Any]]:
     proc = await asyncio.create_subprocess_exec(
         sys.executable, "-m", "bench.stream_vs_mavsdk", "--load-url", base,
         "--seconds", str(seconds), stdout=asyncio.subprocess.PIPE, cwd=PROJECT_ROOT,
-        preexec_fn=lambda: os.nice(LOAD_NICE),
+        preexec_fn=lambda: os.nice(nice),
     )
     facts: dict[str, Any] = {}
     try:
         await asyncio.sleep(LOAD_WARMUP_S)
         yield facts
     finally:
-        out, _ = await asyncio.wait_for(proc.communicate(), seconds + 30)
+        try:
+            out, _ = await asyncio.wait_for(proc.communicate(), seconds + 30)
+        except TimeoutError:  # a starved load worker: its figures are lost, not the run's
+            proc.kill()
+            out, _ = await proc.communicate()
         lines = out.decode().strip().splitlines()
         facts.update(json.loads(lines[-1]) if lines else {})
 

@@ -19,6 +19,7 @@ from server.link.liveness import LinkQuality
 from server.link.requests import Requester
 from server.link.state import StateSubscription, SubscriptionHub, VehicleState
 from server.link.statustext import RecentTexts
+from server.link.stream_channel import StreamChannel
 
 MessageHandler = Callable[[Any], None]
 
@@ -81,6 +82,12 @@ class VehicleCore:
 
     def send(self, msg: mavlink.MAVLink_message) -> None:
         self.sender.send(msg)
+
+    def stream_channel(self, on_ticks: Callable[[int, list[float]], None]
+                       ) -> StreamChannel | None:
+        """A stream in the link's sender process, where the link has one."""
+        factory = getattr(self.sender, "stream_channel", None)
+        return factory(on_ticks) if factory is not None else None
 
     # -- wiring (plugins register at construction) ---------------------------------------
     def on_message(self, kind: str, handler: MessageHandler) -> None:

@@ -26,6 +26,7 @@ from .aio import cancel_and_wait
 from .link_stats import LinkStats, SequenceGapCounter
 from .liveness import DEFAULT_SILENCE_TIMEOUT_S, MAVLINK_HEARTBEAT_TIMEOUT_S, Liveness
 from .signing import MAVLINK_MSG_ID_SETUP_SIGNING, LinkSigning, SigningKeyStore
+from .stream_channel import LinkHandover, StreamChannel
 from .tlog import TlogWriter
 from .transports import Peer, Transport, create_transport
 from .urls import LinkUrl, parse_link_url
@@ -44,6 +45,8 @@ HEARTBEAT_CHECK_PERIOD_S = 0.1
 LOOP_STALL_S = 0.25
 # While frames wait unread, a vehicle is not judged silent for up to this long.
 MAX_VERDICT_DELAY_S = 1.0
+# SETUP_SIGNING's message id as a MAVLink 2 frame carries it (bytes 7..9, little-endian)
+_SETUP_SIGNING_ID = MAVLINK_MSG_ID_SETUP_SIGNING.to_bytes(3, "little")
 # subscribe_vehicles() queues hold this many announcements and drop the oldest beyond it.
 VEHICLE_QUEUE_SIZE = 32
 
@@ -86,6 +89,10 @@ class Link:
         # sender thread sends too (server.link.stream_thread)
         self._send_lock = threading.Lock()
         self._transport = transport
+        # every frame goes out through the setpoint sender process once a stream put this
+        # link there (server.link.stream_channel): one sequence, one signing stream
+        self._handover = LinkHandover(name, transport, self.mav, self.signing, self._loop,
+                                      self._process_sent)
         self._tlog = tlog
         self._vehicle_factory = vehicle_factory
         self._vehicles: dict[int, Vehicle] = {}
@@ -163,6 +170,7 @@ class Link:
             return
         with self._send_lock:
             self._closed = True  # the sender thread's next send is dropped, not written
+        await self._handover.close()
         for task in self._tasks:
             await cancel_and_wait(task)
         for vehicle in list(self._vehicles.values()):
@@ -230,8 +238,15 @@ class Link:
         a frame the transport cannot take now is dropped and counted. Thread-safe: off the
         loop (the setpoint sender thread) the transport's thread writer writes and the
         tlog record is handed to the loop."""
-        on_loop = threading.get_ident() == self._loop_thread
         target_system = getattr(msg, "target_system", None)
+        if self._closed:
+            self.frames_dropped_out += 1
+            return
+        handed = self._handover.send(msg, target_system)
+        if handed is not None:
+            self.frames_dropped_out += not handed
+            return
+        on_loop = threading.get_ident() == self._loop_thread
         with self._send_lock:
             frame = bytes(msg.pack(self.mav))
             self.mav.seq = (self.mav.seq + 1) % 256
@@ -249,6 +264,26 @@ class Link:
             else:
                 with contextlib.suppress(RuntimeError):  # the loop has closed
                     self._loop.call_soon_threadsafe(self._tlog.record, frame, time.time())
+
+    def stream_channel(self, on_ticks: Callable[[int, list[float]], None]
+                       ) -> StreamChannel | None:
+        """A stream in the sender process (its ticks reported to ``on_ticks``), or None
+        where there is none (TCP, serial, replay; a process that cannot run). The first one
+        hands this link's sending over to the process for good."""
+        if self._closed:
+            return None
+        return self._handover.channel(on_ticks, self._send_lock)
+
+    def _process_sent(self, records: list[tuple[float, bytes]], dropped: int,
+                      _timestamp: int) -> None:
+        """What the sender process wrote for this link (on the loop)."""
+        self.frames_dropped_out += dropped
+        self._frames_out += len(records)
+        self._bytes_out += sum(len(frame) for _, frame in records)
+        if self._tlog is not None:
+            for unix_s, frame in records:
+                if frame[7:10] != _SETUP_SIGNING_ID:  # a key never goes to the tlog
+                    self._tlog.record(frame, unix_s)
 
     def _write_off_loop(self, frame: bytes, target_system: int | None) -> bool:
         writer = self._transport.thread_writer()

@@ -64,7 +64,8 @@ class ManualControl:
     def __init__(self, core: VehicleCore, offboard: Offboard) -> None:
         self._core = core
         self._offboard = offboard
-        self.streamer = SetpointStreamer(core.send, rate_hz=MANUAL_CONTROL_RATE_HZ)
+        self.streamer = SetpointStreamer(
+            core.send, rate_hz=MANUAL_CONTROL_RATE_HZ, channel=core.stream_channel)
         self.sticks: Sticks | None = None  # what is sent now (None: not sending)
         offboard.on_stream_start(self._stop_for_offboard)
 

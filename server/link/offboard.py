@@ -46,7 +46,8 @@ class Offboard:
         self._action = action
         self.envelope = Envelope()
         self.setpoint: Setpoint | None = None  # what is streamed now, offsets resolved
-        self.streamer = SetpointStreamer(core.send, rate_hz=stream_rate_hz)  # its rate, stats
+        self.streamer = SetpointStreamer(
+            core.send, rate_hz=stream_rate_hz, channel=core.stream_channel)  # its rate, stats
         self._engaged = False
         self._on_stream_start: list[Callable[[], None]] = []
         self.stopped_by_link: str | None = None  # why the link stopped the stream, if it did

@@ -238,6 +238,8 @@ class LinkSigning:
         self._provisions = 0
         self._persist_task: asyncio.Task[None] | None = None
         self._checker = _SigningCodec(self)
+        # told after every key change (the link's sender process signs with the new one)
+        self.on_key_change: Callable[[], None] | None = None
         key = store.key if store is not None else None
         self.use_key(key, store.start_timestamp() if store is not None else signing_timestamp())
 
@@ -259,6 +261,8 @@ class LinkSigning:
             state.timestamp = max(state.timestamp, timestamp)
         self._last_verified_s.clear()
         self._last_unsigned_s.clear()
+        if self.on_key_change is not None:
+            self.on_key_change()
 
     def vehicle_signed(self, sysid: int) -> bool:
         last = self._last_verified_s.get(sysid)

@@ -4,7 +4,7 @@ The web server's event loop encodes JSON, answers REST reads and collects garbag
 timed by that loop is late whenever it is busy. One daemon thread per process instead keeps a
 heap of (deadline, job) on ``time.monotonic`` and sleeps on a condition until the earliest
 is due; a job sends its frame and answers its next deadline (or None: it is over). Deadline
-math (:class:`Deadlines`) is shared with the loop-timed streamer used under a virtual clock.
+math (:class:`Deadlines`, from the sender process's module) is shared with the loop-timed streamer.
 
 A thread still needs the GIL to send, and CPython hands it over only every switch interval
 (5 ms by default) while the loop thread runs Python code. Starting the thread lowers the
@@ -16,12 +16,15 @@ from __future__ import annotations
 import heapq
 import itertools
 import logging
-import math
 import os
 import sys
 import threading
 import time
 from collections.abc import Callable
+
+from server.link.stream_process import Deadlines
+
+__all__ = ["Deadlines", "SenderThread", "shared_sender"]
 
 log = logging.getLogger(__name__)
 
@@ -34,34 +37,11 @@ SWITCH_INTERVAL_S = float(os.environ.get("SKYHELM_STREAM_SWITCH_INTERVAL_MS", "0
 # The sender thread's real-time priority (SCHED_FIFO, 1-99; 0 = ordinary scheduling).
 SENDER_RT_PRIORITY = int(os.environ.get("SKYHELM_STREAM_RT_PRIORITY", "10"))
 
+# The sender process's (server.link.stream_process): above the threads' and other programs'
+# usual real-time work, so only the kernel's own threads (IRQs at 50) come before it.
+PROCESS_RT_PRIORITY = int(os.environ.get("SKYHELM_STREAM_PROCESS_RT_PRIORITY", "30"))
+
 Job = Callable[[float], float | None]
-
-
-class Deadlines:
-    """Ticks at t0 + k·period: a late tick does not push later ones back, and a tick later
-    than a whole period skips the missed ones instead of bursting them."""
-
-    def __init__(self, period_s: float) -> None:
-        self.period_s = period_s
-        self.t0_s = 0.0
-        self.k = 1
-
-    def rephase(self, at_s: float) -> float:
-        """Count ticks from ``at_s`` (a send just made); answers the first deadline."""
-        self.t0_s = at_s
-        self.k = 1
-        return self.next_s
-
-    @property
-    def next_s(self) -> float:
-        return self.t0_s + self.k * self.period_s
-
-    def after_tick(self, now_s: float) -> float:
-        """The deadline after a tick that ran at ``now_s``."""
-        self.k += 1
-        if self.next_s <= now_s:
-            self.k = math.floor((now_s - self.t0_s) / self.period_s) + 1
-        return self.next_s
 
 
 class SenderThread:

@@ -4,16 +4,19 @@ Ticks fall on t0 + k·period, so a late tick does not push every later one back;
 comes too late to matter is skipped and shows up as a gap. A new setpoint goes out at once
 (from the caller, on the loop) and re-phases the schedule.
 
-Who keeps the time: on a real clock, the process's sender thread (server.link.stream_thread),
-where the event loop's load cannot delay a tick; under a virtual loop clock (looptime in
-tests) the event loop itself (loop.call_at), so virtual time drives the stream exactly.
-``SENDER_THREAD = False`` (or SKYHELM_STREAM_SENDER=loop in the environment) keeps every
-stream on the loop; bench/stream_vs_mavsdk.py compares the two.
+Who keeps the time, on a real clock: the server's setpoint sender process
+(server.link.stream_process, through a ``channel`` of the link: UDP links), which needs
+neither the GIL nor the event loop; where there is none (TCP, serial, a process that cannot
+run), the process's sender thread (server.link.stream_thread). Under a virtual loop clock
+(looptime in tests) the event loop itself (loop.call_at), so virtual time drives the stream
+exactly. SKYHELM_STREAM_SENDER (``process``, ``thread`` or ``loop``) caps the choice;
+bench/stream_vs_mavsdk.py and bench/stream_contention.py compare them.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import math
 import os
 import threading
@@ -24,6 +27,7 @@ from collections.abc import Callable
 from pymavlink.dialects.v20 import development as mavlink
 
 from server.link.state import StreamStats
+from server.link.stream_channel import ProcessGone, StreamChannel
 from server.link.stream_thread import Deadlines, SenderThread, shared_sender
 
 MIN_RATE_HZ = 2.0
@@ -31,8 +35,12 @@ MAX_RATE_HZ = 100.0
 DEFAULT_RATE_HZ = 20.0
 # An interval longer than this many periods counts as a gap.
 GAP_PERIODS = 2.0
-# Streams on a real clock are timed by the sender thread (False: by the event loop).
-SENDER_THREAD = os.environ.get("SKYHELM_STREAM_SENDER", "thread") != "loop"
+# Who times streams on a real clock: "process" (the sender process where the link has one,
+# else the thread), "thread" (the sender thread) or "loop" (the event loop).
+SENDER = os.environ.get("SKYHELM_STREAM_SENDER", "process")
+SENDER_THREAD = SENDER != "loop"
+# A stream in the sender process: given the callback for its tick times, a channel or None.
+ChannelFactory = Callable[[Callable[[int, list[float]], None]], StreamChannel | None]
 
 
 def _real_time_loop(loop: asyncio.AbstractEventLoop) -> bool:
@@ -49,8 +57,12 @@ class SetpointStreamer:
         rate_hz: float = DEFAULT_RATE_HZ,
         window: int = 1024,
         sender: SenderThread | None = None,
+        channel: ChannelFactory | None = None,
     ) -> None:
         self._send = send
+        self._channel_factory = channel
+        self._channel: StreamChannel | None = None  # set while the process times the stream
+        self._sid: int | None = None
         self._deadlines = Deadlines(1.0 / self._checked_rate(rate_hz))
         self._msg: mavlink.MAVLink_message | None = None
         self._active = False
@@ -89,7 +101,9 @@ class SetpointStreamer:
         period_s = 1.0 / self._checked_rate(rate_hz)
         with self._lock:
             self._deadlines.period_s = period_s
-            if self.active:
+            if self.active and self._channel is not None:
+                self._channel.period(period_s)
+            elif self.active:
                 self._rephase()
 
     @property
@@ -100,6 +114,11 @@ class SetpointStreamer:
     def threaded(self) -> bool:
         """Whether the sender thread (not the event loop) times this stream."""
         return self._threaded
+
+    @property
+    def in_process(self) -> bool:
+        """Whether the sender process times this stream."""
+        return self._channel is not None
 
     def stream(self, msg: mavlink.MAVLink_message) -> None:
         """Send ``msg`` now and then every period until stop() or the next stream()."""
@@ -113,18 +132,44 @@ class SetpointStreamer:
                 self._reset_stats()
                 self._started_s = self._clock()
             self._active = True
+            if self._channel is not None and self._stream_in_process(msg):
+                return
             self._emit(self._clock())
             self._rephase()
 
+    def _stream_in_process(self, msg: mavlink.MAVLink_message) -> bool:
+        """Send now and re-phase in the sender process; False (and the thread from now on)
+        once the process has ended."""
+        assert self._channel is not None
+        try:
+            self._sid = self._channel.stream(msg, self._period_s)
+        except ProcessGone:
+            self._channel = None
+            self._choose_thread()
+            return False
+        return True
+
     def _choose_clock(self, loop: asyncio.AbstractEventLoop) -> None:
         self._loop = loop
-        self._threaded = SENDER_THREAD and _real_time_loop(loop)
+        self._channel = None
+        real_time = _real_time_loop(loop)
+        if real_time and SENDER == "process" and self._channel_factory is not None:
+            self._channel = self._channel_factory(self._process_ticks)
+            if self._channel is not None:
+                self._threaded = False
+                self._clock = time.monotonic  # the process's clock: CLOCK_MONOTONIC
+                return
+        self._choose_thread()
+
+    def _choose_thread(self) -> None:
+        assert self._loop is not None
+        self._threaded = SENDER_THREAD and _real_time_loop(self._loop)
         if self._threaded:
             if self._sender is None:
                 self._sender = shared_sender()
             self._clock = self._sender.clock
         else:
-            self._clock = loop.time
+            self._clock = self._loop.time
 
     def update(self, msg: mavlink.MAVLink_message) -> None:
         """Send ``msg`` from the next tick on without moving the schedule (a stream that
@@ -132,6 +177,9 @@ class SetpointStreamer:
         with self._lock:
             if self.active:
                 self._msg = msg
+                if self._channel is not None:
+                    with contextlib.suppress(ProcessGone):  # the stream stops with it
+                        self._channel.update(msg)
                 return
         self.stream(msg)
 
@@ -152,6 +200,9 @@ class SetpointStreamer:
             if self._handle is not None:
                 self._handle.cancel()
                 self._handle = None
+            if self._channel is not None:
+                self._channel.stop()
+            self._sid = None
             self._active = False
             self._msg = None
             self._started_s = None
@@ -196,10 +247,21 @@ class SetpointStreamer:
         self._emit(now)
         self._handle = self._loop.call_at(self._deadlines.after_tick(now), self._loop_tick)
 
+    def _process_ticks(self, sid: int, times: list[float]) -> None:
+        """Ticks the sender process made (its reader thread calls this)."""
+        with self._lock:
+            if sid != self._sid:
+                return  # a stopped stream's last ticks
+            for now in times:
+                self._record(now)
+
     def _emit(self, now: float) -> None:
         if self._msg is None:
             return
         self._send(self._msg)
+        self._record(now)
+
+    def _record(self, now: float) -> None:
         if self._last_s is not None:
             interval = now - self._last_s
             self._intervals[self._ring_next] = interval

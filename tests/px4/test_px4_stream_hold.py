@@ -1,4 +1,4 @@
-"""The setpoint stream on the server's sender thread keeps real PX4 v1.16 SITL in OFFBOARD:
+"""The setpoint stream on the server's sender process keeps real PX4 v1.16 SITL in OFFBOARD:
 take off, start offboard at the current position, then hold for HOLD_S seconds without a
 single call from the client; the server's own stream statistics over that time show a
 steady stream at its configured rate and no gap."""

@@ -3,6 +3,7 @@ and the routing of frames to the peers that spoke from each system."""
 
 from __future__ import annotations
 
+import socket
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Hashable
 from typing import Any, Protocol
@@ -190,6 +191,16 @@ class Transport(ABC):
     def thread_writer(self) -> Callable[[bytes, int | None], bool] | None:
         """A write() that threads other than the loop's may call (the setpoint sender
         thread), or None: then the link hands their frames to the loop."""
+        return None
+
+    def process_socket(self) -> socket.socket | None:
+        """The socket another process may write this transport's frames with (the setpoint
+        sender process), or None: that process cannot send for it."""
+        return None
+
+    def destinations_of(self, target_system: int | None) -> list[Any] | None:
+        """Where a frame for ``target_system`` goes when written with process_socket()
+        (None: the socket is connected to its one peer)."""
         return None
 
     def _opened(self) -> None:

@@ -81,6 +81,9 @@ class _UdpTransport(Transport):
     def thread_writer(self) -> Callable[[bytes, int | None], bool] | None:
         return self._write_off_loop
 
+    def process_socket(self) -> socket.socket | None:
+        return self._thread_socket
+
     def input_pending(self) -> bool:
         # FIONREAD on a datagram socket: the size of the next queued datagram, 0 if none
         sock = self._thread_socket
@@ -167,6 +170,9 @@ class UdpInTransport(_UdpTransport):
         for addr in destinations:
             self._endpoint.sendto(frame, cast(tuple[str, int], addr))
         return bool(destinations)
+
+    def destinations_of(self, target_system: int | None) -> list[Any] | None:
+        return list(self._router.destinations(target_system))
 
     def _send_off_loop(self, sock: socket.socket, frame: bytes, target_system: int | None
                        ) -> bool:
