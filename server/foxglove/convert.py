@@ -1,0 +1,61 @@
+"""`skyhelm convert FLIGHT.tlog FLIGHT.mcap`: a recorded .tlog as MCAP, with the channels a
+live MCAP recording has, less those only the running server knows (state, health, events):
+every MAVLink message on its channel, the pose, position and status texts derived from
+them. Frames from the ground station's ids (255/190, SkyHelm's own) count as sent."""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import foxglove
+from pymavlink.dialects.v20 import development as mavlink
+
+from server.foxglove.channels import LinkChannels
+from server.foxglove.router import FrameRouter
+from server.link import px4_messages
+from server.link.tlog import iter_tlog
+
+GCS_SYSID = 255
+GCS_COMPID = 190
+
+
+@dataclass
+class Conversion:
+    """What a conversion wrote: messages per MAVLink type, and frames it could not decode."""
+
+    messages: Counter[str] = field(default_factory=Counter)
+    undecodable: int = 0
+
+    @property
+    def total(self) -> int:
+        return sum(self.messages.values())
+
+
+def convert_tlog(source: Path, target: Path, *, overwrite: bool = False) -> Conversion:
+    context = foxglove.Context()
+    router = FrameRouter(LinkChannels(context, source.stem))
+    codec = mavlink.MAVLink(None)
+    result = Conversion()
+    with foxglove.open_mcap(target, allow_overwrite=overwrite, context=context):
+        for unix_time_s, frame in iter_tlog(source):
+            msg = _decode(codec, frame)
+            if msg is None:
+                result.undecodable += 1
+                continue
+            sent = (msg.get_srcSystem(), msg.get_srcComponent()) == (GCS_SYSID, GCS_COMPID)
+            router.frame(msg, sent, unix_time_s)
+            result.messages[msg.get_type()] += 1
+    router.channels.close()
+    return result
+
+
+def _decode(codec: mavlink.MAVLink, frame: bytes) -> mavlink.MAVLink_message | None:
+    try:
+        msg = codec.decode(bytearray(frame))
+    except mavlink.MAVError:
+        return None
+    if isinstance(msg, mavlink.MAVLink_unknown):
+        return px4_messages.decode_unknown(msg)
+    return msg
