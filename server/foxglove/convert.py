@@ -5,11 +5,13 @@ them. Frames from the ground station's ids (255/190, SkyHelm's own) count as sen
 
 from __future__ import annotations
 
+import sys
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import foxglove
+from mcap.reader import make_reader
 from pymavlink.dialects.v20 import development as mavlink
 
 from server.foxglove.channels import LinkChannels
@@ -59,3 +61,28 @@ def _decode(codec: mavlink.MAVLink, frame: bytes) -> mavlink.MAVLink_message | N
     if isinstance(msg, mavlink.MAVLink_unknown):
         return px4_messages.decode_unknown(msg)
     return msg
+
+
+def run_convert_command(source: Path, target: Path, *, overwrite: bool) -> int:
+    """`skyhelm convert`: 0, or 2 with the reason when a file cannot be read or written.
+    The summary printed is read back from the MCAP file as written."""
+    if not source.is_file():
+        print(f"skyhelm convert: no .tlog at {source}", file=sys.stderr)
+        return 2
+    if target.exists() and not overwrite:
+        print(f"skyhelm convert: {target} exists (--force overwrites it)", file=sys.stderr)
+        return 2
+    try:
+        result = convert_tlog(source, target, overwrite=overwrite)
+    except (OSError, RuntimeError) as exc:
+        print(f"skyhelm convert: {exc}", file=sys.stderr)
+        return 2
+    with target.open("rb") as file:
+        summary = make_reader(file).get_summary()
+    written = summary.statistics.message_count if summary and summary.statistics else 0
+    channels = len(summary.channels) if summary else 0
+    print(f"{target}: {written} messages on {channels} channels "
+          f"({result.total} MAVLink messages of {len(result.messages)} types"
+          + (f", {result.undecodable} frames not decodable" if result.undecodable else "")
+          + ")")
+    return 0

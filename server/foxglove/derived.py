@@ -41,18 +41,20 @@ def timestamp(time_ns: int) -> Timestamp:
     return Timestamp(time_ns // 1_000_000_000, time_ns % 1_000_000_000)
 
 
-def enu_flu_quaternion(roll_rad: float, pitch_rad: float, yaw_rad: float) -> Quaternion:
-    """The FRD body's attitude in NED as the FLU body's in ENU: roll stays, pitch turns
-    sign, yaw is measured from east counter-clockwise (90° − yaw)."""
+def enu_flu_quaternion(
+    roll_rad: float, pitch_rad: float, yaw_rad: float
+) -> tuple[float, float, float, float]:
+    """The FRD body's attitude in NED as the FLU body's in ENU, (x, y, z, w): roll stays,
+    pitch turns sign, yaw is measured from east counter-clockwise (90° − yaw)."""
     half_r, half_p, half_y = roll_rad / 2, -pitch_rad / 2, (math.pi / 2 - yaw_rad) / 2
     cr, sr = math.cos(half_r), math.sin(half_r)
     cp, sp = math.cos(half_p), math.sin(half_p)
     cy, sy = math.cos(half_y), math.sin(half_y)
-    return Quaternion(
-        x=sr * cp * cy - cr * sp * sy,
-        y=cr * sp * cy + sr * cp * sy,
-        z=cr * cp * sy - sr * sp * cy,
-        w=cr * cp * cy + sr * sp * sy,
+    return (
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+        cr * cp * cy + sr * sp * sy,
     )
 
 
@@ -104,7 +106,8 @@ class Derived:
         north_m, east_m, down_m = position
         stamp = timestamp(time_ns)
         translation = Vector3(x=east_m, y=north_m, z=-down_m)
-        rotation = enu_flu_quaternion(*attitude)
+        x, y, z, w = enu_flu_quaternion(*attitude)
+        rotation = Quaternion(x=x, y=y, z=z, w=w)
         if transform:
             channels.transform.log(
                 FrameTransform(
@@ -119,7 +122,7 @@ class Derived:
                     timestamp=stamp, frame_id=WORLD_FRAME,
                     pose=Pose(
                         position=Vector3(x=east_m, y=north_m, z=-down_m),
-                        orientation=enu_flu_quaternion(*attitude),
+                        orientation=Quaternion(x=x, y=y, z=z, w=w),
                     ),
                 ),
                 log_time=time_ns,

@@ -30,3 +30,8 @@ def mcap_mavlink_counts(reader: Any) -> Counter[str]:
         if direction in ("mavlink", "sent"):
             counts[kind] += 1
     return counts
+
+
+def mcap_topics(reader: Any) -> set[str]:
+    """The topics that hold at least one message."""
+    return {channel.topic for _, channel, _ in reader.iter_messages()}

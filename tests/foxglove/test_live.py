@@ -1,26 +1,24 @@
 """A flight of the simulated vehicle seen through Foxglove: a foxglove.websocket.v1 client
 on the app's proxied path gets every kind of channel, each message read by its own schema;
-the MCAP written meanwhile holds what the .tlog holds; no token, no socket."""
+no token, no socket."""
 
 from __future__ import annotations
 
-import asyncio
 from collections.abc import AsyncIterator
 from dataclasses import dataclass
-from pathlib import Path
 
 import pytest
+import pytest_asyncio
 import websockets
-from mcap.reader import make_reader
 
+from server.api.publisher import StatePublisher
 from server.foxglove import FoxgloveBridge
-from server.link.tlog import iter_tlog
 from tests.api.conftest import OBSERVER, PILOT, Api, api_for, sim_cluster
 from tests.foxglove.ws_client import FoxgloveClient, Received, foxglove_client
 from tests.serving import uvicorn_serving
 from tests.waiting import eventually
 
-from .counts import mcap_mavlink_counts, tlog_counts
+pytestmark = pytest.mark.asyncio(loop_scope="module")
 
 PREFIX = "/vehicle_1"
 # one of each kind a Foxglove panel reads, by topic: schema name
@@ -44,18 +42,18 @@ class Flight:
     bridge: FoxgloveBridge
 
 
-@pytest.fixture
-async def flight(tmp_path: Path) -> AsyncIterator[Flight]:
+@pytest_asyncio.fixture(loop_scope="module", scope="module")
+async def flight() -> AsyncIterator[Flight]:
     async with (
         sim_cluster("quad") as sim,
-        api_for(sim, foxglove_port=0, mcap=True, log_dir=tmp_path) as api,
+        api_for(sim, foxglove_port=0) as api,
         uvicorn_serving(api.app) as host,
     ):
         await api.wait_ready()
         yield Flight(api, host, api.app.state.foxglove)
 
 
-async def _fly_offboard(api: Api) -> None:
+async def fly_offboard(api: Api) -> None:
     await api.take_control()
     assert (await api.control("arm", {"force": False})).status_code == 200
     assert (await api.control("takeoff", {"altitude_m": 4.0})).status_code == 200
@@ -82,11 +80,15 @@ async def test_a_foxglove_client_gets_every_channel_kind_with_valid_schemas(
     flight: Flight,
 ) -> None:
     url = f"ws://{flight.host}/api/v1/foxglove?token={OBSERVER}"
+    publisher = flight.api.app.state.publishers.for_vehicle(flight.api.vehicle())
+    assert publisher.consumers == 0  # no reader of the state channel, no state taken for it
     async with foxglove_client(url) as client:
         # the events of the flight go to the log as they happen: subscribe first
         await eventually(lambda: _subscribed_to_log(client), 10.0, "the log advertised")
-        await _fly_offboard(flight.api)
+        await fly_offboard(flight.api)
         received = await eventually(lambda: _all_kinds(client), 20.0, "every channel kind")
+        assert publisher.consumers == 1
+    await eventually(lambda: _no_consumer(publisher), 5.0, "the state read no more")
     assert received.server_info is not None
     topics = received.topics()
     for topic, schema_name in EXPECTED.items():
@@ -105,22 +107,6 @@ async def test_a_foxglove_client_gets_every_channel_kind_with_valid_schemas(
     assert any("armed" in text for text in texts), texts
 
 
-async def test_the_mcap_written_during_a_flight_holds_every_tlog_message(flight: Flight) -> None:
-    link = next(iter(flight.api.app.state.api.registry.links))
-    tlog_path = link.tlog_path
-    assert tlog_path is not None
-    assert flight.bridge.mcap_paths == [tlog_path.with_suffix(".mcap")]
-    await _fly_offboard(flight.api)
-    await asyncio.sleep(1.0)
-    await link.close()
-    await flight.bridge.close()
-    tlog = tlog_counts(iter_tlog(tlog_path))
-    with tlog_path.with_suffix(".mcap").open("rb") as file:
-        mcap = mcap_mavlink_counts(make_reader(file))
-    assert tlog["SET_POSITION_TARGET_LOCAL_NED"] > 10
-    assert mcap == tlog
-
-
 async def test_a_missing_or_wrong_token_is_refused(flight: Flight) -> None:
     for query in ("", "?token=wrong-token-value"):
         with pytest.raises(websockets.exceptions.InvalidStatus) as refused:
@@ -131,6 +117,10 @@ async def test_a_missing_or_wrong_token_is_refused(flight: Flight) -> None:
         f"ws://{flight.host}/api/v1/foxglove", Authorization=f"Bearer {PILOT}"
     ) as client:
         await eventually(lambda: _advertised(client), 5.0, "channels advertised")
+
+
+async def _no_consumer(publisher: StatePublisher) -> bool:
+    return publisher.consumers == 0
 
 
 async def _advertised(client: FoxgloveClient) -> bool:
