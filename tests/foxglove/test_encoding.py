@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,12 +14,14 @@ from pymavlink.dialects.v20 import development as mavlink
 
 from server.foxglove.bridge import event_log
 from server.foxglove.derived import enu_flu_quaternion
+from server.foxglove.layout import layout_json
 from server.foxglove.mavlink_json import message_json
 from server.foxglove.schemas import HEALTH_SCHEMA, STATE_SCHEMA, foxglove_schema, mavlink_schema
 from server.link import VehicleEvent, px4_messages
 from tests.foxglove.ws_client import check_conforms, check_foxglove_json_schema
 
 _MAV = mavlink.MAVLink(None, 1, 1)
+LAYOUT_FILE = Path(__file__).resolve().parents[2] / "docs" / "foxglove-layout.json"
 
 
 def test_the_state_and_health_schemas_are_in_foxgloves_subset() -> None:
@@ -126,3 +129,13 @@ def test_events_are_log_lines_with_their_own_text_or_their_data() -> None:
     assert event_log(armed) == (LogLevel.Info, 'armed: {"armed": true}')
     px4 = VehicleEvent("px4_event", 0.0, {"severity": "error", "text": "Preflight Fail"})
     assert event_log(px4) == (LogLevel.Error, "Preflight Fail")
+
+
+def test_the_layout_in_the_docs_is_the_one_the_code_builds() -> None:
+    assert LAYOUT_FILE.read_text() == layout_json(), (
+        "docs/foxglove-layout.json is stale: python -m server.foxglove.layout > it"
+    )
+    text = LAYOUT_FILE.read_text()
+    for topic in ("/vehicle_1/location", "/vehicle_1/pose", "/vehicle_1/log",
+                  "/vehicle_1/state.attitude.roll_deg", "/vehicle_1/state.global.alt_rel_m"):
+        assert f'"{topic}' in text
