@@ -1,7 +1,8 @@
 """The vehicles in Foxglove: a Foxglove WebSocket server (foxglove-sdk) on a loopback port,
 and per link an MCAP file beside its .tlog, both fed from the same channels.
 
-What feeds them: every frame of a link through a frame tap (router.py), and per vehicle
+What feeds them: every frame of a link through a frame tap (router.py; the tap only queues
+the frame, so the link's reader does not wait for any encoding), and per vehicle
 its events (foxglove.Log) and, while someone reads them, its state and health from the
 API's state publisher at ``state_rate_hz``. Nothing is encoded for a channel without a
 reader, so with no client and no MCAP file the bridge costs a lookup per frame.
@@ -18,11 +19,13 @@ import dataclasses
 import json
 import logging
 import time
+from collections import deque
 from pathlib import Path
 
 import foxglove
 from foxglove.messages import LogLevel
 from foxglove.websocket import WebSocketServer
+from pymavlink.dialects.v20 import development as mavlink
 
 from server.api.publisher import StatePublishers
 from server.api.views import LeaseStatus, finite, state_json, stream_dict
@@ -31,6 +34,7 @@ from server.foxglove.derived import LEVEL_BY_SEVERITY_NAME
 from server.foxglove.router import FrameRouter
 from server.link import Link, Vehicle, VehicleEvent, VehicleState
 from server.link.aio import cancel_and_wait
+from server.link.link import FrameTap
 
 log = logging.getLogger(__name__)
 
@@ -41,6 +45,11 @@ READER_CHECK_S = 0.25
 EVENT_BACKLOG = 256
 # Each client's queue in the SDK's server: the oldest data message goes when it is full.
 MESSAGE_BACKLOG = 4096
+# Frames wait for the next loop iteration in a queue of at most PENDING_FRAMES (beyond it the
+# oldest is dropped and counted: only a loop stalled for seconds gets there) and are routed
+# FRAME_BATCH per iteration, so that timers and reads run between batches.
+PENDING_FRAMES = 10_000
+FRAME_BATCH = 64
 # Events other than these are information.
 _EVENT_LEVELS = {"reboot": LogLevel.Warning, "link_restored": LogLevel.Warning}
 
@@ -61,7 +70,7 @@ class FoxgloveBridge:
         self.state_rate_hz = state_rate_hz
         self.server: WebSocketServer | None = None
         self.mcap_paths: list[Path] = []
-        self._links: list[tuple[Link, LinkChannels, FrameRouter]] = []
+        self._links: list[tuple[Link, LinkChannels, FrameRouter, FrameQueue]] = []
         self._writers: list[foxglove.MCAPWriter] = []
         self._tasks: list[asyncio.Task[None]] = []
         self._publishers: StatePublishers | None = None
@@ -76,8 +85,9 @@ class FoxgloveBridge:
     def attach(self, link: Link) -> None:
         channels = LinkChannels(self.context, link.name)
         router = FrameRouter(channels)
-        link.add_frame_tap(router.frame)
-        self._links.append((link, channels, router))
+        queue = FrameQueue(router.frame)
+        link.add_frame_tap(queue.put)
+        self._links.append((link, channels, router, queue))
         if self.record_mcap and link.tlog_path is not None:
             self._open_mcap(link.tlog_path.with_suffix(".mcap"), link.name)
 
@@ -99,7 +109,7 @@ class FoxgloveBridge:
                 message_backlog_size=MESSAGE_BACKLOG,
             )
             log.info("Foxglove WebSocket server on ws://%s:%d", LOOPBACK, self.server.port)
-        for link, channels, router in self._links:
+        for link, channels, router, _ in self._links:
             self._tasks.append(asyncio.create_task(self._discover(link, channels, router)))
 
     async def close(self) -> None:
@@ -109,13 +119,19 @@ class FoxgloveBridge:
         if self.server is not None:
             self.server.stop()
             self.server = None
+        for link, _, _, queue in self._links:
+            link.remove_frame_tap(queue.put)
+            queue.flush()  # what the .tlog recorded goes into the MCAP file too
         for writer in self._writers:
             writer.close()
         self._writers.clear()
-        for link, channels, router in self._links:
-            link.remove_frame_tap(router.frame)
+        for _, channels, _, _ in self._links:
             channels.close()
         self._links.clear()
+
+    @property
+    def frames_dropped(self) -> int:
+        return sum(queue.dropped for *_, queue in self._links)
 
     async def _discover(self, link: Link, channels: LinkChannels, router: FrameRouter) -> None:
         queue = link.subscribe_vehicles()
@@ -162,6 +178,41 @@ class FoxgloveBridge:
                     derived.log(level, text, f"skyhelm.{event.kind}", int(event.time_s * 1e9))
         finally:
             vehicle.unsubscribe_events(queue)
+
+
+class FrameQueue:
+    """A link's frames on their way to the router: the tap puts, the loop routes them soon
+    after, in order, FRAME_BATCH at a time."""
+
+    def __init__(self, route: FrameTap) -> None:
+        self._route = route
+        self._loop = asyncio.get_running_loop()
+        self._pending: deque[tuple[mavlink.MAVLink_message, bool, float]] = deque()
+        self._scheduled = False
+        self.dropped = 0
+
+    def put(self, msg: mavlink.MAVLink_message, sent: bool, unix_time_s: float) -> None:
+        pending = self._pending
+        if len(pending) >= PENDING_FRAMES:
+            pending.popleft()
+            self.dropped += 1
+        pending.append((msg, sent, unix_time_s))
+        if not self._scheduled:
+            self._scheduled = True
+            self._loop.call_soon(self._drain)
+
+    def _drain(self) -> None:
+        self._scheduled = False
+        pending, route = self._pending, self._route
+        for _ in range(min(FRAME_BATCH, len(pending))):
+            route(*pending.popleft())
+        if pending and not self._scheduled:
+            self._scheduled = True
+            self._loop.call_soon(self._drain)
+
+    def flush(self) -> None:
+        while self._pending:
+            self._route(*self._pending.popleft())
 
 
 def _read(channels: VehicleChannels) -> bool:
