@@ -1,6 +1,6 @@
 """What Foxglove's Map, 3D and Log panels read, derived from a vehicle's MAVLink messages:
-GLOBAL_POSITION_INT → foxglove.LocationFix; LOCAL_POSITION_NED with ATTITUDE →
-foxglove.FrameTransform and foxglove.PoseInFrame (NED/FRD turned into ENU/FLU);
+GLOBAL_POSITION_INT → foxglove.LocationFix; each LOCAL_POSITION_NED with the latest
+ATTITUDE → foxglove.FrameTransform and foxglove.PoseInFrame (NED/FRD turned into ENU/FLU);
 STATUSTEXT (chunks joined) → foxglove.Log. Live and `skyhelm convert` both go through
 here, so a recording and the live view show the same."""
 
@@ -91,9 +91,10 @@ class Derived:
             self._pose(time_ns)
 
     def _attitude(self, msg: Any, time_ns: int) -> None:
+        # kept for the next position: a pose per position report is the 3D view's rate, and
+        # one per ATTITUDE too would double the work for no new place
         if msg.get_srcComponent() == MAV_COMP_ID_AUTOPILOT1:
             self.channels.pose.attitude_rad = (msg.roll, msg.pitch, msg.yaw)
-            self._pose(time_ns)
 
     def _pose(self, time_ns: int) -> None:
         channels = self.channels
