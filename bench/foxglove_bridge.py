@@ -7,14 +7,15 @@ The vehicle is one bench._sim_tap process, which times every SET_POSITION_TARGET
 with its datagram's kernel receive time. Two servers fly it in turn: one without
 --foxglove-port (windows ``off``), then one with it, whose windows alternate ``idle`` (no
 client), ``direct`` (the client on the SDK's loopback port) and ``proxied`` (the client
-through /api/v1/foxglove with the token: the relay runs in the server's process), ROUNDS
-times, so that the machine's load drifts over all of them alike. Per window: the server's
+through /api/v1/foxglove with the token: the relay runs in the server's process), in
+turn, ROUNDS short windows of idle and direct (fewer of off and proxied), so that the
+machine's other load falls on all of them alike. Per window: the server's
 CPU share of one core (utime + stime of its process, the SDK's threads included) and the
 stream's |interval − 50 ms| at the vehicle. The claims: the bridge with a client costs
 ≤ 10 % of a core (direct − off), and the stream's p99 is the same with the client as
 without it (direct / idle: the same process, interleaved windows).
 
-    .venv/bin/python -m bench.foxglove_bridge [--seconds 4] [--rounds 3] [--quick]
+    .venv/bin/python -m bench.foxglove_bridge [--seconds 2] [--rounds 8] [--quick]
 """
 
 from __future__ import annotations
@@ -50,6 +51,9 @@ WARMUP_S = 2.0
 KINDS = ("off", "idle", "direct", "proxied")
 # after a client connects or leaves, before a window is measured
 SETTLE_S = 1.0
+# the stream's p99 compares idle and direct windows, many short ones in turn so that the
+# machine's other work falls on both alike; off and proxied need fewer (their CPU share)
+SIDE_ROUNDS = 3
 GOAL_CPU_SHARE = 0.10
 # "does not change the p99": within this factor of the run without the bridge (or within
 # GOAL_P99_SLACK_MS of it, where both are a fraction of a millisecond)
@@ -63,7 +67,6 @@ class Subscriber:
 
     messages: Counter[str] = field(default_factory=Counter)
     bytes: int = 0
-    topics: dict[int, str] = field(default_factory=dict)
 
     def reset(self) -> None:
         self.messages.clear()
@@ -162,16 +165,23 @@ async def measure_server(
             await take_control_and_stream(client, 1)
             await asyncio.sleep(WARMUP_S)
             proxied = base.replace("http://", "ws://") + f"/api/v1/foxglove?token={TOKEN}"
-            for _ in range(rounds):
-                if not bridge:
+            if not bridge:
+                for _ in range(min(rounds, SIDE_ROUNDS)):
                     windows.append(await _window(tap, server.pid, "off", seconds, None))
-                    continue
+                return windows
+            direct = f"ws://127.0.0.1:{foxglove_port}"
+            for round_ in range(rounds):
+                if round_ % 2:  # which comes first alternates: no kind always follows a client
+                    windows.append(await _with_client(
+                        tap, server.pid, "direct", seconds, direct, "foxglove.sdk.v1"))
+                    await asyncio.sleep(SETTLE_S)
                 windows.append(await _window(tap, server.pid, "idle", seconds, None))
-                windows.append(await _with_client(
-                    tap, server.pid, "direct", seconds, f"ws://127.0.0.1:{foxglove_port}",
-                    "foxglove.sdk.v1"))
-                windows.append(await _with_client(
-                    tap, server.pid, "proxied", seconds, proxied, "foxglove.websocket.v1"))
+                if not round_ % 2:
+                    windows.append(await _with_client(
+                        tap, server.pid, "direct", seconds, direct, "foxglove.sdk.v1"))
+                if round_ < SIDE_ROUNDS:
+                    windows.append(await _with_client(
+                        tap, server.pid, "proxied", seconds, proxied, "foxglove.websocket.v1"))
                 await asyncio.sleep(SETTLE_S)  # the last client gone: the next idle is idle
     return windows
 
@@ -198,7 +208,15 @@ def summarise(windows: list[dict[str, Any]]) -> dict[str, Any]:
         cpu = sum(w["server_cpu_share_of_one_core"] * w["seconds"] for w in mine)
         wall = sum(w["seconds"] for w in mine)
         p99 = percentile(errors_ms, 99)
+        window_p99s = [percentile([abs(b - a - period_s) * 1000.0
+                                   for a, b in itertools.pairwise(w["arrivals"])], 99)
+                       for w in mine]
+        window_p99s_ms = sorted(round(v, 3) for v in window_p99s if v is not None)
         kinds[kind] = {
+            "windows": len(mine),
+            # one stall of the machine lands in one window: the median window is robust to it
+            "stream_window_p99_median_ms": percentile(window_p99s_ms, 50),
+            "stream_window_p99s_ms": window_p99s_ms,
             "server_cpu_share_of_one_core": round(cpu / wall, 4),
             "stream_p99_error_ms": round(p99, 3) if p99 is not None else None,
             "stream_max_gap_ms": round(max(intervals) * 1000.0, 1) if intervals else None,
@@ -209,10 +227,11 @@ def summarise(windows: list[dict[str, Any]]) -> dict[str, Any]:
             "kbytes_per_s": round(sum(w["kbytes_per_s"] for w in mine) / len(mine), 1),
         }
     cpu = {kind: figures["server_cpu_share_of_one_core"] for kind, figures in kinds.items()}
-    p99 = {kind: figures["stream_p99_error_ms"] for kind, figures in kinds.items()}
+    p99 = {kind: figures["stream_window_p99_median_ms"] for kind, figures in kinds.items()}
     ratio = p99["direct"] / p99["idle"] if p99["idle"] and p99["direct"] is not None else None
     p99_kept = ratio is not None and (
         ratio <= GOAL_P99_RATIO or p99["direct"] - p99["idle"] <= GOAL_P99_SLACK_MS)
+    pooled = {kind: figures["stream_p99_error_ms"] for kind, figures in kinds.items()}
     cost = cpu["direct"] - cpu["off"]
     return {
         "kinds": kinds,
@@ -220,17 +239,22 @@ def summarise(windows: list[dict[str, Any]]) -> dict[str, Any]:
         "client_cpu_share_of_one_core": round(cpu["direct"] - cpu["idle"], 4),
         "idle_bridge_cpu_share_of_one_core": round(cpu["idle"] - cpu["off"], 4),
         "proxied_cpu_share_of_one_core": round(cpu["proxied"] - cpu["off"], 4),
+        # the median window's p99, with the client over without it (same server, in turn)
         "stream_p99_ratio_with_over_without": round(ratio, 3) if ratio is not None else None,
         "stream_p99_ratio_with_over_no_bridge": (
             round(p99["direct"] / p99["off"], 3) if p99["off"] and p99["direct"] else None),
+        # the p99 of all windows' intervals together, over without the client
+        "stream_pooled_p99_ratio_with_over_without": (
+            round(pooled["direct"] / pooled["idle"], 3)
+            if pooled["idle"] and pooled["direct"] is not None else None),
         "goal_met": cost <= GOAL_CPU_SHARE and p99_kept,
     }
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--seconds", type=float, default=4.0, help="one window")
-    parser.add_argument("--rounds", type=int, default=3, help="windows of each kind")
+    parser.add_argument("--seconds", type=float, default=2.0, help="one window")
+    parser.add_argument("--rounds", type=int, default=8, help="idle and direct windows")
     parser.add_argument("--quick", action="store_true", help="smoke run: one round of 2 s")
     args = parser.parse_args()
     seconds, rounds = (2.0, 1) if args.quick else (args.seconds, args.rounds)
@@ -238,7 +262,8 @@ def main() -> int:
     summary = summarise(asyncio.run(run(seconds, rounds)))
     for kind, figures in summary["kinds"].items():
         print(f"{kind:8s} server {100 * figures['server_cpu_share_of_one_core']:5.1f} % of a "
-              f"core; stream p99 |interval − 50 ms| {figures['stream_p99_error_ms']} ms, max "
+              f"core; stream |interval − 50 ms| p99 {figures['stream_p99_error_ms']} ms (median "
+              f"window {figures['stream_window_p99_median_ms']} ms), max "
               f"gap {figures['stream_max_gap_ms']:.1f} ms; client: {figures['channels']} "
               f"channels, {figures['messages_per_s']} msg/s ({figures['state_per_s']} states/s), "
               f"{figures['kbytes_per_s']} kB/s", flush=True)
@@ -246,7 +271,8 @@ def main() -> int:
           f"core (idle {100 * summary['idle_bridge_cpu_share_of_one_core']:.1f} %, the client "
           f"{100 * summary['client_cpu_share_of_one_core']:.1f} %, through the proxy "
           f"{100 * summary['proxied_cpu_share_of_one_core']:.1f} %); stream p99 with/without "
-          f"the client {summary['stream_p99_ratio_with_over_without']} (over no bridge "
+          f"the client {summary['stream_p99_ratio_with_over_without']} (median window; all "
+          f"intervals {summary['stream_pooled_p99_ratio_with_over_without']}; over no bridge "
           f"{summary['stream_p99_ratio_with_over_no_bridge']}); goal met: {summary['goal_met']}")
     write_results("foxglove_bridge", {
         "machine": machine_info(load_before),
@@ -273,21 +299,24 @@ def report(result: dict[str, Any]) -> Section | None:
              "proxied": "bridge, client through /api/v1/foxglove"}
     rows = [
         [names[kind], f"{100 * f['server_cpu_share_of_one_core']:.1f} %",
-         f"{f['stream_p99_error_ms']} ms", f"{f['stream_max_gap_ms']} ms",
+         f"{f['stream_window_p99_median_ms']} ms", f"{f['stream_p99_error_ms']} ms",
+         f"{f['stream_max_gap_ms']} ms",
          f"{f['channels']}", f"{f['messages_per_s']:.0f}", f"{f['state_per_s']:.0f}"]
         for kind, f in kinds.items()
     ]
     markdown = (
         f"One simulated vehicle, a {result['stream_rate_hz']:g} Hz setpoint stream and a "
         f"Foxglove client subscribed to every channel (state at up to "
-        f"{result['state_rate_hz']:g} Hz), {result['rounds']} windows of "
+        f"{result['state_rate_hz']:g} Hz), up to {result['rounds']} windows of "
         f"{result['seconds_per_window']:g} s of each kind, interleaved: the bridge with a "
         f"client costs {100 * result['bridge_cpu_share_of_one_core']:.1f} % of a core "
         f"({100 * result['proxied_cpu_share_of_one_core']:.1f} % with the client through "
         f"the proxy; goal ≤ {100 * result['goal']['cpu_share_of_one_core']:.0f} %), and the "
         f"stream's p99 with/without the client is "
-        f"{result['stream_p99_ratio_with_over_without']}.\n\n"
-        + table(["server", "CPU (one core)", "stream p99 |interval − 50 ms|", "max gap",
+        f"{result['stream_p99_ratio_with_over_without']} (the median window's; over all "
+        f"intervals {result['stream_pooled_p99_ratio_with_over_without']}).\n\n"
+        + table(["server", "CPU (one core)", "stream p99 |interval − 50 ms|, median window",
+                 "all windows", "max gap",
                  "channels", "messages/s", "states/s"], rows))
     return Section("Foxglove bridge", 96, markdown)
 

@@ -26,7 +26,7 @@ from foxglove.channels import (
 )
 from pymavlink.dialects.v20 import development as mavlink
 
-from server.foxglove.schemas import HEALTH_SCHEMA, STATE_SCHEMA, mavlink_schema
+from server.foxglove.schemas import HEALTH_SCHEMA, STATE_SCHEMA, JsonSchema, mavlink_schema
 
 LINK_METADATA = "skyhelm.link"
 WORLD_FRAME = "map"
@@ -61,11 +61,13 @@ class LinkChannels:
         key = (sysid, sent, msg.get_type())
         channel = self._mavlink.get(key)
         if channel is None:
-            channel = self._mavlink[key] = foxglove.Channel(
-                mavlink_topic(*key), schema=mavlink_schema(msg),
-                context=self.context, metadata=self.metadata,
-            )
+            channel = self._mavlink[key] = self.json_channel(mavlink_topic(*key),
+                                                             mavlink_schema(msg))
         return channel
+
+    def json_channel(self, topic: str, schema: JsonSchema) -> foxglove.Channel:
+        return foxglove.Channel(topic, schema=schema, context=self.context,
+                                metadata=self.metadata)
 
     def vehicle(self, sysid: int) -> VehicleChannels:
         channels = self._vehicles.get(sysid)
@@ -109,23 +111,19 @@ class VehicleChannels:
         self._state: foxglove.Channel | None = None
         self._health: foxglove.Channel | None = None
 
+    # live only (a .tlog holds neither): made when the bridge first asks
     @property
     def state(self) -> foxglove.Channel:
-        # live only (a .tlog holds no state): made when the bridge first asks
         if self._state is None:
-            self._state = foxglove.Channel(
-                f"{vehicle_prefix(self.sysid)}/state", schema=STATE_SCHEMA,
-                context=self.link.context, metadata=self.link.metadata,
-            )
+            self._state = self.link.json_channel(f"{vehicle_prefix(self.sysid)}/state",
+                                                 STATE_SCHEMA)
         return self._state
 
     @property
     def health(self) -> foxglove.Channel:
         if self._health is None:
-            self._health = foxglove.Channel(
-                f"{vehicle_prefix(self.sysid)}/health", schema=HEALTH_SCHEMA,
-                context=self.link.context, metadata=self.link.metadata,
-            )
+            self._health = self.link.json_channel(f"{vehicle_prefix(self.sysid)}/health",
+                                                  HEALTH_SCHEMA)
         return self._health
 
     def close(self) -> None:
