@@ -96,6 +96,8 @@ def create_app(settings: Settings, *, freeze_gc_at_start: bool = False) -> FastA
         sim: SimProcess | None = None
         try:
             signing_store = app.state.signing_store = _signing_store(settings)
+            if foxglove is not None:
+                await foxglove.open()
             if settings.connect:
                 await _open_links(registry, settings, settings.connect, signing_store, attach)
             elif starts_sim(settings):  # a fleet server may have no vehicle of its own

@@ -42,7 +42,7 @@ def convert_tlog(source: Path, target: Path, *, overwrite: bool = False) -> Conv
     result = Conversion()
     with foxglove.open_mcap(target, allow_overwrite=overwrite, context=context):
         for unix_time_s, frame in iter_tlog(source):
-            msg = _decode(codec, frame)
+            msg = decode_frame(codec, frame)
             if msg is None:
                 result.undecodable += 1
                 continue
@@ -53,7 +53,8 @@ def convert_tlog(source: Path, target: Path, *, overwrite: bool = False) -> Conv
     return result
 
 
-def _decode(codec: mavlink.MAVLink, frame: bytes) -> mavlink.MAVLink_message | None:
+def decode_frame(codec: mavlink.MAVLink, frame: bytes) -> mavlink.MAVLink_message | None:
+    """A frame as the link decoded it (PX4's own messages too), or None."""
     try:
         msg = codec.decode(bytearray(frame))
     except mavlink.MAVError:
