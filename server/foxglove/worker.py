@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
 import time
 import traceback
@@ -130,6 +131,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--port", type=int, help="the WebSocket server's port (none: no server)")
     args = parser.parse_args()
+    # Ctrl-C reaches the whole process group: the server closes this process's stdin once
+    # it has handed over its last frames, and that ends it (a dead server's pipe ends too)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     worker = Worker(args.port, sys.stdout.buffer)
     try:
         serve(sys.stdin.buffer, worker)
