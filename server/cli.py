@@ -261,6 +261,11 @@ async def serve(settings: Settings) -> int:
         await asyncio.sleep(0.05)
     port = server.servers[0].sockets[0].getsockname()[1]
     print(f"SkyHelm ready: {ready_url(settings, port)}", flush=True)
+    foxglove = getattr(getattr(server.config.app, "state", None), "foxglove", None)
+    if foxglove is not None and foxglove.server_port is not None:
+        url = ready_url(settings, port).replace("http", "ws", 1).replace("/?", "/api/v1/foxglove?")
+        print(f"Foxglove: ws://127.0.0.1:{foxglove.server_port} on this machine, or {url}",
+              flush=True)
     await running
     return 0
 

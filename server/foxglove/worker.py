@@ -131,9 +131,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--port", type=int, help="the WebSocket server's port (none: no server)")
     args = parser.parse_args()
-    # Ctrl-C reaches the whole process group: the server closes this process's stdin once
-    # it has handed over its last frames, and that ends it (a dead server's pipe ends too)
+    # Ctrl-C reaches the whole process group, and a service manager's SIGTERM every process
+    # of the service: the server closes this process's stdin once it has handed over its
+    # last frames, and that ends it, the MCAP files closed (a dead server's pipe ends too)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
     worker = Worker(args.port, sys.stdout.buffer)
     try:
         serve(sys.stdin.buffer, worker)

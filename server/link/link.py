@@ -309,10 +309,10 @@ class Link:
         self.signing.note_received(msg)
         if msg.get_msgId() == MAVLINK_MSG_ID_SETUP_SIGNING:
             return  # a key: never recorded, and no vehicle of ours takes one from a peer
-        if self._tlog is not None:
-            self._tlog.record(msg.get_msgbuf())
-        if self._taps:
-            unix_time_s = time.time()
+        if self._tlog is not None or self._taps:
+            unix_time_s = time.time()  # one time for both: a tap's frames match the .tlog's
+            if self._tlog is not None:
+                self._tlog.record(msg.get_msgbuf(), unix_time_s)
             for tap in self._taps:
                 tap(msg, False, unix_time_s)
         if (msg.get_msgId() == mavlink.MAVLINK_MSG_ID_HEARTBEAT
