@@ -15,7 +15,7 @@ stream's |interval − 50 ms| at the vehicle. The claims: the bridge with a clie
 ≤ 10 % of a core (direct − off), and the stream's p99 is the same with the client as
 without it (direct / idle: the same process, interleaved windows).
 
-    .venv/bin/python -m bench.foxglove_bridge [--seconds 2] [--rounds 6] [--quick]
+    .venv/bin/python -m bench.foxglove_bridge [--seconds 2] [--rounds 4] [--quick]
 """
 
 from __future__ import annotations
@@ -266,7 +266,7 @@ def summarise(windows: list[dict[str, Any]]) -> dict[str, Any]:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seconds", type=float, default=2.0, help="one window")
-    parser.add_argument("--rounds", type=int, default=6, help="idle and direct windows")
+    parser.add_argument("--rounds", type=int, default=4, help="idle and direct windows")
     parser.add_argument("--quick", action="store_true", help="smoke run: one round of 2 s")
     args = parser.parse_args()
     seconds, rounds = (2.0, 1) if args.quick else (args.seconds, args.rounds)
