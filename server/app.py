@@ -44,6 +44,7 @@ from server.fleet import ws as fleet_ws
 from server.fleet.edge import EdgeService
 from server.fleet.view import FleetVehicle
 from server.fleet.view_service import FleetService
+from server.foxglove import FoxgloveBridge, FoxgloveProxy
 from server.link import Envelope, Link
 from server.link.signing import SigningKeyError, SigningKeyStore
 from server.link.urls import parse_link_url
@@ -87,14 +88,18 @@ def create_app(settings: Settings, *, freeze_gc_at_start: bool = False) -> FastA
     if fleet is not None and hub is not None:
         fleet.view.on_change.append(_show_in_scene(hub.fleet))
     edge = EdgeService.from_settings(settings, registry.all, publishers) if settings.zenoh else None
+    foxglove = _foxglove_bridge(settings)
+    attach = foxglove.attach if foxglove is not None else None
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         sim: SimProcess | None = None
         try:
             signing_store = app.state.signing_store = _signing_store(settings)
+            if foxglove is not None:
+                await foxglove.open()
             if settings.connect:
-                await _open_links(registry, settings, settings.connect, signing_store)
+                await _open_links(registry, settings, settings.connect, signing_store, attach)
             elif starts_sim(settings):  # a fleet server may have no vehicle of its own
                 sim = SimProcess(
                     airframe=settings.sim_airframe,
@@ -105,11 +110,13 @@ def create_app(settings: Settings, *, freeze_gc_at_start: bool = False) -> FastA
                 app.state.sim = sim
                 instances = await sim.start()
                 await _open_links(
-                    registry, settings, [i.url for i in instances], signing_store
+                    registry, settings, [i.url for i in instances], signing_store, attach
                 )
                 await _wait_for_vehicles(registry, [i.sysid for i in instances], settings)
             await deadman.start()
             await publishers.start(registry.links)
+            if foxglove is not None:
+                await foxglove.start(publishers)
             if fleet is not None:
                 await _start_fleet(fleet)
             if edge is not None:
@@ -132,6 +139,8 @@ def create_app(settings: Settings, *, freeze_gc_at_start: bool = False) -> FastA
             await deadman.stop()
             for link in registry.remove_links():
                 await link.close()
+            if foxglove is not None:
+                await foxglove.close()
             if sim is not None:
                 await sim.stop()
 
@@ -147,6 +156,7 @@ def create_app(settings: Settings, *, freeze_gc_at_start: bool = False) -> FastA
     app.state.signing_store = None  # the lifespan reads the key file
     app.state.fleet = fleet
     app.state.edge = edge
+    app.state.foxglove = foxglove
     install_error_handlers(app)
     if settings.cors_origins:
         app.add_middleware(
@@ -177,6 +187,8 @@ def create_app(settings: Settings, *, freeze_gc_at_start: bool = False) -> FastA
     app.include_router(api)
     if hub is not None:
         hub.mount(app, check_token=tokens.is_valid)
+    if foxglove is not None and settings.foxglove_port is not None:
+        FoxgloveProxy(lambda: foxglove.port, tokens.is_valid).mount(app)
     if settings.web_dir is not None:
         app.mount("/", StaticFiles(directory=settings.web_dir, html=True), name="web")
     install_security(app, tokens, context.guards, settings.cors_origins)
@@ -201,6 +213,16 @@ def _show_in_scene(scene: FleetScene) -> Callable[[FleetVehicle], None]:
             scene.show(vehicle.key, vehicle.state, vehicle.alive)
 
     return show
+
+
+def _foxglove_bridge(settings: Settings) -> FoxgloveBridge | None:
+    """Foxglove's server with --foxglove-port, MCAP files with --mcap (beside the .tlogs)."""
+    if settings.foxglove_port is None and not (settings.mcap and settings.log_dir is not None):
+        return None
+    return FoxgloveBridge(
+        port=settings.foxglove_port, record_mcap=settings.mcap,
+        state_rate_hz=settings.telemetry_max_rate_hz,
+    )
 
 
 def starts_sim(settings: Settings) -> bool:
@@ -247,6 +269,7 @@ def _sim_signing_dir(store: SigningKeyStore | None) -> Path | None:
 async def _open_links(
     registry: VehicleRegistry, settings: Settings, urls: list[str],
     signing_store: SigningKeyStore | None = None,
+    on_open: Callable[[Link], None] | None = None,
 ) -> None:
     for url in urls:
         # Recording a replay would only copy the file being replayed.
@@ -257,6 +280,7 @@ async def _open_links(
                 silence_timeout_s=settings.silence_timeout_s,
                 # a recording is shown as it was recorded: nothing to sign or check
                 signing_store=None if is_replay([url]) else signing_store,
+                on_open=on_open,
             )
         except OSError as exc:
             raise StartupError(f"cannot open {url}: {exc}") from exc

@@ -1,5 +1,6 @@
 """The `skyhelm` command: `serve` (the dashboard), `replay` (the dashboard, read-only, from a
-recorded .tlog), `sim` (the simulated vehicle alone), `router` (a Zenoh router for a fleet)."""
+recorded .tlog), `sim` (the simulated vehicle alone), `router` (a Zenoh router for a fleet),
+`convert` (a .tlog to MCAP)."""
 
 from __future__ import annotations
 
@@ -54,6 +55,9 @@ def _server_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--no-access-log", action="store_true", help="no request log (tokens are redacted in it)"
     )
+    parser.add_argument("--foxglove-port", type=int,
+                        help="Foxglove WebSocket server on 127.0.0.1 (0: a free port; default "
+                             "off); with a token through /api/v1/foxglove (docs/foxglove.md)")
     parser.add_argument("--log-level", default="info", help="debug|info|warning|error")
 
 
@@ -88,6 +92,8 @@ def _serve_parser(sub: Any) -> None:
     serve.add_argument("--max-speed-z-m-s", type=float, help="envelope: vertical speed")
     serve.add_argument("--log-dir", type=Path, help="where .tlog recordings go (default logs)")
     serve.add_argument("--no-tlog", action="store_true", help="record no .tlog")
+    serve.add_argument("--mcap", action="store_true",
+                       help="record an MCAP file beside each .tlog (docs/foxglove.md)")
     serve.add_argument("--signing-key-file", type=Path,
                        help="MAVLink 2 signing key file (a path: the key itself never goes on "
                             "the command line); POST /api/v1/signing creates it")
@@ -149,6 +155,10 @@ def build_parser() -> argparse.ArgumentParser:
     # `skyhelm sim` hands every argument to `python -m sim`, see main().
     sub.add_parser("sim", help="run the simulated PX4 vehicle alone, like PX4 SITL (sim --help)")
     _router_parser(sub)
+    convert = sub.add_parser("convert", help="write a recorded .tlog as MCAP (docs/foxglove.md)")
+    convert.add_argument("tlog", type=Path, help="the .tlog to read")
+    convert.add_argument("mcap", type=Path, help="the MCAP file to write")
+    convert.add_argument("--force", action="store_true", help="overwrite an existing MCAP file")
     return parser
 
 
@@ -251,6 +261,11 @@ async def serve(settings: Settings) -> int:
         await asyncio.sleep(0.05)
     port = server.servers[0].sockets[0].getsockname()[1]
     print(f"SkyHelm ready: {ready_url(settings, port)}", flush=True)
+    foxglove = getattr(getattr(server.config.app, "state", None), "foxglove", None)
+    if foxglove is not None and foxglove.server_port is not None:
+        url = ready_url(settings, port).replace("http", "ws", 1).replace("/?", "/api/v1/foxglove?")
+        print(f"Foxglove: ws://127.0.0.1:{foxglove.server_port} on this machine, or {url}",
+              flush=True)
     await running
     return 0
 
@@ -263,6 +278,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     configure_logging(getattr(args, "log_level", "info"))
     if args.command == "router":
         return run_router_command(args)
+    if args.command == "convert":
+        from server.foxglove.convert import run_convert_command
+
+        return run_convert_command(args.tlog, args.mcap, overwrite=args.force)
     try:
         settings = settings_from_args(args)
     except SettingsError as exc:

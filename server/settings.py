@@ -128,6 +128,13 @@ class Settings(BaseSettings):
         20.0, ge=0.0, description="how long startup waits for each simulated vehicle"
     )
     scene: bool = True
+    # Foxglove (docs/foxglove.md). The SDK's server checks no token, so it listens on
+    # 127.0.0.1 only; /api/v1/foxglove is the way in with a token.
+    foxglove_port: int | None = Field(
+        None, ge=0, le=65535,
+        description="Foxglove WebSocket server on 127.0.0.1 (0 picks a free port); none = off",
+    )
+    mcap: bool = Field(False, description="record an MCAP file beside each .tlog")
     map_tile_url: str | None = Field(
         None,
         description="2D map tiles, e.g. https://tile.openstreetmap.org/{z}/{x}/{y}.png; "

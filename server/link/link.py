@@ -51,6 +51,8 @@ _SETUP_SIGNING_ID = MAVLINK_MSG_ID_SETUP_SIGNING.to_bytes(3, "little")
 VEHICLE_QUEUE_SIZE = 32
 
 VehicleFactory = Callable[..., Vehicle]
+# Sees every frame the .tlog records, decoded, on the loop: (message, sent by us, Unix time).
+FrameTap = Callable[[mavlink.MAVLink_message, bool, float], None]
 # MAVLink signing link ids, one per link of this process
 _signing_link_ids = itertools.count()
 
@@ -94,6 +96,7 @@ class Link:
         self._handover = LinkHandover(name, transport, self.mav, self.signing, self._loop,
                                       self._process_sent)
         self._tlog = tlog
+        self._taps: list[FrameTap] = []
         self._vehicle_factory = vehicle_factory
         self._vehicles: dict[int, Vehicle] = {}
         self._liveness = Liveness(heartbeat_timeout_s, silence_timeout_s)
@@ -125,6 +128,7 @@ class Link:
         silence_timeout_s: float = DEFAULT_SILENCE_TIMEOUT_S,
         vehicle_factory: VehicleFactory | None = None,
         signing_store: SigningKeyStore | None = None,
+        on_open: Callable[[Link], None] | None = None,
     ) -> Link:
         """Bind or connect ``url`` (pymavlink style), start the GCS heartbeat and the tlog.
 
@@ -133,6 +137,7 @@ class Link:
         A vehicle is lost after ``silence_timeout_s`` without any valid frame while it
         streams telemetry, after ``heartbeat_timeout_s`` without one otherwise (liveness).
         ``signing_store`` holds the MAVLink signing key (none: the link signs nothing).
+        ``on_open(link)`` runs before the first frame is read (to add a frame tap).
         """
         address = parse_link_url(url)
         link_name = name or address.label
@@ -144,6 +149,8 @@ class Link:
             silence_timeout_s=silence_timeout_s,
             signing_store=signing_store,
         )
+        if on_open is not None:
+            on_open(link)
         try:
             await transport.start(_LinkReceiver.of(link))
         except BaseException:
@@ -179,6 +186,7 @@ class Link:
         await self.signing.close()
         if self._tlog is not None:
             await self._tlog.close()
+        self._taps.clear()  # as the .tlog closes: both have recorded the same frames
         log.info("link %s closed", self.name)
 
     @property
@@ -214,6 +222,16 @@ class Link:
     def unsubscribe_vehicles(self, queue: asyncio.Queue[Vehicle]) -> None:
         with contextlib.suppress(ValueError):
             self._vehicle_queues.remove(queue)
+
+    def add_frame_tap(self, tap: FrameTap) -> None:
+        """Call ``tap`` on the loop with every frame the .tlog records (both directions,
+        whether or not a .tlog is written). A frame sent from the setpoint sender thread
+        reaches it one loop iteration later; the tap must be quick."""
+        self._taps.append(tap)
+
+    def remove_frame_tap(self, tap: FrameTap) -> None:
+        with contextlib.suppress(ValueError):
+            self._taps.remove(tap)
 
     def stats(self) -> LinkStats:
         last = self._last_vehicle_heartbeat_s
@@ -258,12 +276,19 @@ class Link:
                 return
             self._frames_out += 1
             self._bytes_out += len(frame)
-        if self._tlog is not None and msg.get_msgId() != MAVLINK_MSG_ID_SETUP_SIGNING:
+        recorded = self._tlog is not None or self._taps
+        if recorded and msg.get_msgId() != MAVLINK_MSG_ID_SETUP_SIGNING:
             if on_loop:
-                self._tlog.record(frame)  # a key never goes to the tlog
+                self._record_sent(msg, frame, time.time())  # a key is never recorded
             else:
                 with contextlib.suppress(RuntimeError):  # the loop has closed
-                    self._loop.call_soon_threadsafe(self._tlog.record, frame, time.time())
+                    self._loop.call_soon_threadsafe(self._record_sent, msg, frame, time.time())
+
+    def _record_sent(self, msg: mavlink.MAVLink_message, frame: bytes, unix_time_s: float) -> None:
+        if self._tlog is not None:
+            self._tlog.record(frame, unix_time_s)
+        for tap in self._taps:
+            tap(msg, True, unix_time_s)
 
     def stream_channel(self, on_ticks: Callable[[int, list[float]], None]
                        ) -> StreamChannel | None:
@@ -319,8 +344,12 @@ class Link:
         self.signing.note_received(msg)
         if msg.get_msgId() == MAVLINK_MSG_ID_SETUP_SIGNING:
             return  # a key: never recorded, and no vehicle of ours takes one from a peer
-        if self._tlog is not None:
-            self._tlog.record(msg.get_msgbuf())
+        if self._tlog is not None or self._taps:
+            unix_time_s = time.time()  # one time for both: a tap's frames match the .tlog's
+            if self._tlog is not None:
+                self._tlog.record(msg.get_msgbuf(), unix_time_s)
+            for tap in self._taps:
+                tap(msg, False, unix_time_s)
         if (msg.get_msgId() == mavlink.MAVLINK_MSG_ID_HEARTBEAT
                 and msg.get_srcComponent() == MAV_COMP_ID_AUTOPILOT1):
             self._vehicle_heartbeat(msg)

@@ -113,7 +113,7 @@ class SceneProxy:
         self.open_sockets += 1
         try:
             await websocket.accept(subprotocol=upstream.subprotocol)
-            await _pump(websocket, upstream)
+            await relay(websocket, upstream)
         finally:
             self.open_sockets -= 1
             await upstream.close()
@@ -144,8 +144,9 @@ class SceneProxy:
         return endpoint
 
 
-async def _pump(websocket: WebSocket, upstream: ClientConnection) -> None:
-    """Copy frames both ways until either side closes; the other side is closed after it."""
+async def relay(websocket: WebSocket, upstream: ClientConnection) -> None:
+    """Copy frames both ways until either side closes; the other side is closed after it
+    (the scene's socket, and the Foxglove server's in server.foxglove.proxy)."""
 
     async def browser_to_viser() -> None:
         while True:
