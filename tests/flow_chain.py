@@ -250,6 +250,23 @@ class Chain:
         (self.workdir / f"{self.flows:02d}-{name}.log").write_text(output)
 
 
+def full_chain(chain: Chain, context: Any) -> None:
+    """Every documented flow in turn: the README session three times, the two examples, a
+    page flight, the README session again; then scripts killed half-way (Ctrl-C, SIGKILL)
+    and the next ones still flying, the docs/api.md session last."""
+    for _ in range(3):
+        chain.curl_session(README)
+    chain.example("fly_square.py")
+    chain.example("fly_square_async.py")
+    chain.page_flight(context)
+    chain.curl_session(README)
+    chain.example_killed_half_way("fly_square.py", signal.SIGINT)
+    chain.example_killed_half_way("fly_square_async.py", signal.SIGKILL)
+    chain.example("fly_square.py")
+    chain.curl_session(API_DOC)
+    assert chain.flows == 11
+
+
 def _alt_rel_m(state: dict[str, Any]) -> float:
     where = state.get("global") or {}
     return float(where.get("alt_rel_m") or 0.0)
