@@ -78,8 +78,8 @@ test-px4: $(TSTAMP)
 	  SKYHELM_PX4_SITL_DIR="$$dir" $(VENV)/bin/pytest -q -p no:cacheprovider -m px4 -rs tests/px4; \
 	fi
 
-## Every benchmark at its default size (~15 min on 2 cores; each prints its time), then
-## docs/PERFORMANCE.md and its figures (docs/img/perf/). ARGS="--quick" for a smoke run,
+## Every benchmark at its default size (~9 min on 2 cores, within a 15 min budget; each prints
+## its time), then docs/PERFORMANCE.md and its figures (docs/img/perf/). ARGS="--quick" for a smoke run,
 ## ARGS="--only api_load,signing" for some; bench/run_all.py --help for the rest.
 bench: $(BSTAMP) chromium
 	$(PY) -m bench.run_all $(ARGS)
