@@ -12,6 +12,7 @@ from collections.abc import Iterator
 import pytest
 
 from server.api.holder_process import verified_holder
+from server.api.lease import LeaseEnd, LeaseManager
 from tests.waiting import wait_for_blocking
 
 pytestmark = pytest.mark.skipif(not os.path.exists("/proc/self/fd"), reason="needs Linux /proc")
@@ -85,3 +86,29 @@ def test_a_process_that_does_not_own_the_connection_is_not_believed(
     finally:
         child.kill()
         child.wait()
+
+
+def test_a_lease_ends_as_gone_when_its_process_exits_and_not_while_it_lives(
+    listener: socket.socket,
+) -> None:
+    ended: list[str] = []
+    leases = LeaseManager(120.0, clock=lambda: 0.0)
+    leases.add_listener(lambda _lease, what: ended.append(what))
+    child, client_port = _connected_child(listener)
+    try:
+        lease = leases.acquire(1, "pilot · script", session="rest")
+        lease.process = verified_holder(child.pid, "127.0.0.1", client_port)
+        assert lease.process is not None
+        leases.expire_due()
+        assert leases.current(1) is lease  # alive and quiet: held until its TTL
+        child.kill()
+        wait_for_blocking("the process seen gone", lease.process.gone, 5.0)
+        assert leases.expire_due() == [lease]
+    finally:
+        child.kill()
+        child.wait()
+    assert leases.current(1) is None
+    assert lease.end is LeaseEnd.GONE
+    assert ended == ["acquired", "gone"]
+    assert leases.last_ended(1) is lease
+    assert leases.acquire(1, "pilot · next", session="rest").holder == "pilot · next"
