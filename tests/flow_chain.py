@@ -124,18 +124,17 @@ class Chain:
         )
 
     def state(self) -> dict[str, Any]:
-        with self.client() as api:
-            answer = api.get(f"/vehicles/{self.vehicle}")
-            answer.raise_for_status()
-            state: dict[str, Any] = answer.json()
-            return state
+        return self._read("")
 
     def control(self) -> dict[str, Any]:
+        return self._read("/control")
+
+    def _read(self, path: str) -> dict[str, Any]:
         with self.client() as api:
-            answer = api.get(f"/vehicles/{self.vehicle}/control")
+            answer = api.get(f"/vehicles/{self.vehicle}{path}")
             answer.raise_for_status()
-            control: dict[str, Any] = answer.json()
-            return control
+            read: dict[str, Any] = answer.json()
+            return read
 
     # -- the flows ---------------------------------------------------------------------
 

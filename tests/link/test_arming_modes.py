@@ -39,16 +39,20 @@ async def _disarmed_in(session: SimSession, mode: str) -> Vehicle:
     return vehicle
 
 
+async def _armed_in(vehicle: Vehicle) -> str | None:
+    """Arm; the mode the vehicle is armed in."""
+    result = await vehicle.arm()
+    assert result.ok, result
+    await wait_for(lambda: vehicle.snapshot().armed, 3.0, "armed")
+    return vehicle.snapshot().mode
+
+
 @pytest.mark.parametrize("mode", ["OFFBOARD", "RTL", "LAND"])
 async def test_arm_leaves_a_mode_px4_will_not_arm_in_for_hold(mode: str) -> None:
     async with open_sim(speed=2.0) as session:
         vehicle = await _disarmed_in(session, mode)
 
-        result = await vehicle.arm()
-
-        assert result.ok, result
-        await wait_for(lambda: vehicle.snapshot().armed, 3.0, "armed")
-        assert vehicle.snapshot().mode == "HOLD"
+        assert await _armed_in(vehicle) == "HOLD"
 
 
 async def test_arm_in_offboard_with_the_stream_running_stays_in_offboard() -> None:
@@ -60,11 +64,7 @@ async def test_arm_in_offboard_with_the_stream_running_stays_in_offboard() -> No
         await vehicle.set_setpoint(PositionNed(here.north_m, here.east_m, here.down_m))
         assert (await vehicle.set_mode("OFFBOARD")).ok
 
-        result = await vehicle.arm()
-
-        assert result.ok, result
-        await wait_for(lambda: vehicle.snapshot().armed, 3.0, "armed")
-        assert vehicle.snapshot().mode == "OFFBOARD"
+        assert await _armed_in(vehicle) == "OFFBOARD"
 
 
 async def test_takeoff_from_offboard_without_a_stream_switches_to_takeoff_arms_and_climbs() -> None:
