@@ -99,6 +99,26 @@ async def test_offboard_accepted_but_not_entered_is_asked_for_once_more() -> Non
     assert streaming
 
 
+async def test_offboard_asked_again_keeps_the_stream_a_mode_change_would_have_stopped() -> None:
+    """Flying in OFFBOARD, a new start whose first ask PX4 acks but ends in HOLD (as when a
+    takeoff ends just then): the stream goes on through the second ask, which PX4 takes."""
+    async with open_sim(speed=2.0) as session:
+        vehicle = session.vehicle
+        vehicle.mode_confirm_timeout_s = 1.0
+        assert (await vehicle.takeoff(3.0)).ok  # arms and climbs
+        await wait_for(lambda: vehicle.snapshot().mode == "HOLD", 20.0, "the takeoff done")
+        assert (await vehicle.start_offboard()).ok  # the stream engaged in OFFBOARD
+        session.sim.instances[0].vehicle.commander.offboard_requests_lost = 1
+        here = vehicle.snapshot().position_ned
+        assert here is not None
+
+        result = await vehicle.start_offboard(PositionNed(here.north_m + 2, here.east_m, -3.0))
+
+        assert result.ok, result
+        assert vehicle.streamer_active
+        assert vehicle.snapshot().mode == "OFFBOARD"
+
+
 async def test_offboard_lost_twice_is_not_confirmed_with_the_mode_observed() -> None:
     result, streaming = await _start_offboard_losing(2)
 
