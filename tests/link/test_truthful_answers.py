@@ -104,7 +104,6 @@ async def test_offboard_asked_again_keeps_the_stream_a_mode_change_would_have_st
     takeoff ends just then): the stream goes on through the second ask, which PX4 takes."""
     async with open_sim(speed=2.0) as session:
         vehicle = session.vehicle
-        vehicle.mode_confirm_timeout_s = 1.0
         assert (await vehicle.takeoff(3.0)).ok  # arms and climbs
         await wait_for(lambda: vehicle.snapshot().mode == "HOLD", 20.0, "the takeoff done")
         assert (await vehicle.start_offboard()).ok  # the stream engaged in OFFBOARD
