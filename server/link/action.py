@@ -114,9 +114,8 @@ class Action:
         started_s = self._core.now()
         if self._known_disarmed(started_s):
             return await self._arm_and_take_off(alt_amsl)
-        # PX4 accepts a takeoff while disarmed (it only switches to TAKEOFF), e.g. after it
-        # disarmed itself on the ground (COM_DISARM_PRFLT) since: only a climb, armed,
-        # confirms it
+        # only a climb, armed, confirms it: PX4 still accepts the takeoff (it only switches to
+        # TAKEOFF) if it disarmed itself on the ground meanwhile (COM_DISARM_PRFLT)
         confirm = Confirmation(
             reached=self._taking_off,
             timeout_s=self.mode_confirm_timeout_s,
@@ -130,8 +129,8 @@ class Action:
 
     async def _arm_and_take_off(self, alt_amsl: float) -> CommandResult:
         """QGroundControl's takeoff (PX4FirmwarePlugin::guidedModeTakeoff): NAV_TAKEOFF
-        switches the disarmed vehicle to TAKEOFF, a mode PX4 arms in whatever mode it was
-        left in; arming there starts the climb. A refused arm is answered as PX4 gave it."""
+        switches the disarmed vehicle to TAKEOFF from whatever mode it was left in, PX4 arms
+        there, and arming starts the climb. A refused arm is answered as PX4 gave it."""
         t = self._telemetry
         in_takeoff = Confirmation(
             reached=lambda: t.mode in _TAKING_OFF_MODES,
