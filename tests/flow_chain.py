@@ -37,8 +37,11 @@ FLIGHT_TIMEOUT_S = 400.0
 
 # Runs an example as `python examples/x.py URL` would, with every module of a distribution
 # outside the runtime dependencies hidden, as in the environment `make run` creates.
+# Ctrl-C raises KeyboardInterrupt, as in a terminal, even where the test runs as a
+# background job whose shell left SIGINT ignored.
 _RUNNER = """
-import json, runpy, sys
+import json, runpy, signal, sys
+signal.signal(signal.SIGINT, signal.default_int_handler)
 path, hidden = sys.argv[1], set(json.loads(sys.argv[2]))
 sys.argv = [path, *sys.argv[3:]]
 
