@@ -8,7 +8,7 @@ TSTAMP  := $(VENV)/.installed-test
 BSTAMP  := $(VENV)/.installed-bench
 ARGS    ?=
 
-.PHONY: run test test-px4 lint audit bench soak sim chromium clean
+.PHONY: run test test-chain test-px4 lint audit bench soak sim chromium clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -61,7 +61,13 @@ TEST_WORKERS ?= 2
 test: $(TSTAMP) chromium lint audit
 	$(VENV)/bin/pytest -q -p no:cacheprovider -n $(TEST_WORKERS)
 
-## The REST flight against real PX4 v1.16 SITL (the kit of shared/px4-sitl, built into
+## The whole chain of documented flows (README and docs/api.md curl sessions, the examples,
+## a page flight, scripts killed half-way) on the simulated quad at real speed, default
+## settings (about 10 min; `make test` runs a shorter chain at 8x).
+test-chain: $(TSTAMP) chromium
+	$(VENV)/bin/pytest -q -p no:cacheprovider -m chain -rs tests/browser/test_flow_chain_full.py
+
+## The REST flight and the chain of documented flows against real PX4 v1.16 SITL (the kit of shared/px4-sitl, built into
 ## SKYHELM_PX4_SITL_DIR or /root/px4sitl); skipped with a message when there is no build.
 ## SKYHELM_PX4_INSTANCE=N picks the instance (its ports follow the kit's layout);
 ## SKYHELM_PX4_SOAK_MINUTES=10 adds the hover through 20 % loss (tests/px4/test_px4_radio_loss.py).
@@ -73,8 +79,8 @@ test-px4: $(TSTAMP)
 	  SKYHELM_PX4_SITL_DIR="$$dir" $(VENV)/bin/pytest -q -p no:cacheprovider -m px4 -rs tests/px4; \
 	fi
 
-## Every benchmark at its default size (~15 min on 2 cores; each prints its time), then
-## docs/PERFORMANCE.md and its figures (docs/img/perf/). ARGS="--quick" for a smoke run,
+## Every benchmark at its default size (~9 min on 2 cores, within a 15 min budget; each prints
+## its time), then docs/PERFORMANCE.md and its figures (docs/img/perf/). ARGS="--quick" for a smoke run,
 ## ARGS="--only api_load,signing" for some; bench/run_all.py --help for the rest.
 bench: $(BSTAMP) chromium
 	$(PY) -m bench.run_all $(ARGS)

@@ -6,7 +6,7 @@ sequences them so their numbers come from one run on one machine, times each one
 the run's budget, and then runs bench/report.py, which counts only the results written in
 this run. The run's timings go to bench/results/run_all.json.
 
-    .venv/bin/python -m bench.run_all                 # default sizes (~15 min on 2 cores)
+    .venv/bin/python -m bench.run_all                 # default sizes (~9 min on 2 cores)
     .venv/bin/python -m bench.run_all --quick         # a smoke run with small sizes
     .venv/bin/python -m bench.run_all --only api_load,signing
     .venv/bin/python -m bench.run_all --soak          # adds the 30-minute soak

@@ -5,7 +5,10 @@
 
 Uses the blocking client (`server.client.SkyHelm`): it takes the control lease, and its
 waits renew the lease while they poll, so the script keeps control however long it waits.
-If the script dies, the lease lapses and the server's deadman holds the vehicle where it is.
+However the script ends (the square flown, a refusal, Ctrl-C, SIGTERM) the client gives the
+lease back, and the server holds the vehicle where it is; killed outright (SIGKILL), the
+server sees the process gone and does the same. The next script takes control without
+`force`, and arms from whatever mode this one left the vehicle in.
 """
 
 from __future__ import annotations

@@ -5,6 +5,7 @@
 
 One task watches the telemetry socket (mode changes, command results, control events and
 the vehicle's messages) while the flight waits for each corner of the square on the state.
+The lease is given back however the script ends, as in fly_square.py.
 """
 
 from __future__ import annotations

@@ -398,7 +398,7 @@ class Commander:
             or (self.nav_mode in MANUAL_CONTROL_MODES and self.manual_control_lost())
             or (self.nav_mode == modes.AUTO_MISSION
                 and not self._mode_available[modes.AUTO_MISSION])
-            or self.nav_mode == modes.TERMINATION
+            or self.nav_mode in _MODES_PREVENTING_ARMING
         )
 
     def _failing_checks(self) -> tuple[ev.ArmingCheck, ...]:
@@ -407,6 +407,7 @@ class Commander:
             (not self.ready, ev.NO_GLOBAL_POSITION),
             (not self._mode_available[modes.AUTO_MISSION], ev.NO_MISSION),
             (not self.offboard_signal_fresh(), ev.OFFBOARD_SIGNAL),
+            (self.nav_mode in _MODES_PREVENTING_ARMING, ev.MODE_NOT_SUITABLE),
             (self.gcs_heartbeat_s is None or self.datalink_lost, ev.NO_DATALINK),
             (self.manual_control_lost(), self._no_manual_control_check()),
         )

@@ -109,6 +109,11 @@ NO_MANUAL_CONTROL = ArmingCheck("check_modes_manual_control", 0, HEALTH_REMOTE_C
                                 LOG_WARNING, blocked_groups=NAV_GROUP_MANUAL_CONTROL)
 NO_MANUAL_CONTROL_DISABLED = ArmingCheck("check_modes_manual_control", NAV_GROUP_MANUAL_CONTROL,
                                          HEALTH_REMOTE_CONTROL, LOG_ERROR)
+# modeCheck checkArmingRequirement: the modes of mode_req_prevent_arming (RTL 5, DESCEND 12,
+# TERMINATION 13, LAND 18, FOLLOW_TARGET 19, PRECLAND 20, ORBIT 21), reported while in one
+NAV_GROUP_PREVENT_ARMING = sum(1 << bit for bit in (5, 12, 13, 18, 19, 20, 21))
+MODE_NOT_SUITABLE = ArmingCheck("check_modes_cannot_takeoff", NAV_GROUP_PREVENT_ARMING,
+                                HEALTH_SYSTEM, LOG_INFO)
 # failsafe_cause_t
 FAILSAFE_CAUSE_MANUAL_CONTROL_LOSS = 1
 

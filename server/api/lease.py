@@ -20,7 +20,20 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from server.api.auth import same_secret
+from server.api.holder_process import HolderProcess
+from server.api.lease_errors import (
+    LeaseHeld,
+    LeaseInvalid,
+    TakeoverRefused,
+    TtlOutOfBounds,
+    UnknownRequest,
+)
 from server.settings import Settings
+
+__all__ = [
+    "OPERATOR_LOST", "Lease", "LeaseEnd", "LeaseHeld", "LeaseInvalid", "LeaseListener",
+    "LeaseManager", "TakeoverRefused", "TakeoverRequest", "TtlOutOfBounds", "UnknownRequest",
+]  # fmt: skip
 
 
 class LeaseEnd(enum.Enum):
@@ -28,10 +41,11 @@ class LeaseEnd(enum.Enum):
     CLOSED = "closed"  # the WebSocket session that held it went away
     EXPIRED = "expired"  # not renewed within the TTL
     TAKEN_OVER = "taken_over"  # another pilot took control
+    GONE = "gone"  # the process that held it exited (holder_process)
 
 
 # Ends after which nobody is flying the vehicle any more.
-OPERATOR_LOST = frozenset({LeaseEnd.RELEASED, LeaseEnd.CLOSED, LeaseEnd.EXPIRED})
+OPERATOR_LOST = frozenset({LeaseEnd.RELEASED, LeaseEnd.CLOSED, LeaseEnd.EXPIRED, LeaseEnd.GONE})
 # Ended leases remembered by id, so a call with a stale lease id hears who took control.
 _ENDED_REMEMBERED = 64
 
@@ -64,42 +78,11 @@ class Lease:
     forced: bool = False  # with TAKEN_OVER: taken without asking
     renamed_from: str | None = None  # the name before the last rename
     request: TakeoverRequest | None = None  # a pending ask to take this lease
+    process: HolderProcess | None = None  # the holder's process, where it could be proved
+    ended_at: float | None = None
 
     def expires_in_s(self, now: float) -> float:
         return max(0.0, self.expires_at - now)
-
-
-class LeaseHeld(Exception):
-    def __init__(self, lease: Lease) -> None:
-        super().__init__(f"control of vehicle {lease.vehicle_id} is held by {lease.holder}")
-        self.lease = lease
-
-
-class LeaseInvalid(Exception):
-    """The caller's lease id is missing, unknown, or no longer the vehicle's lease;
-    ``holder`` names who holds it now (None when nobody does)."""
-
-    def __init__(self, reason: str, holder: str | None = None) -> None:
-        super().__init__(reason)
-        self.holder = holder
-
-
-class TakeoverRefused(Exception):
-    """The holder denied a takeover, did not answer in time, or another ask is pending."""
-
-    def __init__(self, reason: str, holder: str) -> None:
-        super().__init__(reason)
-        self.holder = holder
-
-
-class UnknownRequest(LookupError):
-    """No pending takeover request with that id (answered, timed out or never made)."""
-
-
-class TtlOutOfBounds(ValueError):
-    def __init__(self, ttl_s: float, limit: float) -> None:
-        super().__init__(f"ttl_s {ttl_s:g} is outside the server's bounds; the limit is {limit:g}")
-        self.limit = limit
 
 
 class LeaseListener(Protocol):
@@ -131,6 +114,7 @@ class LeaseManager:
         self._clock = clock
         self._leases: dict[int, Lease] = {}
         self._ended: OrderedDict[str, Lease] = OrderedDict()
+        self._last_ended: dict[int, Lease] = {}
         self._listeners: list[LeaseListener] = []
 
     @classmethod
@@ -155,6 +139,9 @@ class LeaseManager:
 
     def current(self, vehicle_id: int) -> Lease | None:
         return self._leases.get(vehicle_id)
+
+    def last_ended(self, vehicle_id: int) -> Lease | None:
+        return self._last_ended.get(vehicle_id)
 
     def ttl_for(self, asked_s: float | None) -> float:
         """The TTL a client asked for, or the default; TtlOutOfBounds outside the bounds."""
@@ -334,14 +321,21 @@ class LeaseManager:
                 lease.expires_at = self._clock() + lease.ttl_s
 
     def expire_due(self) -> list[Lease]:
-        """End every lease whose TTL has run out; the checker task calls this."""
+        """End every lease whose TTL has run out, or whose holder's process is gone; the
+        checker task calls this."""
         now = self._clock()
         due = [
             lease for lease in self._leases.values() if lease.busy == 0 and lease.expires_at <= now
         ]
+        gone = [
+            lease for lease in self._leases.values()
+            if lease not in due and lease.process is not None and lease.process.gone()
+        ]  # fmt: skip
         for lease in due:
             self._end(lease, LeaseEnd.EXPIRED)
-        return due
+        for lease in gone:
+            self._end(lease, LeaseEnd.GONE)
+        return due + gone
 
     def status(self, vehicle_id: int) -> tuple[str | None, float | None]:
         lease = self._leases.get(vehicle_id)
@@ -375,6 +369,8 @@ class LeaseManager:
         if self._leases.get(lease.vehicle_id) is lease:
             del self._leases[lease.vehicle_id]
         lease.end = end
+        lease.ended_at = self._clock()
+        self._last_ended[lease.vehicle_id] = lease
         lease.ended.set()
         if lease.request is not None and not lease.request.answer.done():
             lease.request.answer.cancel()  # the asker stops waiting: control is free

@@ -47,7 +47,13 @@ class AsyncSkyHelm(
         return self
 
     async def __aexit__(self, *exc_info: object) -> None:
-        await self.aclose()
+        try:
+            if self.lease is not None:
+                await self.release()
+        except SkyHelmError:
+            pass  # lapsed or taken over meanwhile: nothing left to give back
+        finally:
+            await self.aclose()
 
     async def aclose(self) -> None:
         await self._http.aclose()

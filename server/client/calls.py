@@ -10,11 +10,13 @@ say which, so both clients are typed from this one list.
 from __future__ import annotations
 
 import math
+import os
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Generic, Literal, TypeVar
 
+from server.client import exit_release
 from server.client.errors import NoLease, error_for, timed_out
 from server.client.models import Lease, State
 from server.client.urls import API_PREFIX, split_url
@@ -142,15 +144,20 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
         if status >= 300:
             error = error_for(status, body)
             if isinstance(error, NoLease) and call.control:
-                self.lease = None
+                self._lease_gone()
             raise error
         if call.lease == "grant":
             self.lease = Lease.from_json(body)
+            exit_release.holding(self, lambda: self._request(self._release_call()))
         elif call.lease == "drop":
-            self.lease = None
+            self._lease_gone()
         if call.control and self.lease is not None:
             self._renewed_at = self._now()
         return body[call.pick] if call.pick is not None else body
+
+    def _lease_gone(self) -> None:
+        self.lease = None
+        exit_release.released(self)
 
     def _renew_due(self) -> bool:
         """A wait renews a held lease at a third of its TTL, so waiting never loses it."""
@@ -206,15 +213,18 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
 
     def acquire(self, *, ttl_s: float | None = None, client_name: str | None = None) -> _Lease:
         """Take the control lease (409 :class:`Refused` naming the holder while someone else
-        has it); ``ttl_s`` within the server's bounds, its default otherwise."""
-        return self._control("POST", _arguments(locals()))
+        has it); ``ttl_s`` within the server's bounds, its default otherwise. The lease is
+        given back when the script ends (``exit_release``); this process's id goes along,
+        so a server on the same machine ends it too if the process is killed."""
+        return self._control("POST", {**_arguments(locals()), "client_pid": os.getpid()})
 
     def take_over(
         self, *, force: bool = False, ttl_s: float | None = None, client_name: str | None = None
     ) -> _Lease:
         """Ask the holder for control (granted: the lease; denied or unanswered: 409), or
         with ``force`` take it at once."""
-        return self._control("POST", {"takeover": True, **_arguments(locals())})
+        body = {"takeover": True, **_arguments(locals()), "client_pid": os.getpid()}
+        return self._control("POST", body)
 
     def renew(self, *, ttl_s: float | None = None, client_name: str | None = None) -> _Lease:
         """Renew the lease (any control call also does), optionally with a new TTL or
@@ -226,8 +236,11 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
         ``request`` is a pending takeover (``request_id``, ``by``) the holder may answer."""
         return self._json(Call("GET", self._vehicle("/control")))
 
+    def _release_call(self) -> Call:
+        return Call("DELETE", self._vehicle("/control"), control=True, lease="drop")
+
     def release(self) -> _None:
-        return self._none(Call("DELETE", self._vehicle("/control"), control=True, lease="drop"))
+        return self._none(self._release_call())
 
     def answer_takeover(self, request_id: str, *, grant: bool) -> _Json:
         """The holder's answer to a ``takeover_requested`` control event."""

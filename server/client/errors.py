@@ -107,4 +107,5 @@ class WaitTimedOut(SkyHelmError, TimeoutError):
 
 
 def timed_out(what: str, last: Any) -> WaitTimedOut:
-    return WaitTimedOut(0, f"timed out waiting for {what}", body=last)
+    return WaitTimedOut(0, f"timed out waiting for {what}; the vehicle last showed {last!r}",
+                        body=last)  # fmt: skip

@@ -38,7 +38,13 @@ class SkyHelm(Calls[CommandResult, Lease, State, Any, float, None]):
         return self
 
     def __exit__(self, *exc_info: object) -> None:
-        self.close()
+        try:
+            if self.lease is not None:
+                self.release()
+        except SkyHelmError:
+            pass  # lapsed or taken over meanwhile: nothing left to give back
+        finally:
+            self.close()
 
     def close(self) -> None:
         self._http.close()

@@ -8,10 +8,12 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections.abc import Callable
 
 from pymavlink.dialects.v20 import development as mavlink
 
 from server.link import modes
+from server.link.arming_modes import mode_to_arm_in
 from server.link.commands import CommandInt, CommandOutcome, CommandResult, not_sent
 from server.link.core import VehicleCore
 from server.link.requests import Confirmation
@@ -51,6 +53,10 @@ def _deg_e7(deg: float) -> int:
     return round(deg * 1e7)
 
 
+def _not_streaming() -> bool:
+    return False
+
+
 class Action:
     """Commands and mode changes for one vehicle."""
 
@@ -63,6 +69,8 @@ class Action:
         # when this client's own arm / disarm was last accepted, on the loop's clock
         self._arm_accepted_s: float | None = None
         self._disarm_accepted_s: float | None = None
+        # whether this server streams offboard setpoints now (the vehicle wires its streamer)
+        self.offboard_streaming: Callable[[], bool] = _not_streaming
 
     async def command_long(
         self, command: int, *params: float, confirm_timeout_s: float | None = None
@@ -70,7 +78,17 @@ class Action:
         return await self._core.requests.command_long(command, *params, timeout_s=confirm_timeout_s)
 
     async def arm(self, force: bool = False) -> CommandResult:
+        """Arm; on the ground in a mode PX4 will not arm in for want of something only
+        the pilot's choice gives (arming_modes), switch to one it arms in first."""
+        if not self._telemetry.armed:
+            switched = await self._into_arming_mode()
+            if switched is not None and not switched.ok:
+                return switched
         return await self._arm_disarm(True, force)
+
+    async def _into_arming_mode(self) -> CommandResult | None:
+        target = mode_to_arm_in(self._telemetry.mode, self.offboard_streaming())
+        return await self.set_mode(target) if target is not None else None
 
     async def disarm(self, force: bool = False) -> CommandResult:
         return await self._arm_disarm(False, force)
@@ -93,22 +111,55 @@ class Action:
             if home_alt is None:
                 return not_sent(MAV_CMD_NAV_TAKEOFF, "no home position yet")
             alt_amsl = home_alt + altitude_rel_m
-        # PX4 accepts a takeoff while disarmed (it only switches to TAKEOFF), e.g. after it
-        # disarmed itself on the ground (COM_DISARM_PRFLT): only a climb, armed, confirms it
-        t = self._telemetry
         started_s = self._core.now()
-        known_disarmed = self._known_disarmed(started_s)
+        if self._known_disarmed(started_s):
+            return await self._arm_and_take_off(alt_amsl)
+        # only a climb, armed, confirms it: PX4 still accepts the takeoff (it only switches to
+        # TAKEOFF) if it disarmed itself on the ground meanwhile (COM_DISARM_PRFLT)
         confirm = Confirmation(
-            reached=lambda: t.armed and (t.mode in _TAKING_OFF_MODES
-                                         or t.landed_state in _IN_AIR_STATES),
+            reached=self._taking_off,
             timeout_s=self.mode_confirm_timeout_s,
             explain=lambda _s: self._why_not_taking_off(),
-            aborted=lambda: known_disarmed or self._disarmed_since(started_s),
+            aborted=lambda: self._disarmed_since(started_s),
             aborted_outcome=CommandOutcome.NOT_CONFIRMED,
-        )  # fmt: skip
+        )
         return await self._core.requests.command_long(
             MAV_CMD_NAV_TAKEOFF, NAN, NAN, NAN, NAN, NAN, NAN, alt_amsl, confirm=confirm
         )
+
+    async def _arm_and_take_off(self, alt_amsl: float) -> CommandResult:
+        """QGroundControl's takeoff (PX4FirmwarePlugin::guidedModeTakeoff): NAV_TAKEOFF
+        switches the disarmed vehicle to TAKEOFF from whatever mode it was left in, PX4 arms
+        there, and arming starts the climb. A refused arm is answered as PX4 gave it."""
+        t = self._telemetry
+        in_takeoff = Confirmation(
+            reached=lambda: t.mode in _TAKING_OFF_MODES,
+            timeout_s=self.mode_confirm_timeout_s,
+            explain=lambda _s: f"accepted, but the vehicle still reports {t.mode}",
+        )
+        switched = await self._core.requests.command_long(
+            MAV_CMD_NAV_TAKEOFF, NAN, NAN, NAN, NAN, NAN, NAN, alt_amsl, confirm=in_takeoff
+        )
+        if not switched.ok:
+            return switched
+        armed = await self._arm_disarm(True, False)
+        if not armed.ok:
+            return armed
+        started_s = self._core.now()
+        climbing = await self._core.requests.wait_until(
+            self._taking_off, self.mode_confirm_timeout_s
+        )
+        elapsed_ms = switched.elapsed_ms + armed.elapsed_ms + (self._core.now() - started_s) * 1e3
+        if climbing:
+            return dataclasses.replace(switched, elapsed_ms=elapsed_ms)
+        return dataclasses.replace(
+            switched, outcome=CommandOutcome.NOT_CONFIRMED, elapsed_ms=elapsed_ms,
+            reason=self._why_not_taking_off(),
+        )  # fmt: skip
+
+    def _taking_off(self) -> bool:
+        t = self._telemetry
+        return t.armed and (t.mode in _TAKING_OFF_MODES or t.landed_state in _IN_AIR_STATES)
 
     async def land(self) -> CommandResult:
         return await self.command_long(MAV_CMD_NAV_LAND)

@@ -49,6 +49,7 @@ class Offboard:
         self.streamer = SetpointStreamer(
             core.send, rate_hz=stream_rate_hz, channel=core.stream_channel)  # its rate, stats
         self._engaged = False
+        self._starting = False  # start() asking for OFFBOARD: its stream must not stop
         self._on_stream_start: list[Callable[[], None]] = []
         self.stopped_by_link: str | None = None  # why the link stopped the stream, if it did
         telemetry.on_mode(self._apply_stream_policy)
@@ -119,9 +120,18 @@ class Offboard:
             await self.hold_position()
         # PX4 docs ask for > 1 s of stream first; the code needs less, so this satisfies both
         await asyncio.sleep(max(0.0, self.prestream_s - self.streamer.streaming_for_s()))
-        result = await self._action.set_mode("OFFBOARD")
+        # A mode PX4 changes to meanwhile (a takeoff ending in HOLD just as OFFBOARD is asked
+        # for) must not stop this stream: set_mode asks once more, and PX4 refuses OFFBOARD
+        # without it ("No offboard signal")
+        self._starting = True
+        try:
+            result = await self._action.set_mode("OFFBOARD")
+        finally:
+            self._starting = False
         if not result.ok and not self._engaged:
             self._stop_stream("offboard refused")
+        elif not result.ok:
+            self._apply_stream_policy()  # what a mode change during the ask would have done
         return result
 
     async def stop(self, then_mode: str = "HOLD") -> CommandResult:
@@ -188,5 +198,5 @@ class Offboard:
         intended = t.user_mode if t.user_mode is not None else t.mode
         if intended == "OFFBOARD":
             self._engaged = True
-        elif self._engaged:
+        elif self._engaged and not self._starting:
             self._stop_stream(f"mode changed to {intended}")

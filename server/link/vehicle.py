@@ -115,6 +115,7 @@ class Vehicle:
         core.on_message("PARAM_VALUE", self.params.handle_param_value)
         self.action = Action(core, self.telemetry)
         self.offboard = Offboard(core, self.telemetry, self.action, stream_rate_hz=stream_rate_hz)
+        self.action.offboard_streaming = lambda: self.offboard.streamer.active
         self.manual_control = ManualControl(core, self.offboard)
         self.telemetry_requests = TelemetryRequests(core, self.telemetry, telemetry_rates_hz)
         self.px4_events = Px4Events(core, self.telemetry)

@@ -122,21 +122,20 @@ async def test_offboard_stop_switches_mode_and_stops_the_stream(quad_api: Api) -
     assert state["stream"]["active"] is False
 
 
-async def test_arming_in_offboard_without_stream_is_409_with_px4_reason(quad_api: Api) -> None:
+async def test_arming_in_offboard_without_stream_switches_to_hold_first(quad_api: Api) -> None:
     api = quad_api
     await api.take_control()
-    # Disarmed, PX4 accepts the switch to OFFBOARD with no stream, then refuses to arm.
+    # Disarmed, PX4 accepts the switch to OFFBOARD with no stream, then would refuse to arm
+    # ("No offboard signal"): the server picks Hold, where it arms, as after an RTL.
     mode = await api.client.post(
         "/api/v1/vehicles/1/mode", json={"mode": "OFFBOARD"}, headers=api.lease_headers
     )
     assert mode.status_code == 200, mode.text
     arm = await api.control("arm")
-    assert arm.status_code == 409, arm.text
-    body = arm.json()
-    assert body["result"] == "TEMPORARILY_REJECTED"
-    assert body["result_code"] == 1
-    assert body["reason"] is not None
-    assert body["reason"].startswith("Arming denied")
+    assert arm.status_code == 200, arm.text
+    assert arm.json()["command"] == "MAV_CMD_COMPONENT_ARM_DISARM"
+    state = await api.wait_state(lambda s: s["armed"], 5.0, "armed")
+    assert state["mode"] == "HOLD"
 
 
 async def test_disarm_in_the_air_is_refused(quad_api: Api) -> None:

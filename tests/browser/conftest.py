@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import tempfile
 from collections.abc import Iterator
 from typing import Any
 
@@ -10,7 +9,7 @@ import httpx
 import pytest
 
 from .flows import open_dashboard
-from .harness import CHROMIUM, CHROMIUM_ARGS, Serve
+from .harness import Serve, chromium_context
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
@@ -23,25 +22,8 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
 def browser(request: pytest.FixtureRequest) -> Iterator[Any]:
     """Chromium; it ignores the server's Content-Security-Policy (which forbids the eval that
     Playwright's string predicates use) unless the module sets ENFORCE_CSP (test_csp.py)."""
-    if not CHROMIUM.exists():
-        pytest.skip("/usr/bin/chromium is not installed (make chromium, as root)")
-    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
-    with (
-        tempfile.TemporaryDirectory(prefix="skyhelm-chromium-") as profile,
-        sync_api.sync_playwright() as playwright,
-    ):
-        context = playwright.chromium.launch_persistent_context(
-            profile,
-            executable_path=str(CHROMIUM),
-            args=CHROMIUM_ARGS,
-            headless=True,
-            viewport={"width": 1600, "height": 1000},
-            bypass_csp=not getattr(request.module, "ENFORCE_CSP", False),
-        )
-        try:
-            yield context
-        finally:
-            context.close()
+    with chromium_context(bypass_csp=not getattr(request.module, "ENFORCE_CSP", False)) as context:
+        yield context
 
 
 @pytest.fixture(scope="module")

@@ -190,3 +190,31 @@ def empty_scene() -> Iterator[tuple[str, str]]:
     finally:
         holder["stop"]()
         thread.join(10.0)
+
+
+@contextlib.contextmanager
+def chromium_context(bypass_csp: bool = True) -> Iterator[Any]:
+    """Debian's Chromium under Playwright, in a fresh profile (a skip when either is
+    missing); it ignores the server's Content-Security-Policy (which forbids the eval that
+    Playwright's string predicates use) unless told not to."""
+    import pytest
+
+    if not CHROMIUM.exists():
+        pytest.skip("/usr/bin/chromium is not installed (make chromium, as root)")
+    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
+    with (
+        tempfile.TemporaryDirectory(prefix="skyhelm-chromium-") as profile,
+        sync_api.sync_playwright() as playwright,
+    ):
+        context = playwright.chromium.launch_persistent_context(
+            profile,
+            executable_path=str(CHROMIUM),
+            args=CHROMIUM_ARGS,
+            headless=True,
+            viewport={"width": 1600, "height": 1000},
+            bypass_csp=bypass_csp,
+        )
+        try:
+            yield context
+        finally:
+            context.close()

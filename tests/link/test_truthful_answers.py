@@ -1,6 +1,6 @@
 """Answers that say what the vehicle did: a repeated setpoint renews the stream without an
 extra send, a VTOL transition on a multicopter is refused at once, a mode PX4 accepts but
-does not enter is asked for again, and a take-off after PX4 disarmed itself says so."""
+does not enter is asked for again, and a take-off after PX4 disarmed itself arms again."""
 
 from __future__ import annotations
 
@@ -99,6 +99,25 @@ async def test_offboard_accepted_but_not_entered_is_asked_for_once_more() -> Non
     assert streaming
 
 
+async def test_offboard_asked_again_keeps_the_stream_a_mode_change_would_have_stopped() -> None:
+    """Flying in OFFBOARD, a new start whose first ask PX4 acks but ends in HOLD (as when a
+    takeoff ends just then): the stream goes on through the second ask, which PX4 takes."""
+    async with open_sim(speed=2.0) as session:
+        vehicle = session.vehicle
+        assert (await vehicle.takeoff(3.0)).ok  # arms and climbs
+        await wait_for(lambda: vehicle.snapshot().mode == "HOLD", 20.0, "the takeoff done")
+        assert (await vehicle.start_offboard()).ok  # the stream engaged in OFFBOARD
+        session.sim.instances[0].vehicle.commander.offboard_requests_lost = 1
+        here = vehicle.snapshot().position_ned
+        assert here is not None
+
+        result = await vehicle.start_offboard(PositionNed(here.north_m + 2, here.east_m, -3.0))
+
+        assert result.ok, result
+        assert vehicle.streamer_active
+        assert vehicle.snapshot().mode == "OFFBOARD"
+
+
 async def test_offboard_lost_twice_is_not_confirmed_with_the_mode_observed() -> None:
     result, streaming = await _start_offboard_losing(2)
 
@@ -109,7 +128,7 @@ async def test_offboard_lost_twice_is_not_confirmed_with_the_mode_observed() -> 
     assert not streaming
 
 
-async def test_takeoff_after_px4_disarmed_itself_is_not_confirmed_and_says_why() -> None:
+async def test_takeoff_after_px4_disarmed_itself_arms_again_and_climbs() -> None:
     async with open_sim(speed=5.0) as session:
         vehicle = session.vehicle
         assert (await vehicle.arm()).ok
@@ -119,12 +138,9 @@ async def test_takeoff_after_px4_disarmed_itself_is_not_confirmed_and_says_why()
 
         result = await vehicle.takeoff(3.0)
 
-        assert result.outcome is CommandOutcome.NOT_CONFIRMED
-        assert result.result_code == mavlink.MAV_RESULT_ACCEPTED
-        assert result.reason is not None
-        assert result.reason.startswith("accepted, but the vehicle disarmed itself")
-        assert "COM_DISARM_PRFLT" in result.reason
-        assert result.elapsed_ms < 1000  # known at once, not after a confirmation timeout
+        assert result.ok, result
+        assert result.command == "MAV_CMD_NAV_TAKEOFF"
+        assert vehicle.snapshot().armed
 
 
 async def test_takeoff_right_after_arming_is_confirmed_by_the_climb() -> None:
@@ -137,10 +153,16 @@ async def test_takeoff_right_after_arming_is_confirmed_by_the_climb() -> None:
         assert vehicle.snapshot().armed
 
 
-async def test_takeoff_while_disarmed_is_not_confirmed(scripted: ScriptedSession) -> None:
-    scripted.peer.accept_commands()
+async def test_takeoff_while_disarmed_waits_for_the_takeoff_mode_before_arming(
+    scripted: ScriptedSession,
+) -> None:
+    scripted.peer.accept_commands()  # acks everything, never reports a mode change
 
     result = await scripted.vehicle.takeoff()
 
     assert result.outcome is CommandOutcome.NOT_CONFIRMED
-    assert result.reason == "accepted, but the vehicle is disarmed: arm it, then take off"
+    assert result.reason is not None
+    assert result.reason.startswith("accepted, but the vehicle still reports")
+    sent = [m.command for _, m in scripted.peer.received if m.get_type() == "COMMAND_LONG"]
+    assert mavlink.MAV_CMD_NAV_TAKEOFF in sent
+    assert mavlink.MAV_CMD_COMPONENT_ARM_DISARM not in sent

@@ -90,6 +90,17 @@ def test_arming_in_offboard_without_signal_is_refused(harness: Harness) -> None:
     assert "Arming denied: Resolve system health failures first" in harness.api.texts()
 
 
+def test_arming_in_a_mode_preventing_arming_is_refused(harness: Harness) -> None:
+    # mode_requirements.cpp mode_req_prevent_arming: "Mode not suitable for arming"
+    harness.set_mode(modes.AUTO_RTL)
+    assert harness.last_ack(SET_MODE) == ACCEPTED  # disarmed: any known mode is accepted
+    harness.arm()
+    assert harness.last_ack(ARM) == TEMPORARILY_REJECTED
+    harness.set_mode(modes.AUTO_LOITER)
+    harness.arm()
+    assert harness.last_ack(ARM) == ACCEPTED
+
+
 def test_disarm_in_air_needs_force(harness: Harness) -> None:
     harness.command_long(mavlink.MAV_CMD_NAV_TAKEOFF, *([math.nan] * 7))
     harness.arm()

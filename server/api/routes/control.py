@@ -13,12 +13,14 @@ from fastapi import APIRouter, Body, Depends, Query, Request, Response
 from server.api.auth import same_secret
 from server.api.deps import ApiContext, Context, KnownVehicle, LeaseIdHeader, Pilot, Reader
 from server.api.errors import CONTROL_RESPONSES, READ_RESPONSES, ApiError
+from server.api.holder_process import verified_holder
 from server.api.lease import Lease, LeaseHeld, TakeoverRefused, TtlOutOfBounds, UnknownRequest
 from server.api.schemas import ErrorOut, setpoint_body
 from server.api.schemas.control import (
     AuditEntryOut,
     ControlBody,
     ControlStatusOut,
+    LeaseEndOut,
     LeaseOut,
     RenewBody,
     TakeoverAnswerBody,
@@ -119,6 +121,7 @@ async def acquire_control(
     body = body or ControlBody()
     vehicle, context, x_lease_id = call.vehicle, call.context, call.lease_id
     ttl_s = ttl_checked(context, body.ttl_s)
+    context.leases.expire_due()  # a lapsed lease, or one whose process is gone, is free now
     held = context.leases.current(vehicle.sysid)
     if held is not None and x_lease_id is not None and same_secret(x_lease_id, held.lease_id):
         return lease_out(
@@ -145,6 +148,8 @@ async def acquire_control(
     except AskerGone:
         # nobody reads this answer; 499 is what proxies log for a client that left
         raise ApiError(499, "the client asking for control went away") from None
+    if body.client_pid is not None and request.client is not None:
+        lease.process = verified_holder(body.client_pid, request.client.host, request.client.port)
     return lease_out(lease, context, vehicle)
 
 
@@ -167,11 +172,14 @@ async def renew_control(
 async def control_status(vehicle: KnownVehicle, context: Context, _: Reader) -> ControlStatusOut:
     """Who holds control, since when, until when, and a pending takeover request."""
     lease = context.leases.current(vehicle.sysid)
-    if lease is None:
-        return ControlStatusOut()
     now = context.leases.now()
+    last_end = _last_end(context, vehicle.sysid, now)
+    if lease is None:
+        return ControlStatusOut(last_end=last_end)
     asked = lease.request
     return ControlStatusOut(
+        holder_pid=lease.process.pid if lease.process is not None else None,
+        last_end=last_end,
         holder=lease.holder,
         session="ws" if lease.session == "ws" else "rest",
         since_s=round(max(0.0, now - lease.since), 3),
@@ -185,6 +193,18 @@ async def control_status(vehicle: KnownVehicle, context: Context, _: Reader) -> 
             timeout_s=asked.timeout_s,
             expires_in_s=round(max(0.0, asked.asked_at + asked.timeout_s - now), 3),
         ),
+    )
+
+
+def _last_end(context: ApiContext, vehicle_id: int, now: float) -> LeaseEndOut | None:
+    ended = context.leases.last_ended(vehicle_id)
+    if ended is None or ended.end is None or ended.ended_at is None:
+        return None
+    return LeaseEndOut(
+        holder=ended.holder,
+        end=ended.end.value,
+        ago_s=round(max(0.0, now - ended.ended_at), 3),
+        holder_pid=ended.process.pid if ended.process is not None else None,
     )
 
 

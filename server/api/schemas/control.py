@@ -37,6 +37,13 @@ class ControlBody(StrictBody):
     force: bool = Field(default=False, description="with takeover: take it at once, without asking")
     client_name: ClientName = None
     ttl_s: TtlS = None
+    client_pid: int | None = Field(
+        default=None,
+        ge=1,
+        description="the calling process's id, for a client on the server's machine: once "
+        "the server has seen that this process owns the request's connection, the lease "
+        "ends as soon as the process exits (docs/control.md)",
+    )
 
 
 class RenewBody(StrictBody):
@@ -71,6 +78,15 @@ class TakeoverRequestOut(BaseModel):
     expires_in_s: float
 
 
+class LeaseEndOut(BaseModel):
+    holder: str
+    end: Literal["released", "closed", "expired", "taken_over", "gone"] = Field(
+        description="gone: the holder's process exited"
+    )
+    ago_s: float
+    holder_pid: int | None = None
+
+
 class ControlStatusOut(BaseModel):
     """GET /control: who holds it, since when, and a pending takeover request; all null
     while nobody holds it."""
@@ -84,6 +100,12 @@ class ControlStatusOut(BaseModel):
     ttl_s: float | None = None
     request: TakeoverRequestOut | None = Field(
         default=None, description="a pending takeover request"
+    )
+    holder_pid: int | None = Field(
+        default=None, description="the holder's process, watched: the lease ends when it exits"
+    )
+    last_end: LeaseEndOut | None = Field(
+        default=None, description="how the vehicle's last lease ended; null when none has"
     )
 
 

@@ -1,0 +1,32 @@
+"""The documented flows one after another against one `skyhelm serve` (default control
+settings, the simulated quad at 8x), none needing `force`: the README's curl session twice,
+the examples killed half-way (Ctrl-C, then SIGKILL) and then flown to the end, the curl
+session of docs/api.md last. The whole chain, three README sessions and the page included,
+at real speed: `make test-chain` (tests/browser/test_flow_chain_full.py)."""
+
+from __future__ import annotations
+
+import shutil
+import signal
+from pathlib import Path
+
+import pytest
+
+from tests.flow_chain import API_DOC, README, Chain
+from tests.serve_process import Served
+
+pytestmark = pytest.mark.skipif(shutil.which("curl") is None, reason="needs curl")
+
+
+def test_the_documented_flows_fly_one_after_another(served: Served, tmp_path: Path) -> None:
+    chain = Chain(served.base_url, served.pilot_token, tmp_path)
+
+    chain.curl_session(README)
+    chain.curl_session(README)  # the first gave the lease back; arming from OFFBOARD works
+    chain.example_killed_half_way("fly_square.py", signal.SIGINT)
+    chain.example_killed_half_way("fly_square_async.py", signal.SIGKILL)
+    chain.example("fly_square.py")  # from the hold in the air the kill left
+    chain.example("fly_square_async.py")
+    chain.curl_session(API_DOC)
+
+    assert chain.flows == 7
