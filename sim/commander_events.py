@@ -103,8 +103,9 @@ NO_GLOBAL_POSITION = ArmingCheck("check_modes_global_pos", NAV_GROUP_ALL,
 # without a GCS link required (NAV_DLL_ACT 0) only a notice
 NO_DATALINK = ArmingCheck("check_rc_dl_no_dllink", NAV_GROUP_ALL, HEALTH_COMMUNICATION_LINKS,
                           LOG_INFO, blocks=False)
-# modeCheck: without stick input the manual modes cannot arm or run; a warning naming no
-# mode, unless COM_RC_IN_MODE disabled the sticks (then an error naming the modes)
+# modeCheck: without stick input the manual modes cannot arm or run; a warning that names
+# no mode (reported as every mode), unless COM_RC_IN_MODE disabled the sticks (then an
+# error naming the modes)
 NO_MANUAL_CONTROL = ArmingCheck("check_modes_manual_control", 0, HEALTH_REMOTE_CONTROL,
                                 LOG_WARNING, blocked_groups=NAV_GROUP_MANUAL_CONTROL)
 NO_MANUAL_CONTROL_DISABLED = ArmingCheck("check_modes_manual_control", NAV_GROUP_MANUAL_CONTROL,
@@ -127,9 +128,15 @@ def send_arming_report(events: EventLog, checks: tuple[ArmingCheck, ...]) -> Non
     events.send("commander_arming_check_summary", log_levels(LOG_PROTOCOL), 0, error, warning,
                 can_arm, can_arm)
     for check in checks:
-        events.send(check.name, log_levels(check.level), check.nav_groups, check.health_index)
+        events.send(check.name, log_levels(check.level), _reported_modes(check.nav_groups),
+                    check.health_index)
     events.send("commander_health_summary", log_levels(LOG_PROTOCOL), 0, HEALTH_PRESENT_SIH,
                 error, warning)
+
+
+def _reported_modes(nav_groups: int) -> int:
+    """Report::reportedModes: a check that requires no mode is shown in every mode."""
+    return nav_groups or NAV_GROUP_ALL
 
 
 def send_arm_denied(events: EventLog) -> None:
