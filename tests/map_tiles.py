@@ -3,6 +3,7 @@ tile, so each tile is told apart) around a point, written by tools.make_tiles.""
 
 from __future__ import annotations
 
+import math
 import struct
 import zlib
 from pathlib import Path
@@ -31,22 +32,40 @@ def tile_colour(z: int, x: int, y: int) -> tuple[int, int, int]:
     return (z * 11) % 256, (x * 37) % 256, (y * 53) % 256
 
 
-def tiles_around(lat_deg: float, lon_deg: float, zooms: range, reach: int) -> list[Tile]:
+def tiles_around(
+    lat_deg: float, lon_deg: float, zooms: range, reach: int, tile_px: int = 64
+) -> list[Tile]:
     """The tiles within `reach` tiles of a point at each zoom, each its own colour."""
     tiles = []
     for z in zooms:
         cx, cy = tile_xy(lon_deg, lat_deg, z)
         for x in range(cx - reach, cx + reach + 1):
             for y in range(cy - reach, cy + reach + 1):
-                tiles.append((z, x, y, solid_png(tile_colour(z, x, y), size=64)))
+                tiles.append((z, x, y, solid_png(tile_colour(z, x, y), size=tile_px)))
     return tiles
 
 
 def make_archive(
-    path: Path, zooms: range = range(16, 19), reach: int = 4, attribution: str = "Test map"
+    path: Path,
+    zooms: range = range(16, 19),
+    reach: int = 4,
+    attribution: str = "Test map",
+    tile_px: int = 64,
 ) -> list[Tile]:
     """An archive around the simulated vehicle's home; returns its tiles."""
-    tiles = tiles_around(HOME_LAT_DEG, HOME_LON_DEG, zooms, reach)
-    bounds = (HOME_LON_DEG - 0.02, HOME_LAT_DEG - 0.01, HOME_LON_DEG + 0.02, HOME_LAT_DEG + 0.01)
-    write_archive(path, tiles, ArchiveInfo(bounds, attribution))
+    tiles = tiles_around(HOME_LAT_DEG, HOME_LON_DEG, zooms, reach, tile_px)
+    write_archive(path, tiles, ArchiveInfo(_covered(tiles), attribution))
     return tiles
+
+
+def _covered(tiles: list[Tile]) -> tuple[float, float, float, float]:
+    """West, south, east, north of the tiles of the highest zoom (all of it is there)."""
+    top = max(z for z, *_ in tiles)
+    xs = [x for z, x, _, _ in tiles if z == top]
+    ys = [y for z, _, y, _ in tiles if z == top]
+    n = 1 << top
+
+    def lat(y: int) -> float:
+        return math.degrees(math.atan(math.sinh(math.pi * (1 - 2 * y / n))))
+
+    return min(xs) / n * 360 - 180, lat(max(ys) + 1), (max(xs) + 1) / n * 360 - 180, lat(min(ys))
