@@ -10,6 +10,7 @@ from tests.api.conftest import Api, api_for
 from tests.waiting import eventually
 
 NO_POSITION = "Navigation error: No valid global position estimate"
+NO_LOCAL_POSITION = "Navigation error: No valid position estimate"
 NO_OFFBOARD_SIGNAL = "No offboard signal"
 # slower than real time, so the not-ready time after boot (3 s of sim time, as PX4 SITL's
 # first seconds) outlasts the server's first look at the vehicle and its events metadata
@@ -32,7 +33,9 @@ async def test_not_ready_with_px4s_reason_after_boot_then_ready() -> None:
         assert not_ready, f"never seen not ready from PX4's report: {seen[:3]}"
         first = not_ready[0]
         assert first["mode"] == "HOLD"
-        assert NO_POSITION in [r["text"] for r in first["reasons"]]
+        # as PX4 v1.16 SITL reports it after boot: no position estimate, local nor global
+        errors = [r["text"] for r in first["reasons"] if r["severity"] == "ERROR"]
+        assert errors == [NO_LOCAL_POSITION, NO_POSITION]
         reason = next(r for r in first["reasons"] if r["text"] == NO_POSITION)
         assert reason["severity"] == "ERROR"
         assert reason["component"] == "Global position estimate"

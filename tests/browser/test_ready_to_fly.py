@@ -53,7 +53,8 @@ def test_ready_then_not_ready_with_px4s_reason_for_the_mode_flown(
     # the mode picked in the menu gets its own verdict
     page.select_option("#mode-select", "HOLD")
     page.wait_for_function(
-        "document.getElementById('ready-popover').textContent.includes('In HOLD (picked): can arm')",
+        "document.getElementById('ready-popover').textContent"
+        ".includes('In HOLD (picked): can arm')",
         timeout=5_000,
     )
     page.keyboard.press("Escape")
