@@ -22,7 +22,8 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
 @pytest.fixture(scope="module")
 def browser(request: pytest.FixtureRequest) -> Iterator[Any]:
     """Chromium; it ignores the server's Content-Security-Policy (which forbids the eval that
-    Playwright's string predicates use) unless the module sets ENFORCE_CSP (test_csp.py)."""
+    Playwright's string predicates use) unless the module sets ENFORCE_CSP (test_csp.py).
+    A module's BROWSER_ARGS add to Chromium's arguments, its VIEWPORT sets the window."""
     if not CHROMIUM.exists():
         pytest.skip("/usr/bin/chromium is not installed (make chromium, as root)")
     sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
@@ -33,9 +34,9 @@ def browser(request: pytest.FixtureRequest) -> Iterator[Any]:
         context = playwright.chromium.launch_persistent_context(
             profile,
             executable_path=str(CHROMIUM),
-            args=CHROMIUM_ARGS,
+            args=[*CHROMIUM_ARGS, *getattr(request.module, "BROWSER_ARGS", [])],
             headless=True,
-            viewport={"width": 1600, "height": 1000},
+            viewport=getattr(request.module, "VIEWPORT", {"width": 1600, "height": 1000}),
             bypass_csp=not getattr(request.module, "ENFORCE_CSP", False),
         )
         try:
@@ -45,9 +46,15 @@ def browser(request: pytest.FixtureRequest) -> Iterator[Any]:
 
 
 @pytest.fixture(scope="module")
-def serve(request: pytest.FixtureRequest) -> Iterator[Serve]:
-    """One `skyhelm serve` per test module, with the module's SERVE_ARGS."""
-    server = Serve(extra_args=list(getattr(request.module, "SERVE_ARGS", [])))
+def serve(
+    request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
+) -> Iterator[Serve]:
+    """One `skyhelm serve` per test module, with the module's SERVE_ARGS (a list, or a
+    function of a fresh directory that gives the list: files the server is to read)."""
+    args = getattr(request.module, "SERVE_ARGS", [])
+    if callable(args):
+        args = args(tmp_path_factory.mktemp("serve"))
+    server = Serve(extra_args=list(args))
     server.start()
     try:
         yield server

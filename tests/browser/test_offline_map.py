@@ -4,18 +4,14 @@ one fetched from the server."""
 
 from __future__ import annotations
 
-import tempfile
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit
 
-import pytest
-
 from tests.map_tiles import make_archive
 
 from .flows import open_dashboard
-from .harness import CHROMIUM, CHROMIUM_ARGS, Serve, wait_for
+from .harness import Serve, wait_for
 
 # every host name fails to resolve and everything not on loopback goes to a proxy that is
 # not there (Chromium never sends loopback through a proxy): no network but this machine
@@ -26,36 +22,15 @@ LOOPBACK_ONLY_ARGS = [
 TILE_PATH = "/api/v1/tiles/"
 
 
-@pytest.fixture(scope="module")
-def serve(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Serve]:
-    archive = tmp_path_factory.mktemp("tiles") / "field.pmtiles"
+BROWSER_ARGS = LOOPBACK_ONLY_ARGS
+VIEWPORT = {"width": 1280, "height": 800}
+
+
+def SERVE_ARGS(directory: Path) -> list[str]:
+    """The archive this module's server serves, made in `directory`."""
+    archive = directory / "field.pmtiles"
     make_archive(archive, zooms=range(17, 20), reach=4, attribution="Field map", tile_px=256)
-    server = Serve(extra_args=["--sim-speed", "3", "--map-tiles", str(archive)])
-    server.start()
-    try:
-        yield server
-    finally:
-        server.stop()
-        server.discard_log()
-
-
-@pytest.fixture(scope="module")
-def browser() -> Iterator[Any]:
-    if not CHROMIUM.exists():
-        pytest.skip("/usr/bin/chromium is not installed (make chromium, as root)")
-    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
-    with (
-        tempfile.TemporaryDirectory(prefix="skyhelm-chromium-") as profile,
-        sync_api.sync_playwright() as playwright,
-    ):
-        context = playwright.chromium.launch_persistent_context(
-            profile, executable_path=str(CHROMIUM), args=[*CHROMIUM_ARGS, *LOOPBACK_ONLY_ARGS],
-            headless=True, viewport={"width": 1280, "height": 800}, bypass_csp=True,
-        )  # fmt: skip
-        try:
-            yield context
-        finally:
-            context.close()
+    return ["--sim-speed", "3", "--map-tiles", str(archive)]
 
 
 def test_the_map_shows_the_archives_tiles_with_no_network(browser: Any, serve: Serve) -> None:

@@ -30,6 +30,16 @@ from tests.link.ftp_server import FtpServer
 from tests.waiting import wait_for
 
 _BITFIELD = {"type": "uint32_t", "is_bitfield": True}
+_HEALTH, _MODE_GROUPS = "px4::health_component_t", "px4::navigation_mode_group_t"
+
+
+def _arguments(**types: str) -> list[dict[str, str]]:
+    """An event's argument list, in order: name=type."""
+    return [{"name": name, "type": kind} for name, kind in types.items()]
+
+
+# every arming check's event: the mode groups it concerns, its health component
+_CHECK_ARGUMENTS = _arguments(modes="navigation_mode_group_t", health_component_index="uint8_t")
 # PX4's definitions (ids, names, texts, argument layouts) of the events used here
 EVENTS_JSON: dict[str, Any] = {"version": 2, "components": {"1": {
     "namespace": "px4",
@@ -62,32 +72,24 @@ EVENTS_JSON: dict[str, Any] = {"version": 2, "components": {"1": {
         "arming_check": {"events": {
             "11047904": {"name": "commander_arming_check_summary", "type": "summary",
                          "message": "Arming check summary event",
-                         "arguments": [{"name": "chunk_idx", "type": "uint8_t"},
-                                       {"name": "error", "type": "px4::health_component_t"},
-                                       {"name": "warning", "type": "px4::health_component_t"},
-                                       {"name": "can_arm",
-                                        "type": "px4::navigation_mode_group_t"},
-                                       {"name": "can_run",
-                                        "type": "px4::navigation_mode_group_t"}]},
+                         "arguments": _arguments(
+                             chunk_idx="uint8_t", error=_HEALTH, warning=_HEALTH,
+                             can_arm=_MODE_GROUPS, can_run=_MODE_GROUPS)},
             "3087815": {"name": "check_modes_offboard_signal", "message": "No offboard signal",
-                        "arguments": [{"name": "modes", "type": "navigation_mode_group_t"},
-                                      {"name": "health_component_index", "type": "uint8_t"}]},
+                        "arguments": _CHECK_ARGUMENTS},
             "10011251": {"name": "check_modes_global_pos",
                          "message": "Navigation error: No valid global position estimate",
-                         "arguments": [{"name": "modes", "type": "navigation_mode_group_t"},
-                                       {"name": "health_component_index", "type": "uint8_t"}]},
+                         "arguments": _CHECK_ARGUMENTS},
             "6801787": {"name": "check_rc_dl_no_dllink",
                         "message": "No connection to the ground control station",
-                        "arguments": [{"name": "modes", "type": "navigation_mode_group_t"},
-                                      {"name": "health_component_index", "type": "uint8_t"}]},
+                        "arguments": _CHECK_ARGUMENTS},
         }},
         "health": {"events": {
             "1914663": {"name": "commander_health_summary", "type": "summary",
                         "message": "Health report summary event",
-                        "arguments": [{"name": "chunk_idx", "type": "uint8_t"},
-                                      {"name": "is_present", "type": "px4::health_component_t"},
-                                      {"name": "error", "type": "px4::health_component_t"},
-                                      {"name": "warning", "type": "px4::health_component_t"}]},
+                        "arguments": _arguments(
+                            chunk_idx="uint8_t", is_present=_HEALTH, error=_HEALTH,
+                            warning=_HEALTH)},
         }},
     },
 }}}  # fmt: skip
