@@ -53,20 +53,23 @@ def test_px4_not_ready_with_its_reasons_after_boot_then_ready(
 ) -> None:
     sitl, served = booting_px4
     reports: list[dict[str, Any]] = []  # each new verdict from PX4's report, in order
+    seen_s: list[float] = []  # when each came, in seconds since PX4 was launched
     headers = {"Authorization": f"Bearer {served.observer_token}"}
     with httpx.Client(base_url=served.api, headers=headers, timeout=10.0) as http:
-        deadline = time.monotonic() + BOOT_TIMEOUT_S
+        started_s = time.monotonic()
+        deadline = started_s + BOOT_TIMEOUT_S
         while time.monotonic() < deadline:
             checks = _arming_checks(http, sitl.sysid)
             if checks is not None and checks["source"] == "events":
                 if not reports or reports[-1] != checks:
                     reports.append(checks)
+                    seen_s.append(time.monotonic() - started_s)
                 if checks["ready"]:
                     break
             time.sleep(0.1)  # polling a real vehicle booting in real time
     assert reports, "PX4's arming-check report never reached the state"
-    for checks in reports:  # shown with -s: what PX4 said, for the docs and the sim
-        print(checks["ready"], checks["mode"], checks["can_arm_modes"])
+    for at_s, checks in zip(seen_s, reports, strict=True):  # with -s: what PX4 said, when
+        print(f"{at_s:.1f} s", checks["ready"], checks["mode"], checks["can_arm_modes"])
         for reason in checks["reasons"] + checks["other_reasons"]:
             print("  ", reason["severity"], reason["text"], reason["component"], reason["modes"])
     assert reports[-1]["ready"] is True, f"never ready: {reports[-1]}"
