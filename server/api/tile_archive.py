@@ -15,7 +15,14 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from pmtiles.reader import MmapSource, Reader
-from pmtiles.tile import Compression, TileType
+from pmtiles.tile import (
+    Compression,
+    Entry,
+    TileType,
+    deserialize_directory,
+    find_tile,
+    zxy_to_tileid,
+)
 
 from server.settings import SettingsError
 
@@ -26,6 +33,7 @@ MEDIA_TYPES = {"png": "image/png", "jpg": "image/jpeg", "webp": "image/webp"}
 _PMTILES_FORMATS = {TileType.PNG: "png", TileType.JPEG: "jpg", TileType.WEBP: "webp"}
 _MBTILES_FORMATS = {"png": "png", "jpg": "jpg", "jpeg": "jpg", "webp": "webp"}
 MAX_ZOOM = 30
+_DIRECTORIES_KEPT = 64  # a leaf directory holds thousands of tiles' entries
 
 
 class TileArchiveError(SettingsError):
@@ -93,6 +101,11 @@ class PmTilesArchive:
                 raise
             raise TileArchiveError(f"{path}: not a readable PMTiles archive ({exc})") from None
         self._gzipped = header["tile_compression"] == Compression.GZIP
+        self._header = header
+        # parsed directories by (offset, length): the root and the leaves asked for so far
+        # (pmtiles' Reader.get parses the root again for every tile)
+        self._directories: dict[tuple[int, int], list[Entry]] = {}
+        self._lock = threading.Lock()
         bounds = tuple(header[k] / 1e7 for k in ("min_lon_e7", "min_lat_e7", "max_lon_e7",
                                                  "max_lat_e7"))  # fmt: skip
         self.info = TileArchiveInfo(
@@ -101,10 +114,29 @@ class PmTilesArchive:
         )  # fmt: skip
 
     def tile(self, z: int, x: int, y: int) -> bytes | None:
-        data: bytes | None = self._reader.get(z, x, y)  # type: ignore[no-untyped-call]
-        if data is None:
-            return None
-        return gzip.decompress(data) if self._gzipped else bytes(data)
+        header = self._header
+        tile_id = zxy_to_tileid(z, x, y)
+        offset, length = header["root_offset"], header["root_length"]
+        for _depth in range(4):  # the spec's deepest directory tree
+            entry = find_tile(self._directory(offset, length), tile_id)
+            if entry is None:
+                return None
+            if entry.run_length > 0:
+                at = header["tile_data_offset"] + entry.offset
+                data = bytes(self._reader.get_bytes(at, entry.length))
+                return gzip.decompress(data) if self._gzipped else data
+            offset, length = header["leaf_directory_offset"] + entry.offset, entry.length
+        return None
+
+    def _directory(self, offset: int, length: int) -> list[Entry]:
+        with self._lock:
+            entries = self._directories.get((offset, length))
+            if entries is None:
+                if len(self._directories) >= _DIRECTORIES_KEPT:
+                    self._directories.clear()
+                entries = deserialize_directory(self._reader.get_bytes(offset, length))
+                self._directories[(offset, length)] = entries
+            return entries
 
     def close(self) -> None:
         self._file.close()
