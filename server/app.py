@@ -35,10 +35,12 @@ from server.api.routes import (
     session,
     setpoint,
     sticks,
+    tiles,
     vehicles,
 )
 from server.api.routes import signing as signing_routes
 from server.api.security import install_security
+from server.api.tile_archive import open_tile_archive
 from server.fleet import routes as fleet_routes
 from server.fleet import ws as fleet_ws
 from server.fleet.edge import EdgeService
@@ -77,7 +79,8 @@ def create_app(settings: Settings, *, freeze_gc_at_start: bool = False) -> FastA
     leases = LeaseManager.from_settings(settings)
     deadman = Deadman.from_settings(leases, registry, settings)
     context = ApiContext(
-        settings, tokens, registry, leases, deadman, read_only=is_replay(settings.connect)
+        settings, tokens, registry, leases, deadman, read_only=is_replay(settings.connect),
+        tiles=open_tile_archive(settings.map_tiles) if settings.map_tiles else None,
     )
     hub = SceneHub() if settings.scene else None
     publishers = StatePublishers(
@@ -143,6 +146,8 @@ def create_app(settings: Settings, *, freeze_gc_at_start: bool = False) -> FastA
                 await foxglove.close()
             if sim is not None:
                 await sim.stop()
+            if context.tiles is not None:
+                context.tiles.close()
 
     app = FastAPI(
         title="SkyHelm",
@@ -170,6 +175,7 @@ def create_app(settings: Settings, *, freeze_gc_at_start: bool = False) -> FastA
         health,
         session,
         page_config,
+        tiles,
         vehicles,
         control,
         commands,

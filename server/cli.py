@@ -50,6 +50,10 @@ def _server_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cors-origin", action="append", dest="cors_origins", metavar="ORIGIN")
     parser.add_argument("--no-scene", action="store_true", help="do not start the 3D scene")
     parser.add_argument("--map-tile-url", help="2D map tiles ({z}/{x}/{y}); default: a grid")
+    parser.add_argument(
+        "--map-tiles", type=Path, metavar="FILE",
+        help="offline 2D map tiles: a PMTiles or MBTiles archive (python -m tools.make_tiles)",
+    )
     parser.add_argument("--tls-cert", type=Path, help="PEM certificate: serve https and wss")
     parser.add_argument("--tls-key", type=Path, help="PEM private key of --tls-cert")
     parser.add_argument(
@@ -289,6 +293,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     try:
         return asyncio.run(serve(settings))
+    except SettingsError as exc:  # found while building the app (a tile archive it opens)
+        print(f"skyhelm: {exc}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         return 0
 

@@ -141,6 +141,11 @@ class Settings(BaseSettings):
         "none = an offline metre grid",
     )
     map_tile_attribution: str = Field("", max_length=200, description="shown on the map")
+    map_tiles: Path | None = Field(
+        None,
+        description="offline 2D map tiles: a PMTiles or MBTiles archive of raster tiles, "
+        "served at /api/v1/tiles/{z}/{x}/{y}.{png|jpg|webp} (python -m tools.make_tiles)",
+    )
     web_dir: Path | None = Field(default_factory=_default_web_dir)
     # Abuse limits (docs/api.md, "Security"): per token, per client address.
     control_rate_per_s: float = Field(
@@ -237,6 +242,12 @@ class Settings(BaseSettings):
             )
         ):
             raise ValueError("observer_token must differ from token")
+        return self
+
+    @model_validator(mode="after")
+    def _one_tile_source(self) -> Settings:
+        if self.map_tiles is not None and self.map_tile_url is not None:
+            raise ValueError("map_tiles and map_tile_url both name the map's tiles: give one")
         return self
 
     @model_validator(mode="after")

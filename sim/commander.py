@@ -404,12 +404,13 @@ class Commander:
     def _failing_checks(self) -> tuple[ev.ArmingCheck, ...]:
         """The arming checks failing now, in the order PX4's report lists them."""
         failing = (
+            (not self.ready, ev.NO_LOCAL_POSITION),
             (not self.ready, ev.NO_GLOBAL_POSITION),
-            (not self._mode_available[modes.AUTO_MISSION], ev.NO_MISSION),
-            (not self.offboard_signal_fresh(), ev.OFFBOARD_SIGNAL),
+            (self.manual_control_lost(), self._no_manual_control_check()),
             (self.nav_mode in _MODES_PREVENTING_ARMING, ev.MODE_NOT_SUITABLE),
             (self.gcs_heartbeat_s is None or self.datalink_lost, ev.NO_DATALINK),
-            (self.manual_control_lost(), self._no_manual_control_check()),
+            (not self.offboard_signal_fresh(), ev.OFFBOARD_SIGNAL),
+            (not self._mode_available[modes.AUTO_MISSION], ev.NO_MISSION),
         )
         return tuple(check for fails, check in failing if fails)
 

@@ -25,6 +25,12 @@ from sim.modes import Px4Mode
 
 # navigation_mode_group_t bits (one per vehicle_status nav_state)
 NAV_GROUP_MISSION = 1 << 3
+# a multicopter's mode requirements (ModeUtil/mode_requirements.cpp), as PX4 v1.16 SITL's
+# SIH quad names them after boot: a local position for posctl, mission, loiter, rtl,
+# takeoff, land, follow target, precland, orbit, vtol takeoff; a global one for mission,
+# loiter, rtl
+NAV_GROUP_LOCAL_POSITION = sum(1 << bit for bit in (2, 3, 4, 5, 17, 18, 19, 20, 21, 22))
+NAV_GROUP_GLOBAL_POSITION = sum(1 << bit for bit in (3, 4, 5))
 NAV_GROUP_OFFBOARD = 1 << 14
 # mode_req_manual_control: manual, altctl, posctl, acro, stab
 NAV_GROUP_MANUAL_CONTROL = sum(1 << bit for bit in (0, 1, 2, 10, 15))
@@ -35,6 +41,7 @@ NAV_GROUPS_SUPPORTED = sum(1 << bit for bit in (0, 1, 2, 3, 4, 5, 10, 14, 15, 17
 # health_component_t bits as indices (the uint8 argument of a check event)
 HEALTH_REMOTE_CONTROL = 7
 HEALTH_COMMUNICATION_LINKS = 12
+HEALTH_LOCAL_POSITION = 17
 HEALTH_GLOBAL_POSITION = 24
 HEALTH_SYSTEM = 20
 # health components PX4's SIH quad reports present
@@ -98,13 +105,17 @@ class ArmingCheck:
 OFFBOARD_SIGNAL = ArmingCheck("check_modes_offboard_signal", NAV_GROUP_OFFBOARD,
                               HEALTH_SYSTEM, LOG_ERROR)
 NO_MISSION = ArmingCheck("check_modes_mission", NAV_GROUP_MISSION, HEALTH_SYSTEM, LOG_INFO)
-NO_GLOBAL_POSITION = ArmingCheck("check_modes_global_pos", NAV_GROUP_ALL,
+# until the estimator has a position (the first seconds after boot)
+NO_LOCAL_POSITION = ArmingCheck("check_modes_local_pos", NAV_GROUP_LOCAL_POSITION,
+                                HEALTH_LOCAL_POSITION, LOG_ERROR)
+NO_GLOBAL_POSITION = ArmingCheck("check_modes_global_pos", NAV_GROUP_GLOBAL_POSITION,
                                  HEALTH_GLOBAL_POSITION, LOG_ERROR)
 # without a GCS link required (NAV_DLL_ACT 0) only a notice
 NO_DATALINK = ArmingCheck("check_rc_dl_no_dllink", NAV_GROUP_ALL, HEALTH_COMMUNICATION_LINKS,
                           LOG_INFO, blocks=False)
-# modeCheck: without stick input the manual modes cannot arm or run; a warning naming no
-# mode, unless COM_RC_IN_MODE disabled the sticks (then an error naming the modes)
+# modeCheck: without stick input the manual modes cannot arm or run; a warning that names
+# no mode (reported as every mode), unless COM_RC_IN_MODE disabled the sticks (then an
+# error naming the modes)
 NO_MANUAL_CONTROL = ArmingCheck("check_modes_manual_control", 0, HEALTH_REMOTE_CONTROL,
                                 LOG_WARNING, blocked_groups=NAV_GROUP_MANUAL_CONTROL)
 NO_MANUAL_CONTROL_DISABLED = ArmingCheck("check_modes_manual_control", NAV_GROUP_MANUAL_CONTROL,
@@ -132,9 +143,15 @@ def send_arming_report(events: EventLog, checks: tuple[ArmingCheck, ...]) -> Non
     events.send("commander_arming_check_summary", log_levels(LOG_PROTOCOL), 0, error, warning,
                 can_arm, can_arm)
     for check in checks:
-        events.send(check.name, log_levels(check.level), check.nav_groups, check.health_index)
+        events.send(check.name, log_levels(check.level), _reported_modes(check.nav_groups),
+                    check.health_index)
     events.send("commander_health_summary", log_levels(LOG_PROTOCOL), 0, HEALTH_PRESENT_SIH,
                 error, warning)
+
+
+def _reported_modes(nav_groups: int) -> int:
+    """Report::reportedModes: a check that requires no mode is shown in every mode."""
+    return nav_groups or NAV_GROUP_ALL
 
 
 def send_arm_denied(events: EventLog) -> None:

@@ -264,3 +264,31 @@ def test_replay_of_a_missing_file_exits_2(tmp_path: Path) -> None:
     )
     assert result.returncode == 2
     assert "no recording" in result.stderr
+
+
+def test_a_map_tile_file_that_is_no_archive_exits_2(tmp_path: Path) -> None:
+    not_tiles = tmp_path / "field.mbtiles"
+    not_tiles.write_text("not an archive")
+    result = subprocess.run(
+        [str(SKYHELM), "serve", "--port", "0", "--no-scene", "--no-tlog",
+         "--connect", "udpin:127.0.0.1:0", "--map-tiles", str(not_tiles)],
+        capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    assert result.returncode == 2
+    assert "map_tiles" in result.stderr
+    assert "neither a PMTiles nor an MBTiles archive" in result.stderr
+
+
+def test_map_tiles_comes_from_the_flag_environment_or_toml(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    config = tmp_path / "skyhelm.toml"
+    config.write_text('map_tiles = "from-toml.pmtiles"\n')
+    parse = build_parser().parse_args
+    assert settings_from_args(parse(["serve", "--config", str(config)])).map_tiles == Path(
+        "from-toml.pmtiles"
+    )
+    monkeypatch.setenv("SKYHELM_MAP_TILES", "from-env.mbtiles")
+    assert settings_from_args(parse(["serve"])).map_tiles == Path("from-env.mbtiles")
+    flag = parse(["serve", "--map-tiles", "field.pmtiles"])
+    assert settings_from_args(flag).map_tiles == Path("field.pmtiles")

@@ -20,6 +20,7 @@ import { VehicleMap } from "./map.js";
 import { modeMenu, modesFor } from "./modes.js";
 import { SETPOINT_TYPES } from "./offboard.js";
 import { freshness, page, plots, vehiclePath } from "./page.js";
+import { readiness } from "./readiness.js";
 import { instruments, render } from "./render.js";
 import { $, banner, log, nowS, num, setText } from "./ui.js";
 
@@ -52,6 +53,7 @@ function onTelemetry(message) {
 
 function showState(message) {
   render(message);
+  readiness.show(message);
   alerts.fromState(message);
   renderHolder(message.lease);
   modeMenu.follow(message.vehicle_type || page.vehicleType, message.mode);

@@ -296,7 +296,7 @@ export class VehicleMap {
     new ResizeObserver(() => this.map.invalidateSize({ pan: false })).observe(container);
   }
 
-  /** Tiles when the server has a map_tile_url; the grid stays otherwise. */
+  /** Tiles when the server has a map_tile_url or a tile archive; the grid stays otherwise. */
   async loadConfig() {
     let config = null;
     try {
@@ -305,9 +305,13 @@ export class VehicleMap {
       return; // an older server: the grid
     }
     if (!config?.map_tile_url) return;
+    // an offline archive (map_tiles) says which zooms and area it holds: no asking past them
+    const [west, south, east, north] = config.map_tile_bounds || [];
     this.tiles = L.tileLayer(config.map_tile_url, {
-      maxZoom: MAX_ZOOM, maxNativeZoom: TILE_MAX_NATIVE_ZOOM,
+      maxZoom: MAX_ZOOM, maxNativeZoom: config.map_tile_max_zoom ?? TILE_MAX_NATIVE_ZOOM,
+      minZoom: config.map_tile_min_zoom ?? 0,
       attribution: config.map_tile_attribution || "",
+      ...(config.map_tile_bounds ? { bounds: L.latLngBounds([south, west], [north, east]) } : {}),
     }).addTo(this.map);
     this.container.classList.add("with-tiles");
     this.grid.remove();

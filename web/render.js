@@ -15,6 +15,7 @@ for (const [id, source] of Object.entries({
   "t-battery": "battery", "t-gps": "gps", "t-pos": "position", "t-vel": "position",
   "t-alt": "altitude", "t-latlon": "altitude", "t-att": "attitude", "t-speed": "speed",
   "t-home": "home", "t-motors": "motors", mode: "mode", armed: "mode", landed: "landed",
+  "ready-to-fly": "SYS_STATUS",
 })) freshness.watch($(id), source);
 
 export function altitudeAboveHome(state) {

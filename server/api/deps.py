@@ -22,6 +22,7 @@ from server.api.errors import ApiError
 from server.api.lease import Lease, LeaseManager
 from server.api.registry import VehicleRegistry
 from server.api.security import Guards
+from server.api.tile_archive import TileArchive
 from server.link import Vehicle
 from server.settings import Settings
 
@@ -35,6 +36,8 @@ class ApiContext:
     deadman: Deadman
     # A replayed recording: nobody may control, whatever the token.
     read_only: bool = False
+    # the offline map's tiles (settings.map_tiles), opened when the app is built
+    tiles: TileArchive | None = None
 
     @functools.cached_property
     def guards(self) -> Guards:

@@ -32,6 +32,7 @@ from typing import Any
 from pyulog.libevents_parse.parser import Parser  # type: ignore[import-untyped]
 
 from server.link.aio import cancel_and_wait
+from server.link.arming_checks import NAV_STATES, CheckReportReader, log_level_name
 from server.link.component_metadata import ComponentMetadata, MetadataError, default_cache_dir
 from server.link.core import VehicleCore
 from server.link.ftp import FtpClient
@@ -46,34 +47,17 @@ from server.link.telemetry import STATUSTEXT_KEEP, Telemetry
 
 log = logging.getLogger(__name__)
 
-# libevents' log levels (the low nibble of log_levels is the external one)
-EVENT_LOG_LEVEL_NAMES = (
-    "EMERGENCY", "ALERT", "CRITICAL", "ERROR", "WARNING", "NOTICE", "INFO", "DEBUG",
-    "PROTOCOL", "DISABLED",
-)  # fmt: skip
-_LOG_LEVEL_PROTOCOL = 8
 # groups PX4 uses for the texts a user reads: plain events and the arming/health checks
 _SHOWN_GROUPS = frozenset({"default", "arming_check", "health"})
+_CHECK_GROUPS = ("arming_check", "health")
+_LOG_LEVEL_PROTOCOL = 8
 MAV_CMD_RUN_PREARM_CHECKS = 401
-MAV_SEVERITY_ERROR = 3
-# PX4's event names of the arming-check report and of the refusal that points at it
-ARMING_CHECK_SUMMARY = "commander_arming_check_summary"
+# PX4's event names of the refusal that points at the arming-check report
 ARM_DENIED_RESOLVE_FAILURES = "commander_arm_denied_resolve_failures"
 APPEND_CHECKS = "append_health_and_arming_messages"
-# PX4's navigation states by mode name: a check's "modes" argument has bit 1 << nav_state
-# set for each mode it blocks (navigation_mode_group_t maps group == mode)
-NAV_STATES = {
-    "MANUAL": 0, "ALTCTL": 1, "POSCTL": 2, "MISSION": 3, "HOLD": 4, "RTL": 5, "ACRO": 10,
-    "TERMINATION": 13, "OFFBOARD": 14, "STABILIZED": 15, "TAKEOFF": 17, "LAND": 18,
-    "FOLLOW_TARGET": 19, "PRECLAND": 20, "POSCTL_ORBIT": 21, "VTOL_TAKEOFF": 22,
-}  # fmt: skip
 _MAX_MISSING = 128  # a larger gap is not worth asking for
 _KEEP_UNDECODED = 64
 _SAME_TEXT_S = 1.0
-
-
-def log_level_name(level: int) -> str:
-    return EVENT_LOG_LEVEL_NAMES[level] if 0 <= level < len(EVENT_LOG_LEVEL_NAMES) else str(level)
 
 
 def _newer(a: int, b: int) -> bool:
@@ -102,7 +86,13 @@ class EventDecoder:
         self._argument_names: dict[int, list[str]] = {}
         # PX4's custom_mode → navigation state, from its "navigation_mode_groups"
         self.nav_states: dict[int, int] = {}
+        # health_component_t by bit index: PX4's description of each component
+        self.health_components: dict[int, str] = {}
         for component_id, component in definitions.get("components", {}).items():
+            health = component.get("enums", {}).get("health_component_t", {})
+            for bit, entry in health.get("entries", {}).items():
+                label = entry.get("description") or entry.get("name")
+                self.health_components[int(bit).bit_length() - 1] = str(label)
             groups = component.get("navigation_mode_groups", {}).get("groups", {})
             for nav_state, custom_modes in groups.items():
                 self.nav_states.update((int(mode), int(nav_state)) for mode in custom_modes)
@@ -155,7 +145,7 @@ class Px4Events:
         self._undecoded: deque[Any] = deque(maxlen=_KEEP_UNDECODED)
         self._latest: int | None = None
         self._missing: set[int] = set()
-        self._checks: dict[str, tuple[str, int | None]] = {}
+        self.checks = CheckReportReader()
         self._refusal: tuple[float, DecodedEvent] | None = None
         core.requests.explainers.append(self._explain)
         core.on_message("FILE_TRANSFER_PROTOCOL", self.ftp.handle_message)
@@ -176,7 +166,7 @@ class Px4Events:
         self.metadata_error = None
         self._latest = None
         self._missing.clear()
-        self._checks = {}
+        self.checks.forget()
         self._refusal = None
         self._start_loading()
 
@@ -241,6 +231,7 @@ class Px4Events:
     async def _load(self) -> None:
         try:
             self.decoder = EventDecoder(await self.metadata.events())
+            self.checks.health_components = self.decoder.health_components
         except (MetadataError, ValueError) as e:
             self.metadata_error = str(e)
             self._failed_s = self._core.now()
@@ -265,8 +256,10 @@ class Px4Events:
         decoded = self.decoder.decode(msg.id, event_arguments(msg))
         if decoded is None:
             decoded = DecodedEvent("", "default", f"[unknown event {msg.id}]", {})
-        elif decoded.group == "arming_check":
-            self._note_check(decoded, level)
+        elif decoded.group in _CHECK_GROUPS and self.checks.take(
+            decoded.name, decoded.group, decoded.text, level, list(decoded.arguments.values())
+        ):
+            self._core.changed()
         if level >= _LOG_LEVEL_PROTOCOL or decoded.group not in _SHOWN_GROUPS:
             return
         self._core.publish_event("px4_event", {
@@ -285,25 +278,12 @@ class Px4Events:
             self._refusal = (self._core.now(), decoded)
 
     # -- arming checks and refusal reasons ------------------------------------------------
-    def _note_check(self, event: DecodedEvent, level: int) -> None:
-        """PX4 sends its arming-check report as a summary event followed by one event per
-        failing check, each naming the mode groups it blocks."""
-        if event.name == ARMING_CHECK_SUMMARY:
-            self._checks = {}
-        elif level <= MAV_SEVERITY_ERROR:
-            modes = event.arguments.get("modes")
-            self._checks[event.name] = (event.text, modes if isinstance(modes, int) else None)
-
     def failing_checks(self, nav_state: int | None = None) -> list[str]:
         """The texts of the arming checks that fail in a mode (PX4's navigation state;
         by default the vehicle's current mode)."""
         if nav_state is None:
             nav_state = NAV_STATES.get(self._telemetry.mode)
-        return [
-            text
-            for text, modes in self._checks.values()
-            if modes is None or nav_state is None or modes & (1 << nav_state)
-        ]
+        return self.checks.failing(nav_state)
 
     async def _explain(self, started_s: float, reason: str | None) -> str | None:
         """A refused command's reason: PX4's event that follows the COMMAND_ACK, followed

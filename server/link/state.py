@@ -138,6 +138,29 @@ class StatusText:
 
 
 @dataclass(frozen=True)
+class ArmingCheck:
+    """One check PX4 reports failing or warning about, in its words."""
+
+    text: str
+    severity: str  # PX4's log level: ERROR keeps the modes it names from arming
+    modes: tuple[str, ...]  # the modes it concerns
+    component: str | None  # PX4's health component ("Global position estimate")
+    kind: str  # "arming_check", or "health" for a component's health
+
+
+@dataclass(frozen=True)
+class ArmingChecksState:
+    """Ready to arm in the mode flown, and why not."""
+
+    ready: bool | None  # None until the vehicle told
+    mode: str  # the mode judged: the one flown
+    source: str  # "events": PX4's check report; "sys_status": only SYS_STATUS's bits
+    can_arm_modes: tuple[str, ...]  # the modes PX4 would arm in now (events only)
+    reasons: tuple[ArmingCheck, ...]  # the checks concerning `mode`, errors first
+    other_reasons: tuple[ArmingCheck, ...]  # the checks concerning only other modes
+
+
+@dataclass(frozen=True)
 class StreamStats:
     """Setpoint streamer figures since it started; intervals from a bounded recent window."""
 
@@ -200,6 +223,7 @@ class VehicleState:
     # how well the vehicle is heard, and the warning before a loss (None before the link's
     # first look)
     link_quality: LinkQuality | None = None
+    arming_checks: ArmingChecksState | None = None
 
 
 class StateSubscription:

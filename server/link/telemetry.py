@@ -41,6 +41,7 @@ _SOURCES: dict[str, tuple[str, ...]] = {
     "heading_deg": ("VFR_HUD", "GLOBAL_POSITION_INT"),
     "actuator_outputs": ("SERVO_OUTPUT_RAW", "ACTUATOR_OUTPUT_STATUS"),
     "ready_to_arm": ("SYS_STATUS",),
+    "arming_checks": ("SYS_STATUS",),
     "battery": ("SYS_STATUS", "BATTERY_STATUS"),
     "gps": ("GPS_RAW_INT",),
 }

@@ -26,6 +26,7 @@ from pymavlink.dialects.v20 import development as mavlink
 
 from server.link.action import Action
 from server.link.aio import cancel_and_wait
+from server.link.arming_checks import readiness
 from server.link.core import Sender, VehicleCore
 from server.link.manual_control import ManualControl
 from server.link.offboard import Offboard
@@ -212,8 +213,9 @@ class Vehicle:
     def snapshot(self) -> VehicleState:
         core, t = self.core, self.telemetry
         setpoint = self.offboard.setpoint
+        reported = t.reported()
         return VehicleState(
-            **t.reported(),
+            **reported,
             sysid=self.sysid,
             compid=self.compid,
             mav_type=enum_name("MAV_TYPE", core.mav_type, "MAV_TYPE_"),
@@ -227,4 +229,8 @@ class Vehicle:
             updated_s=core.updated_s,
             telemetry_refused=tuple(sorted(self.telemetry_requests.refused)),
             message_ages_s=t.ages_at(core.now()),
+            arming_checks=readiness(
+                self.px4_events.checks.report, reported["mode"], t.ready_to_arm,
+                t.sensors_unhealthy,
+            ),
         )

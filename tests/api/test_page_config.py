@@ -19,6 +19,8 @@ async def test_config_gives_the_tile_url_to_observers_and_not_without_a_token() 
         assert answer.status_code == 200
         assert answer.json() == {
             "map_tile_url": TILES, "map_tile_attribution": "© Example", "fleet": False,
+            "map_tiles_offline": False, "map_tile_min_zoom": None, "map_tile_max_zoom": None,
+            "map_tile_bounds": None,
         }
         async with httpx.AsyncClient(
             transport=httpx.ASGITransport(app=api.app), base_url="http://testserver"

@@ -26,7 +26,7 @@ from tests.serving import uvicorn_serving
 API_MD = Path(__file__).resolve().parents[2] / "docs" / "api.md"
 PATH_VALUES = {
     "vehicle_id": "1", "name": "MPC_XY_VEL_MAX", "request_id": "no-such-request",
-    "edge": "edge-a", "rest": "arm",
+    "edge": "edge-a", "rest": "arm", "z": "1", "x": "0", "y": "0", "ext": "png",
 }
 # What each caller gets where the rule by method does not hold: health is public; a session
 # cookie may be had by any token; POST /control is how a pilot asks for the lease (409 while

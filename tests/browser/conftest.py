@@ -21,15 +21,26 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
 @pytest.fixture(scope="module")
 def browser(request: pytest.FixtureRequest) -> Iterator[Any]:
     """Chromium; it ignores the server's Content-Security-Policy (which forbids the eval that
-    Playwright's string predicates use) unless the module sets ENFORCE_CSP (test_csp.py)."""
-    with chromium_context(bypass_csp=not getattr(request.module, "ENFORCE_CSP", False)) as context:
+    Playwright's string predicates use) unless the module sets ENFORCE_CSP (test_csp.py).
+    A module's BROWSER_ARGS add to Chromium's arguments, its VIEWPORT sets the window."""
+    with chromium_context(
+        bypass_csp=not getattr(request.module, "ENFORCE_CSP", False),
+        extra_args=getattr(request.module, "BROWSER_ARGS", ()),
+        viewport=getattr(request.module, "VIEWPORT", None),
+    ) as context:
         yield context
 
 
 @pytest.fixture(scope="module")
-def serve(request: pytest.FixtureRequest) -> Iterator[Serve]:
-    """One `skyhelm serve` per test module, with the module's SERVE_ARGS."""
-    server = Serve(extra_args=list(getattr(request.module, "SERVE_ARGS", [])))
+def serve(
+    request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
+) -> Iterator[Serve]:
+    """One `skyhelm serve` per test module, with the module's SERVE_ARGS (a list, or a
+    function of a fresh directory that gives the list: files the server is to read)."""
+    args = getattr(request.module, "SERVE_ARGS", [])
+    if callable(args):
+        args = args(tmp_path_factory.mktemp("serve"))
+    server = Serve(extra_args=list(args))
     server.start()
     try:
         yield server

@@ -14,7 +14,7 @@ import subprocess
 import sys
 import tempfile
 import threading
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -193,10 +193,15 @@ def empty_scene() -> Iterator[tuple[str, str]]:
 
 
 @contextlib.contextmanager
-def chromium_context(bypass_csp: bool = True) -> Iterator[Any]:
+def chromium_context(
+    bypass_csp: bool = True,
+    extra_args: Sequence[str] = (),
+    viewport: dict[str, int] | None = None,
+) -> Iterator[Any]:
     """Debian's Chromium under Playwright, in a fresh profile (a skip when either is
     missing); it ignores the server's Content-Security-Policy (which forbids the eval that
-    Playwright's string predicates use) unless told not to."""
+    Playwright's string predicates use) unless told not to. `extra_args` add to Chromium's
+    arguments; `viewport` sets the window (1600×1000 by default)."""
     import pytest
 
     if not CHROMIUM.exists():
@@ -209,9 +214,9 @@ def chromium_context(bypass_csp: bool = True) -> Iterator[Any]:
         context = playwright.chromium.launch_persistent_context(
             profile,
             executable_path=str(CHROMIUM),
-            args=CHROMIUM_ARGS,
+            args=[*CHROMIUM_ARGS, *extra_args],
             headless=True,
-            viewport={"width": 1600, "height": 1000},
+            viewport=viewport or {"width": 1600, "height": 1000},
             bypass_csp=bypass_csp,
         )
         try:

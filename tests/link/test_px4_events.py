@@ -30,6 +30,16 @@ from tests.link.ftp_server import FtpServer
 from tests.waiting import wait_for
 
 _BITFIELD = {"type": "uint32_t", "is_bitfield": True}
+_HEALTH, _MODE_GROUPS = "px4::health_component_t", "px4::navigation_mode_group_t"
+
+
+def _arguments(**types: str) -> list[dict[str, str]]:
+    """An event's argument list, in order: name=type."""
+    return [{"name": name, "type": kind} for name, kind in types.items()]
+
+
+# every arming check's event: the mode groups it concerns, its health component
+_CHECK_ARGUMENTS = _arguments(modes="navigation_mode_group_t", health_component_index="uint8_t")
 # PX4's definitions (ids, names, texts, argument layouts) of the events used here
 EVENTS_JSON: dict[str, Any] = {"version": 2, "components": {"1": {
     "namespace": "px4",
@@ -38,7 +48,11 @@ EVENTS_JSON: dict[str, Any] = {"version": 2, "components": {"1": {
         "navigation_mode_t": {"type": "uint8_t", "entries": {
             "7": {"name": "offboard", "description": "Offboard"}}},
         "navigation_mode_group_t": {**_BITFIELD, "entries": {
-            "4": {"name": "posctl"}, "16384": {"name": "offboard"}}},
+            "4": {"name": "posctl"}, "16": {"name": "loiter"}, "16384": {"name": "offboard"}}},
+        "health_component_t": {**_BITFIELD, "entries": {
+            "1048576": {"name": "system", "description": "System"},
+            "16777216": {"name": "global_position_estimate",
+                         "description": "Global position estimate"}}},
     },
     "event_groups": {
         "default": {"events": {
@@ -58,10 +72,24 @@ EVENTS_JSON: dict[str, Any] = {"version": 2, "components": {"1": {
         "arming_check": {"events": {
             "11047904": {"name": "commander_arming_check_summary", "type": "summary",
                          "message": "Arming check summary event",
-                         "arguments": [{"name": "chunk_idx", "type": "uint8_t"}]},
+                         "arguments": _arguments(
+                             chunk_idx="uint8_t", error=_HEALTH, warning=_HEALTH,
+                             can_arm=_MODE_GROUPS, can_run=_MODE_GROUPS)},
             "3087815": {"name": "check_modes_offboard_signal", "message": "No offboard signal",
-                        "arguments": [{"name": "modes", "type": "navigation_mode_group_t"},
-                                      {"name": "health_component_index", "type": "uint8_t"}]},
+                        "arguments": _CHECK_ARGUMENTS},
+            "10011251": {"name": "check_modes_global_pos",
+                         "message": "Navigation error: No valid global position estimate",
+                         "arguments": _CHECK_ARGUMENTS},
+            "6801787": {"name": "check_rc_dl_no_dllink",
+                        "message": "No connection to the ground control station",
+                        "arguments": _CHECK_ARGUMENTS},
+        }},
+        "health": {"events": {
+            "1914663": {"name": "commander_health_summary", "type": "summary",
+                        "message": "Health report summary event",
+                        "arguments": _arguments(
+                            chunk_idx="uint8_t", is_present=_HEALTH, error=_HEALTH,
+                            warning=_HEALTH)},
         }},
     },
 }}}  # fmt: skip
@@ -78,12 +106,16 @@ def _event_id(name: str) -> int:
 
 
 (ARM_DENIED, MODE_NOT_AVAILABLE, TAKEOFF_TOO_LOW, PARAM_MARKED, CHECK_SUMMARY,
- OFFBOARD_SIGNAL) = map(_event_id, (
+ OFFBOARD_SIGNAL, NO_GLOBAL_POSITION, NO_GCS, HEALTH_SUMMARY) = map(_event_id, (
     "commander_arm_denied_resolve_failures", "commander_modeswitch_not_avail",
     "navigator_mis_takeoff_too_low", "param_marked", "commander_arming_check_summary",
-    "check_modes_offboard_signal",
+    "check_modes_offboard_signal", "check_modes_global_pos", "check_rc_dl_no_dllink",
+    "commander_health_summary",
 ))  # fmt: skip
 OFFBOARD_MODE_GROUP = 1 << 14
+POSCTL_MODE_GROUP, HOLD_MODE_GROUP = 1 << 2, 1 << 4
+ALL_MODE_GROUPS = 0xFFFFFFFF
+HEALTH_SYSTEM, HEALTH_GLOBAL_POSITION = 20, 24
 # log_levels: external | internal << 4
 CRITICAL, ERROR, WARNING, INFO, PROTOCOL = 0x22, 0x33, 0x44, 0x66, 0x88
 
@@ -119,8 +151,17 @@ class FakePx4:
             self.peer.send(msg)
 
     def check_report(self, modes: int) -> None:
-        self.event(CHECK_SUMMARY, PROTOCOL)
-        self.event(OFFBOARD_SIGNAL, ERROR, struct.pack("<IB", modes, 20))
+        """The offboard signal missing in `modes`; every other mode can arm."""
+        can_arm = ALL_MODE_GROUPS & ~modes
+        self.report(can_arm, [(OFFBOARD_SIGNAL, ERROR, modes, HEALTH_SYSTEM)])
+
+    def report(self, can_arm: int, checks: list[tuple[int, int, int, int]]) -> None:
+        """PX4's arming-check report: summary, one event per check (id, log levels, mode
+        groups, health component index), health summary."""
+        self.event(CHECK_SUMMARY, PROTOCOL, struct.pack("<BIIII", 0, 0, 0, can_arm, can_arm))
+        for event_id, levels, modes, component in checks:
+            self.event(event_id, levels, struct.pack("<IB", modes, component))
+        self.event(HEALTH_SUMMARY, PROTOCOL, struct.pack("<BIII", 0, 0, 0, 0))
 
     def current_sequence(self) -> None:
         self.peer.send(CurrentEventSequenceMessage(self.seq, 0))

@@ -10,6 +10,8 @@ from server.api.deps import Context, Reader
 from server.api.errors import AUTH_RESPONSES
 
 router = APIRouter(tags=["health"])
+# the offline archive's tiles, as the tiles route serves them (the page's own origin)
+ARCHIVE_TILE_URL = "/api/v1/tiles/{{z}}/{{x}}/{{y}}.{format}"
 
 
 class PageConfigOut(BaseModel):
@@ -17,14 +19,38 @@ class PageConfigOut(BaseModel):
         description="Leaflet tile template ({z}/{x}/{y}); null: the map draws a metre grid"
     )
     map_tile_attribution: str
+    map_tiles_offline: bool = Field(
+        default=False, description="the tiles come from this server's archive (map_tiles)"
+    )
+    map_tile_min_zoom: int | None = Field(
+        default=None, description="the archive's lowest zoom level"
+    )
+    map_tile_max_zoom: int | None = Field(
+        default=None, description="the archive's highest zoom level: beyond, tiles are scaled"
+    )
+    map_tile_bounds: list[float] | None = Field(
+        default=None, description="west, south, east, north (degrees) the archive covers"
+    )
     fleet: bool = Field(description="a fleet server (--fleet): /api/v1/fleet and its socket")
 
 
 @router.get("/config", response_model=PageConfigOut, responses=AUTH_RESPONSES)
 async def page_config(context: Context, _role: Reader) -> PageConfigOut:
     settings = context.settings
+    archive = context.tiles
+    if archive is None:
+        return PageConfigOut(
+            map_tile_url=settings.map_tile_url,
+            map_tile_attribution=settings.map_tile_attribution,
+            fleet=settings.fleet,
+        )
+    info = archive.info
     return PageConfigOut(
-        map_tile_url=settings.map_tile_url,
-        map_tile_attribution=settings.map_tile_attribution,
+        map_tile_url=ARCHIVE_TILE_URL.format(format=info.format),
+        map_tile_attribution=settings.map_tile_attribution or info.attribution,
+        map_tiles_offline=True,
+        map_tile_min_zoom=info.min_zoom,
+        map_tile_max_zoom=info.max_zoom,
+        map_tile_bounds=list(info.bounds) if info.bounds else None,
         fleet=settings.fleet,
     )

@@ -136,6 +136,35 @@ class StatusTextOut(_Out):
     text: str
 
 
+class ArmingCheckOut(_Out):
+    text: str = Field(description="PX4's words", examples=["No offboard signal"])
+    severity: str = Field(
+        description="PX4's log level; ERROR keeps the modes it concerns from arming",
+        examples=["ERROR"],
+    )
+    modes: list[str] = Field(description="the modes it concerns (empty: not told)")
+    component: str | None = Field(description="PX4's health component it belongs to")
+    kind: Literal["arming_check", "health"]
+
+
+class ArmingChecksOut(_Out):
+    ready: bool | None = Field(
+        description="arming would pass PX4's checks in `mode` (null: not told yet)"
+    )
+    mode: str = Field(description="the mode judged: the one the vehicle flies")
+    source: Literal["events", "sys_status"] = Field(
+        description="events: PX4's arming-check report; sys_status: only SYS_STATUS's "
+        "pre-arm and sensor health bits (no events metadata)"
+    )
+    can_arm_modes: list[str] = Field(description="the modes PX4 would arm in now")
+    reasons: list[ArmingCheckOut] = Field(
+        description="the failing checks (and warnings) that concern `mode`, errors first"
+    )
+    other_reasons: list[ArmingCheckOut] = Field(
+        description="the checks that concern only other modes"
+    )
+
+
 class VehicleSummaryOut(_Out):
     id: int
     sysid: int
@@ -201,3 +230,6 @@ class VehicleStateOut(_Out):
         description="seconds since each source message (by MAVLink name) was last received",
     )
     link_quality: LinkQualityOut | None = None
+    arming_checks: ArmingChecksOut | None = Field(
+        None, description="ready to fly: PX4's arming checks for the mode flown, and why not"
+    )

@@ -1,0 +1,120 @@
+// Ready to fly: the state's arming_checks (PX4's arming-check report, or SYS_STATUS's bits)
+// as one fixed-size top-bar element, "Ready to fly" / "Not ready", whose popover lists the
+// checks in PX4's words: those of the mode flown, those of the mode picked in the mode menu
+// when it is another, and those that concern only other modes.
+
+import { $ } from "./ui.js";
+
+const SEVERITY_CLASS = { EMERGENCY: "bad", ALERT: "bad", CRITICAL: "bad", ERROR: "bad", WARNING: "warn" };
+
+/** The element's text and badge class for a state. */
+export function readinessLabel(state) {
+  const checks = state?.arming_checks;
+  if (state?.armed) return ["Armed", ""];
+  if (!checks || checks.ready === null || checks.ready === undefined) return ["Ready ?", ""];
+  return checks.ready ? ["Ready to fly", "ok"] : ["Not ready", "bad"];
+}
+
+/** The checks of a report that concern `mode` (the flown mode's are `reasons`). */
+export function checksFor(checks, mode) {
+  if (!checks) return [];
+  if (mode === checks.mode) return checks.reasons;
+  return [...checks.reasons, ...checks.other_reasons].filter((c) => c.modes.includes(mode));
+}
+
+function item(check, withModes) {
+  const li = document.createElement("li");
+  li.className = `sev ${SEVERITY_CLASS[check.severity] || "info"}`;
+  const text = document.createElement("span");
+  text.textContent = check.text;
+  li.append(text);
+  const detail = [check.severity];
+  if (check.component) detail.push(check.component);
+  if (withModes && check.modes.length) detail.push(check.modes.join(", "));
+  const small = document.createElement("small");
+  small.textContent = detail.join(" · ");
+  li.append(small);
+  return li;
+}
+
+function section(title, checks, withModes, empty) {
+  const box = document.createElement("section");
+  const h = document.createElement("h3");
+  h.textContent = title;
+  box.append(h);
+  if (!checks.length) {
+    const none = document.createElement("p");
+    none.className = "hint";
+    none.textContent = empty;
+    box.append(none);
+    return box;
+  }
+  const list = document.createElement("ul");
+  list.append(...checks.map((c) => item(c, withModes)));
+  box.append(list);
+  return box;
+}
+
+export class Readiness {
+  constructor(button, popover, modeSelect) {
+    this.button = button;
+    this.popover = popover;
+    this.modeSelect = modeSelect;
+    this.state = null;
+    button.addEventListener("click", () => this.toggle());
+    modeSelect.addEventListener("change", () => this.renderPopover());
+    document.addEventListener("keydown", (e) => { if (e.key === "Escape") this.toggle(false); });
+    document.addEventListener("pointerdown", (e) => {
+      if (!this.popover.contains(e.target) && !this.button.contains(e.target)) this.toggle(false);
+    });
+  }
+
+  show(state) {
+    this.state = state;
+    const [text, cls] = readinessLabel(state);
+    if (this.button.textContent !== text) this.button.textContent = text;
+    this.button.classList.remove("ok", "bad");
+    if (cls) this.button.classList.add(cls);
+    const checks = state.arming_checks;
+    const count = checks ? checks.reasons.filter((c) => SEVERITY_CLASS[c.severity] === "bad").length : 0;
+    this.button.title = checks?.ready === false && count
+      ? `${count} failing check${count > 1 ? "s" : ""} in ${checks.mode}: click for PX4's reasons`
+      : "PX4's arming checks: click for details";
+    if (!this.popover.classList.contains("hidden")) this.renderPopover();
+  }
+
+  toggle(open = this.popover.classList.contains("hidden")) {
+    this.popover.classList.toggle("hidden", !open);
+    this.button.setAttribute("aria-expanded", String(open));
+    if (open) this.renderPopover();
+  }
+
+  renderPopover() {
+    const checks = this.state?.arming_checks;
+    const parts = [];
+    if (!checks) {
+      const p = document.createElement("p");
+      p.className = "hint";
+      p.textContent = "The vehicle has not told its arming checks yet.";
+      parts.push(p);
+    } else {
+      const verdict = checks.ready === null ? "not told" : checks.ready ? "can arm" : "cannot arm";
+      parts.push(section(`In ${checks.mode} (flown): ${verdict}`, checks.reasons, false, "No check fails."));
+      const picked = this.modeSelect.value;
+      if (picked && picked !== checks.mode && checks.source === "events") {
+        const can = checks.can_arm_modes.includes(picked) ? "can arm" : "cannot arm";
+        parts.push(section(`In ${picked} (picked): ${can}`, checksFor(checks, picked), false, "No check fails."));
+      }
+      if (checks.other_reasons.length) parts.push(section("Other modes", checks.other_reasons, true, ""));
+      const source = document.createElement("p");
+      source.className = "hint";
+      source.textContent = checks.source === "events"
+        ? "PX4's arming-check report"
+        : "From SYS_STATUS only: the vehicle's events are not decoded";
+      parts.push(source);
+    }
+    this.popover.replaceChildren(...parts);
+  }
+}
+
+export const readiness = new Readiness($("ready-to-fly"), $("ready-popover"), $("mode-select"));
