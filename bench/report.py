@@ -237,6 +237,25 @@ def _stream_target(results: dict[str, dict[str, Any] | None]) -> TargetRow:
     return TargetRow(target, NOT_MEASURED, None, "stream_vs_mavsdk")
 
 
+def _contention_target(results: dict[str, dict[str, Any] | None]) -> TargetRow:
+    target = ("A busy machine (8 busy loops per core, with and without SkyHelm's own load), "
+              "and quiet: SkyHelm's p99 ≤ 0.5× MAVSDK's in the same run, no gap > 100 ms; "
+              "one core: no gap > 250 ms; 50 vehicles busy: every p99 ≤ 5 ms")
+    r = results.get("stream_contention")
+    goals = (r or {}).get("goals") or {}
+    scenarios = [goals.get(name) for name in ("quiet", "busy", "busy+load", "one-core")]
+    if r is None or not all(isinstance(g, dict) for g in scenarios):
+        return TargetRow(target, NOT_MEASURED, None, "stream_contention")
+    ratios = ", ".join(f"{name} {goals[name]['ratio']:.3f}" for name in
+                       ("quiet", "busy", "busy+load", "one-core")
+                       if goals[name].get("ratio") is not None)
+    fleet = r.get("fleet") or {}
+    passed = (all(g.get("no_gap") and g.get("ratio_met", True) for g in scenarios)
+              and bool(goals.get("fleet_every_stream_p99_met")))
+    return TargetRow(target, f"p99 ratios {ratios}; 50 vehicles worst p99 "
+                     f"{_ms(fleet.get('worst_p99_ms'))}", passed, "stream_contention")
+
+
 def _clients_target(results: dict[str, dict[str, Any] | None]) -> TargetRow:
     target = ("100 WS telemetry clients at 10 Hz: vehicle → client p99 ≤ 20 ms, server ≤ 50 % "
               "of one core")
@@ -292,7 +311,7 @@ def _command_target(results: dict[str, dict[str, Any] | None]) -> TargetRow:
 
 
 TARGETS: tuple[Callable[[dict[str, dict[str, Any] | None]], TargetRow], ...] = (
-    _stream_target, _clients_target, _vehicles_target, _command_target,
+    _stream_target, _contention_target, _clients_target, _vehicles_target, _command_target,
 )
 
 

@@ -506,7 +506,7 @@ def report(result: dict[str, Any]) -> Section | None:
                  f"{r.get('abs_error_p99_ms', float('nan')):.2f} | "
                  f"{r.get('interval_max_ms', float('nan')):.1f} |" for r in options]
     ratio = goal.get("ratio_skyhelm_over_mavsdk")
-    ratio_text = f"{ratio:.2f}" if ratio is not None else "n/a"
+    ratio_text = f"{ratio:.2g}" if ratio is not None else "n/a"
     markdown = (
         f"Under load, SkyHelm's 50 Hz stream ({goal['variant']} sender) has a p99 "
         f"|interval − period| of **{ratio_text}×** MAVSDK's 20 Hz offboard stream measured in "

@@ -201,8 +201,7 @@ class SetpointStreamer:
                 self._handle.cancel()
                 self._handle = None
             if self._channel is not None:
-                self._channel.stop()
-            self._sid = None
+                self._channel.stop()  # its last ticks still come, under the same id
             self._active = False
             self._msg = None
             self._started_s = None
@@ -251,7 +250,7 @@ class SetpointStreamer:
         """Ticks the sender process made (its reader thread calls this)."""
         with self._lock:
             if sid != self._sid:
-                return  # a stopped stream's last ticks
+                return  # a stream before the current one
             for now in times:
                 self._record(now)
 
