@@ -1,8 +1,7 @@
 """A decoded MAVLink message as the JSON of its channel: its fields by their MAVLink names,
 and `_compid`, the component that sent it. Non-finite floats (PX4 sends NaN for "unset")
 become null: JSON has no NaN. msgspec writes it (null for NaN included) about ten times
-faster than the json module, which matters at a few hundred messages a second on the loop
-that also serves the setpoint stream's GIL."""
+faster than the json module, which matters at a few hundred messages a second."""
 
 from __future__ import annotations
 
