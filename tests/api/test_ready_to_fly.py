@@ -62,10 +62,8 @@ async def test_ready_is_judged_for_the_mode_flown(quad_api: Api) -> None:
     assert checks["reasons"][0]["modes"] == ["OFFBOARD"]
     assert "OFFBOARD" not in checks["can_arm_modes"]
     assert "HOLD" in checks["can_arm_modes"]
-    # and the arm the element warned of is refused with the same words
-    arm = await api.control("arm")
-    assert arm.status_code == 409
-    assert arm.json()["reason"].endswith(NO_OFFBOARD_SIGNAL)
+    # (`arm` itself would switch to HOLD first: PX4 refuses OFFBOARD for want of a stream,
+    # not for a fault; tests/link/test_arming_modes.py)
     assert (await api.control("mode", {"mode": "HOLD"})).status_code == 200
     state = await api.wait_state(lambda s: s["arming_checks"]["mode"] == "HOLD", 10.0, "HOLD")
     assert state["arming_checks"]["ready"] is True
