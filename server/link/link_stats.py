@@ -15,7 +15,7 @@ REORDER_WINDOW = 32
 @dataclass(frozen=True)
 class LinkStats:
     url: str
-    connected: bool  # a vehicle HEARTBEAT arrived within the link's heartbeat timeout
+    connected: bool  # at least one vehicle on the link is heard (not silent, see liveness)
     frames_in: int
     frames_out: int
     bytes_in: int

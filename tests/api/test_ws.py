@@ -141,7 +141,7 @@ async def test_telemetry_pushes_the_vehicle_list_and_scene_clicks(quad: Served) 
         click = await receive_until(ws, {"type": "scene_click"})
         assert (click["seq"], click["east_m"], click["lat_deg"]) == (3, 2.0, 47.4)
         vehicle = quad.api.app.state.api.registry.get(1)
-        vehicle.set_connected(False)  # as the link does when HEARTBEATs stop
+        vehicle.set_connected(False)  # as the link does when the vehicle falls silent
         lost = await receive_until(ws, {"type": "vehicles"})
         assert lost["vehicles"][0]["connected"] is False
 

@@ -37,7 +37,7 @@ async def rig() -> AsyncIterator[Rig]:
     async with (
         sim_cluster("quad", speed=1.0) as sim,
         vehicle_behind_proxy(sim) as proxy,
-        api_through(proxy, sim, heartbeat_timeout_s=10.0) as api,
+        api_through(proxy, sim, heartbeat_timeout_s=10.0, silence_timeout_s=10.0) as api,
     ):
         await api.wait_ready()
         await api.take_control()
