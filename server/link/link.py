@@ -16,8 +16,7 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from types import MappingProxyType, TracebackType
-from typing import Any
+from types import TracebackType
 
 from pymavlink.dialects.v20 import development as mavlink
 
@@ -25,6 +24,7 @@ from . import px4_messages
 from .aio import cancel_and_wait
 from .link_stats import LinkStats, SequenceGapCounter
 from .liveness import DEFAULT_SILENCE_TIMEOUT_S, MAVLINK_HEARTBEAT_TIMEOUT_S, Liveness
+from .roster import MAV_COMP_ID_AUTOPILOT1, VehicleRoster
 from .signing import MAVLINK_MSG_ID_SETUP_SIGNING, LinkSigning, SigningKeyStore
 from .stream_channel import LinkHandover, StreamChannel
 from .tlog import TlogWriter
@@ -34,21 +34,13 @@ from .vehicle import Vehicle
 
 log = logging.getLogger(__name__)
 
-MAV_COMP_ID_AUTOPILOT1 = mavlink.MAV_COMP_ID_AUTOPILOT1
-MAV_AUTOPILOT_INVALID = mavlink.MAV_AUTOPILOT_INVALID
-# Heartbeats of these types are other ground stations or companions, never vehicles.
-_NOT_VEHICLE_TYPES = frozenset({mavlink.MAV_TYPE_GCS, mavlink.MAV_TYPE_ONBOARD_CONTROLLER})
 GCS_HEARTBEAT_PERIOD_S = 1.0
 # How often silence is looked for: the delay added to the silence bound at most.
 HEARTBEAT_CHECK_PERIOD_S = 0.1
 # A check later than this was held up by the loop itself (see Liveness.forgive).
 LOOP_STALL_S = 0.25
-# While frames wait unread, a vehicle is not judged silent for up to this long.
-MAX_VERDICT_DELAY_S = 1.0
 # SETUP_SIGNING's message id as a MAVLink 2 frame carries it (bytes 7..9, little-endian)
 _SETUP_SIGNING_ID = MAVLINK_MSG_ID_SETUP_SIGNING.to_bytes(3, "little")
-# subscribe_vehicles() queues hold this many announcements and drop the oldest beyond it.
-VEHICLE_QUEUE_SIZE = 32
 
 VehicleFactory = Callable[..., Vehicle]
 # Sees every frame the .tlog records, decoded, on the loop: (message, sent by us, Unix time).
@@ -97,14 +89,9 @@ class Link:
                                       self._process_sent)
         self._tlog = tlog
         self._taps: list[FrameTap] = []
-        self._vehicle_factory = vehicle_factory
-        self._vehicles: dict[int, Vehicle] = {}
-        self._liveness = Liveness(heartbeat_timeout_s, silence_timeout_s)
-        # since when the loop has been behind reading this link (frames waiting)
-        self._behind_since_s: float | None = None
-        self._connected_sysids: set[int] = set()
-        self._last_vehicle_heartbeat_s: float | None = None
-        self._vehicle_queues: list[asyncio.Queue[Vehicle]] = []
+        self._vehicle_factory = vehicle_factory or Vehicle
+        self._roster = VehicleRoster(
+            name, Liveness(heartbeat_timeout_s, silence_timeout_s), self._make_vehicle)
         self._gaps = SequenceGapCounter()
         self._frames_in = 0
         self._frames_out = 0
@@ -180,8 +167,7 @@ class Link:
         await self._handover.close()
         for task in self._tasks:
             await cancel_and_wait(task)
-        for vehicle in list(self._vehicles.values()):
-            await _close_vehicle(vehicle)
+        await self._roster.close()
         await self._transport.close()
         await self.signing.close()
         if self._tlog is not None:
@@ -191,7 +177,7 @@ class Link:
 
     @property
     def vehicles(self) -> Mapping[int, Vehicle]:
-        return MappingProxyType(self._vehicles)
+        return self._roster.vehicles
 
     @property
     def tlog_path(self) -> Path | None:
@@ -211,17 +197,11 @@ class Link:
         return self._loop.time()
 
     def subscribe_vehicles(self) -> asyncio.Queue[Vehicle]:
-        """A bounded queue of vehicles as they are discovered (already known ones first);
-        a reader that falls behind loses the oldest announcements."""
-        queue: asyncio.Queue[Vehicle] = asyncio.Queue(maxsize=VEHICLE_QUEUE_SIZE)
-        for vehicle in self._vehicles.values():
-            _put_drop_oldest(queue, vehicle)
-        self._vehicle_queues.append(queue)
-        return queue
+        """Vehicles as they are discovered (VehicleRoster.subscribe)."""
+        return self._roster.subscribe()
 
     def unsubscribe_vehicles(self, queue: asyncio.Queue[Vehicle]) -> None:
-        with contextlib.suppress(ValueError):
-            self._vehicle_queues.remove(queue)
+        self._roster.unsubscribe(queue)
 
     def add_frame_tap(self, tap: FrameTap) -> None:
         """Call ``tap`` on the loop with every frame the .tlog records (both directions,
@@ -234,11 +214,11 @@ class Link:
             self._taps.remove(tap)
 
     def stats(self) -> LinkStats:
-        last = self._last_vehicle_heartbeat_s
+        last = self._roster.last_heartbeat_s
         age = None if last is None else max(0.0, self.now() - last)
         return LinkStats(
             url=self.url,
-            connected=bool(self._connected_sysids),
+            connected=self._roster.any_connected,
             frames_in=self._frames_in,
             frames_out=self._frames_out,
             bytes_in=self._bytes_in,
@@ -248,7 +228,7 @@ class Link:
             unverified_frames=self._unverified_frames,
             last_heartbeat_age_s=age,
             reconnects=self._transport.reconnects,
-            signing=self.signing.stats(self._vehicles),
+            signing=self.signing.stats(self._roster.vehicles),
         )
 
     def send(self, msg: mavlink.MAVLink_message) -> None:
@@ -350,15 +330,8 @@ class Link:
                 self._tlog.record(msg.get_msgbuf(), unix_time_s)
             for tap in self._taps:
                 tap(msg, False, unix_time_s)
-        if (msg.get_msgId() == mavlink.MAVLINK_MSG_ID_HEARTBEAT
-                and msg.get_srcComponent() == MAV_COMP_ID_AUTOPILOT1):
-            self._vehicle_heartbeat(msg)
-        if msg.get_srcComponent() == MAV_COMP_ID_AUTOPILOT1:
-            self._vehicle_heard(src_system, missing)
-            if msg.get_msgId() == px4_messages.MAVLINK_MSG_ID_LINK_NODE_STATUS:
-                self._liveness.node_status(
-                    src_system, self.now(), msg.messages_received, msg.messages_lost)
-        vehicle = self._vehicles.get(src_system)
+        self._roster.frame_received(msg, missing, self.now())
+        vehicle = self._roster.vehicles.get(src_system)
         if vehicle is not None:
             try:
                 vehicle.handle_message(msg)
@@ -366,40 +339,9 @@ class Link:
                 # One bad message must not stop the link for every other vehicle.
                 log.exception("vehicle %d failed to handle %s", src_system, msg.get_type())
 
-    def _vehicle_heartbeat(self, msg: mavlink.MAVLink_message) -> None:
-        if msg.autopilot == MAV_AUTOPILOT_INVALID or msg.type in _NOT_VEHICLE_TYPES:
-            return
-        sysid = msg.get_srcSystem()
-        now = self.now()
-        self._liveness.heartbeat(sysid, now)
-        self._last_vehicle_heartbeat_s = now
-        if sysid not in self._vehicles:
-            self._discover(sysid, msg)
-
-    def _vehicle_heard(self, sysid: int, missing: int) -> None:
-        """Any frame of a known vehicle keeps it alive, and brings a lost one back (its
-        first frame after a cut is seldom the HEARTBEAT)."""
-        if not self._liveness.known(sysid):
-            return
-        now = self.now()
-        self._liveness.frame(sysid, now, missing)
-        vehicle = self._vehicles.get(sysid)
-        if vehicle is not None and sysid not in self._connected_sysids:
-            self._connected_sysids.add(sysid)
-            self._liveness.back(sysid, now)
-            log.info("link %s: vehicle %d back", self.name, sysid)
-            vehicle.set_connected(True)
-
-    def _discover(self, sysid: int, heartbeat: mavlink.MAVLink_message) -> None:
-        factory = self._vehicle_factory or Vehicle
-        vehicle = factory(link=self, sysid=sysid, compid=MAV_COMP_ID_AUTOPILOT1,
-                          heartbeat=heartbeat)
-        self._vehicles[sysid] = vehicle
-        self._connected_sysids.add(sysid)
-        log.info("link %s: vehicle %d discovered (type %d, autopilot %d)", self.name, sysid,
-                 heartbeat.type, heartbeat.autopilot)
-        for queue in self._vehicle_queues:
-            _put_drop_oldest(queue, vehicle)
+    def _make_vehicle(self, sysid: int, heartbeat: mavlink.MAVLink_message) -> Vehicle:
+        return self._vehicle_factory(link=self, sysid=sysid, compid=MAV_COMP_ID_AUTOPILOT1,
+                                     heartbeat=heartbeat)
 
     def _bytes_received(self, count: int) -> None:
         self._bytes_in += count
@@ -438,33 +380,9 @@ class Link:
             await asyncio.sleep(max(0.0, expected_s - self.now()))
             late_s = self.now() - expected_s
             if late_s > LOOP_STALL_S:
-                self._liveness.forgive(late_s)
+                self._roster.liveness.forgive(late_s)
             expected_s = self.now() + HEARTBEAT_CHECK_PERIOD_S
-            self._mark_silent_vehicles()
-
-    def _mark_silent_vehicles(self) -> None:
-        now = self.now()
-        if self._transport.input_pending():
-            # Frames wait unread: the loop is behind, and a vehicle whose heartbeat is
-            # queued is not silent. The verdict waits for the reads, but not for ever (a
-            # flood must not hide a vehicle that really went quiet).
-            if self._behind_since_s is None:
-                self._behind_since_s = now
-            if now - self._behind_since_s < MAX_VERDICT_DELAY_S:
-                return
-        else:
-            self._behind_since_s = None
-        for sysid, vehicle in self._vehicles.items():
-            set_quality = getattr(vehicle, "set_link_quality", None)
-            if set_quality is not None:  # test stand-ins may lack it
-                set_quality(self._liveness.quality(sysid, now))
-        for sysid in list(self._connected_sysids):
-            why = self._liveness.silent_for(sysid, now)
-            if why is not None:
-                self._connected_sysids.discard(sysid)
-                log.warning("link %s: vehicle %d lost (%s)", self.name, sysid, why)
-                self._vehicles[sysid].set_connected(
-                    False, why, silent_since_s=self._liveness.last_frame_s(sysid))
+            self._roster.judge(self.now(), self._transport.input_pending())
 
 
 @dataclass(frozen=True)
@@ -478,23 +396,5 @@ class _LinkReceiver:
 
     @classmethod
     def of(cls, link: Link) -> _LinkReceiver:
-        return cls(
-            lambda msg, _peer: link._frame_received(msg), link._bad_frames_received,
-            link._bytes_received, link._connection_changed,
-        )  # fmt: skip
-
-
-def _put_drop_oldest(queue: asyncio.Queue[Any], item: Any) -> None:
-    if queue.full():
-        queue.get_nowait()
-    queue.put_nowait(item)
-
-
-async def _close_vehicle(vehicle: Vehicle) -> None:
-    """Stop a vehicle's own tasks (its streamer) if it has a close()."""
-    close = getattr(vehicle, "close", None)
-    if close is None:
-        return
-    result = close()
-    if asyncio.iscoroutine(result):
-        await result
+        return cls(lambda msg, _peer: link._frame_received(msg), link._bad_frames_received,
+                   link._bytes_received, link._connection_changed)

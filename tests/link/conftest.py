@@ -13,12 +13,19 @@ from typing import Any
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
+from server.link.commands import CommandResult
 from server.link.events import VehicleEvent
 from server.link.link import Link
 from server.link.vehicle import Vehicle
 from tests.waiting import wait_for
 
 HEARTBEAT_PERIOD_S = 0.5
+
+
+async def arm_as_sent(vehicle: Vehicle) -> CommandResult:
+    """MAV_CMD_COMPONENT_ARM_DISARM as it is, without arm()'s choice of a mode to arm in:
+    what the vehicle itself answers in the mode it is in."""
+    return await vehicle.command_long(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1, 0)
 
 
 def drain(queue: asyncio.Queue[VehicleEvent]) -> list[VehicleEvent]:

@@ -7,7 +7,7 @@ from __future__ import annotations
 from server.link.commands import CommandOutcome
 from server.link.setpoints import PositionNed
 from server.link.vehicle import Vehicle
-from tests.link.conftest import SimSession, drain, open_sim, wait_for
+from tests.link.conftest import SimSession, arm_as_sent, drain, open_sim, wait_for
 
 SPEED = 5.0  # sim seconds per wall second
 NO_OFFBOARD_SIGNAL = "No offboard signal"
@@ -30,7 +30,7 @@ async def test_arming_refusal_reason_is_px4s_text_with_the_failing_check() -> No
         await _decoding(vehicle)
         assert (await vehicle.set_mode("OFFBOARD")).ok  # disarmed: accepted
 
-        result = await vehicle.arm()
+        result = await arm_as_sent(vehicle)
 
         assert result.outcome is CommandOutcome.TEMPORARILY_REJECTED
         assert result.reason == (

@@ -5,11 +5,14 @@ a reboot noticed by the boot clock."""
 
 from __future__ import annotations
 
+import asyncio
+
 from pymavlink.dialects.v20 import development as mavlink
 
 from server.link.events import VehicleEvent
 from server.link.liveness import Liveness
 from server.link.setpoints import PositionNed
+from server.link.stream_process import REPORT_PERIOD_S
 from server.link.telemetry import MODE_WITHHELD
 from tests.link.conftest import ScriptedSession, drain, wait_for
 from tests.waiting import holds_for
@@ -174,6 +177,9 @@ async def test_the_stream_stays_stopped_after_the_return_until_a_setpoint(
     await vehicle.set_setpoint(PositionNed(0.0, 0.0, -5.0))
     vehicle.set_connected(False, "test")
     vehicle.set_connected(True)
+    assert not vehicle.streamer_active
+    # the sender process reports what it wrote every REPORT_PERIOD_S: the count settles
+    await asyncio.sleep(3 * REPORT_PERIOD_S)
     sent = vehicle.stream_stats().sent
     await holds_for(lambda: vehicle.stream_stats().sent == sent and not vehicle.streamer_active,
                     0.3, "nothing streamed after the return")

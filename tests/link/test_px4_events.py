@@ -25,7 +25,7 @@ from server.link.px4_messages import (
     EventMessage,
     ResponseEventErrorMessage,
 )
-from tests.link.conftest import ScriptedSession, drain
+from tests.link.conftest import ScriptedSession, arm_as_sent, drain
 from tests.link.ftp_server import FtpServer
 from tests.waiting import wait_for
 
@@ -314,7 +314,7 @@ async def test_arm_refusal_names_the_failing_check(
     assert not scripted.vehicle.snapshot().statustext
     scripted.peer.report_mode(0x60000, 0x60000)  # OFFBOARD
     await scripted.vehicle_heard_all()
-    result = await scripted.vehicle.arm()
+    result = await arm_as_sent(scripted.vehicle)
     assert result.outcome.value == "TEMPORARILY_REJECTED"
     assert result.reason == (
         "Arming denied: Resolve system health failures first: No offboard signal"
@@ -322,7 +322,7 @@ async def test_arm_refusal_names_the_failing_check(
     # in a mode the check does not block, PX4's refusal text itself
     scripted.peer.report_mode(0x30000, 0x30000)  # POSCTL
     await scripted.vehicle_heard_all()
-    result = await scripted.vehicle.arm()
+    result = await arm_as_sent(scripted.vehicle)
     assert result.reason == "Arming denied: Resolve system health failures first"
 
 

@@ -12,7 +12,7 @@ from server.link.commands import CommandOutcome
 from server.link.setpoints import PositionNed, VelocityBody, VelocityNed
 from server.link.state import HomeState
 from server.link.vehicle import Vehicle
-from tests.link.conftest import SimSession, drain, open_sim, wait_for
+from tests.link.conftest import SimSession, arm_as_sent, drain, open_sim, wait_for
 
 SPEED = 5.0  # sim seconds per wall second
 
@@ -176,7 +176,7 @@ async def test_arming_refusal_in_offboard_without_signal_carries_the_reason() ->
         vehicle = session.vehicle
         assert (await vehicle.set_mode("OFFBOARD")).ok  # disarmed: accepted
 
-        result = await vehicle.arm()
+        result = await arm_as_sent(vehicle)
 
         assert result.outcome is CommandOutcome.TEMPORARILY_REJECTED
         assert result.reason is not None
@@ -190,7 +190,7 @@ async def test_ready_to_arm_follows_px4s_prearm_bit_in_the_current_mode() -> Non
         assert (await vehicle.set_mode("OFFBOARD")).ok  # disarmed: accepted, no stream yet
         await wait_for(lambda: vehicle.snapshot().ready_to_arm is False, 5.0,
                        "no pre-arm bit in OFFBOARD without a setpoint stream")  # fmt: skip
-        assert not (await vehicle.arm()).ok
+        assert not (await arm_as_sent(vehicle)).ok
         await vehicle.set_setpoint(PositionNed(0.0, 0.0, -2.0))
         await wait_for(lambda: vehicle.snapshot().ready_to_arm is True, 5.0,
                        "the pre-arm bit back once setpoints stream")  # fmt: skip
