@@ -2,7 +2,7 @@
 // VTOL progress and the strip charts.
 
 import { followFlown } from "./control.js";
-import { millis } from "./format.js";
+import { age, millis } from "./format.js";
 import { Instruments } from "./instruments.js";
 import { flownText } from "./offboard.js";
 import { freshness, page, plots } from "./page.js";
@@ -15,7 +15,39 @@ for (const [id, source] of Object.entries({
   "t-battery": "battery", "t-gps": "gps", "t-pos": "position", "t-vel": "position",
   "t-alt": "altitude", "t-latlon": "altitude", "t-att": "attitude", "t-speed": "speed",
   "t-home": "home", "t-motors": "motors", mode: "mode", armed: "mode", landed: "landed",
+  "vtol-state": "landed",
 })) freshness.watch($(id), source);
+freshness.onRefresh(renderLink);
+
+// Above this age of its freshest message the vehicle is late (amber), before the server's
+// verdict says it is lost (red).
+const LINK_LATE_S = 1.0;
+
+/** The LINK box: the server's link to the vehicle, apart from this page's link to the server
+ * (SERVER). Its age keeps growing between states, so a silent server shows too: then what
+ * the link does is not known (grey). */
+function renderLink() {
+  const state = page.state;
+  if (!state) return;
+  const silentS = freshness.freshestS();
+  const link = state.link || {};
+  const frames = (link.frames_in || 0) + (link.lost_frames || 0);
+  const loss = frames ? (100 * (link.lost_frames || 0)) / frames : 0;
+  setText("link-loss", frames ? `· ${num(loss, 1)}% lost` : "");
+  let text = age(silentS);
+  let cls = silentS !== null && silentS > LINK_LATE_S ? "warn" : "ok";
+  if (state.connected === false) {
+    text = `LOST · ${age(silentS)}`;
+    cls = "bad";
+  } else if (!page.connected) {
+    text = `? · ${age(silentS)}`;
+    cls = "";
+  }
+  setText("link-health", text, cls);
+  $("link-slot").title = `the server's link to vehicle ${state.vehicle ?? ""}: its freshest message ${age(silentS)} old`
+    + ` (heartbeat ${age(state.last_heartbeat_age_s)}), ${num(loss, 1)}% of frames lost`
+    + (page.connected ? "" : "; this page has lost the server, so the link's state is not known");
+}
 
 export function altitudeAboveHome(state) {
   if (state.global && Number.isFinite(state.global.alt_rel_m)) return state.global.alt_rel_m;
@@ -45,14 +77,9 @@ function setpointSpeed(state) {
 export function render(state) {
   page.state = state;
   if (state.vehicle_type) page.vehicleType = state.vehicle_type;
-  const link = state.link || {};
-  const age = state.last_heartbeat_age_s;
-  const loss = link.frames_in ? (100 * (link.lost_frames || 0)) / (link.frames_in + (link.lost_frames || 0)) : 0;
-  setText("link-health", `${state.connected ? "" : "LOST · "}hb ${num(age, 1)} s · loss ${num(loss, 1)}%`);
-  $("link-health").style.color = state.connected && age < 2 ? "" : "var(--bad)";
-
   const failsafe = state.user_mode && state.user_mode !== state.mode && state.armed;
   setText("mode", state.mode || "–");
+  $("mode").title = state.mode || "";
   $("mode").style.color = failsafe ? "var(--bad)" : state.mode === "OFFBOARD" ? "var(--offboard)" : "";
   setText("user-mode", state.user_mode || "–");
   setText("armed", state.armed ? "ARMED" : "DISARMED", state.armed ? "ok" : "");
