@@ -96,6 +96,7 @@ export function render(state) {
   instruments.show(state);
   const streaming = Boolean(state.stream?.active && state.setpoint);
   setText("sp-flown-text", streaming ? flownText(state.setpoint, state.home?.down_m ?? 0) : "no setpoint streamed");
+  $("sp-flown").title = $("sp-flown").textContent;
   followFlown(state);
   plots.add(nowS(), state, {
     alt_above_home_m: [altitudeAboveHome(state), setpointAltitude(state)],
