@@ -1,7 +1,8 @@
 // Boxes of every visible control and panel, checked in the page: returns what is wrong
 // (test_layout.py evaluates this function). Options: `reach`, ids of controls that must be
 // in sight without scrolling anything; `boxes`, ids whose boxes (page coordinates) come back.
-(options = {}) => {
+(given) => {
+  const options = given || {};
   const CONTROLS = "button, input, select, textarea, a[href], iframe, [role=button]";
   const BOXES = CONTROLS + ", .panel, .view, .leaflet-control, #topbar .slot, #alerts > *";
   const problems = [];
