@@ -31,7 +31,7 @@ COCKPIT = (1280, 800)
 THEMES = ["light", "dark"]
 PAGE_TIMEOUT_MS = 30_000
 # A long ask: the probe looks at the question at every size and theme before it is answered.
-QUAD_SERVE_ARGS = ["--sim-count", "4", "--sim-speed", "2", "--takeover-ask-s", "60"]
+QUAD_SERVE_ARGS = ["--sim-count", "4", "--sim-speed", "1", "--takeover-ask-s", "60"]
 VTOL_SERVE_ARGS = ["--sim-airframe", "vtol", "--sim-speed", "2"]
 # Where these are must not depend on the state (a text that grows, a banner, a button that
 # comes or goes): the commands, the offboard panel, the top bar's control buttons, the sticks.
@@ -39,7 +39,7 @@ FIXED = [
     "btn-arm", "btn-disarm", "takeoff-alt", "btn-takeoff", "btn-land", "btn-rtl", "btn-hold",
     "btn-kill", "mode-select", "btn-set-mode", "sp-type", "sp-from-here", "btn-offboard-start",
     "btn-offboard-stop", "btn-brake", "kbd-enable", "control-slot", "sticks-enable",
-    "sticks-posctl", "stick-left", "stick-right", "map-follow",
+    "sticks-posctl", "stick-left", "stick-right", "map-follow", "instruments",
 ]  # fmt: skip
 # The primary flight controls, in sight at 1280x800 without scrolling anything.
 REACH = [
@@ -124,6 +124,10 @@ class Walk:
         path = self.shot_dir / f"{shot.name}.png"
         if shot.selector:
             self.page.locator(shot.selector).first.screenshot(path=str(path))
+            # the element's picture scrolled it into view: back to the page as probed
+            self.page.evaluate(
+                "document.querySelectorAll('.column').forEach((c) => { c.scrollTop = 0; })"
+            )
         else:
             self.page.screenshot(path=str(path))
         self.shot_paths.append(path)
@@ -265,7 +269,9 @@ def walk_quad(browser: Any, serve: Serve, api: httpx.Client, walk_for: Any) -> W
         # the stream stopped with the link: PX4's offboard loss failsafe
         page.wait_for_selector('.alert[data-kind="failsafe"]', timeout=PAGE_TIMEOUT_MS)
         walk.probe("failsafe")
-        # flying OFFBOARD again ends it at once, however it was announced
+        # flying OFFBOARD again ends it at once, however it was announced (the answer line
+        # emptied first: the same answer as before would read as none)
+        page.evaluate("document.getElementById('result').textContent = ''")
         start_offboard_here(page, api)
         page.wait_for_selector('.alert[data-kind="failsafe"]', state="detached", timeout=3_000)
 
