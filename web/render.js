@@ -15,7 +15,7 @@ for (const [id, source] of Object.entries({
   "t-battery": "battery", "t-gps": "gps", "t-pos": "position", "t-vel": "position",
   "t-alt": "altitude", "t-latlon": "altitude", "t-att": "attitude", "t-speed": "speed",
   "t-home": "home", "t-motors": "motors", mode: "mode", armed: "mode", landed: "landed",
-  "vtol-state": "landed",
+  "vtol-state": "landed", "user-mode": "mode", // Wanted: CURRENT_MODE.intended_custom_mode
 })) freshness.watch($(id), source);
 freshness.onRefresh(renderLink);
 

@@ -250,7 +250,7 @@ def walk_quad(browser: Any, serve: Serve, api: httpx.Client, walk_for: Any) -> W
         with sim_paused(serve):
             page.wait_for_selector('.alert[data-kind="link"]', timeout=PAGE_TIMEOUT_MS)
             page.wait_for_function(
-                "['armed', 'landed', 'mode', 'vtol-state'].every((id) =>"
+                "['armed', 'landed', 'mode', 'user-mode', 'vtol-state'].every((id) =>"
                 " document.getElementById(id).classList.contains('stale'))",
                 timeout=PAGE_TIMEOUT_MS,
             )
