@@ -90,22 +90,17 @@ def shoot_cockpit(browser: Any) -> list[dict[str, Any]]:
         (QUAD_SERVE_ARGS, "quad", QUAD_SHOTS),
         (VTOL_SERVE_ARGS, "vtol", VTOL_SHOTS),
     ):
-        serve = Serve(extra_args=args)
         started = time.monotonic()
-        serve.start()
 
         def walk_for(page: Any, reach: list[str], wanted: Any = wanted) -> Walk:
             return Walk(page, reach, shots=wanted, shot_dir=IMG_DIR)
 
-        try:
+        with Serve(extra_args=args).running() as serve:
             if airframe == "quad":
                 with serve.client() as api:
                     walk = walk_quad(browser, serve, api, walk_for)
             else:
                 walk = walk_vtol(browser, serve, walk_for)
-        finally:
-            serve.stop()
-            serve.discard_log()
         if walk.problems or walk.moved():
             raise AssertionError("\n".join(walk.problems + walk.moved()))
         seconds = time.monotonic() - started

@@ -71,13 +71,8 @@ def chromium() -> Iterator[Any]:
 
 @pytest.fixture(scope="module")
 def vtol_serve() -> Iterator[Serve]:
-    server = Serve(extra_args=VTOL_SERVE_ARGS)
-    server.start()
-    try:
+    with Serve(extra_args=VTOL_SERVE_ARGS).running() as server:
         yield server
-    finally:
-        server.stop()
-        server.discard_log()
 
 
 def _open(chromium: Any, url: str, size: tuple[int, int], scheme: str) -> Any:
