@@ -19,9 +19,9 @@ import { wireLayout } from "./layout.js";
 import { VehicleMap } from "./map.js";
 import { modeMenu, modesFor } from "./modes.js";
 import { SETPOINT_TYPES } from "./offboard.js";
-import { watchSceneNotices } from "./scene-notice.js";
 import { freshness, page, plots, vehiclePath } from "./page.js";
 import { instruments, render } from "./render.js";
+import { watchSceneNotices } from "./scene-notice.js";
 import { $, banner, log, nowS, num, setText } from "./ui.js";
 
 const OFFBOARD_PARAMS = [
