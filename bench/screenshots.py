@@ -1,8 +1,10 @@
 """Screenshots of the dashboard in flight for docs/dashboard.md, taken in headless Chromium
 against `skyhelm serve` with the simulated vehicle: the quad in offboard and the VTOL in
-fixed-wing flight with the 3D scene (1600x1000); the quad flying to a point clicked on the
-2D map at 1280x800, dark and light; and each panel on its own (map, instruments, sticks,
-alerts, plots).
+fixed-wing flight with the 3D scene (1600x1000); then the cockpit's states as the layout
+probe walks them (tests/browser/cockpit_walk.py: in control, a takeover request, offboard,
+the link lost, a failsafe, sticks, a VTOL in fixed-wing flight) at 1024x768, 1280x800 and
+1920x1080, dark and light, and each panel on its own (map, instruments, sticks, alerts,
+plots). The walk also runs its probe: a picture is written only of a layout it checked.
 
 Run: .venv/bin/python -m bench.screenshots (also `make bench`)
 Writes docs/img/dashboard-*.png, docs/img/panel-*.png and bench/results/screenshots.json
@@ -19,6 +21,14 @@ from pathlib import Path
 from typing import Any
 
 from bench._results import write_results
+from tests.browser.cockpit_walk import (
+    QUAD_SERVE_ARGS,
+    VTOL_SERVE_ARGS,
+    Shot,
+    Walk,
+    walk_quad,
+    walk_vtol,
+)
 from tests.browser.flows import (
     arm_and_take_off,
     click_and_wait_result,
@@ -31,16 +41,23 @@ from tests.browser.harness import CHROMIUM, CHROMIUM_ARGS, Serve, vehicle_state,
 ROOT = Path(__file__).resolve().parents[1]
 IMG_DIR = ROOT / "docs" / "img"
 WIDTH, HEIGHT = 1600, 1000
-COCKPIT_SIZE = (1280, 800)
-# Each panel's picture: docs/img/panel-<name>.png of the element the selector finds.
-PANEL_SHOTS = {
-    "map": ".views-panel",
-    "instruments": ".panel:has(#instruments)",
-    "sticks": "#sticks-panel",
-    "plots": ".plots",
+# The pictures taken in the walk's states (docs/img/<name>.png).
+QUAD_SHOTS = {
+    "in control": [Shot("dashboard-1024", size=(1024, 768))],
+    "takeover request": [Shot("dashboard-takeover")],
+    "flying offboard": [
+        Shot("dashboard-1280-dark"),
+        Shot("dashboard-1280-light", scheme="light"),
+        Shot("dashboard-1920", size=(1920, 1080)),
+        Shot("panel-map", selector=".views-panel"),
+        Shot("panel-instruments", selector=".panel:has(#instruments)"),
+        Shot("panel-plots", selector=".plots"),
+    ],
+    "link lost": [Shot("dashboard-link-lost"), Shot("panel-alerts", selector="#alerts")],
+    "failsafe": [Shot("dashboard-failsafe", scheme="light")],
+    "sticks": [Shot("panel-sticks", selector="#sticks-panel")],
 }
-# Shot after another client takes control from the page (a real alert).
-ALERT_SHOT = ("alerts", "#alerts")
+VTOL_SHOTS = {"VTOL in fixed-wing flight": [Shot("dashboard-vtol-fixed-wing")]}
 
 
 def fly_quad(page: Any, serve: Serve) -> None:
@@ -65,80 +82,34 @@ def fly_vtol(page: Any, serve: Serve) -> None:
         time.sleep(4.0)
 
 
-def fly_by_map_click(page: Any, serve: Serve) -> None:
-    """Takes off, then clicks a point 64 m north-east on the map and flies there."""
-    import pymap3d
-
-    with serve.client() as api:
-        take_control(page)
-        arm_and_take_off(page, api, 6.0)
-        page.wait_for_selector(".map-vehicle", timeout=30_000)
-        here = vehicle_state(api)["global"]
-        lat, lon, _ = pymap3d.ned2geodetic(45.0, 45.0, 0.0, here["lat_deg"], here["lon_deg"], 0.0)
-        point = page.evaluate("([a, b]) => window.skyhelm.map.pagePoint(a, b)", [lat, lon])
-        page.mouse.click(point["x"], point["y"])
-        page.fill("#map-goto-alt", "9")
-        click_and_wait_result(page, "#map-goto-go")
-        wait_for("the quad on its way", lambda: vehicle_state(api)["position_ned"]["north_m"] > 5,
-                 30.0)
-
-
-def shoot_panel(page: Any, name: str, selector: str) -> list[dict[str, Any]]:
-    """docs/img/panel-<name>.png of the element, or nothing when it is not on the page."""
-    element = page.locator(selector).first
-    if element.count() == 0 or not element.is_visible():
-        print(f"panel {name}: {selector} not on the page", file=sys.stderr)
-        return []
-    path = IMG_DIR / f"panel-{name}.png"
-    element.screenshot(path=str(path))
-    return [{"image": str(path.relative_to(ROOT)), "panel": name}]
-
-
 def shoot_cockpit(browser: Any) -> list[dict[str, Any]]:
-    """The page at 1280x800, map and no 3D scene, dark then light; then each panel."""
-    serve = Serve(extra_args=["--sim-speed", "2", "--lease-ttl-s", "10"])
-    started = time.monotonic()
-    serve.start()
+    """The walk of the layout probe, quad then VTOL, with the pictures of QUAD_SHOTS and
+    VTOL_SHOTS; fails when the probe finds the layout broken."""
     shots: list[dict[str, Any]] = []
-    # Playwright's string predicates run through eval, which the page's CSP forbids (the
-    # policy itself is pinned by tests/browser/test_csp.py)
-    context = browser.new_context(
-        viewport={"width": COCKPIT_SIZE[0], "height": COCKPIT_SIZE[1]}, color_scheme="dark",
-        bypass_csp=True,
-    )
-    try:
-        page = open_dashboard(context, serve.url, scene=False)
-        fly_by_map_click(page, serve)
-        for scheme in ("dark", "light"):
-            page.emulate_media(color_scheme=scheme)
-            page.wait_for_timeout(300)
-            path = IMG_DIR / f"dashboard-{COCKPIT_SIZE[0]}-{scheme}.png"
-            page.screenshot(path=str(path))
-            shots.append({"image": str(path.relative_to(ROOT)), "scheme": scheme})
-        page.emulate_media(color_scheme="dark")
-        for name, selector in PANEL_SHOTS.items():
-            shots += shoot_panel(page, name, selector)
-        with serve.client() as api:
-            api.post("/vehicles/1/control",
-                     json={"takeover": True, "force": True, "client_name": "ground crew"})
-        page.wait_for_selector("#alerts .alert", timeout=15_000)
-        shots += shoot_panel(page, *ALERT_SHOT)
-    finally:
-        context.close()
-        serve.stop()
-        serve.discard_log()
-    seconds = time.monotonic() - started
-    print(f"cockpit: {len(shots)} pictures after {seconds:.1f} s")
-    for shot in shots:
-        shot["wall_s"] = round(seconds, 1)
+    for args, airframe, wanted in (
+        (QUAD_SERVE_ARGS, "quad", QUAD_SHOTS),
+        (VTOL_SERVE_ARGS, "vtol", VTOL_SHOTS),
+    ):
+        started = time.monotonic()
+
+        def walk_for(page: Any, reach: list[str], wanted: Any = wanted) -> Walk:
+            return Walk(page, reach, shots=wanted, shot_dir=IMG_DIR)
+
+        with Serve(extra_args=args).running() as serve:
+            if airframe == "quad":
+                with serve.client() as api:
+                    walk = walk_quad(browser, serve, api, walk_for)
+            else:
+                walk = walk_vtol(browser, serve, walk_for)
+        if walk.problems or walk.moved():
+            raise AssertionError("\n".join(walk.problems + walk.moved()))
+        seconds = time.monotonic() - started
+        print(f"cockpit {airframe}: {len(walk.shot_paths)} pictures after {seconds:.1f} s")
+        shots += [
+            {"image": str(path.relative_to(ROOT)), "walk": airframe, "wall_s": round(seconds, 1)}
+            for path in walk.shot_paths
+        ]
     return shots
-
-
-def dismiss_scene_notifications(page: Any) -> None:
-    """viser warns about software WebGL in a toast; it is noise in a screenshot. (Hidden, not
-    clicked: clicks wait for frames that software WebGL delivers slowly.)"""
-    toasts = page.frame_locator("#scene").locator(".mantine-Notification-root")
-    toasts.evaluate_all("els => els.forEach(e => { e.style.display = 'none'; })")
 
 
 def shoot(context: Any, airframe: str, fly: Callable[[Any, Serve], None]) -> dict[str, Any]:
@@ -154,9 +125,7 @@ def shoot(context: Any, airframe: str, fly: Callable[[Any, Serve], None]) -> dic
         fly(page, serve)
         page.check("#scene-enable")
         page.frame_locator("#scene").locator("canvas").first.wait_for(timeout=30_000)
-        page.wait_for_timeout(4000)
-        dismiss_scene_notifications(page)
-        page.wait_for_timeout(500)
+        page.wait_for_timeout(4500)  # the page moves viser's WebGL notice to its views' bar
         path = IMG_DIR / f"dashboard-{'quad' if airframe == 'quad' else airframe}.png"
         page.screenshot(path=str(path))
         page.close()

@@ -30,6 +30,7 @@ export class Alerts {
     this.active = new Map(); // kind -> {element, text, level, timer}
     this.muted = storedMute();
     this.vehicleLost = false;
+    this.lastMode = null;
     this.showMute();
     muteButton.addEventListener("click", () => this.setMuted(!this.muted));
   }
@@ -57,7 +58,8 @@ export class Alerts {
     const shown = this.active.get(kind);
     if (shown) {
       if (shown.text !== text) shown.element.querySelector("span").textContent = text;
-      shown.text = text;
+      if (shown.level !== level) shown.element.className = `alert ${level}`;
+      Object.assign(shown, { text, level });
       this.timeOut(kind, shown, forMs);
       return;
     }
@@ -126,8 +128,11 @@ export class Alerts {
       this.clear("link");
     }
     const failsafe = state.armed && state.user_mode && state.mode && state.user_mode !== state.mode;
+    // back in the chosen mode (or disarmed): a failsafe the vehicle announced is over too
+    const recovered = !state.armed || (state.mode === state.user_mode && state.mode !== this.lastMode);
     if (failsafe) this.raise("failsafe", `Failsafe: ${words(state.mode)}`, "critical");
-    else if (!this.active.get("failsafe")?.fromText) this.clear("failsafe");
+    else if (!this.active.get("failsafe")?.fromText || recovered) this.clear("failsafe");
+    this.lastMode = state.mode;
     const pct = state.battery?.remaining_pct;
     if (Number.isFinite(pct)) {
       if (pct <= BAT_CRIT_PCT) {
@@ -152,10 +157,10 @@ export class Alerts {
     }
   }
 
-  /** The server connection of the page. */
-  fromServer(connected) {
+  /** The server connection of the page; `retryInS`: when the page tries again. */
+  fromServer(connected, retryInS = 0) {
     if (connected) this.clear("server");
-    else this.raise("server", "Connection to the server lost", "critical");
+    else this.raise("server", `Connection to the server lost${retryInS ? ` — trying again in ${retryInS} s` : " — trying again…"}`, "critical");
   }
 
   /** This tab lost control to someone else. */

@@ -22,6 +22,7 @@ import { SETPOINT_TYPES } from "./offboard.js";
 import { freshness, page, plots, vehiclePath } from "./page.js";
 import { readiness } from "./readiness.js";
 import { instruments, render } from "./render.js";
+import { watchSceneNotices } from "./scene-notice.js";
 import { $, banner, log, nowS, num, setText } from "./ui.js";
 
 const OFFBOARD_PARAMS = [
@@ -73,7 +74,7 @@ function onEvent(message) {
   } else if (message.kind === "lease") {
     return; // the same changes as the control events, in the older shape
   } else if (message.kind === "deadman") {
-    const text = deadmanText(data);
+    const text = deadmanText(data, { vehicleSilentS: freshness.freshestS(), vehicle: message.vehicle ?? page.vehicleId });
     log("WARNING", text);
     alerts.raise("deadman", text, data.ok === false ? "critical" : "warning", { forMs: 15000 });
   } else {
@@ -97,7 +98,9 @@ function controlText(data) {
 function onTelemetryStatus(status) {
   page.connected = status.state === "connected";
   if (page.connected) page.everConnected = true;
-  if (page.everConnected) alerts.fromServer(page.connected);
+  const inS = Math.ceil((status.retryInMs ?? 0) / 1000);
+  // one alert says the server is lost (the SERVER box too); before it ever answered, a banner
+  if (page.everConnected) alerts.fromServer(page.connected, inS);
   if (page.connected) {
     setText("conn-status", "connected", "ok");
     if (status.reconnected) {
@@ -108,9 +111,8 @@ function onTelemetryStatus(status) {
       banner("");
     }
   } else {
-    const inS = Math.ceil((status.retryInMs ?? 0) / 1000);
     setText("conn-status", "reconnecting…", "bad");
-    banner(`Connection to the server lost — trying again${inS ? ` in ${inS} s` : ""}…`);
+    banner(page.everConnected ? "" : `Cannot reach the server — trying again${inS ? ` in ${inS} s` : ""}…`);
   }
   updateControls();
 }
@@ -388,6 +390,7 @@ async function main() {
   document.addEventListener("skyhelm-control-taken", (e) => alerts.controlTaken(e.detail.by));
   wire();
   wireLayout(map);
+  watchSceneNotices($("scene"));
   showSetpointType("position");
   updateControls();
   showScene($("scene-enable").checked);

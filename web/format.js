@@ -37,8 +37,10 @@ export function age(seconds) {
 export function duration(seconds) {
   if (typeof seconds !== "number" || !Number.isFinite(seconds) || seconds < 0) return UNKNOWN;
   if (seconds < 60) return `${Math.round(seconds)} s`;
-  if (seconds < 3600) return `${Math.round(seconds / 60)} min`;
-  return `${Math.floor(seconds / 3600)} h ${String(Math.round((seconds % 3600) / 60)).padStart(2, "0")} min`;
+  // rounded to the minute first, so 9 h 59 min 50 s reads "10 h 00 min", never "9 h 60 min"
+  const minutes = Math.round(seconds / 60);
+  if (minutes < 60) return `${minutes} min`;
+  return `${Math.floor(minutes / 60)} h ${String(minutes % 60).padStart(2, "0")} min`;
 }
 
 /** Milliseconds, as an age when long ("Since last 2 min 34 s", never "154753 ms"). */
@@ -59,11 +61,17 @@ export function words(name) {
 }
 
 /** A deadman event in words: "deadman: brake (the pilot's live input fell silent for 0.5 s)
- * — position north 10.0 m east 2.0 m down -5.0 m", not its JSON. */
-export function deadmanText(data) {
-  const cause = data.cause === "live_timeout"
-    ? `the pilot's live input fell silent for ${num(data.timeout_s, 1)} s`
-    : `operator ${words(data.cause || "lost")}`;
+ * — position north 10.0 m east 2.0 m down -5.0 m", not its JSON. `vehicleSilentS`: how long
+ * nothing has come from the vehicle; when that is the longer silence, the vehicle went silent
+ * (the server refuses live input for a vehicle it does not hear), not the pilot. */
+export function deadmanText(data, { vehicleSilentS = null, vehicle = "" } = {}) {
+  const timeoutS = data.timeout_s;
+  // a talking vehicle's freshest message is a few tens of ms old (and a state period more)
+  const vehicleSilent = Number.isFinite(vehicleSilentS) && Number.isFinite(timeoutS)
+    && vehicleSilentS >= Math.max(0.3, timeoutS / 2);
+  const cause = data.cause !== "live_timeout" ? `operator ${words(data.cause || "lost")}`
+    : vehicleSilent ? `${`vehicle ${vehicle}`.trim()} went silent ${age(vehicleSilentS)} ago: the pilot's input could not reach it`
+      : `the pilot's live input fell silent for ${num(timeoutS, 1)} s`;
   const sp = data.setpoint;
   let what = "";
   if (sp && typeof sp === "object") {

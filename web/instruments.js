@@ -40,13 +40,24 @@ export class Freshness {
     this.ages = {};
     this.receivedMs = performance.now();
     this.watched = []; // [element, source key]
+    this.linkLost = false;
+    this.listeners = [];
     this.timer = setInterval(() => this.refresh(), AGE_TICK_MS);
   }
 
   update(state) {
     this.ages = state.message_ages_s || {};
+    // the server's verdict: nothing valid comes from the vehicle, whatever each age says yet
+    this.linkLost = state.connected === false;
     this.receivedMs = performance.now();
     this.refresh();
+  }
+
+  /** Seconds since anything at all came from the vehicle (its freshest message); null if
+   * nothing ever did. */
+  freshestS() {
+    const known = Object.values(this.ages).filter(Number.isFinite);
+    return known.length ? Math.min(...known) + (performance.now() - this.receivedMs) / 1000 : null;
   }
 
   /** Seconds since the freshest source of `key` was received; null if none ever was. */
@@ -62,7 +73,8 @@ export class Freshness {
         limit = STALE_AFTER_S[kind] ?? STALE_DEFAULT_S;
       }
     }
-    return best === null ? null : { ageS: best + elapsedS, stale: best + elapsedS > limit };
+    if (best === null) return null;
+    return { ageS: best + elapsedS, stale: (this.linkLost && limit !== Infinity) || best + elapsedS > limit };
   }
 
   /** Grey out `element` (and show its age) whenever the value `key` is stale. */
@@ -71,7 +83,13 @@ export class Freshness {
     this.watched.push([element, key]);
   }
 
+  /** `listener()` runs at every refresh: at each state and as ages grow between states. */
+  onRefresh(listener) {
+    this.listeners.push(listener);
+  }
+
   refresh() {
+    for (const listener of this.listeners) listener();
     for (const [element, key] of this.watched) {
       const known = this.ageOf(key);
       const stale = Boolean(known?.stale);

@@ -261,7 +261,7 @@ function followButton(onToggle) {
     const button = L.DomUtil.create("button", "map-follow");
     button.type = "button";
     button.id = "map-follow";
-    button.title = "keep the selected vehicle in view (F)";
+    button.title = "keep the selected vehicle in view (C)";
     button.textContent = "Follow";
     L.DomEvent.disableClickPropagation(button);
     button.addEventListener("click", () => onToggle());

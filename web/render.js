@@ -2,7 +2,7 @@
 // VTOL progress and the strip charts.
 
 import { followFlown } from "./control.js";
-import { millis } from "./format.js";
+import { age, millis } from "./format.js";
 import { Instruments } from "./instruments.js";
 import { flownText } from "./offboard.js";
 import { freshness, page, plots } from "./page.js";
@@ -15,8 +15,42 @@ for (const [id, source] of Object.entries({
   "t-battery": "battery", "t-gps": "gps", "t-pos": "position", "t-vel": "position",
   "t-alt": "altitude", "t-latlon": "altitude", "t-att": "attitude", "t-speed": "speed",
   "t-home": "home", "t-motors": "motors", mode: "mode", armed: "mode", landed: "landed",
+  "vtol-state": "landed", "user-mode": "mode", // Wanted: CURRENT_MODE.intended_custom_mode
   "ready-to-fly": "SYS_STATUS",
 })) freshness.watch($(id), source);
+freshness.onRefresh(renderLink);
+
+// Above this age of its freshest message the vehicle is late (amber), before the server's
+// verdict says it is lost (red).
+const LINK_LATE_S = 1.0;
+
+/** The LINK box: the server's link to the vehicle, apart from this page's link to the server
+ * (SERVER). Its age keeps growing between states, so a silent server shows too: then what
+ * the link does is not known (grey). */
+function renderLink() {
+  const state = page.state;
+  if (!state) return;
+  const silentS = freshness.freshestS();
+  const quality = state.link_quality;
+  const pct = (value) => (value === null || value === undefined ? "?" : `${num(value, 0)}%`);
+  setText("link-loss", quality ? `↓${pct(quality.loss_in_pct)} ↑${pct(quality.loss_out_pct)}` : "");
+  let text = age(silentS);
+  const late = silentS !== null && silentS > LINK_LATE_S;
+  let cls = late || quality?.degraded ? "warn" : "ok";
+  if (state.connected === false) {
+    text = `LOST · ${age(silentS)}`;
+    cls = "bad";
+  } else if (!page.connected) {
+    text = `? · ${age(silentS)}`;
+    cls = "";
+  }
+  setText("link-health", text, cls);
+  const warnings = quality?.warnings?.length ? `; ${quality.warnings.join("; ")}` : "";
+  $("link-slot").title = `the server's link to vehicle ${state.vehicle ?? ""}: its freshest message ${age(silentS)} old`
+    + ` (heartbeat ${age(state.last_heartbeat_age_s)}), frames lost from it ${pct(quality?.loss_in_pct)}`
+    + ` and to it ${pct(quality?.loss_out_pct)}${warnings}`
+    + (page.connected ? "" : "; this page has lost the server, so the link's state is not known");
+}
 
 export function altitudeAboveHome(state) {
   if (state.global && Number.isFinite(state.global.alt_rel_m)) return state.global.alt_rel_m;
@@ -45,29 +79,12 @@ function setpointSpeed(state) {
 
 // The link badge: lost, or degraded (the warning before the verdict, its reasons on hover),
 // with the loss each way from state.link_quality (sequence numbers; "?" where unknown).
-function renderLinkHealth(state) {
-  const quality = state.link_quality;
-  const el = $("link-health");
-  if (!quality) {
-    setText("link-health", state.connected ? "–" : "LOST");
-    el.style.color = state.connected ? "" : "var(--bad)";
-    return;
-  }
-  const pct = (value) => (value === null || value === undefined ? "?" : `${num(value, 0)}%`);
-  const head = !state.connected ? "LOST · " : quality.degraded ? "DEGRADED · " : "";
-  setText("link-health", `${head}loss ↓${pct(quality.loss_in_pct)} ↑${pct(quality.loss_out_pct)}`);
-  el.style.color = !state.connected ? "var(--bad)" : quality.degraded ? "var(--warn)" : "";
-  el.title = quality.warnings.length ? quality.warnings.join("\n") :
-    `heard ${num(quality.silent_s, 1)} s ago, ${num(quality.rate_hz, 0)} frames/s`;
-}
-
 export function render(state) {
   page.state = state;
   if (state.vehicle_type) page.vehicleType = state.vehicle_type;
-  renderLinkHealth(state);
-
   const failsafe = state.user_mode && state.user_mode !== state.mode && state.armed;
   setText("mode", state.mode || "–");
+  $("mode").title = state.mode || "";
   $("mode").style.color = failsafe ? "var(--bad)" : state.mode === "OFFBOARD" ? "var(--offboard)" : "";
   setText("user-mode", state.user_mode || "–");
   setText("armed", state.armed ? "ARMED" : "DISARMED", state.armed ? "ok" : "");
@@ -84,6 +101,7 @@ export function render(state) {
   instruments.show(state);
   const streaming = Boolean(state.stream?.active && state.setpoint);
   setText("sp-flown-text", streaming ? flownText(state.setpoint, state.home?.down_m ?? 0) : "no setpoint streamed");
+  $("sp-flown").title = $("sp-flown").textContent;
   followFlown(state);
   plots.add(nowS(), state, {
     alt_above_home_m: [altitudeAboveHome(state), setpointAltitude(state)],

@@ -128,6 +128,16 @@ class Serve:
         text = Path(self._log.name).read_text(errors="replace")
         return "\n".join(text.splitlines()[-lines:])
 
+    @contextlib.contextmanager
+    def running(self) -> Iterator[Serve]:
+        """Started for the block, stopped (its log removed) after it."""
+        self.start()
+        try:
+            yield self
+        finally:
+            self.stop()
+            self.discard_log()
+
     def client(self) -> httpx.Client:
         return httpx.Client(base_url=f"{self.base}/api/v1", timeout=10.0,
                             headers={"Authorization": f"Bearer {self.token}"})

@@ -1,8 +1,10 @@
 // Boxes of every visible control and panel, checked in the page: returns what is wrong
-// (test_layout.py evaluates this function).
-() => {
+// (test_layout.py evaluates this function). Options: `reach`, ids of controls that must be
+// in sight without scrolling anything; `boxes`, ids whose boxes (page coordinates) come back.
+(given) => {
+  const options = given || {};
   const CONTROLS = "button, input, select, textarea, a[href], iframe, [role=button]";
-  const BOXES = CONTROLS + ", .panel, .view, .leaflet-control";
+  const BOXES = CONTROLS + ", .panel, .view, .leaflet-control, #topbar .slot, #alerts > *";
   const problems = [];
   const vw = document.documentElement.clientWidth;
   const vh = document.documentElement.clientHeight;
@@ -61,6 +63,47 @@
       if (w > EPS && h > EPS) problems.push(`${name(a)} overlaps ${name(b)}`);
     }
   }
+  // the top bar is one row: every slot inside it, none pushed out of its end
+  const bar = document.getElementById("topbar").getBoundingClientRect();
+  const topbar = document.getElementById("topbar");
+  if (topbar.scrollWidth > topbar.clientWidth + EPS) problems.push(`#topbar overflows (${topbar.scrollWidth} > ${topbar.clientWidth})`);
+  for (const slot of topbar.children) {
+    if (!shown(slot)) continue;
+    const r = slot.getBoundingClientRect();
+    if (r.top < bar.top - EPS || r.bottom > bar.bottom + EPS || r.right > bar.right + EPS) {
+      problems.push(`${name(slot)} off the top bar's row`);
+    }
+  }
+  // the alert area never covers the views (the map with its north arrow, the 3D scene)
+  const views = document.querySelector(".views-panel").getBoundingClientRect();
+  for (const alert of document.querySelectorAll("#alerts > *")) {
+    if (!shown(alert)) continue;
+    const r = alert.getBoundingClientRect();
+    if (Math.min(r.right, views.right) - Math.max(r.left, views.left) > EPS
+        && Math.min(r.bottom, views.bottom) - Math.max(r.top, views.top) > EPS) {
+      problems.push(`${name(alert)} covers the views`);
+    }
+  }
+  // in sight without scrolling: inside the window and inside every ancestor's visible box
+  const unreachable = [];
+  for (const id of options.reach || []) {
+    const el = document.getElementById(id);
+    if (!el || !shown(el)) { unreachable.push(`#${id} not shown`); continue; }
+    const r = el.getBoundingClientRect();
+    let inSight = r.top >= -EPS && r.left >= -EPS && r.bottom <= vh + EPS && r.right <= vw + EPS;
+    for (let p = el.parentElement; inSight && p && p !== document.body; p = p.parentElement) {
+      if (!clips(getComputedStyle(p))) continue;
+      const b = p.getBoundingClientRect();
+      inSight = r.top >= b.top - EPS && r.bottom <= b.bottom + EPS;
+    }
+    if (!inSight) unreachable.push(`#${id} needs scrolling (${Math.round(r.top)}..${Math.round(r.bottom)} of ${vh})`);
+  }
+  const boxes = {};
+  for (const id of options.boxes || []) {
+    const el = document.getElementById(id);
+    const r = el && shown(el) ? el.getBoundingClientRect() : null;
+    boxes[id] = r && [r.x + window.scrollX, r.y + window.scrollY, r.width, r.height].map(Math.round);
+  }
   const pageScrolls = document.documentElement.scrollHeight > vh + EPS;
-  return { problems, controls: controls.length, pageScrolls };
+  return { problems, controls: controls.length, pageScrolls, unreachable, boxes };
 }

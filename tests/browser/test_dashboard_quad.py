@@ -98,7 +98,7 @@ def test_page_shows_the_vehicle_and_observes_until_control_is_taken(
     assert "QUADROTOR" in (page.text_content("#vehicle-select") or "")
     # the link badge: loss from the vehicle (its sequence numbers) and to it (its own report)
     page.wait_for_function(
-        "/^loss ↓\\d+% ↑(\\d+%|\\?)$/.test(document.getElementById('link-health').textContent)",
+        "/^↓\\d+% ↑(\\d+%|\\?)$/.test(document.getElementById('link-loss').textContent)",
         timeout=10_000,
     )
     assert page.is_disabled("#btn-arm")

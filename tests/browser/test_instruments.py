@@ -166,19 +166,28 @@ def test_numbers_ages_and_battery_time_are_written_for_people(page: Any) -> None
             units: [f.withUnit(12.345, "m"), f.withUnit(undefined, "m"), f.signed(1.25)],
             ages: [f.age(0.42), f.age(12.7), f.age(154.753), f.age(7300)],
             millis: [f.millis(17.4), f.millis(154753)],
-            durations: [f.duration(45), f.duration(720), f.duration(3900)],
+            durations: [f.duration(45), f.duration(720), f.duration(3900), f.duration(35990),
+                        f.duration(3590)],
             battery: [byCurrent, byRate, own],
             deadman: f.deadmanText({
                 action: "brake", cause: "live_timeout", timeout_s: 0.5, ok: true,
                 setpoint: { type: "position_ned", north_m: 10.04, east_m: -0.02, down_m: -5 },
             }),
+            // the same brake while nothing came from the vehicle for 2.5 s: its silence
+            vehicleSilent: f.deadmanText(
+                { action: "brake", cause: "live_timeout", timeout_s: 0.5, ok: true },
+                { vehicleSilentS: 2.5, vehicle: 1 }),
+            vehicleTalking: f.deadmanText(
+                { action: "brake", cause: "live_timeout", timeout_s: 0.5, ok: true },
+                { vehicleSilentS: 0.05, vehicle: 1 }),
         };
     }""")
     assert shown["zero"] == ["0.0", "0.00", "-0.1", "–", "–"]
     assert shown["units"] == ["12.3 m", "–", "+1.3"]
     assert shown["ages"] == ["0.4 s", "12 s", "2 min 34 s", "2 h 01 min"]
     assert shown["millis"] == ["17 ms", "2 min 34 s"]
-    assert shown["durations"] == ["45 s", "12 min", "1 h 05 min"]
+    # minutes rounded before they are split from the hours: never "9 h 60 min"
+    assert shown["durations"] == ["45 s", "12 min", "1 h 05 min", "10 h 00 min", "1 h 00 min"]
     by_current, by_rate, own = shown["battery"]
     # 1000 mAh used for half the charge: 1000 mAh left at 10 A is 6 minutes
     assert by_current == {"seconds": pytest.approx(360.0), "how": "current"}
@@ -188,6 +197,12 @@ def test_numbers_ages_and_battery_time_are_written_for_people(page: Any) -> None
     assert shown["deadman"] == (
         "deadman: brake (the pilot's live input fell silent for 0.5 s)"
         " — position ned north 10.0 east 0.0 down -5.0"
+    )
+    assert shown["vehicleSilent"] == (
+        "deadman: brake (vehicle 1 went silent 2.5 s ago: the pilot's input could not reach it)"
+    )
+    assert (
+        shown["vehicleTalking"] == "deadman: brake (the pilot's live input fell silent for 0.5 s)"
     )
 
 
