@@ -14,8 +14,8 @@ from typing import TYPE_CHECKING, Annotated, Any, ClassVar, Literal
 
 from pydantic import BaseModel, Field, create_model
 
-from server.api.schemas.common import StrictBody, limits_of
-from server.link.setpoint_kinds import (
+from skyhelm_wire.common import StrictBody, limits_of
+from skyhelm_wire.setpoint_kinds import (
     SETPOINT_KINDS,
     KindField,
     Setpoint,

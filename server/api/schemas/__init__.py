@@ -4,8 +4,6 @@ from the link's setpoint kinds (``schemas.setpoints``)."""
 
 from server.api.schemas.commands import (
     ArmBody,
-    CommandResultName,
-    CommandResultOut,
     HomeBody,
     ModeBody,
     ModeName,
@@ -16,7 +14,9 @@ from server.api.schemas.commands import (
     TakeoffBody,
     VtolTransitionBody,
 )
-from server.api.schemas.common import (
+from server.api.schemas.params import ParamOut, ParamsOut, ParamValueBody
+from skyhelm_wire.commands import CommandResultName, CommandResultOut
+from skyhelm_wire.common import (
     AltM,
     ErrorDetail,
     ErrorOut,
@@ -27,9 +27,8 @@ from server.api.schemas.common import (
     UnprocessableOut,
     YawDeg,
 )
-from server.api.schemas.control import ControlBody, LeaseOut, LeaseStatusOut
-from server.api.schemas.params import ParamOut, ParamsOut, ParamValueBody
-from server.api.schemas.setpoints import (
+from skyhelm_wire.control import ControlBody, LeaseOut, LeaseStatusOut
+from skyhelm_wire.setpoints import (
     SETPOINT_BODIES,
     SentSetpointOut,
     SetpointBody,
@@ -37,7 +36,7 @@ from server.api.schemas.setpoints import (
     setpoint_as_dict,
     setpoint_body,
 )
-from server.api.schemas.state import (
+from skyhelm_wire.state import (
     AttitudeOut,
     BatteryOut,
     GlobalOut,
