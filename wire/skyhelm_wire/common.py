@@ -1,5 +1,5 @@
 """What every request and error shares: strict bodies, error answers, the health answer,
-and the command bodies' number types with the limits and units the link defines."""
+and the command bodies' number types with the limits and units the setpoint kinds define."""
 
 from __future__ import annotations
 

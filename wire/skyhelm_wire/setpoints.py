@@ -1,4 +1,4 @@
-"""The setpoint request bodies, built from the link's setpoint kinds.
+"""The setpoint request bodies, built from the setpoint kinds (``setpoint_kinds``).
 
 Nothing here lists a kind or a field: each registered kind becomes a model named
 ``<Kind>Body`` with a ``type`` literal (the kind's name) and the kind's fields, their limits and

@@ -1,6 +1,7 @@
-"""Request and response models of the v1 API, one module per resource. Field names carry
-units; enum values are the PX4/MAVLink names the link layer uses. Setpoint bodies are built
-from the link's setpoint kinds (``schemas.setpoints``)."""
+"""Request and response models of the v1 API. Field names carry units; enum values are the
+PX4/MAVLink names the link layer uses. The wire format (state, setpoints, command results,
+the lease, errors) is the wire package's (``skyhelm_wire``), re-exported here; the modules
+here hold the request bodies that need the link (mode names, intents) or only the API."""
 
 from server.api.schemas.commands import (
     ArmBody,
