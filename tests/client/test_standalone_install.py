@@ -46,7 +46,7 @@ class Standalone:
         self.python = directory / "bin" / "python"
         self.log = directory / "pip.log"
         command = [sys.executable, "-m", "pip", "--python", str(self.python), "install"]
-        command += ["--disable-pip-version-check", "--no-input"]
+        command += ["--disable-pip-version-check", "--no-input", "--no-compile"]
         command += [str(ROOT / "wire"), str(ROOT / "clients" / "python")]
         with self.log.open("w") as log:
             self._pip = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, env=_env())
