@@ -8,7 +8,7 @@ import math
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Any
+from typing import Any, Generic, TypeVar
 
 from pydantic import ConfigDict, TypeAdapter
 
@@ -17,6 +17,7 @@ from skyhelm_wire.control import LeaseOut
 from skyhelm_wire.messages import StateMessage, TelemetryMessage
 from skyhelm_wire.state import VehicleStateOut
 
+_T = TypeVar("_T")
 _TELEMETRY: TypeAdapter[TelemetryMessage] = TypeAdapter(TelemetryMessage)
 
 
@@ -73,6 +74,17 @@ def _number(value: float | None) -> float:
     return math.nan if value is None else value
 
 
+class _ModelField(Generic[_T]):
+    """A field of the state's model, as a read-only attribute of the state."""
+
+    def __set_name__(self, owner: type[State], name: str) -> None:
+        self.name = name
+
+    def __get__(self, state: State, owner: type[State] | None = None) -> _T:
+        value: _T = getattr(state.model, self.name)
+        return value
+
+
 class State(Mapping[str, Any]):
     """A vehicle's state snapshot (``GET /vehicles/{id}``, or a telemetry ``state``
     message). Every field of the JSON is there by key (``state["battery"]``), all of them
@@ -99,21 +111,10 @@ class State(Mapping[str, Any]):
             f"{self.landed_state!r}, position_ned={self.position_ned})"
         )
 
-    @property
-    def mode(self) -> str:
-        return self.model.mode
-
-    @property
-    def armed(self) -> bool:
-        return self.model.armed
-
-    @property
-    def connected(self) -> bool:
-        return self.model.connected
-
-    @property
-    def landed_state(self) -> str:
-        return self.model.landed_state
+    mode = _ModelField[str]()
+    armed = _ModelField[bool]()
+    connected = _ModelField[bool]()
+    landed_state = _ModelField[str]()
 
     @property
     def position_ned(self) -> Ned:
