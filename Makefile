@@ -16,11 +16,11 @@ $(PY):
 
 # The wire format and the Python client are distributions of their own (wire/,
 # clients/python/); installed from their paths in the same pip call, never from an index.
-$(STAMP): pyproject.toml wire/pyproject.toml | $(PY)
-	$(PIP) install -q -e ./wire -e .
+$(STAMP): pyproject.toml wire/pyproject.toml clients/python/pyproject.toml | $(PY)
+	$(PIP) install -q -e ./wire -e ./clients/python -e .
 	touch $@
 
-$(TSTAMP): pyproject.toml clients/python/pyproject.toml $(STAMP)
+$(TSTAMP): pyproject.toml $(STAMP)
 	$(PIP) install -q -e ./wire -e ./clients/python -e '.[test]'
 	touch $@
 
