@@ -14,16 +14,18 @@ $(PY):
 	$(PYTHON) -m venv $(VENV)
 	$(PIP) install -q --upgrade pip
 
-$(STAMP): pyproject.toml | $(PY)
-	$(PIP) install -q -e .
+# The wire format and the Python client are distributions of their own (wire/,
+# clients/python/); installed from their paths in the same pip call, never from an index.
+$(STAMP): pyproject.toml wire/pyproject.toml clients/python/pyproject.toml | $(PY)
+	$(PIP) install -q -e ./wire -e ./clients/python -e .
 	touch $@
 
 $(TSTAMP): pyproject.toml $(STAMP)
-	$(PIP) install -q -e '.[test]'
+	$(PIP) install -q -e ./wire -e ./clients/python -e '.[test]'
 	touch $@
 
 $(BSTAMP): pyproject.toml $(TSTAMP)
-	$(PIP) install -q -e '.[test,bench]'
+	$(PIP) install -q -e ./wire -e ./clients/python -e '.[test,bench]'
 	touch $@
 
 ## Start the server with the embedded simulated vehicle and print the URL.
@@ -44,7 +46,7 @@ chromium:
 
 lint: $(TSTAMP)
 	$(VENV)/bin/ruff check .
-	$(VENV)/bin/mypy --strict server sim
+	$(VENV)/bin/mypy --strict server sim wire/skyhelm_wire clients/python/skyhelm_client
 	$(VENV)/bin/lint-imports
 
 ## pip-audit over the packages installed in $(VENV) (tools/audit.py): known vulnerabilities

@@ -3,7 +3,7 @@
     skyhelm serve                      # prints  SkyHelm ready: http://127.0.0.1:8000/?token=...
     python examples/fly_square.py 'http://127.0.0.1:8000/?token=...'
 
-Uses the blocking client (`server.client.SkyHelm`): it takes the control lease, and its
+Uses the blocking client (`skyhelm_client.SkyHelm`): it takes the control lease, and its
 waits renew the lease while they poll, so the script keeps control however long it waits.
 However the script ends (the square flown, a refusal, Ctrl-C, SIGTERM) the client gives the
 lease back, and the server holds the vehicle where it is; killed outright (SIGKILL), the
@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import argparse
 
-from server.client import PositionNed, SkyHelm, SkyHelmError
+from skyhelm_client import PositionNed, SkyHelm, SkyHelmError
 
 SIDE_M = 10.0
 ALTITUDE_M = 5.0

@@ -14,7 +14,7 @@ import argparse
 import asyncio
 import contextlib
 
-from server.client import AsyncSkyHelm, PositionNed, SkyHelmError
+from skyhelm_client import AsyncSkyHelm, PositionNed, SkyHelmError
 
 SIDE_M = 10.0
 ALTITUDE_M = 5.0

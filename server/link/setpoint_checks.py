@@ -15,7 +15,6 @@ from server.link.envelope import Envelope as Envelope
 from server.link.envelope import SetpointRejected as SetpointRejected
 from server.link.envelope import check_limit
 from server.link.geo import ground_distance_m
-from server.link.setpoint_kinds import Attitude, BodyRates, PositionGlobal, RawLocal, kind_fields
 from server.link.setpoints import (
     IGNORE_ACCELERATION,
     IGNORE_POSITION,
@@ -30,6 +29,7 @@ from server.link.setpoints import (
     Setpoint,
     local_fields,
 )
+from skyhelm_wire.setpoint_kinds import Attitude, BodyRates, PositionGlobal, RawLocal, kind_fields
 
 VehicleClass = Literal["multicopter", "fixed_wing", "vtol_transition", "rover"]
 # What PX4 controls for a setpoint (its offboard control mode), which it accepts per vehicle type

@@ -13,7 +13,7 @@ from dataclasses import dataclass, replace
 from pymavlink.dialects.v20 import development as mavlink
 from pymavlink.quaternion import QuaternionBase
 
-from server.link.setpoint_kinds import (
+from skyhelm_wire.setpoint_kinds import (
     SETPOINT_KINDS,
     AccelerationNed,
     AltFrame,

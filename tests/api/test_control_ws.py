@@ -9,25 +9,35 @@ import json
 import math
 import time
 from collections.abc import AsyncIterator
-from typing import Any
+from typing import Any, Union
 
 import httpx
 import pytest
-from websockets.asyncio.client import connect
+from pydantic import TypeAdapter
+from websockets.asyncio.client import ClientConnection, connect
 
+from skyhelm_wire.messages import ControlMessage, TelemetryMessage
 from tests.api.conftest import PILOT
 from tests.api.test_ws import (
     Served,
     close_code,
     fly_offboard_at_2_m_s,
-    receive,
     receive_until,
     served,
 )
+from tests.api.test_ws import receive as receive_any
 from tests.waiting import eventually, holds_for, wait_for
 
 DEADMAN_S = 0.5
 HERE = {"type": "position_ned", "north_m": 0.0, "east_m": 0.0, "down_m": -2.0, "yaw_deg": 0.0}
+_SOCKET_MESSAGE: TypeAdapter[Any] = TypeAdapter(Union[ControlMessage, TelemetryMessage])  # noqa: UP007
+
+
+async def receive(ws: ClientConnection, timeout_s: float = 5.0) -> dict[str, Any]:
+    """The next message, which must be one the wire package describes."""
+    message = await receive_any(ws, timeout_s)
+    _SOCKET_MESSAGE.validate_python(message)
+    return message
 
 
 @pytest.fixture

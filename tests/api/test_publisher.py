@@ -15,6 +15,7 @@ from server.api.schemas import VehicleStateOut
 from server.api.slots import Slot
 from server.api.views import encode_state, state_json, state_message
 from server.link.state import GlobalState, PositionNedState, VehicleState
+from skyhelm_wire.messages import StateMessage
 from tests.api.state_fakes import PushingVehicle
 from tests.scene.conftest import make_state
 
@@ -221,6 +222,11 @@ def test_state_json_has_the_api_names_and_null_for_non_finite_numbers() -> None:
     assert message["lease"] == {"holder": None, "expires_in_s": None}
     assert {key: message[key] for key in rest if key not in ("type", "lease")} == {
         key: value for key, value in rest.items() if key not in ("type", "lease")
+    }
+    # the socket's message is the wire's StateMessage, every key of it declared there
+    as_wire = StateMessage.model_validate(message).model_dump(mode="json", by_alias=True)
+    assert {key: value for key, value in as_wire.items() if key != "setpoint"} == {
+        key: value for key, value in message.items() if key != "setpoint"
     }
 
 

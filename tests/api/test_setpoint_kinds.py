@@ -14,7 +14,7 @@ from pydantic import TypeAdapter, ValidationError
 
 from server.api.schemas import SETPOINT_BODIES, SetpointBody
 from server.app import create_app
-from server.link.setpoint_kinds import (
+from skyhelm_wire.setpoint_kinds import (
     SETPOINT_KINDS,
     KindField,
     SetpointKind,

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from server.client import State
+from skyhelm_client import State
 from tests.serve_process import Served, skyhelm_serve
 
 # Sim seconds per wall second: PX4's timeouts inside the sim scale with it.

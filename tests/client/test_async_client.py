@@ -8,7 +8,7 @@ import contextlib
 
 import pytest
 
-from server.client import (
+from skyhelm_client import (
     AsyncSkyHelm,
     InvalidInput,
     Message,

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from server.client import InvalidInput, NoAnswer, NoLease, Refused, SkyHelm, SkyHelmError
-from server.client.errors import error_for
+from skyhelm_client import InvalidInput, NoAnswer, NoLease, Refused, SkyHelm, SkyHelmError
+from skyhelm_client.errors import error_for
 
 
 def test_a_refused_command_carries_its_mav_result_and_reason() -> None:

@@ -8,7 +8,7 @@ import contextlib
 
 import pytest
 
-from server.client import AsyncSkyHelm, InvalidInput, Message, PositionNed
+from skyhelm_client import AsyncSkyHelm, InvalidInput, Message, PositionNed
 from tests.client.conftest import pilot_url, ready
 from tests.serve_process import Served
 

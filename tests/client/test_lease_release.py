@@ -10,7 +10,7 @@ import sys
 
 import pytest
 
-from server.client import SkyHelm
+from skyhelm_client import SkyHelm
 from tests.client.conftest import pilot_url
 from tests.serve_process import Served
 from tests.waiting import wait_for_blocking
@@ -18,7 +18,7 @@ from tests.waiting import wait_for_blocking
 # takes the lease, says so, then waits (for a signal) or ends (with the lease held)
 _SCRIPT = """
 import sys, time
-from server.client import SkyHelm
+from skyhelm_client import SkyHelm
 sky = SkyHelm(sys.argv[1])
 print(sky.acquire(client_name="script").holder, flush=True)
 if sys.argv[2] == "wait":

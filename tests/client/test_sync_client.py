@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from server.client import (
+from skyhelm_client import (
     Forbidden,
     InvalidInput,
     NoLease,

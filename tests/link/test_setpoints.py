@@ -9,8 +9,8 @@ import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
 from server.link import setpoints as sp
-from server.link.setpoint_kinds import kind_fields
 from server.link.setpoints import encode, resolve
+from skyhelm_wire.setpoint_kinds import kind_fields
 
 MAV = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
 

@@ -16,7 +16,8 @@ from server.api.errors import CONTROL_RESPONSES, READ_RESPONSES, ApiError
 from server.api.holder_process import verified_holder
 from server.api.lease import Lease, LeaseHeld, TakeoverRefused, TtlOutOfBounds, UnknownRequest
 from server.api.schemas import ErrorOut, setpoint_body
-from server.api.schemas.control import (
+from server.link import Vehicle
+from skyhelm_wire.control import (
     AuditEntryOut,
     ControlBody,
     ControlStatusOut,
@@ -27,7 +28,6 @@ from server.api.schemas.control import (
     TakeoverAnswerOut,
     TakeoverRequestOut,
 )
-from server.link import Vehicle
 
 router = APIRouter(tags=["control"])
 _lease_router = APIRouter(prefix="/vehicles/{vehicle_id}/control")

@@ -15,15 +15,15 @@ from fastapi import APIRouter, Request
 
 from server.api.deps import Context, Pilot, Reader
 from server.api.errors import AUTH_RESPONSES, ApiError
-from server.api.schemas.common import ErrorOut
-from server.api.schemas.signing import (
+from server.link import Link
+from server.link.signing import ProvisionError, SigningKeyStore, new_key, provision
+from skyhelm_wire.common import ErrorOut
+from skyhelm_wire.signing import (
     LinkSigningOut,
     SigningBody,
     SigningOut,
     SigningStatusOut,
 )
-from server.link import Link
-from server.link.signing import ProvisionError, SigningKeyStore, new_key, provision
 
 router = APIRouter(prefix="/signing", tags=["signing"])
 

@@ -13,10 +13,10 @@ from fastapi import APIRouter
 
 from server.api.deps import Context, ControlledVehicle, KnownVehicle
 from server.api.errors import CONTROL_RESPONSES, READ_RESPONSES
-from server.api.schemas.state import StreamOut
 from server.api.schemas.sticks import SticksBody, SticksOut
 from server.link import Sticks, Vehicle
 from server.link.manual_control import MANUAL_CONTROL_RATE_HZ
+from skyhelm_wire.state import StreamOut
 
 router = APIRouter(prefix="/vehicles/{vehicle_id}", tags=["sticks"])
 

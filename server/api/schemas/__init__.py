@@ -1,11 +1,10 @@
-"""Request and response models of the v1 API, one module per resource. Field names carry
-units; enum values are the PX4/MAVLink names the link layer uses. Setpoint bodies are built
-from the link's setpoint kinds (``schemas.setpoints``)."""
+"""Request and response models of the v1 API. Field names carry units; enum values are the
+PX4/MAVLink names the link layer uses. The wire format (state, setpoints, command results,
+the lease, errors) is the wire package's (``skyhelm_wire``), re-exported here; the modules
+here hold the request bodies that need the link (mode names, intents) or only the API."""
 
 from server.api.schemas.commands import (
     ArmBody,
-    CommandResultName,
-    CommandResultOut,
     HomeBody,
     ModeBody,
     ModeName,
@@ -16,7 +15,9 @@ from server.api.schemas.commands import (
     TakeoffBody,
     VtolTransitionBody,
 )
-from server.api.schemas.common import (
+from server.api.schemas.params import ParamOut, ParamsOut, ParamValueBody
+from skyhelm_wire.commands import CommandResultName, CommandResultOut
+from skyhelm_wire.common import (
     AltM,
     ErrorDetail,
     ErrorOut,
@@ -27,9 +28,8 @@ from server.api.schemas.common import (
     UnprocessableOut,
     YawDeg,
 )
-from server.api.schemas.control import ControlBody, LeaseOut, LeaseStatusOut
-from server.api.schemas.params import ParamOut, ParamsOut, ParamValueBody
-from server.api.schemas.setpoints import (
+from skyhelm_wire.control import ControlBody, LeaseOut, LeaseStatusOut
+from skyhelm_wire.setpoints import (
     SETPOINT_BODIES,
     SentSetpointOut,
     SetpointBody,
@@ -37,7 +37,7 @@ from server.api.schemas.setpoints import (
     setpoint_as_dict,
     setpoint_body,
 )
-from server.api.schemas.state import (
+from skyhelm_wire.state import (
     AttitudeOut,
     BatteryOut,
     GlobalOut,

@@ -1,14 +1,15 @@
-"""Command requests (arm, takeoff, modes, reposition, home, offboard) and their result."""
+"""Command requests (arm, takeoff, modes, reposition, home, offboard); their result is the
+wire's (``skyhelm_wire.commands``)."""
 
 from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import AfterValidator, BaseModel, Field, model_validator
+from pydantic import AfterValidator, Field, model_validator
 
-from server.api.schemas.common import AltM, LatDeg, LonDeg, StrictBody, YawDeg
-from server.api.schemas.setpoints import SetpointBody
 from server.link import PX4_MODE_NAMES
+from skyhelm_wire.common import AltM, LatDeg, LonDeg, StrictBody, YawDeg
+from skyhelm_wire.setpoints import SetpointBody
 
 
 class ArmBody(StrictBody):
@@ -86,25 +87,3 @@ class OffboardStartBody(StrictBody):
 
 class OffboardStopBody(StrictBody):
     then_mode: ModeName = "HOLD"
-
-
-CommandResultName = Literal[
-    "ACCEPTED",
-    "TEMPORARILY_REJECTED",
-    "DENIED",
-    "UNSUPPORTED",
-    "FAILED",
-    "IN_PROGRESS",
-    "CANCELLED",
-    "TIMEOUT",
-    "LINK_LOST",
-    "NOT_CONFIRMED",
-]
-
-
-class CommandResultOut(BaseModel):
-    command: str = Field(examples=["MAV_CMD_COMPONENT_ARM_DISARM"])
-    result: CommandResultName
-    result_code: int | None = Field(description="MAV_RESULT as received")
-    elapsed_ms: float
-    reason: str | None = Field(None, description="the vehicle's STATUSTEXT explaining a refusal")

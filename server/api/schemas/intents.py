@@ -6,11 +6,11 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, Field, model_validator
 
-from server.api.schemas.commands import CommandResultOut
-from server.api.schemas.common import LatDeg, LonDeg, StrictBody, YawDeg, limits_of
-from server.api.schemas.setpoints import SentSetpointOut
 from server.link.intents import IntentName
-from server.link.setpoint_kinds import AltitudeM, DegreesPerSecond, Metres, MetresPerSecond
+from skyhelm_wire.commands import CommandResultOut
+from skyhelm_wire.common import LatDeg, LonDeg, StrictBody, YawDeg, limits_of
+from skyhelm_wire.setpoint_kinds import AltitudeM, DegreesPerSecond, Metres, MetresPerSecond
+from skyhelm_wire.setpoints import SentSetpointOut
 
 SpeedMS = Annotated[float, limits_of(MetresPerSecond)]
 DistanceM = Annotated[float, limits_of(Metres)]

@@ -1,25 +1,31 @@
 """What the client hands back: command results, the lease, the vehicle's state and the
-telemetry socket's messages, each keeping the JSON it came from."""
+telemetry socket's messages, parsed with the wire models (``skyhelm_wire``) the server
+answers with, so a field the server renames or drops fails here, not in a script."""
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterator, Mapping
-from dataclasses import dataclass, field
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
+from functools import cached_property
 from typing import Any, Generic, TypeVar
 
+from pydantic import ConfigDict, TypeAdapter
+
+from skyhelm_wire.commands import CommandResultOut
+from skyhelm_wire.control import LeaseOut
+from skyhelm_wire.messages import StateMessage, TelemetryMessage
+from skyhelm_wire.state import VehicleStateOut
+
 _T = TypeVar("_T")
+_TELEMETRY: TypeAdapter[TelemetryMessage] = TypeAdapter(TelemetryMessage)
 
 
-@dataclass(frozen=True)
-class CommandResult:
+class CommandResult(CommandResultOut):
     """A command the vehicle accepted (200) or still runs (202, ``in_progress``)."""
 
-    command: str
-    result: str
-    result_code: int | None
-    elapsed_ms: float
-    reason: str | None
+    model_config = ConfigDict(frozen=True)
+
     status: int = 200
 
     @property
@@ -28,45 +34,28 @@ class CommandResult:
 
     @classmethod
     def from_json(cls, body: Mapping[str, Any], status: int = 200) -> CommandResult:
-        return cls(
-            command=str(body["command"]),
-            result=str(body["result"]),
-            result_code=body.get("result_code"),
-            elapsed_ms=float(body.get("elapsed_ms", 0.0)),
-            reason=body.get("reason"),
-            status=status,
-        )
+        return cls.model_validate({**body, "status": status})
 
 
-@dataclass(frozen=True)
-class Lease:
+class Lease(LeaseOut):
     """The control lease as the server granted or renewed it. ``setpoint`` is the setpoint
     the vehicle is flying when control was taken (a new holder starts from it), if any;
     ``taken_from`` the previous holder after a takeover."""
 
-    lease_id: str
-    ttl_s: float
-    holder: str
-    expires_in_s: float
-    session: str = "rest"
-    since_s: float = 0.0
-    setpoint: dict[str, Any] | None = None
-    taken_from: str | None = None
-    raw: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
+    model_config = ConfigDict(frozen=True)
+
+    # JSON, as scripts index it (``lease.setpoint["type"]``); checked against its kind first
+    setpoint: dict[str, Any] | None = None  # type: ignore[assignment]
 
     @classmethod
     def from_json(cls, body: Mapping[str, Any]) -> Lease:
-        return cls(
-            lease_id=str(body["lease_id"]),
-            ttl_s=float(body["ttl_s"]),
-            holder=str(body.get("holder", "")),
-            expires_in_s=float(body.get("expires_in_s") or 0.0),
-            session=str(body.get("session", "rest")),
-            since_s=float(body.get("since_s") or 0.0),
-            setpoint=body.get("setpoint"),
-            taken_from=body.get("taken_from"),
-            raw=dict(body),
-        )
+        LeaseOut.model_validate(body)
+        return cls.model_validate(body)
+
+    @property
+    def raw(self) -> dict[str, Any]:
+        """The lease as JSON."""
+        return self.model_dump(mode="json")
 
 
 @dataclass(frozen=True)
@@ -81,23 +70,31 @@ class Ned:
         return math.hypot(self.north_m - north_m, self.east_m - east_m)
 
 
-class _Field(Generic[_T]):
-    """A state field read from the JSON as a typed attribute."""
+def _number(value: float | None) -> float:
+    return math.nan if value is None else value
 
-    def __init__(self, key: str, convert: Callable[[Any], _T]) -> None:
-        self.key, self.convert = key, convert
+
+class _ModelField(Generic[_T]):
+    """A field of the state's model, as a read-only attribute of the state."""
+
+    def __set_name__(self, owner: type[State], name: str) -> None:
+        self.name = name
 
     def __get__(self, state: State, owner: type[State] | None = None) -> _T:
-        return self.convert(state.get(self.key))
+        value: _T = getattr(state.model, self.name)
+        return value
 
 
 class State(Mapping[str, Any]):
     """A vehicle's state snapshot (``GET /vehicles/{id}``, or a telemetry ``state``
-    message). Every field of the JSON is there by key (``state["battery"]``); the ones a
-    script reads most have typed properties."""
+    message). Every field of the JSON is there by key (``state["battery"]``), all of them
+    typed in ``model``; the ones a script reads most are properties."""
 
     def __init__(self, data: Mapping[str, Any]) -> None:
         self._data = dict(data)
+        self.model: VehicleStateOut = (
+            StateMessage if self._data.get("type") == "state" else VehicleStateOut
+        ).model_validate(self._data)
 
     def __getitem__(self, key: str) -> Any:
         return self._data[key]
@@ -114,26 +111,30 @@ class State(Mapping[str, Any]):
             f"{self.landed_state!r}, position_ned={self.position_ned})"
         )
 
-    mode = _Field("mode", str)
-    armed = _Field("armed", bool)
-    connected = _Field("connected", bool)
-    landed_state = _Field("landed_state", str)
+    mode = _ModelField[str]()
+    armed = _ModelField[bool]()
+    connected = _ModelField[bool]()
+    landed_state = _ModelField[str]()
 
     @property
     def position_ned(self) -> Ned:
-        p = self._data.get("position_ned") or {}
-        return Ned(p.get("north_m", math.nan), p.get("east_m", math.nan), p.get("down_m", math.nan))
+        """NaN before the vehicle reports a position."""
+        p = self.model.position_ned
+        if p is None:
+            return Ned(math.nan, math.nan, math.nan)
+        return Ned(_number(p.north_m), _number(p.east_m), _number(p.down_m))
 
     @property
     def altitude_m(self) -> float:
         """Height above home (NaN before the vehicle reports a position)."""
-        position = self._data.get("global") or {}
-        if position.get("alt_rel_m") is not None:
-            return float(position["alt_rel_m"])
+        position = self.model.global_
+        if position is not None and position.alt_rel_m is not None:
+            return position.alt_rel_m
         return -self.position_ned.down_m
 
     @property
     def setpoint(self) -> dict[str, Any] | None:
+        """The streamed setpoint as JSON (``model.setpoint`` typed)."""
         setpoint: dict[str, Any] | None = self._data.get("setpoint")
         return setpoint
 
@@ -144,10 +145,15 @@ class State(Mapping[str, Any]):
 @dataclass(frozen=True)
 class Message:
     """One telemetry socket message: ``type`` is ``state``, ``event``, ``statustext``,
-    ``vehicles`` or ``scene_click``; ``state`` is set for states, ``kind`` for events."""
+    ``vehicles`` or ``scene_click``; ``state`` is set for states, ``kind`` for events;
+    ``model`` is the message typed."""
 
     type: str
     data: dict[str, Any]
+
+    @cached_property
+    def model(self) -> TelemetryMessage:
+        return _TELEMETRY.validate_python(self.data)
 
     @property
     def vehicle(self) -> int | None:

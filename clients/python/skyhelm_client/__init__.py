@@ -1,11 +1,11 @@
 """A typed Python client for the SkyHelm API: :class:`SkyHelm` (blocking) and
-:class:`AsyncSkyHelm` (asyncio), with the same calls. Setpoints are the link's own setpoint
+:class:`AsyncSkyHelm` (asyncio), with the same calls. Setpoints are the wire's setpoint
 kinds (``PositionNed(north_m=10, east_m=0, down_m=-5)``; every kind in
-``server.client.setpoints``, which is ``server.link.setpoint_kinds``), so their fields, units
-and limits have one definition. Only the package's runtime dependencies are needed (httpx,
-websockets).
+``skyhelm_client.setpoints``, which is ``skyhelm_wire.setpoint_kinds``), and answers are
+parsed with the wire's models, so fields, units and limits have one definition. It needs
+httpx, websockets and the wire package (pydantic), nothing of the server.
 
-    from server.client import PositionNed, SkyHelm
+    from skyhelm_client import PositionNed, SkyHelm
 
     with SkyHelm("http://127.0.0.1:8000/?token=...") as sky:
         sky.acquire()
@@ -15,8 +15,8 @@ websockets).
         sky.offboard_start(PositionNed(north_m=0, east_m=0, down_m=-5))
 """
 
-from server.client.aio import AsyncSkyHelm
-from server.client.errors import (
+from skyhelm_client.aio import AsyncSkyHelm
+from skyhelm_client.errors import (
     Forbidden,
     InvalidInput,
     NoAnswer,
@@ -28,10 +28,10 @@ from server.client.errors import (
     Unavailable,
     WaitTimedOut,
 )
-from server.client.models import CommandResult, Lease, Message, Ned, State
-from server.client.sync import SkyHelm
-from server.link import setpoint_kinds as setpoints
-from server.link.setpoint_kinds import PositionNed, SetpointKind, VelocityBody, VelocityNed
+from skyhelm_client.models import CommandResult, Lease, Message, Ned, State
+from skyhelm_client.sync import SkyHelm
+from skyhelm_wire import setpoint_kinds as setpoints
+from skyhelm_wire.setpoint_kinds import PositionNed, SetpointKind, VelocityBody, VelocityNed
 
 __all__ = [
     "AsyncSkyHelm",

@@ -6,9 +6,9 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from server.api.schemas.control import LeaseStatusOut
-from server.api.schemas.setpoints import SetpointBody
-from server.api.schemas.signing import SigningOut
+from skyhelm_wire.control import LeaseStatusOut
+from skyhelm_wire.setpoints import SetpointBody
+from skyhelm_wire.signing import SigningOut
 
 
 class _Out(BaseModel):

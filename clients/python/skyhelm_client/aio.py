@@ -10,10 +10,10 @@ from typing import Any
 import httpx
 from websockets.asyncio.client import connect
 
-from server.client.calls import Call, Calls, Waiting
-from server.client.errors import SkyHelmError
-from server.client.models import CommandResult, Lease, Message, State
-from server.client.urls import ws_url
+from skyhelm_client.calls import Call, Calls, Waiting
+from skyhelm_client.errors import SkyHelmError
+from skyhelm_client.models import CommandResult, Lease, Message, State
+from skyhelm_client.urls import ws_url
 
 _Co = Coroutine[Any, Any, Any]
 
@@ -36,7 +36,7 @@ class AsyncSkyHelm(
             async for message in sky.telemetry():
                 ...
 
-    The same calls as :class:`~server.client.SkyHelm`, awaited."""
+    The same calls as :class:`~skyhelm_client.SkyHelm`, awaited."""
 
     _http: httpx.AsyncClient
 

@@ -6,6 +6,9 @@ from __future__ import annotations
 
 from typing import Any
 
+from skyhelm_wire.commands import CommandResultOut
+from skyhelm_wire.common import ErrorDetail
+
 
 class SkyHelmError(Exception):
     """A call the server refused or could not carry out: the HTTP status (0 when the server
@@ -77,21 +80,23 @@ def error_for(status: int, body: Any) -> SkyHelmError:
     field errors."""
     cls = _BY_STATUS.get(status, SkyHelmError)
     if isinstance(body, dict) and "result" in body:
+        command = CommandResultOut.model_validate(body)
         return cls(
             status,
-            body.get("reason") or body["result"],
-            result=body["result"],
-            result_code=body.get("result_code"),
+            command.reason or command.result,
+            result=command.result,
+            result_code=command.result_code,
             body=body,
         )
     detail = body.get("detail") if isinstance(body, dict) else None
-    if isinstance(detail, dict):
+    if isinstance(detail, dict) and "reason" in detail:
+        error = ErrorDetail.model_validate(detail)
         return cls(
             status,
-            str(detail.get("reason", detail)),
-            field=detail.get("field"),
-            limit=detail.get("limit"),
-            holder=detail.get("holder"),
+            error.reason,
+            field=error.field,
+            limit=error.limit,
+            holder=error.holder,
             body=body,
         )
     if isinstance(detail, list) and detail and isinstance(detail[0], dict):

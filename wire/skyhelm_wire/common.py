@@ -1,5 +1,5 @@
 """What every request and error shares: strict bodies, error answers, the health answer,
-and the command bodies' number types with the limits and units the link defines."""
+and the command bodies' number types with the limits and units the setpoint kinds define."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field
 from pydantic.fields import FieldInfo
 
-from server.link.setpoint_kinds import AltitudeM, Degrees, LatitudeDeg, LongitudeDeg, quantity_of
+from skyhelm_wire.setpoint_kinds import AltitudeM, Degrees, LatitudeDeg, LongitudeDeg, quantity_of
 
 
 def limits_of(hint: Any) -> FieldInfo:

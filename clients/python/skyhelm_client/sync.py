@@ -10,10 +10,10 @@ from typing import Any
 import httpx
 from websockets.sync.client import connect
 
-from server.client.calls import Call, Calls, Waiting
-from server.client.errors import SkyHelmError
-from server.client.models import CommandResult, Lease, Message, State
-from server.client.urls import ws_url
+from skyhelm_client.calls import Call, Calls, Waiting
+from skyhelm_client.errors import SkyHelmError
+from skyhelm_client.models import CommandResult, Lease, Message, State
+from skyhelm_client.urls import ws_url
 
 
 class SkyHelm(Calls[CommandResult, Lease, State, Any, float, None]):
@@ -25,7 +25,7 @@ class SkyHelm(Calls[CommandResult, Lease, State, Any, float, None]):
             sky.takeoff(altitude_m=5)
             sky.wait_until(lambda s: s.altitude_m > 4.5, timeout_s=60)
 
-    Refusals raise :class:`~server.client.errors.SkyHelmError` subclasses."""
+    Refusals raise :class:`~skyhelm_client.errors.SkyHelmError` subclasses."""
 
     # what waits measure time with
     clock: Callable[[], float] = time.monotonic

@@ -1,4 +1,4 @@
-"""The setpoint request bodies, built from the link's setpoint kinds.
+"""The setpoint request bodies, built from the setpoint kinds (``setpoint_kinds``).
 
 Nothing here lists a kind or a field: each registered kind becomes a model named
 ``<Kind>Body`` with a ``type`` literal (the kind's name) and the kind's fields, their limits and
@@ -14,8 +14,8 @@ from typing import TYPE_CHECKING, Annotated, Any, ClassVar, Literal
 
 from pydantic import BaseModel, Field, create_model
 
-from server.api.schemas.common import StrictBody, limits_of
-from server.link.setpoint_kinds import (
+from skyhelm_wire.common import StrictBody, limits_of
+from skyhelm_wire.setpoint_kinds import (
     SETPOINT_KINDS,
     KindField,
     Setpoint,

@@ -16,11 +16,11 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Generic, Literal, TypeVar
 
-from server.client import exit_release
-from server.client.errors import NoLease, error_for, timed_out
-from server.client.models import Lease, State
-from server.client.urls import API_PREFIX, split_url
-from server.link.setpoint_kinds import SetpointKind, describe
+from skyhelm_client import exit_release
+from skyhelm_client.errors import NoLease, error_for, timed_out
+from skyhelm_client.models import Lease, State
+from skyhelm_client.urls import API_PREFIX, split_url
+from skyhelm_wire.setpoint_kinds import SetpointKind, describe
 
 _Cmd = TypeVar("_Cmd")
 _Lease = TypeVar("_Lease")
