@@ -14,7 +14,7 @@ from typing import Any
 from pydantic import BaseModel
 from pymavlink.dialects.v20 import development as mavlink
 
-from server.api.schemas.state import LinkOut, StreamOut, VehicleStateOut
+from skyhelm_wire.state import LinkOut, StreamOut, VehicleStateOut
 
 JsonSchema = dict[str, Any]
 

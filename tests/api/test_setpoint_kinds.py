@@ -1,6 +1,6 @@
 """Every setpoint kind the link defines reaches OpenAPI with its fields, units and limits, and a
 body of that kind validates into the link's setpoint unchanged: adding a kind to
-server/link/setpoint_kinds.py is all the API needs."""
+skyhelm_wire/setpoint_kinds.py is all the API needs."""
 
 from __future__ import annotations
 
