@@ -3,16 +3,13 @@ topics. State is latest-wins at the asked rate (slots.py); events are queued."""
 
 from __future__ import annotations
 
-import json
-from typing import Any
-
 from fastapi import APIRouter, WebSocket
 
-from server.api.auth import Role
-from server.api.publisher import StatePublisher, StatePublishers
-from server.api.slots import Broadcast
-from server.api.views import finite
-from server.api.ws_common import (
+from server.control.auth import Role
+from server.control.publisher import StatePublisher, StatePublishers
+from server.control.slots import Broadcast
+from server.control.views import event_message
+from server.http.ws_common import (
     CLOSE_NOT_FOUND,
     EVENT_BACKLOG,
     Sender,
@@ -20,7 +17,7 @@ from server.api.ws_common import (
     close_socket,
     run_until_disconnect,
 )
-from server.link import Vehicle, VehicleEvent
+from server.link import Vehicle
 
 MIN_RATE_HZ = 0.1
 
@@ -95,23 +92,3 @@ async def _pump_events(vehicle: Vehicle, sender: Sender) -> None:
         if unsubscribe is not None:
             unsubscribe(queue)
 
-
-def event_message(vehicle_id: int, event: VehicleEvent) -> dict[str, Any]:
-    if event.kind == "statustext":
-        return {
-            "type": "statustext",
-            "vehicle": vehicle_id,
-            "time_s": event.time_s,
-            **finite(dict(event.data)),
-        }
-    return {
-        "type": "event",
-        "vehicle": vehicle_id,
-        "kind": event.kind,
-        "time_s": event.time_s,
-        "data": finite(_jsonable(event.data)),
-    }
-
-
-def _jsonable(value: Any) -> Any:
-    return json.loads(json.dumps(value, default=str))

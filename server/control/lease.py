@@ -19,7 +19,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-from server.api.auth import same_secret
+from server.control.auth import same_secret
 from server.settings import Settings
 
 

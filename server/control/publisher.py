@@ -33,8 +33,8 @@ from collections import deque
 from collections.abc import Callable, Iterable
 from typing import Protocol
 
-from server.api.slots import Broadcast, Slot
-from server.api.views import LeaseStatus, encode_state, state_json, state_message, summary_dict
+from server.control.slots import Broadcast, Slot
+from server.control.views import LeaseStatus, encode_state, state_json, state_message, summary_dict
 from server.link import Link, Vehicle, VehicleState
 from server.link.aio import cancel_and_wait, loop_time_s
 from server.link.state import WAKE_BATCH, RateGrid, StateSubscription

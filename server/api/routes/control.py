@@ -10,12 +10,12 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, Depends, Query, Request, Response
 
-from server.api.auth import same_secret
-from server.api.deps import ApiContext, Context, KnownVehicle, LeaseIdHeader, Pilot, Reader
-from server.api.errors import CONTROL_RESPONSES, READ_RESPONSES, ApiError
-from server.api.lease import Lease, LeaseHeld, TakeoverRefused, TtlOutOfBounds, UnknownRequest
-from server.api.schemas import ErrorOut, setpoint_body
-from server.api.schemas.control import (
+from server.control.auth import same_secret
+from server.control.lease import Lease, LeaseHeld, TakeoverRefused, TtlOutOfBounds, UnknownRequest
+from server.http.deps import ApiContext, Context, KnownVehicle, LeaseIdHeader, Pilot, Reader
+from server.http.errors import CONTROL_RESPONSES, READ_RESPONSES, ApiError
+from server.http.schemas import ErrorOut, setpoint_body
+from server.http.schemas.control import (
     AuditEntryOut,
     ControlBody,
     ControlStatusOut,

@@ -13,10 +13,10 @@ import contextlib
 
 from fastapi import APIRouter, Request
 
-from server.api.deps import Context, Pilot, Reader
-from server.api.errors import AUTH_RESPONSES, ApiError
-from server.api.schemas.common import ErrorOut
-from server.api.schemas.signing import (
+from server.http.deps import Context, Pilot, Reader
+from server.http.errors import AUTH_RESPONSES, ApiError
+from server.http.schemas.common import ErrorOut
+from server.http.schemas.signing import (
     LinkSigningOut,
     SigningBody,
     SigningOut,

@@ -2,7 +2,7 @@
 units; enum values are the PX4/MAVLink names the link layer uses. Setpoint bodies are built
 from the link's setpoint kinds (``schemas.setpoints``)."""
 
-from server.api.schemas.commands import (
+from server.http.schemas.commands import (
     ArmBody,
     CommandResultName,
     CommandResultOut,
@@ -16,7 +16,7 @@ from server.api.schemas.commands import (
     TakeoffBody,
     VtolTransitionBody,
 )
-from server.api.schemas.common import (
+from server.http.schemas.common import (
     AltM,
     ErrorDetail,
     ErrorOut,
@@ -27,9 +27,9 @@ from server.api.schemas.common import (
     UnprocessableOut,
     YawDeg,
 )
-from server.api.schemas.control import ControlBody, LeaseOut, LeaseStatusOut
-from server.api.schemas.params import ParamOut, ParamsOut, ParamValueBody
-from server.api.schemas.setpoints import (
+from server.http.schemas.control import ControlBody, LeaseOut, LeaseStatusOut
+from server.http.schemas.params import ParamOut, ParamsOut, ParamValueBody
+from server.http.schemas.setpoints import (
     SETPOINT_BODIES,
     SentSetpointOut,
     SetpointBody,
@@ -37,7 +37,7 @@ from server.api.schemas.setpoints import (
     setpoint_as_dict,
     setpoint_body,
 )
-from server.api.schemas.state import (
+from server.http.schemas.state import (
     AttitudeOut,
     BatteryOut,
     GlobalOut,

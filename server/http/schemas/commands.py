@@ -6,8 +6,8 @@ from typing import Annotated, Literal
 
 from pydantic import AfterValidator, BaseModel, Field, model_validator
 
-from server.api.schemas.common import AltM, LatDeg, LonDeg, StrictBody, YawDeg
-from server.api.schemas.setpoints import SetpointBody
+from server.http.schemas.common import AltM, LatDeg, LonDeg, StrictBody, YawDeg
+from server.http.schemas.setpoints import SetpointBody
 from server.link import PX4_MODE_NAMES
 
 

@@ -7,8 +7,8 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, Field
 
-from server.api.schemas.common import StrictBody
-from server.api.schemas.setpoints import SetpointBody
+from server.http.schemas.common import StrictBody
+from server.http.schemas.setpoints import SetpointBody
 
 ClientName = Annotated[
     str | None,

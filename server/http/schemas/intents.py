@@ -6,9 +6,9 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, Field, model_validator
 
-from server.api.schemas.commands import CommandResultOut
-from server.api.schemas.common import LatDeg, LonDeg, StrictBody, YawDeg, limits_of
-from server.api.schemas.setpoints import SentSetpointOut
+from server.http.schemas.commands import CommandResultOut
+from server.http.schemas.common import LatDeg, LonDeg, StrictBody, YawDeg, limits_of
+from server.http.schemas.setpoints import SentSetpointOut
 from server.link.intents import IntentName
 from server.link.setpoint_kinds import AltitudeM, DegreesPerSecond, Metres, MetresPerSecond
 

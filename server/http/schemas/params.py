@@ -6,7 +6,7 @@ from typing import Annotated
 
 from pydantic import BaseModel, Field
 
-from server.api.schemas.common import StrictBody
+from server.http.schemas.common import StrictBody
 
 
 class ParamValueBody(StrictBody):

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Annotated, Any, ClassVar, Literal
 
 from pydantic import BaseModel, Field, create_model
 
-from server.api.schemas.common import StrictBody, limits_of
+from server.http.schemas.common import StrictBody, limits_of
 from server.link.setpoint_kinds import (
     SETPOINT_KINDS,
     KindField,

@@ -6,7 +6,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from server.api.schemas.common import StrictBody
+from server.http.schemas.common import StrictBody
 
 SigningAction = Literal["generate", "rotate", "disable"]
 

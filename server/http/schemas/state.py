@@ -6,9 +6,9 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from server.api.schemas.control import LeaseStatusOut
-from server.api.schemas.setpoints import SetpointBody
-from server.api.schemas.signing import SigningOut
+from server.http.schemas.control import LeaseStatusOut
+from server.http.schemas.setpoints import SetpointBody
+from server.http.schemas.signing import SigningOut
 
 
 class _Out(BaseModel):

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from pydantic import BaseModel, Field
 
-from server.api.schemas.common import StrictBody
-from server.api.schemas.state import StreamOut
+from server.http.schemas.common import StrictBody
+from server.http.schemas.state import StreamOut
 
 
 class SticksBody(StrictBody):
