@@ -34,7 +34,7 @@ from server.api.routes import signing as signing_routes
 from server.control.auth import TokenChecker
 from server.control.deadman import Deadman
 from server.control.lease import LeaseManager
-from server.control.publisher import StatePublishers
+from server.control.publishers import StatePublishers
 from server.control.registry import VehicleRegistry
 from server.fleet import routes as fleet_routes
 from server.fleet import ws as fleet_ws

@@ -6,7 +6,8 @@ from __future__ import annotations
 from fastapi import APIRouter, WebSocket
 
 from server.control.auth import Role
-from server.control.publisher import StatePublisher, StatePublishers
+from server.control.publisher import StatePublisher
+from server.control.publishers import StatePublishers
 from server.control.slots import Broadcast
 from server.control.views import event_message
 from server.http.ws_common import (

@@ -10,7 +10,8 @@ from collections.abc import Callable
 
 import pytest
 
-from server.control.publisher import Published, StatePublisher, StatePublishers
+from server.control.publisher import Published, StatePublisher
+from server.control.publishers import StatePublishers
 from server.control.slots import Slot
 from server.control.views import encode_state, state_json, state_message
 from server.http.schemas import VehicleStateOut

@@ -6,7 +6,7 @@ from typing import Any
 
 from fastapi import APIRouter, Request, Response
 
-from server.control.publisher import StatePublishers
+from server.control.publishers import StatePublishers
 from server.control.views import stream_dict, summary_dict
 from server.http.deps import Context, KnownVehicle, Reader
 from server.http.errors import AUTH_RESPONSES, READ_RESPONSES
