@@ -16,10 +16,10 @@ from typing import Any
 from bench._markdown import ratio, table
 from bench._report import Section
 from bench._results import machine_info, write_results
-from server.api.auth import TokenChecker
-from server.api.auth_lockout import Lockout
-from server.api.ratelimit import RateLimiter
-from server.api.security import Guards, SecurityMiddleware, install_log_redaction
+from server.control.auth import TokenChecker
+from server.control.auth_lockout import Lockout
+from server.control.ratelimit import RateLimiter
+from server.http.security import Guards, SecurityMiddleware, install_log_redaction
 
 TOKEN = "bench-token-0123456789"
 REQUESTS = 20_000

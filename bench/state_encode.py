@@ -19,9 +19,9 @@ from typing import Any
 from bench._markdown import ratio, table
 from bench._report import Section, save_figure
 from bench._results import machine_info, write_results
-from server.api.publisher import Published, StatePublisher
-from server.api.slots import Slot
-from server.api.views import encode_state, state_json, state_message
+from server.control.publisher import Published, StatePublisher
+from server.control.slots import Slot
+from server.control.views import encode_state, state_json, state_message
 from server.link import state as link
 from server.link.link_stats import LinkStats
 from tests.api.state_fakes import PushingVehicle

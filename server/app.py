@@ -18,13 +18,6 @@ from fastapi.middleware.cors import CORSMiddleware
 from fastapi.staticfiles import StaticFiles
 
 from server.api import ws
-from server.api.auth import TokenChecker
-from server.api.deadman import Deadman
-from server.api.deps import ApiContext
-from server.api.errors import install_error_handlers
-from server.api.lease import LeaseManager
-from server.api.publisher import StatePublishers
-from server.api.registry import VehicleRegistry
 from server.api.routes import (
     commands,
     control,
@@ -39,14 +32,21 @@ from server.api.routes import (
     vehicles,
 )
 from server.api.routes import signing as signing_routes
-from server.api.security import install_security
-from server.api.tile_archive import open_tile_archive
+from server.control.auth import TokenChecker
+from server.control.deadman import Deadman
+from server.control.lease import LeaseManager
+from server.control.publishers import StatePublishers
+from server.control.registry import VehicleRegistry
 from server.fleet import routes as fleet_routes
 from server.fleet import ws as fleet_ws
 from server.fleet.edge import EdgeService
 from server.fleet.view import FleetVehicle
 from server.fleet.view_service import FleetService
 from server.foxglove import FoxgloveBridge, FoxgloveProxy
+from server.http.deps import ApiContext
+from server.http.errors import install_error_handlers
+from server.http.security import install_security
+from server.http.tile_archive import open_tile_archive
 from server.link import Envelope, Link
 from server.link.signing import SigningKeyError, SigningKeyStore
 from server.link.urls import parse_link_url

@@ -16,7 +16,7 @@ from typing import Any
 
 import uvicorn
 
-from server.api.security import RedactTokens
+from server.http.security import RedactTokens
 from server.settings import Settings, SettingsError, load_settings
 
 log = logging.getLogger("server")

@@ -10,9 +10,9 @@ from typing import Any
 
 from pydantic import BaseModel
 
-from server.api import schemas
-from server.api.errors import COMMAND_STATUS, ApiError, command_out
-from server.api.schemas.intents import (
+from server.http import schemas
+from server.http.errors import COMMAND_STATUS, ApiError, command_out
+from server.http.schemas.intents import (
     BrakeBody,
     GeoTargetOut,
     GotoIntentBody,

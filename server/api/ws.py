@@ -9,7 +9,9 @@ from __future__ import annotations
 from fastapi import APIRouter
 
 from server.api import ws_control, ws_telemetry
-from server.api.ws_common import (
+from server.api.ws_telemetry import MIN_RATE_HZ
+from server.control.views import event_message
+from server.http.ws_common import (
     CLOSE_FORBIDDEN,
     CLOSE_LEASE_HELD,
     CLOSE_LEASE_LOST,
@@ -18,7 +20,6 @@ from server.api.ws_common import (
     EVENT_BACKLOG,
     SEND_TIMEOUT_S,
 )
-from server.api.ws_telemetry import MIN_RATE_HZ, event_message
 
 router = APIRouter()
 router.include_router(ws_telemetry.router)

@@ -14,17 +14,11 @@ from typing import Any
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 from pydantic import TypeAdapter
 
-from server.api.auth import Role
-from server.api.deps import ApiContext
-from server.api.errors import (
-    COMMAND_STATUS,
-    ApiError,
-    command_out,
-    error_status,
-    non_finite_field,
-    refuse_non_finite,
-)
-from server.api.lease import (
+from server.api.operations import INTENT_NAMES, OPERATIONS, run_intent, sent_out
+from server.api.routes.control import AskerGone, lease_out, unless_gone
+from server.api.routes.sticks import fly_sticks, stop_sticks
+from server.control.auth import Role
+from server.control.lease import (
     Lease,
     LeaseEnd,
     LeaseHeld,
@@ -32,12 +26,18 @@ from server.api.lease import (
     TtlOutOfBounds,
     UnknownRequest,
 )
-from server.api.operations import INTENT_NAMES, OPERATIONS, run_intent, sent_out
-from server.api.routes.control import AskerGone, lease_out, unless_gone
-from server.api.routes.sticks import fly_sticks, stop_sticks
-from server.api.schemas import SetpointBody
-from server.api.schemas.sticks import SticksBody
-from server.api.ws_common import (
+from server.http.deps import ApiContext
+from server.http.errors import (
+    COMMAND_STATUS,
+    ApiError,
+    command_out,
+    error_status,
+    non_finite_field,
+    refuse_non_finite,
+)
+from server.http.schemas import SetpointBody
+from server.http.schemas.sticks import SticksBody
+from server.http.ws_common import (
     CLOSE_BAD_REQUEST,
     CLOSE_LEASE_HELD,
     CLOSE_LEASE_LOST,

@@ -9,18 +9,17 @@ reboot), so its socket goes on."""
 from __future__ import annotations
 
 import asyncio
-import json
 from collections.abc import AsyncIterator
-from typing import Any
 
 from fastapi import APIRouter, WebSocket
 
-from server.api.auth import Role
-from server.api.publisher import StatePublisher, StatePublishers
-from server.api.registry import VehicleRegistry
-from server.api.slots import Broadcast
-from server.api.views import finite
-from server.api.ws_common import (
+from server.control.auth import Role
+from server.control.publisher import StatePublisher
+from server.control.publishers import StatePublishers
+from server.control.registry import VehicleRegistry
+from server.control.slots import Broadcast
+from server.control.views import event_message
+from server.http.ws_common import (
     CLOSE_NOT_FOUND,
     EVENT_BACKLOG,
     Sender,
@@ -28,7 +27,7 @@ from server.api.ws_common import (
     close_socket,
     run_until_disconnect,
 )
-from server.link import Link, Vehicle, VehicleEvent
+from server.link import Link, Vehicle
 
 MIN_RATE_HZ = 0.1
 # MAVLink system ids a vehicle can have; another id can never appear.
@@ -157,23 +156,3 @@ async def _pump_events(vehicle: Vehicle, sender: Sender) -> None:
         if unsubscribe is not None:
             unsubscribe(queue)
 
-
-def event_message(vehicle_id: int, event: VehicleEvent) -> dict[str, Any]:
-    if event.kind == "statustext":
-        return {
-            "type": "statustext",
-            "vehicle": vehicle_id,
-            "time_s": event.time_s,
-            **finite(dict(event.data)),
-        }
-    return {
-        "type": "event",
-        "vehicle": vehicle_id,
-        "kind": event.kind,
-        "time_s": event.time_s,
-        "data": finite(_jsonable(event.data)),
-    }
-
-
-def _jsonable(value: Any) -> Any:
-    return json.loads(json.dumps(value, default=str))

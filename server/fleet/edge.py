@@ -23,7 +23,7 @@ from collections.abc import Callable
 
 import zenoh
 
-from server.api.publisher import StatePublishers
+from server.control.publishers import StatePublishers
 from server.fleet.asgi_call import Asgi
 from server.fleet.edge_api import EdgeApi
 from server.fleet.edge_publish import VehiclePublication

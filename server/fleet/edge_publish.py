@@ -2,7 +2,7 @@
 its link is connected, its state at two rate tiers, its events, its messages and, while a
 setpoint stream runs, the stream's health.
 
-State comes from the vehicle's one state publisher (server/api/publisher.py), as a
+State comes from the vehicle's one state publisher (server/control/publisher.py), as a
 consumer at each tier's rate: the tick's JSON is the one the telemetry sockets send (made
 once per tick, whoever reads it), wrapped as
 ``{"edge", "id", "seq", "sent_unix_s", "state": <GET /api/v1/vehicles/{id}>}``.
@@ -28,11 +28,10 @@ from typing import Any
 
 import zenoh
 
-from server.api.publisher import Published, StatePublisher
-from server.api.views import state_json, stream_dict
-from server.api.ws_common import EVENT_BACKLOG
-from server.api.ws_telemetry import event_message
+from server.control.publisher import Published, StatePublisher
+from server.control.views import event_message, state_json, stream_dict
 from server.fleet.keys import TIER_RATE_HZ, FleetKeys, StateTier
+from server.http.ws_common import EVENT_BACKLOG
 from server.link import Vehicle
 from server.link.aio import cancel_and_wait
 

@@ -16,18 +16,18 @@ from fastapi import APIRouter, Path, Request, Response
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel, Field
 
-from server.api.auth import TOKEN_QUERY, Role, token_from
-from server.api.deps import Reader, VehicleId
-from server.api.errors import (
+from server.control.auth import TOKEN_QUERY, Role, token_from
+from server.fleet.proxy import EdgeReplyError, EdgeTimeout, call_timeout_s, edge_call
+from server.fleet.view_service import FleetService
+from server.http.deps import Reader, VehicleId
+from server.http.errors import (
     AUTH_RESPONSES,
     CONTROL_RESPONSES,
     READ_RESPONSES,
     ApiError,
     refuse_non_finite,
 )
-from server.api.schemas import ErrorOut
-from server.fleet.proxy import EdgeReplyError, EdgeTimeout, call_timeout_s, edge_call
-from server.fleet.view_service import FleetService
+from server.http.schemas import ErrorOut
 from server.settings import FLEET_NAME_PATTERN
 
 router = APIRouter(prefix="/fleet", tags=["fleet"])

@@ -9,10 +9,10 @@ import asyncio
 
 from fastapi import APIRouter, WebSocket
 
-from server.api.auth import Role
-from server.api.ws_common import Sender, admit, run_until_disconnect
+from server.control.auth import Role
 from server.fleet.view import FleetView, Watcher
 from server.fleet.view_service import FleetService
+from server.http.ws_common import Sender, admit, run_until_disconnect
 
 MIN_RATE_HZ = 0.1
 

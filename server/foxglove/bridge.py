@@ -31,8 +31,8 @@ from pathlib import Path
 from foxglove.messages import LogLevel
 from pymavlink.dialects.v20 import development as mavlink
 
-from server.api.publisher import StatePublishers
-from server.api.views import LeaseStatus, finite, state_json, stream_dict
+from server.control.publishers import StatePublishers
+from server.control.views import LeaseStatus, finite, state_json, stream_dict
 from server.foxglove import wire
 from server.foxglove.derived import LEVEL_BY_SEVERITY_NAME
 from server.link import Link, Vehicle, VehicleEvent, VehicleState

@@ -21,7 +21,7 @@ from fastapi import FastAPI, WebSocket
 from websockets.asyncio.client import connect
 from websockets.typing import Subprotocol
 
-from server.api.auth import token_from
+from server.control.auth import token_from
 from server.scene.proxy import relay
 
 SUBPROTOCOL = "foxglove.websocket.v1"

@@ -9,7 +9,7 @@ import contextlib
 from collections.abc import AsyncIterator, Callable
 from typing import cast
 
-from server.api.publisher import StatePublishers
+from server.control.publishers import StatePublishers
 from server.link import Vehicle
 from server.link.aio import cancel_and_wait
 from server.link.state import StateSubscription, SubscriptionHub, VehicleState

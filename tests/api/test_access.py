@@ -8,7 +8,7 @@ from collections.abc import AsyncIterator
 import httpx
 import pytest
 
-from server.api.auth import TokenChecker
+from server.control.auth import TokenChecker
 from tests.api.conftest import OBSERVER, PILOT, Api, api_for, auth
 
 

@@ -16,11 +16,11 @@ from typing import Any, cast
 
 import pytest
 
-from server.api.audit import AUDIT_FILE_NAME, AuditLog
-from server.api.deadman import CHECK_PERIOD_S, Brake, Deadman
-from server.api.lease import Lease, LeaseEnd, LeaseManager
-from server.api.registry import VehicleRegistry
-from server.api.schemas import setpoint_as_dict
+from server.control.audit import AUDIT_FILE_NAME, AuditLog
+from server.control.deadman import CHECK_PERIOD_S, Brake, Deadman
+from server.control.lease import Lease, LeaseEnd, LeaseManager
+from server.control.registry import VehicleRegistry
+from server.http.schemas import setpoint_as_dict
 from server.link import PositionNed, SentSetpoint, VelocityNed
 
 TIMEOUT_S = 1.0

@@ -11,9 +11,9 @@ from typing import Any, cast
 
 import pytest
 
-from server.api.auth import Role, TokenChecker
-from server.api.control_events import ControlEvents
-from server.api.lease import (
+from server.control.auth import Role, TokenChecker
+from server.control.control_events import ControlEvents
+from server.control.lease import (
     Lease,
     LeaseEnd,
     LeaseInvalid,
@@ -315,7 +315,7 @@ def test_tokens_have_names_from_the_settings() -> None:
 
 
 def test_session_names_are_token_name_and_client_label() -> None:
-    from server.api.deps import ApiContext
+    from server.http.deps import ApiContext
 
     tokens = TokenChecker("pilot-token-1234", pilot_name="ops")
     context = ApiContext(*cast("Any", (None, tokens, None, None, None)))

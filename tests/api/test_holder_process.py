@@ -11,8 +11,8 @@ from collections.abc import Iterator
 
 import pytest
 
-from server.api.holder_process import verified_holder
-from server.api.lease import LeaseEnd, LeaseManager
+from server.control.holder_process import verified_holder
+from server.control.lease import LeaseEnd, LeaseManager
 from tests.waiting import wait_for_blocking
 
 pytestmark = pytest.mark.skipif(not os.path.exists("/proc/self/fd"), reason="needs Linux /proc")

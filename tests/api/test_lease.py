@@ -11,10 +11,10 @@ from typing import cast
 
 import pytest
 
-from server.api.deadman import CHECK_PERIOD_S, Deadman
-from server.api.lease import LeaseEnd, LeaseHeld, LeaseInvalid, LeaseManager
-from server.api.registry import VehicleRegistry
-from server.api.schemas import setpoint_as_dict
+from server.control.deadman import CHECK_PERIOD_S, Deadman
+from server.control.lease import LeaseEnd, LeaseHeld, LeaseInvalid, LeaseManager
+from server.control.registry import VehicleRegistry
+from server.http.schemas import setpoint_as_dict
 from server.link import CommandOutcome, CommandResult, PositionNed
 from server.settings import OperatorLossAction
 

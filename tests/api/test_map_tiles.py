@@ -107,7 +107,7 @@ def test_a_file_that_is_no_archive_is_refused_at_start(tmp_path: Path) -> None:
 
 def test_make_tiles_fetches_a_box_into_an_archive_the_server_reads(tmp_path: Path) -> None:
     """The online tool, against a tile server this test plays (httpx's mock transport)."""
-    from server.api.tile_archive import open_tile_archive
+    from server.http.tile_archive import open_tile_archive
     from tests.map_tiles import solid_png, tile_colour
 
     asked: list[str] = []

@@ -245,7 +245,7 @@ async def test_non_finite_numbers_in_control_socket_messages_are_422_naming_the_
 
 
 def test_non_finite_field_names_the_first_nan_or_infinity_in_a_message() -> None:
-    from server.api.errors import ApiError, non_finite_field, refuse_non_finite
+    from server.http.errors import ApiError, non_finite_field, refuse_non_finite
 
     message = json.loads('{"id": 1, "setpoint": {"north_m": 1.0, "east_m": [0, -Infinity]}}')
     assert non_finite_field(message) == "setpoint.east_m.1"
@@ -262,7 +262,7 @@ def test_every_request_body_model_derives_from_the_strict_body() -> None:
     from fastapi.routing import APIRoute
     from pydantic import BaseModel
 
-    from server.api.schemas import StrictBody
+    from server.http.schemas import StrictBody
 
     def models(hint: Any) -> Iterator[type[BaseModel]]:
         if isinstance(hint, type) and issubclass(hint, BaseModel):

@@ -10,10 +10,11 @@ from collections.abc import Callable
 
 import pytest
 
-from server.api.publisher import Published, StatePublisher, StatePublishers
-from server.api.schemas import VehicleStateOut
-from server.api.slots import Slot
-from server.api.views import encode_state, state_json, state_message
+from server.control.publisher import Published, StatePublisher
+from server.control.publishers import StatePublishers
+from server.control.slots import Slot
+from server.control.views import encode_state, state_json, state_message
+from server.http.schemas import VehicleStateOut
 from server.link.state import GlobalState, PositionNedState, VehicleState
 from skyhelm_wire.messages import StateMessage
 from tests.api.state_fakes import PushingVehicle

@@ -10,8 +10,8 @@ import itertools
 
 import pytest
 
-from server.api.publisher import NEXT_MESSAGE_WAIT_SHARE, Published, StatePublisher
-from server.api.slots import Slot
+from server.control.publisher import NEXT_MESSAGE_WAIT_SHARE, Published, StatePublisher
+from server.control.slots import Slot
 from server.link.aio import loop_time_s
 from server.link.state import PositionNedState
 from tests.api.state_fakes import PushingVehicle

@@ -18,7 +18,7 @@ import uvicorn
 from websockets.asyncio.client import connect
 from websockets.exceptions import InvalidStatus
 
-from server.api.security import DOCS_CSP, PAGE_CSP, SCENE_CSP, csp_for
+from server.http.security import DOCS_CSP, PAGE_CSP, SCENE_CSP, csp_for
 from tests.api.conftest import OBSERVER, PILOT, Api, api_for, auth
 from tests.api.test_ws import close_code, receive
 from tests.serving import uvicorn_serving

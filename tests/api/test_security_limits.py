@@ -11,8 +11,8 @@ from typing import Any
 import httpx
 import pytest
 
-from server.api.auth_lockout import Lockout
-from server.api.ratelimit import RateLimiter, TokenBucket
+from server.control.auth_lockout import Lockout
+from server.control.ratelimit import RateLimiter, TokenBucket
 from tests.api.conftest import OBSERVER, PILOT, Api, api_for, auth
 
 WEB_DIR = Path(__file__).resolve().parents[2] / "web"
@@ -198,9 +198,9 @@ async def test_lockout_covers_query_tokens_and_the_scene_but_not_the_static_page
 def test_secrets_are_compared_in_constant_time(monkeypatch: pytest.MonkeyPatch) -> None:
     """Both tokens are always compared with hmac.compare_digest, whichever matches, and lease
     ids go through the same comparison (any string: no TypeError on non-ASCII)."""
-    from server.api import auth
-    from server.api.auth import TokenChecker, same_secret
-    from server.api.lease import LeaseInvalid, LeaseManager
+    from server.control import auth
+    from server.control.auth import TokenChecker, same_secret
+    from server.control.lease import LeaseInvalid, LeaseManager
 
     calls: list[tuple[bytes, bytes]] = []
     real = auth.hmac.compare_digest

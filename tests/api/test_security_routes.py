@@ -18,7 +18,7 @@ from fastapi import FastAPI
 from fastapi.routing import APIRoute, APIWebSocketRoute, iter_route_contexts
 from websockets.asyncio.client import connect
 
-from server.api.auth import Role
+from server.control.auth import Role
 from tests.api.conftest import OBSERVER, PILOT, Api, api_for, auth, sim_cluster
 from tests.api.test_ws import Served, close_code, receive, receive_until, served
 from tests.serving import uvicorn_serving

@@ -12,8 +12,8 @@ from typing import Any
 import pytest
 from pydantic import TypeAdapter, ValidationError
 
-from server.api.schemas import SETPOINT_BODIES, SetpointBody
 from server.app import create_app
+from server.http.schemas import SETPOINT_BODIES, SetpointBody
 from skyhelm_wire.setpoint_kinds import (
     SETPOINT_KINDS,
     KindField,

@@ -11,7 +11,7 @@ import pytest
 from fastapi import WebSocket, WebSocketDisconnect
 from starlette.websockets import WebSocketState
 
-from server.api.ws_common import SEND_TIMEOUT_S, Sender
+from server.http.ws_common import SEND_TIMEOUT_S, Sender
 from server.link.aio import loop_time_s
 
 pytestmark = pytest.mark.looptime

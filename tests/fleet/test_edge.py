@@ -21,11 +21,11 @@ import pytest
 import pytest_asyncio
 import zenoh
 
-from server.api.schemas import VehicleStateOut
 from server.fleet.edge import EdgeService, default_edge_name
 from server.fleet.keys import FleetKeys
 from server.fleet.session import open_session
 from server.fleet.view_service import FleetService
+from server.http.schemas import VehicleStateOut
 from sim.runner import SimCluster
 from tests.api.conftest import (
     OBSERVER,

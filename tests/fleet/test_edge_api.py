@@ -17,8 +17,8 @@ import pytest_asyncio
 import zenoh
 from fastapi import FastAPI, Request, Response
 
-from server.api.publisher import Published
 from server.app import StartupError
+from server.control.publisher import Published
 from server.fleet.edge_api import EdgeApi, check_path
 from server.fleet.edge_publish import Sequence
 from server.fleet.proxy import call_timeout_s

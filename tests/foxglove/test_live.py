@@ -11,7 +11,7 @@ import pytest
 import pytest_asyncio
 import websockets
 
-from server.api.publisher import StatePublisher
+from server.control.publisher import StatePublisher
 from server.foxglove import FoxgloveBridge
 from tests.api.conftest import OBSERVER, PILOT, Api, api_for, sim_cluster
 from tests.foxglove.ws_client import FoxgloveClient, Received, foxglove_client

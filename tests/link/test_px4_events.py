@@ -12,7 +12,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import development as mavlink
 
-from server.api.ws_telemetry import event_message
+from server.control.views import event_message
 from server.link.component_metadata import mavlink_crc32
 from server.link.px4_events import EventDecoder
 from server.link.px4_messages import (

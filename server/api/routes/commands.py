@@ -15,10 +15,10 @@ from fastapi import APIRouter, Body
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel
 
-from server.api.deps import ControlledVehicle
-from server.api.errors import COMMAND_RESPONSES, command_response
 from server.api.operations import OPERATIONS
-from server.api.schemas import CommandResultOut
+from server.http.deps import ControlledVehicle
+from server.http.errors import COMMAND_RESPONSES, command_response
+from server.http.schemas import CommandResultOut
 from server.link import Vehicle
 
 router = APIRouter(

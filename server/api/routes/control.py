@@ -10,12 +10,12 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Body, Depends, Query, Request, Response
 
-from server.api.auth import same_secret
-from server.api.deps import ApiContext, Context, KnownVehicle, LeaseIdHeader, Pilot, Reader
-from server.api.errors import CONTROL_RESPONSES, READ_RESPONSES, ApiError
-from server.api.holder_process import verified_holder
-from server.api.lease import Lease, LeaseHeld, TakeoverRefused, TtlOutOfBounds, UnknownRequest
-from server.api.schemas import ErrorOut, setpoint_body
+from server.control.auth import same_secret
+from server.control.holder_process import verified_holder
+from server.control.lease import Lease, LeaseHeld, TakeoverRefused, TtlOutOfBounds, UnknownRequest
+from server.http.deps import ApiContext, Context, KnownVehicle, LeaseIdHeader, Pilot, Reader
+from server.http.errors import CONTROL_RESPONSES, READ_RESPONSES, ApiError
+from server.http.schemas import ErrorOut, setpoint_body
 from server.link import Vehicle
 from skyhelm_wire.control import (
     AuditEntryOut,

@@ -7,8 +7,8 @@ from importlib.metadata import PackageNotFoundError, version
 
 from fastapi import APIRouter
 
-from server.api.deps import Context
-from server.api.schemas import HealthOut
+from server.http.deps import Context
+from server.http.schemas import HealthOut
 
 router = APIRouter(tags=["health"])
 

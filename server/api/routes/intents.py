@@ -11,10 +11,10 @@ from fastapi import APIRouter
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel
 
-from server.api.deps import Context, ControlledVehicle
-from server.api.errors import COMMAND_RESPONSES
 from server.api.operations import run_intent
-from server.api.schemas.intents import (
+from server.http.deps import Context, ControlledVehicle
+from server.http.errors import COMMAND_RESPONSES
+from server.http.schemas.intents import (
     GotoIntentBody,
     IntentOut,
     OffsetIntentBody,

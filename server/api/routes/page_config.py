@@ -6,8 +6,8 @@ from __future__ import annotations
 from fastapi import APIRouter
 from pydantic import BaseModel, Field
 
-from server.api.deps import Context, Reader
-from server.api.errors import AUTH_RESPONSES
+from server.http.deps import Context, Reader
+from server.http.errors import AUTH_RESPONSES
 
 router = APIRouter(tags=["health"])
 # the offline archive's tiles, as the tiles route serves them (the page's own origin)

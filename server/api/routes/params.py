@@ -7,10 +7,10 @@ from typing import Annotated
 
 from fastapi import APIRouter, Path, Query
 
-from server.api.deps import ConnectedVehicle, ControlledVehicle
-from server.api.errors import CONTROL_RESPONSES, READ_RESPONSES, ApiError, Responses
-from server.api.schemas import ErrorOut, ParamOut, ParamsOut, ParamValueBody
-from server.api.views import finite
+from server.control.views import finite
+from server.http.deps import ConnectedVehicle, ControlledVehicle
+from server.http.errors import CONTROL_RESPONSES, READ_RESPONSES, ApiError, Responses
+from server.http.schemas import ErrorOut, ParamOut, ParamsOut, ParamValueBody
 
 router = APIRouter(prefix="/vehicles/{vehicle_id}/params", tags=["params"])
 

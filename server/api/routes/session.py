@@ -7,9 +7,9 @@ from __future__ import annotations
 from fastapi import APIRouter, Request, Response
 from pydantic import BaseModel
 
-from server.api.auth import TOKEN_COOKIE, token_from
-from server.api.deps import Reader
-from server.api.errors import AUTH_RESPONSES
+from server.control.auth import TOKEN_COOKIE, token_from
+from server.http.deps import Reader
+from server.http.errors import AUTH_RESPONSES
 
 router = APIRouter(tags=["session"])
 

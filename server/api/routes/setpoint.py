@@ -6,11 +6,11 @@ from typing import Annotated
 
 from fastapi import APIRouter, Body, Query
 
-from server.api.deadman import LIVE_DESCRIPTION
-from server.api.deps import Context, ControlledVehicle
-from server.api.errors import CONTROL_RESPONSES
 from server.api.operations import sent_out
-from server.api.schemas import SentSetpointOut, SetpointBody
+from server.control.deadman import LIVE_DESCRIPTION
+from server.http.deps import Context, ControlledVehicle
+from server.http.errors import CONTROL_RESPONSES
+from server.http.schemas import SentSetpointOut, SetpointBody
 
 router = APIRouter(prefix="/vehicles/{vehicle_id}", tags=["setpoint"])
 

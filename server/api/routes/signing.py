@@ -13,8 +13,8 @@ import contextlib
 
 from fastapi import APIRouter, Request
 
-from server.api.deps import Context, Pilot, Reader
-from server.api.errors import AUTH_RESPONSES, ApiError
+from server.http.deps import Context, Pilot, Reader
+from server.http.errors import AUTH_RESPONSES, ApiError
 from server.link import Link
 from server.link.signing import ProvisionError, SigningKeyStore, new_key, provision
 from skyhelm_wire.common import ErrorOut

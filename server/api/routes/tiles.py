@@ -13,9 +13,9 @@ from typing import Annotated
 
 from fastapi import APIRouter, Header, Path, Response
 
-from server.api.deps import Context, Reader
-from server.api.errors import AUTH_RESPONSES, ApiError
-from server.api.tile_archive import MAX_ZOOM, MEDIA_TYPES
+from server.http.deps import Context, Reader
+from server.http.errors import AUTH_RESPONSES, ApiError
+from server.http.tile_archive import MAX_ZOOM, MEDIA_TYPES
 
 router = APIRouter(tags=["map"])
 

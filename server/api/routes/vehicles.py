@@ -6,11 +6,11 @@ from typing import Any
 
 from fastapi import APIRouter, Request, Response
 
-from server.api.deps import Context, KnownVehicle, Reader
-from server.api.errors import AUTH_RESPONSES, READ_RESPONSES
-from server.api.publisher import StatePublishers
-from server.api.schemas import StreamOut, VehicleStateOut, VehicleSummaryOut
-from server.api.views import stream_dict, summary_dict
+from server.control.publishers import StatePublishers
+from server.control.views import stream_dict, summary_dict
+from server.http.deps import Context, KnownVehicle, Reader
+from server.http.errors import AUTH_RESPONSES, READ_RESPONSES
+from server.http.schemas import StreamOut, VehicleStateOut, VehicleSummaryOut
 
 router = APIRouter(tags=["vehicles"])
 

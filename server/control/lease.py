@@ -19,9 +19,9 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-from server.api.auth import same_secret
-from server.api.holder_process import HolderProcess
-from server.api.lease_errors import (
+from server.control.auth import same_secret
+from server.control.holder_process import HolderProcess
+from server.control.lease_errors import (
     LeaseHeld,
     LeaseInvalid,
     TakeoverRefused,

@@ -15,14 +15,14 @@ from fastapi.security import APIKeyQuery, HTTPAuthorizationCredentials, HTTPBear
 from starlette.datastructures import Address
 from starlette.requests import HTTPConnection
 
-from server.api.audit import AuditLog
-from server.api.auth import Role, TokenChecker, token_from
-from server.api.deadman import Deadman
-from server.api.errors import ApiError
-from server.api.lease import Lease, LeaseManager
-from server.api.registry import VehicleRegistry
-from server.api.security import Guards
-from server.api.tile_archive import TileArchive
+from server.control.audit import AuditLog
+from server.control.auth import Role, TokenChecker, token_from
+from server.control.deadman import Deadman
+from server.control.lease import Lease, LeaseManager
+from server.control.registry import VehicleRegistry
+from server.http.errors import ApiError
+from server.http.security import Guards
+from server.http.tile_archive import TileArchive
 from server.link import Vehicle
 from server.settings import Settings
 

@@ -4,9 +4,9 @@ Every consumer of state or of a page-wide topic (a telemetry socket, the scene, 
 list, scene clicks) reads through a slot of size one: a newer value replaces one not yet
 read, so a consumer that falls behind gets the newest value, never a backlog, and a slow
 consumer costs the server one reference, not a queue. The scene's per-vehicle watch
-(publisher.FleetWatch) is the same rule with one slot per vehicle. What a telemetry socket
+(publishers.FleetWatch) is the same rule with one slot per vehicle. What a telemetry socket
 does with a send that stalls, and how events (which are not values and do queue) are
-bounded, is in ws_common.py.
+bounded, is in server/http/ws_common.py.
 """
 
 from __future__ import annotations

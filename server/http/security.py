@@ -27,9 +27,9 @@ from fastapi import FastAPI
 from starlette.datastructures import QueryParams
 from starlette.requests import cookie_parser
 
-from server.api.auth import TOKEN_COOKIE, TOKEN_QUERY, Role, TokenChecker, token_from
-from server.api.auth_lockout import Lockout
-from server.api.ratelimit import RateLimiter
+from server.control.auth import TOKEN_COOKIE, TOKEN_QUERY, Role, TokenChecker, token_from
+from server.control.auth_lockout import Lockout
+from server.control.ratelimit import RateLimiter
 from server.settings import Settings
 
 Scope = MutableMapping[str, Any]

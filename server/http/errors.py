@@ -12,8 +12,8 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel, ValidationError
 
-from server.api.lease import LeaseInvalid
-from server.api.schemas import CommandResultOut, ErrorOut, UnprocessableOut
+from server.control.lease import LeaseInvalid
+from server.http.schemas import CommandResultOut, ErrorOut, UnprocessableOut
 from server.link import CommandOutcome, CommandResult, ParamError, SetpointRejected
 
 

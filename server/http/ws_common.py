@@ -26,9 +26,9 @@ from typing import Any
 from fastapi import WebSocket, WebSocketDisconnect
 from starlette.websockets import WebSocketState
 
-from server.api.auth import Role, token_from
-from server.api.deps import READ_ONLY_REASON, ApiContext
-from server.api.security import origin_allowed
+from server.control.auth import Role, token_from
+from server.http.deps import READ_ONLY_REASON, ApiContext
+from server.http.security import origin_allowed
 
 EVENT_BACKLOG = 256
 SEND_TIMEOUT_S = 5.0

@@ -9,8 +9,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any, Protocol
 
-from server.api.audit import AUDIT_KINDS, AuditLog
-from server.api.lease import Lease, LeaseEnd, LeaseManager
+from server.control.audit import AUDIT_KINDS, AuditLog
+from server.control.lease import Lease, LeaseEnd, LeaseManager
 
 
 class _EventVehicle(Protocol):

@@ -3,7 +3,7 @@ PX4/MAVLink names the link layer uses. The wire format (state, setpoints, comman
 the lease, errors) is the wire package's (``skyhelm_wire``), re-exported here; the modules
 here hold the request bodies that need the link (mode names, intents) or only the API."""
 
-from server.api.schemas.commands import (
+from server.http.schemas.commands import (
     ArmBody,
     HomeBody,
     ModeBody,
@@ -15,7 +15,7 @@ from server.api.schemas.commands import (
     TakeoffBody,
     VtolTransitionBody,
 )
-from server.api.schemas.params import ParamOut, ParamsOut, ParamValueBody
+from server.http.schemas.params import ParamOut, ParamsOut, ParamValueBody
 from skyhelm_wire.commands import CommandResultName, CommandResultOut
 from skyhelm_wire.common import (
     AltM,

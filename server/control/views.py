@@ -16,7 +16,7 @@ from typing import Any
 
 from pydantic import ConfigDict, TypeAdapter
 
-from server.link import StreamStats, VehicleState
+from server.link import StreamStats, VehicleEvent, VehicleState
 
 # The API's names for the snapshot's fields; `type` is written by the callers, since the
 # WebSocket message uses that key for the message's own type.
@@ -115,3 +115,24 @@ def summary_dict(state: VehicleState) -> dict[str, Any]:
 def stream_dict(stats: StreamStats) -> dict[str, Any]:
     result: dict[str, Any] = finite(dataclasses.asdict(stats))
     return result
+
+
+def event_message(vehicle_id: int, event: VehicleEvent) -> dict[str, Any]:
+    if event.kind == "statustext":
+        return {
+            "type": "statustext",
+            "vehicle": vehicle_id,
+            "time_s": event.time_s,
+            **finite(dict(event.data)),
+        }
+    return {
+        "type": "event",
+        "vehicle": vehicle_id,
+        "kind": event.kind,
+        "time_s": event.time_s,
+        "data": finite(_jsonable(event.data)),
+    }
+
+
+def _jsonable(value: Any) -> Any:
+    return json.loads(json.dumps(value, default=str))

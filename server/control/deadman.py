@@ -22,15 +22,15 @@ import logging
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 
-from server.api.audit import AuditLog
-from server.api.control_events import ControlEvents
-from server.api.lease import OPERATOR_LOST, Lease, LeaseManager
-from server.api.registry import VehicleRegistry
-from server.api.schemas import setpoint_as_dict
+from server.control.audit import AuditLog
+from server.control.control_events import ControlEvents
+from server.control.lease import OPERATOR_LOST, Lease, LeaseManager
+from server.control.registry import VehicleRegistry
 from server.link import CommandResult, SentSetpoint, Vehicle
 from server.link.aio import cancel_and_wait
 from server.link.intents import brake_then_hold
 from server.settings import OperatorLossAction, Settings
+from skyhelm_wire.setpoint_kinds import describe as setpoint_as_dict
 
 log = logging.getLogger(__name__)
 
