@@ -12,6 +12,25 @@
  */
 
 /**
+ * @typedef {Object} ArmingCheckOut
+ * @property {string} text PX4's words
+ * @property {string} severity PX4's log level; ERROR keeps the modes it concerns from arming
+ * @property {Array<string>} modes the modes it concerns (empty: not told)
+ * @property {string|null} component PX4's health component it belongs to
+ * @property {"arming_check"|"health"} kind
+ */
+
+/**
+ * @typedef {Object} ArmingChecksOut
+ * @property {boolean|null} ready arming would pass PX4's checks in `mode` (null: not told yet)
+ * @property {string} mode the mode judged: the one the vehicle flies
+ * @property {"events"|"sys_status"} source events: PX4's arming-check report; sys_status: only SYS_STATUS's pre-arm and sensor health bits (no events metadata)
+ * @property {Array<string>} can_arm_modes the modes PX4 would arm in now
+ * @property {Array<ArmingCheckOut>} reasons the failing checks (and warnings) that concern `mode`, errors first
+ * @property {Array<ArmingCheckOut>} other_reasons the checks that concern only other modes
+ */
+
+/**
  * Roll, pitch and yaw with a normalised thrust.
  * @typedef {Object} AttitudeBody
  * @property {"attitude"} type
@@ -217,6 +236,19 @@
  */
 
 /**
+ * @typedef {Object} LinkQualityOut
+ * @property {number} silent_s since the vehicle's last valid frame
+ * @property {number} lost_after_s the silence that makes it lost: silence_timeout_s while it streams, heartbeat_timeout_s otherwise
+ * @property {number} rate_hz valid frames a second from the vehicle
+ * @property {number|null} loss_in_pct vehicle -> server frames lost over the last 5 s (sequence numbers)
+ * @property {number|null} loss_out_pct server -> vehicle frames lost over the last 5 s, as the vehicle reports it (PX4's LINK_NODE_STATUS); null where it does not
+ * @property {number} heartbeat_age_s
+ * @property {boolean} degraded a warning before the verdict: see warnings
+ * @property {Array<"silence"|"loss_in"|"loss_out"|"heartbeat">} causes
+ * @property {Array<string>} warnings
+ */
+
+/**
  * @typedef {Object} LinkSigningOut
  * @property {string} url
  * @property {Array<number>} vehicles
@@ -412,6 +444,8 @@
  * @property {EstimatorOut|null} [estimator]
  * @property {Array<string>|null} [sensors_unhealthy] SYS_STATUS sensors present and enabled but not healthy
  * @property {Object<string, number>} [message_ages_s] seconds since each source message (by MAVLink name) was last received
+ * @property {LinkQualityOut|null} [link_quality]
+ * @property {ArmingChecksOut|null} [arming_checks] ready to fly: PX4's arming checks for the mode flown, and why not
  * @property {number} vehicle
  * @property {string} vehicle_type
  * @property {Array<string>} [telemetry_refused] telemetry streams the vehicle refused to send
@@ -511,6 +545,8 @@
  * @property {EstimatorOut|null} [estimator]
  * @property {Array<string>|null} [sensors_unhealthy] SYS_STATUS sensors present and enabled but not healthy
  * @property {Object<string, number>} [message_ages_s] seconds since each source message (by MAVLink name) was last received
+ * @property {LinkQualityOut|null} [link_quality]
+ * @property {ArmingChecksOut|null} [arming_checks] ready to fly: PX4's arming checks for the mode flown, and why not
  */
 
 /**

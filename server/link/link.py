@@ -26,7 +26,7 @@ from .link_stats import LinkStats, SequenceGapCounter
 from .liveness import DEFAULT_SILENCE_TIMEOUT_S, MAVLINK_HEARTBEAT_TIMEOUT_S, Liveness
 from .roster import MAV_COMP_ID_AUTOPILOT1, VehicleRoster
 from .signing import MAVLINK_MSG_ID_SETUP_SIGNING, LinkSigning, SigningKeyStore
-from .stream_channel import LinkHandover, StreamChannel
+from .stream_channel import LinkHandover, StreamChannel, decode_sent
 from .tlog import TlogWriter
 from .transports import Peer, Transport, create_transport
 from .urls import LinkUrl, parse_link_url
@@ -188,10 +188,6 @@ class Link:
         """Where this link is bound (host, port): how to learn an ephemeral port."""
         return self._transport.local_address
 
-    @property
-    def closed(self) -> bool:
-        return self._closed
-
     def now(self) -> float:
         """Seconds on the event loop's clock, the one the link's heartbeat ages use."""
         return self._loop.time()
@@ -285,10 +281,13 @@ class Link:
         self.frames_dropped_out += dropped
         self._frames_out += len(records)
         self._bytes_out += sum(len(frame) for _, frame in records)
-        if self._tlog is not None:
-            for unix_s, frame in records:
-                if frame[7:10] != _SETUP_SIGNING_ID:  # a key never goes to the tlog
+        for unix_s, frame in records:  # a key is never recorded; taps get the frame decoded
+            if frame[7:10] != _SETUP_SIGNING_ID and (self._tlog is not None or self._taps):
+                msg = decode_sent(frame) if self._taps else None
+                if self._tlog is not None:
                     self._tlog.record(frame, unix_s)
+                for tap in self._taps if msg is not None else ():
+                    tap(msg, True, unix_s)
 
     def _write_off_loop(self, frame: bytes, target_system: int | None) -> bool:
         writer = self._transport.thread_writer()

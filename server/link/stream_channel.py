@@ -347,3 +347,15 @@ class LinkHandover:
         state = self._signing.state
         state.timestamp = max(state.timestamp, timestamp)  # persisted from here
         self._on_sent(records, dropped, timestamp)
+
+
+_sent_decoder = mavlink.MAVLink(None)  # no signing state: the frames are ours, checked
+
+
+def decode_sent(frame: bytes) -> mavlink.MAVLink_message | None:
+    """A frame the sender process wrote, decoded for the link's frame taps (None if not)."""
+    try:
+        msg: mavlink.MAVLink_message = _sent_decoder.decode(bytearray(frame))
+    except (mavlink.MAVError, ValueError, IndexError):
+        return None
+    return msg

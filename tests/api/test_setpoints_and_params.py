@@ -161,14 +161,19 @@ async def test_lease_is_renewed_by_control_calls_and_released_by_delete(quad_api
     status = (await client.get("/api/v1/vehicles/1/control")).json()
     assert status["holder"] is not None
     assert (await client.delete("/api/v1/vehicles/1/control", headers=headers)).status_code == 204
-    assert (await client.get("/api/v1/vehicles/1/control")).json() == {
+    after = (await client.get("/api/v1/vehicles/1/control")).json()
+    assert after == {
         "holder": None,
         "session": None,
         "since_s": None,
         "expires_in_s": None,
         "ttl_s": None,
         "request": None,
+        "holder_pid": None,
+        "last_end": after["last_end"],
     }
+    assert after["last_end"]["end"] == "released"
+    assert after["last_end"]["holder"] == status["holder"]
 
 
 async def test_unrenewed_lease_lapses_after_ttl() -> None:
