@@ -56,9 +56,9 @@ lint: $(TSTAMP)
 audit: $(TSTAMP)
 	$(PY) -m tools.audit
 
-## Two workers: most tests wait on a real-time simulated vehicle, not on a core; the browser
+## Three workers: most tests wait on a real-time simulated vehicle, not on a core; the browser
 ## tests share one worker (tests/conftest.py). TEST_WORKERS=0 runs everything in one process.
-TEST_WORKERS ?= 2
+TEST_WORKERS ?= 3
 
 test: $(TSTAMP) chromium lint audit
 	$(VENV)/bin/pytest -q -p no:cacheprovider -n $(TEST_WORKERS)

@@ -26,7 +26,9 @@ from tests.api.conftest import (
 from tests.serving import uvicorn_serving
 from tests.waiting import eventually
 
-TTL_S = 1.0
+# short, so a lapse is quick to see; 2 s, so a loaded machine's stall between the socket's
+# lease and the pilot's first message does not end it
+TTL_S = 2.0
 
 
 @dataclass
