@@ -26,9 +26,10 @@ from tests.api.conftest import (
 from tests.serving import uvicorn_serving
 from tests.waiting import eventually
 
-# short, so a lapse is quick to see; 2 s, so a loaded machine's stall between the socket's
-# lease and the pilot's first message does not end it
-TTL_S = 2.0
+TTL_S = 1.0
+# the policy tests end the lease by closing the socket: a longer TTL keeps a loaded
+# machine's stall before the pilot's first command from ending it first
+POLICY_TTL_S = 3.0
 
 
 @dataclass
@@ -43,7 +44,8 @@ class Served:
 
 @contextlib.asynccontextmanager
 async def served(airframe: str = "quad", **overrides: Any) -> AsyncIterator[Served]:
-    async with sim_cluster(airframe) as sim, api_for(sim, lease_ttl_s=TTL_S, **overrides) as api:
+    settings = {"lease_ttl_s": TTL_S, **overrides}
+    async with sim_cluster(airframe) as sim, api_for(sim, **settings) as api:
         await api.wait_ready()
         async with uvicorn_serving(api.app) as host:
             yield Served(api, host)
@@ -295,7 +297,7 @@ async def test_deadman_holds_when_rest_renewals_stop(quad: Served) -> None:
     ("policy", "mode"), [("land", "LAND"), ("rtl", "RTL"), ("hold-mode", "HOLD")]
 )
 async def test_deadman_applies_land_rtl_and_hold_mode_policies(policy: str, mode: str) -> None:
-    async with served(on_operator_loss=policy) as s:
+    async with served(on_operator_loss=policy, lease_ttl_s=POLICY_TTL_S) as s:
         ws = await fly_offboard_at_2_m_s(s)
         await ws.close()
         state = await s.api.wait_state(lambda st: st["mode"] == mode, TTL_S + 2.0, mode)
