@@ -99,6 +99,7 @@ class TelemetryRequests:
         # seconds after the first heartbeat: ask again until both are known.
         for _ in range(ONE_SHOT_RETRIES):
             missing = self._missing_one_shots()
+            self._clear_arrived(missing)
             if not missing or not self._core.connected:
                 return
             await asyncio.sleep(ONE_SHOT_RETRY_INTERVAL_S)
@@ -116,11 +117,22 @@ class TelemetryRequests:
             missing.append(mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN)
         return missing
 
+    def _clear_arrived(self, missing: list[int]) -> None:
+        """A one-shot message that came anyway (streamed, or answering an earlier request)
+        is no longer refused, whatever its last request's outcome was."""
+        for msg_id in ONE_SHOT_MESSAGES:
+            if msg_id not in missing:
+                self.refused.pop(_name(msg_id), None)
+
     def _note(self, msg_id: int, result: CommandResult) -> None:
-        msg_class = mavlink.mavlink_map.get(msg_id)
-        name = msg_class.msgname if msg_class is not None else str(msg_id)
+        name = _name(msg_id)
         if result.ok:
             self.refused.pop(name, None)
             return
         self.refused[name] = result.outcome.value
         self._core.publish_event("stream", {"message": name, "outcome": result.outcome.value})
+
+
+def _name(msg_id: int) -> str:
+    msg_class = mavlink.mavlink_map.get(msg_id)
+    return msg_class.msgname if msg_class is not None else str(msg_id)
