@@ -64,7 +64,9 @@ async def test_put_of_the_streamed_setpoint_renews_it_without_an_extra_send(
 
     first, last = arrivals[0], arrivals[-1]
     scheduled = 1 + math.floor((last - first) * STREAM_RATE_HZ + 0.5)
-    assert len(arrivals) <= scheduled + 1, (len(arrivals), scheduled)
+    # An extra send per PUT would add RENEWALS; a loaded machine that delays the receiver
+    # bunches a few arrivals together, which shortens the span by a tick or two.
+    assert len(arrivals) <= scheduled + RENEWALS // 8, (len(arrivals), scheduled)
     assert last - first >= (len(arrivals) - 3) / STREAM_RATE_HZ
 
 
