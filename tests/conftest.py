@@ -1,22 +1,128 @@
-"""How `make test` spreads the suite over workers (pytest -n N): a test module stays on one
-worker, in order (module fixtures such as a served vehicle are made once, and the REST
-flight's stages run in sequence), and the browser tests share one worker, since a browser
-rendering WebGL in software takes a core."""
+"""How `make test` spreads the suite over workers (pytest -n N).
+
+- A test module stays on one worker, in order: module fixtures such as a served vehicle are
+  made once, and the REST flight's stages run in sequence.
+- The browser tests are split into ``BROWSER_GROUPS`` groups, each on one worker: a browser
+  rendering WebGL in software takes a core, so no more than that run at once.
+- The longest modules start first (longest processing time first): a 90 s module started
+  last would leave the other workers idle while it runs. ``MODULE_SECONDS`` holds what each
+  took in a run with ``--durations=0``; a module not listed counts as ``UNLISTED_S`` and
+  keeps its place in the collection order among the rest.
+"""
 
 from __future__ import annotations
 
 from typing import Any
 
+import pytest
+
 _BROWSER_TESTS = "tests/browser/"
+BROWSER_GROUPS = 2
+UNLISTED_S = 5.0
+MODULE_SECONDS: dict[str, float] = {
+    "tests/browser/test_dashboard_quad.py": 99,
+    "tests/browser/test_layout.py": 92,
+    "tests/browser/test_dashboard_handover.py": 71,
+    "tests/browser/test_instruments.py": 46,
+    "tests/browser/test_fleet_view.py": 45,
+    "tests/browser/test_csp.py": 21,
+    "tests/browser/test_map.py": 21,
+    "tests/browser/test_sliders.py": 21,
+    "tests/browser/test_dashboard_vtol.py": 16,
+    "tests/browser/test_alerts.py": 16,
+    "tests/browser/test_dashboard_sticks.py": 15,
+    "tests/browser/test_instruments_vtol.py": 14,
+    "tests/browser/test_offline_map.py": 12,
+    "tests/browser/test_map_fleet.py": 12,
+    "tests/browser/test_ready_to_fly.py": 12,
+    "tests/browser/test_plots.py": 11,
+    "tests/api/test_ws.py": 92,
+    "tests/api/test_openapi_fuzz.py": 91,
+    "tests/client/test_flow_chain.py": 82,
+    "tests/fleet/test_fleet_processes.py": 81,
+    "tests/faults/test_radio_faults.py": 52,
+    "tests/api/test_rest_flight.py": 51,
+    "tests/api/test_control_ws.py": 42,
+    "tests/sim/test_rtl_fixed_wing.py": 41,
+    "tests/peers/test_mavsdk.py": 37,
+    "tests/api/test_sticks.py": 34,
+    "tests/api/test_non_finite_bodies.py": 31,
+    "tests/link/test_vehicle_sim.py": 31,
+    "tests/faults/test_pilot_gone.py": 29,
+    "tests/link/test_intents.py": 29,
+    "tests/client/test_standalone_install.py": 27,
+    "tests/client/test_sync_client.py": 26,
+    "tests/sim/test_navigator.py": 25,
+    "tests/api/test_ws_and_stateful_fuzz.py": 24,
+    "tests/sim/test_cli.py": 24,
+    "tests/bench/test_report.py": 23,
+    "tests/faults/test_loss.py": 22,
+    "tests/api/test_flight.py": 22,
+    "tests/link/test_truthful_answers.py": 22,
+    "tests/faults/test_server_kill.py": 21,
+    "tests/faults/test_unanswered.py": 20,
+    "tests/client/test_readme_session.py": 20,
+}
+
+
+def _module(nodeid: str) -> str:
+    return nodeid.split("::", 1)[0]
+
+
+def browser_groups(modules: list[str]) -> dict[str, str]:
+    """Each browser module's group, the longest first into the group with least so far."""
+    totals = [0.0] * BROWSER_GROUPS
+    group_of: dict[str, str] = {}
+    for module in sorted(modules, key=lambda m: (-MODULE_SECONDS.get(m, UNLISTED_S), m)):
+        least = totals.index(min(totals))
+        totals[least] += MODULE_SECONDS.get(module, UNLISTED_S)
+        group_of[module] = f"{_BROWSER_TESTS}group-{least}"
+    return group_of
+
+
+def _scope_seconds(items: list[pytest.Item]) -> dict[str, float]:
+    modules = sorted({_module(item.nodeid) for item in items})
+    groups = browser_groups([m for m in modules if m.startswith(_BROWSER_TESTS)])
+    seconds: dict[str, float] = {}
+    for module in modules:
+        scope = groups.get(module, module)
+        seconds[scope] = seconds.get(scope, 0.0) + MODULE_SECONDS.get(module, UNLISTED_S)
+    return seconds
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    modules = sorted({_module(item.nodeid) for item in items})
+    groups = browser_groups([m for m in modules if m.startswith(_BROWSER_TESTS)])
+    seconds = _scope_seconds(items)
+    first_seen: dict[str, int] = {}
+    for index, item in enumerate(items):
+        first_seen.setdefault(groups.get(_module(item.nodeid), _module(item.nodeid)), index)
+
+    def order(pair: tuple[int, pytest.Item]) -> tuple[float, int, int]:
+        index, item = pair
+        scope = groups.get(_module(item.nodeid), _module(item.nodeid))
+        return (-seconds[scope], first_seen[scope], index)
+
+    items[:] = [item for _, item in sorted(enumerate(items), key=order)]
 
 
 def pytest_xdist_make_scheduler(config: Any, log: Any) -> Any:
     from xdist.scheduler import LoadFileScheduling
 
+    # the order comes from pytest_collection_modifyitems (longest first), not the test count
+    config.option.loadscopereorder = False
+    groups: dict[str, str] = {}
+
     class _ModuleScheduling(LoadFileScheduling):  # type: ignore[misc]
         def _split_scope(self, nodeid: str) -> str:
-            if nodeid.startswith(_BROWSER_TESTS):
-                return _BROWSER_TESTS
-            return str(super()._split_scope(nodeid))
+            module = _module(nodeid)
+            if not module.startswith(_BROWSER_TESTS):
+                return str(super()._split_scope(nodeid))
+            if not groups:  # the whole collection is known once scheduling starts
+                collected = {_module(n) for n in (self.collection or [nodeid])}
+                groups.update(browser_groups(sorted(m for m in collected
+                                                    if m.startswith(_BROWSER_TESTS))))
+            return groups.get(module, f"{_BROWSER_TESTS}group-0")
 
     return _ModuleScheduling(config, log)

@@ -211,7 +211,7 @@ async def test_an_asker_that_closes_its_socket_withdraws_the_request(quad: Serve
 async def test_a_rest_asker_that_gives_up_withdraws_the_request(quad: Served) -> None:
     control = f"http://{quad.host}/api/v1/vehicles/1/control"
     async with httpx.AsyncClient(headers={"Authorization": f"Bearer {PILOT}"}) as client:
-        holder = await client.post(control, json={"client_name": "script"})
+        holder = await client.post(control, json={"client_name": "script", "ttl_s": 30})
         assert holder.status_code == 200
         with pytest.raises(httpx.ReadTimeout):
             await client.post(control, json={"takeover": True}, timeout=0.3)
