@@ -25,10 +25,10 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import dataclasses
 import logging
 import struct
 import time
+from collections import Counter
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any
@@ -56,6 +56,9 @@ NEW_STREAM_WINDOW_TICKS = 6000 * 1000
 # A vehicle counts as talking signed while its last verified frame is this recent.
 SIGNED_RECENT_S = 3.0
 _SIGNATURE_LEN = mavlink.MAVLINK_SIGNATURE_BLOCK_LEN
+# what LinkSigning counts as frames come, named as in SigningStats
+_REJECTED = ("rejected_bad_signature", "rejected_replay", "rejected_unsigned")
+_COUNTED = ("unsigned_in", *_REJECTED, "provisions")
 _SIGNATURE_TIMESTAMP = struct.Struct("<IH")  # 48 bits after the link id
 
 
@@ -73,17 +76,6 @@ class SigningStats:
     rejected_replay: int  # timestamp not newer than its stream's last one
     rejected_unsigned: int  # unsigned and not on the allowlist
     provisions: int  # keys set, rotated or removed on the vehicles since start
-
-
-@dataclass
-class _Counts:
-    """The counters of SigningStats that LinkSigning keeps as frames come."""
-
-    unsigned_in: int = 0
-    rejected_bad_signature: int = 0
-    rejected_replay: int = 0
-    rejected_unsigned: int = 0
-    provisions: int = 0
 
 
 class _SigningCodec(mavlink.MAVLink):  # type: ignore[misc]  # pymavlink is untyped
@@ -137,7 +129,7 @@ class LinkSigning:
         self._last_verified_s: dict[int, float] = {}
         self._last_unsigned_s: dict[int, float] = {}
         self._signature_failed = False
-        self._counts = _Counts()
+        self._counts: Counter[str] = Counter()  # by the names in _COUNTED
         self._persist_task: asyncio.Task[None] | None = None
         self._checker = _SigningCodec(self)
         # told after every key change (the link's sender process signs with the new one)
@@ -177,9 +169,8 @@ class LinkSigning:
             enabled=self.enabled,
             vehicles_signed=self.enabled and bool(ids) and all(map(self.vehicle_signed, ids)),
             signed_in=self.state.goodsig_count,
-            rejected=counts.rejected_bad_signature + counts.rejected_replay
-            + counts.rejected_unsigned,
-            **dataclasses.asdict(counts),
+            rejected=sum(counts[name] for name in _REJECTED),
+            **{name: counts[name] for name in _COUNTED},
         )
 
     def accepts_unknown(self, frame: bytes | bytearray) -> bool:
@@ -192,7 +183,7 @@ class LinkSigning:
                   and buf[2] & mavlink.MAVLINK_IFLAG_SIGNED
                   and len(buf) >= mavlink.HEADER_LEN_V2 + 2 + _SIGNATURE_LEN)
         if not signed:
-            self._counts.rejected_unsigned += 1
+            self._counts["rejected_unsigned"] += 1
             return False
         if self._checker.check_signature(buf, buf[5], buf[6]):
             self.state.goodsig_count += 1
@@ -210,7 +201,7 @@ class LinkSigning:
             return
         self._last_unsigned_s[msg.get_srcSystem()] = self._clock()
         if not self.enabled:
-            self._counts.unsigned_in += 1  # with a key, the allowlist callback counted it
+            self._counts["unsigned_in"] += 1  # with a key, the allowlist callback counted it
 
     # -- called by the codec while it decodes --
     def verified(self, src_system: int) -> None:
@@ -219,9 +210,9 @@ class LinkSigning:
     def failed(self, replay: bool) -> None:
         self._signature_failed = True
         if replay:
-            self._counts.rejected_replay += 1
+            self._counts["rejected_replay"] += 1
         else:
-            self._counts.rejected_bad_signature += 1
+            self._counts["rejected_bad_signature"] += 1
 
     def _accept_unsigned(self, _mav: Any, msg_id: int) -> bool:
         # pymavlink asks this for unsigned frames and for frames whose signature failed
@@ -230,9 +221,9 @@ class LinkSigning:
             self._signature_failed = False
             return False
         if msg_id in UNSIGNED_ALLOWLIST:
-            self._counts.unsigned_in += 1
+            self._counts["unsigned_in"] += 1
             return True
-        self._counts.rejected_unsigned += 1
+        self._counts["rejected_unsigned"] += 1
         return False
 
     # -- persistence --
@@ -261,4 +252,4 @@ class LinkSigning:
 
     # -- provisioning --
     def count_provision(self) -> None:
-        self._counts.provisions += 1
+        self._counts["provisions"] += 1
