@@ -27,7 +27,8 @@ from bench._markdown import ratio, table
 from bench._report import Section
 from bench._results import machine_info, write_results
 from server.link import Link, Vehicle
-from server.link.signing import SigningKeyStore, provision, signing_timestamp
+from server.link.signing_keys import SigningKeyStore, signing_timestamp
+from server.link.signing_provision import provision
 from sim.runner import SimCluster
 
 CODEC_FRAMES = 20_000

@@ -5,7 +5,6 @@ link (``skyhelm replay``) makes the whole API read-only."""
 from __future__ import annotations
 
 import asyncio
-import dataclasses
 import gc
 import logging
 import time
@@ -48,11 +47,12 @@ from server.http.errors import install_error_handlers
 from server.http.security import install_security
 from server.http.tile_archive import open_tile_archive
 from server.link import Envelope, Link
-from server.link.signing import SigningKeyError, SigningKeyStore
+from server.link.signing_keys import SigningKeyError, SigningKeyStore
 from server.link.urls import parse_link_url
-from server.scene import ClickPoint, FleetScene, SceneHub
+from server.scene import FleetScene, SceneHub
 from server.settings import Settings
 from server.simproc import SimProcess
+from skyhelm_wire.messages import SceneClickMessage
 
 log = logging.getLogger(__name__)
 
@@ -201,12 +201,14 @@ def create_app(settings: Settings, *, freeze_gc_at_start: bool = False) -> FastA
     return app
 
 
-def _on_loop(publish: Callable[[dict[str, object]], None]) -> Callable[[ClickPoint], None]:
+def _on_loop(
+    publish: Callable[[dict[str, object]], None],
+) -> Callable[[SceneClickMessage], None]:
     """Clicks come from viser's thread; the page learns of them on its telemetry socket."""
     loop = asyncio.get_running_loop()
 
-    def on_click(click: ClickPoint) -> None:
-        loop.call_soon_threadsafe(publish, dataclasses.asdict(click))
+    def on_click(click: SceneClickMessage) -> None:
+        loop.call_soon_threadsafe(publish, click.model_dump(exclude={"type"}))
 
     return on_click
 

@@ -10,10 +10,10 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from sim.airframes import AIRFRAME_NAMES
 from sim.runner import SimCluster
 from sim.sim_processes import run_processes, stop_event
 
-AIRFRAME_CHOICES = ("quad", "hexa", "octo", "plane", "vtol", "rover")
 # PX4 SITL's ports for instance 0 (instance i adds i, except the shared GCS port).
 SITL_API_REMOTE_PORT = 14540
 SITL_GCS_REMOTE_PORT = 14550
@@ -36,7 +36,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="spread the vehicles over this many processes (instance "
                              "numbers and ports unchanged); 0 = one per "
                              f"{VEHICLES_PER_PROCESS} vehicles")
-    parser.add_argument("--airframe", choices=AIRFRAME_CHOICES, default="quad")
+    parser.add_argument("--airframe", choices=AIRFRAME_NAMES, default="quad")
     parser.add_argument("--api-port", type=int, default=SITL_API_REMOTE_PORT,
                         help="remote API port of instance 0 (instance i: +i); 0 = none")
     parser.add_argument("--gcs-port", type=int, default=SITL_GCS_REMOTE_PORT,

@@ -1,7 +1,7 @@
 """Stick input of the simulated vehicle, after PX4's manual control path.
 
 - `stick_sample`: MANUAL_CONTROL as mavlink_receiver reads it (x pitch, y roll, z throttle
-  0..1000, r yaw; out-of-range axes stay 0, a message for another system is dropped).
+  0..1000, r yaw; out-of-range axes stay 0); the receiver's ManualControlReceiver feeds it.
 - `ManualControlSelector`: which input is used, by COM_RC_IN_MODE (manual_control's
   ManualControlSelector); an input older than COM_RC_LOSS_T is no input.
 - `ManualFlight`: sticks -> setpoint in the manual modes, after flight_mode_manager's
@@ -16,7 +16,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from enum import IntEnum
-from typing import Any, Protocol
 
 from sim import modes
 from sim.modes import Px4Mode
@@ -71,37 +70,6 @@ def stick_sample(
     throttle = z / 500.0 - 1.0 if 0 <= z <= 1000 else 0.0
     yaw = r / 1000.0 if -1000 <= r <= 1000 else 0.0
     return StickSample(roll, pitch, yaw, throttle, received_s, data_source)
-
-
-class _StickTaker(Protocol):
-    def on_manual_control(self, sample: StickSample, now_s: float) -> None: ...
-
-
-class _Vehicle(Protocol):
-    """What the receiver needs of the vehicle (the commander imports this module)."""
-
-    @property
-    def sysid(self) -> int: ...
-    @property
-    def now_s(self) -> float: ...
-    @property
-    def commander(self) -> _StickTaker: ...
-
-
-class ManualControlReceiver:
-    """MANUAL_CONTROL in: each link is its own MAVLink instance (SOURCE_MAVLINK_0 + i)."""
-
-    def __init__(self, vehicle: _Vehicle) -> None:
-        self._v = vehicle
-        self._instances: dict[int, int] = {}
-
-    def handle(self, link: object, msg: Any) -> None:
-        if msg.target not in (0, self._v.sysid):
-            return
-        instance = self._instances.setdefault(id(link), len(self._instances))
-        now = self._v.now_s
-        sample = stick_sample(msg.x, msg.y, msg.z, msg.r, now, SOURCE_MAVLINK_0 + instance)
-        self._v.commander.on_manual_control(sample, now)
 
 
 class ManualControlSelector:

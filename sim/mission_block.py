@@ -7,7 +7,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Protocol
 
-from sim.commander import Announce, Commander
+from sim.commander import Commander
+from sim.commander_failsafe import Announce
 from sim.params import ParamReader
 from sim.topics import TrajectorySetpoint, VehicleStateTruth, VtolState
 

@@ -11,7 +11,8 @@ from __future__ import annotations
 import math
 
 from sim import modes
-from sim.commander import Announce, Commander
+from sim.commander import Commander
+from sim.commander_failsafe import Announce
 from sim.manual_control import ManualFlight
 from sim.mission_block import MissionBlock, VtolAirframe
 from sim.modes import Px4Mode

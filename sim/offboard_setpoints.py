@@ -11,7 +11,7 @@ import math
 
 from pymavlink.dialects.v20 import development as mavlink
 
-from sim.commander import MAV_SEVERITY_CRITICAL
+from sim.commander_failsafe import MAV_SEVERITY_CRITICAL
 from sim.quat import quat_from_yaw, rotate_body_to_ned, yaw_from_quat
 from sim.topics import AttitudeSetpoint, ControlSetpoint, RatesSetpoint, TrajectorySetpoint
 from sim.vehicle_interface import Link, Message, VehicleInterface

@@ -17,7 +17,7 @@ from pymavlink.dialects.v20 import development as mavlink
 from sim import modes
 from sim.commander import MAV_RESULT_ACCEPTED, MAV_RESULT_FAILED, MAV_RESULT_UNSUPPORTED
 from sim.geo import is_valid_lat_lon
-from sim.manual_control import ManualControlReceiver
+from sim.manual_control import SOURCE_MAVLINK_0, stick_sample
 from sim.mavlink_event_services import EventServices
 from sim.mavlink_messages import MAVLINK_MSG_ID_PROTOCOL_VERSION, MessageFactory
 from sim.mavlink_parameters import MavlinkParameters
@@ -50,6 +50,22 @@ _TARGETED_MESSAGES = frozenset(
         mavlink.MAVLINK_MSG_ID_MISSION_REQUEST_LIST,
     }
 )
+
+
+class ManualControlReceiver:
+    """MANUAL_CONTROL in: each link is its own MAVLink instance (SOURCE_MAVLINK_0 + i)."""
+
+    def __init__(self, vehicle: VehicleInterface) -> None:
+        self._v = vehicle
+        self._instances: dict[int, int] = {}
+
+    def handle(self, link: object, msg: Message) -> None:
+        if msg.target not in (0, self._v.sysid):
+            return
+        instance = self._instances.setdefault(id(link), len(self._instances))
+        now = self._v.now_s
+        sample = stick_sample(msg.x, msg.y, msg.z, msg.r, now, SOURCE_MAVLINK_0 + instance)
+        self._v.commander.on_manual_control(sample, now)
 
 
 class ReceiverVehicle(VehicleInterface, Protocol):

@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from enum import Enum
 
-from sim.commander import MAV_SEVERITY_INFO
+from sim.commander_failsafe import MAV_SEVERITY_INFO
 from sim.mission_block import MissionBlock
 from sim.quat import yaw_from_quat
 from sim.topics import TrajectorySetpoint, VehicleStateTruth, VtolState

@@ -20,10 +20,9 @@ from sim.commander import (
     MAV_RESULT_DENIED,
     MAV_RESULT_TEMPORARILY_REJECTED,
     MAV_RESULT_UNSUPPORTED,
-    MAV_SEVERITY_CRITICAL,
-    MAV_SEVERITY_INFO,
 )
 from sim.commander_events import send_command_decision
+from sim.commander_failsafe import MAV_SEVERITY_CRITICAL, MAV_SEVERITY_INFO
 from sim.geo import MAVLINK_ALT_LIMIT_M, is_valid_lat_lon
 from sim.modes import Px4Mode
 from sim.vehicle_interface import Link, Message, VehicleInterface

@@ -199,22 +199,46 @@ export class TelemetrySocket {
   }
 }
 
+/** A control session's answer to a call it could not make: a result without a server's. */
+export function unanswered(reason, status = 0) {
+  return { ok: false, status, body: { detail: { reason } } };
+}
+
+/**
+ * What every control session (the socket's here, the fleet's REST one in fleet-control.js)
+ * keeps for the page: its callbacks and the lease it holds.
+ */
+export class LeaseSession {
+  constructor({ onLease, onClosed, onMessage }) {
+    this.onLease = onLease;
+    this.onClosed = onClosed;
+    this.onMessage = onMessage || (() => {});
+    this.leaseId = null;
+    this.lease = null;
+    this.holder = null;
+  }
+
+  /** The lease granted: held from now on, and the page told. */
+  granted(lease) {
+    this.leaseId = lease.lease_id;
+    this.lease = lease;
+    this.holder = lease.holder;
+    this.onLease(lease);
+  }
+}
+
 /**
  * The pilot session: holds the control lease while open and carries setpoints, commands and
  * intents; every message gets its result back (matched by id). The socket and its heartbeats
  * run in control-worker.js; this side pings the worker to show the page is alive.
  * `takeover` asks the holder first; with `force` it takes control at once.
  */
-export class ControlSession {
+export class ControlSession extends LeaseSession {
   constructor(vehicleId, { takeover = false, force = false, clientName, onLease, onClosed, onMessage }) {
+    super({ onLease, onClosed, onMessage });
     this.vehicleId = vehicleId;
-    this.onLease = onLease;
-    this.onClosed = onClosed;
-    this.onMessage = onMessage || (() => {});
     this.pending = new Map();
     this.nextId = 1;
-    this.leaseId = null;
-    this.lease = null;
     this.ended = null; // the server's last word on the lease: {state, by, …}
     this.socketOpen = false;
     this.closedByUs = false;
@@ -239,10 +263,7 @@ export class ControlSession {
 
   receive(message) {
     if (message.type === "lease" && message.lease_id) {
-      this.leaseId = message.lease_id;
-      this.lease = message;
-      this.holder = message.holder;
-      this.onLease(message);
+      this.granted(message);
     } else if (message.type === "lease") {
       this.ended = message;
     } else if (message.type === "error") {
@@ -263,7 +284,7 @@ export class ControlSession {
     clearInterval(this.alive);
     this.worker.terminate();
     for (const waiter of this.pending.values()) {
-      waiter({ ok: false, status: 0, body: { detail: { reason: "control socket closed" } } });
+      waiter(unanswered("control socket closed"));
     }
     this.pending.clear();
     this.leaseId = null;
@@ -279,7 +300,7 @@ export class ControlSession {
 
   send(message) {
     if (!this.socketOpen) {
-      return Promise.resolve({ ok: false, status: 0, body: { detail: { reason: "not in control" } } });
+      return Promise.resolve(unanswered("not in control"));
     }
     const id = this.nextId++;
     return new Promise((resolve) => {

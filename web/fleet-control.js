@@ -4,7 +4,7 @@
 // lease is REST's: taken with POST /control, carried as X-Lease-Id on every call (which
 // renews it) and renewed with PUT /control while the tab is open; the edge checks all of it.
 
-import { ApiError, request } from "./api.js";
+import { ApiError, LeaseSession, request, unanswered } from "./api.js";
 
 // what the control socket's command names are on REST (docs/api.md, "Endpoints")
 const COMMANDS = {
@@ -27,15 +27,10 @@ function fleetVehiclePath(vehicle, suffix = "") {
   return `/fleet/edges/${encodeURIComponent(vehicle.edge)}/vehicles/${vehicle.id}${suffix}`;
 }
 
-export class FleetControlSession {
+export class FleetControlSession extends LeaseSession {
   constructor(vehicle, { takeover = false, force = false, clientName, onLease, onClosed, onMessage }) {
+    super({ onLease, onClosed, onMessage });
     this.vehicle = vehicle;
-    this.onLease = onLease;
-    this.onClosed = onClosed;
-    this.onMessage = onMessage || (() => {});
-    this.leaseId = null;
-    this.lease = null;
-    this.holder = null;
     this.ended = false;
     this.renewTimer = null;
     this.clientName = clientName;
@@ -53,11 +48,8 @@ export class FleetControlSession {
         request("DELETE", this.path("/control"), undefined, { "X-Lease-Id": lease.lease_id }).catch(() => {});
         return;
       }
-      this.leaseId = lease.lease_id;
-      this.lease = lease;
-      this.holder = lease.holder;
       this.scheduleRenew(lease.ttl_s);
-      this.onLease(lease);
+      this.granted(lease);
     } catch (err) {
       const reason = err.body?.detail?.reason || err.message;
       // the control socket's close codes, so handover.js tells the pilot the same things
@@ -106,7 +98,7 @@ export class FleetControlSession {
   }
 
   async call(method, suffix, body) {
-    if (!this.open) return { ok: false, status: 0, body: { detail: { reason: "not in control" } } };
+    if (!this.open) return unanswered("not in control");
     try {
       const answer = await request(method, this.path(suffix), body, { "X-Lease-Id": this.leaseId });
       this.scheduleRenew(this.lease?.ttl_s); // every control call renews the lease
@@ -137,7 +129,7 @@ export class FleetControlSession {
     if (message.type === "sticks") {
       return message.stop ? this.call("DELETE", "/sticks") : this.call("PUT", "/sticks", message.sticks);
     }
-    return Promise.resolve({ ok: false, status: 422, body: { detail: { reason: `not over the fleet: ${message.type}` } } });
+    return Promise.resolve(unanswered(`not over the fleet: ${message.type}`, 422));
   }
 
   answerTakeover(requestId, grant) {

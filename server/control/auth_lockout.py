@@ -10,6 +10,8 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from server.control.keyed import PerKey
+
 # Addresses remembered at most; the least recently failed are forgotten first.
 MAX_ADDRESSES = 10_000
 
@@ -33,7 +35,7 @@ class Lockout:
         self.base_s = base_s
         self.max_s = max_s
         self._clock = clock
-        self._records: dict[str, _Record] = {}
+        self._records = PerKey(_Record, MAX_ADDRESSES)  # the least recently failed go first
 
     def retry_after_s(self, address: str) -> float:
         """0.0 when the address may try a token, else the seconds until it may."""
@@ -44,14 +46,13 @@ class Lockout:
         if record.locked_until_s > now:
             return record.locked_until_s - now
         if now - record.last_failure_s > 2 * self.max_s:
-            del self._records[address]  # quiet for long enough: forgiven
+            self._records.forget(address)  # quiet for long enough: forgiven
         return 0.0
 
     def failed(self, address: str) -> float:
         """Count a wrong token; the lock it starts, in seconds (0.0 while still free)."""
         now = self._clock()
-        record = self._records.pop(address, None) or _Record()
-        self._records[address] = record  # most recently failed last
+        record = self._records.use(address)
         record.failures += 1
         record.last_failure_s = now
         over = record.failures - self.free_failures
@@ -59,12 +60,10 @@ class Lockout:
         if over > 0:
             lock_s = min(self.max_s, self.base_s * 2.0 ** min(over - 1, 62))
             record.locked_until_s = now + lock_s
-        while len(self._records) > MAX_ADDRESSES:
-            del self._records[next(iter(self._records))]
         return lock_s
 
     def succeeded(self, address: str) -> None:
-        self._records.pop(address, None)
+        self._records.forget(address)
 
     def failures(self, address: str) -> int:
         record = self._records.get(address)

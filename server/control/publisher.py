@@ -30,6 +30,8 @@ from __future__ import annotations
 import asyncio
 from collections import deque
 from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from functools import cached_property
 from typing import Protocol
 
 from server.control.slots import Slot
@@ -62,38 +64,25 @@ class PublishedVehicle(Protocol):
     def subscribe(self, min_interval_s: float = 0.0) -> StateSubscription: ...
 
 
+@dataclass(eq=False)
 class Published:
     """One tick: the snapshot, the lease at that moment, and the encodings, each made once
     on first use and then shared by every consumer of the tick."""
 
-    def __init__(
-        self,
-        state: VehicleState,
-        version: int,
-        lease: LeaseStatus,
-        taken_s: float,
-        encode: Callable[[VehicleState], bytes],
-    ) -> None:
-        self.state = state
-        self.version = version
-        self.lease = lease
-        self.taken_s = taken_s
-        self._encode = encode
-        self._body: bytes | None = None
-        self._message: str | None = None
+    state: VehicleState
+    version: int
+    lease: LeaseStatus
+    taken_s: float
+    encode: Callable[[VehicleState], bytes]
 
-    @property
+    @cached_property
     def body(self) -> bytes:
-        if self._body is None:
-            self._body = self._encode(self.state)
-        return self._body
+        return self.encode(self.state)
 
-    @property
+    @cached_property
     def message(self) -> str:
         """The telemetry socket's `{type: "state"}` text."""
-        if self._message is None:
-            self._message = state_message(self.state, self.body, self.lease)
-        return self._message
+        return state_message(self.state, self.body, self.lease)
 
 
 class Sink(Protocol):

@@ -9,7 +9,11 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from server.control.keyed import PerKey
+
 Clock = Callable[[], float]
+# Keys with a bucket at the most; a forgotten key starts again with a full burst.
+MAX_KEYS = 10_000
 _EPSILON = 1e-9
 
 
@@ -42,11 +46,7 @@ class RateLimiter:
     def __init__(self, rate_per_s: float, burst: float, clock: Clock = time.monotonic) -> None:
         self.rate_per_s = rate_per_s
         self.burst = burst
-        self._clock = clock
-        self._buckets: dict[str, TokenBucket] = {}
+        self._buckets = PerKey(lambda: TokenBucket(rate_per_s, burst, clock), MAX_KEYS)
 
     def take(self, key: str) -> float:
-        bucket = self._buckets.get(key)
-        if bucket is None:
-            bucket = self._buckets[key] = TokenBucket(self.rate_per_s, self.burst, self._clock)
-        return bucket.take()
+        return self._buckets.use(key).take()

@@ -14,7 +14,6 @@ when it appears. stop() undoes it in reverse order and closes the session.
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 import re
 import socket
@@ -28,7 +27,7 @@ from server.fleet.asgi_call import Asgi
 from server.fleet.edge_api import EdgeApi
 from server.fleet.edge_publish import VehiclePublication
 from server.fleet.keys import FleetKeys, check_name
-from server.fleet.session import ZenohOptions, open_session, options_from_settings
+from server.fleet.session import ZenohOptions, open_session, options_from_settings, undeclare
 from server.link import Vehicle
 from server.link.aio import cancel_and_wait
 from server.settings import Settings
@@ -115,20 +114,16 @@ class EdgeService:
     async def stop(self) -> None:
         await cancel_and_wait(self._watch)
         self._watch = None
-        if self._queryable is not None:
-            with contextlib.suppress(zenoh.ZError):
-                self._queryable.undeclare()  # type: ignore[no-untyped-call]
-            self._queryable = None
+        undeclare(self._queryable)
+        self._queryable = None
         api, self.api = self.api, None
         if api is not None:
             await api.close()
         for publication in self.publications.values():
             await publication.close()
         self.publications.clear()
-        if self._token is not None:
-            with contextlib.suppress(zenoh.ZError):
-                self._token.undeclare()  # type: ignore[no-untyped-call]
-            self._token = None
+        undeclare(self._token)
+        self._token = None
         session, self.session = self.session, None
         if session is not None:
             await asyncio.to_thread(session.close)

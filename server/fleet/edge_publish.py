@@ -20,7 +20,6 @@ the network is congested), and nothing the setpoint stream depends on goes throu
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import json
 import logging
 import time
@@ -31,6 +30,7 @@ import zenoh
 from server.control.publisher import Published, StatePublisher
 from server.control.views import event_message, state_json, stream_dict
 from server.fleet.keys import TIER_RATE_HZ, FleetKeys, StateTier
+from server.fleet.session import undeclare
 from server.http.ws_common import EVENT_BACKLOG
 from server.link import Vehicle
 from server.link.aio import cancel_and_wait
@@ -124,8 +124,7 @@ class VehiclePublication:
             self._token = self.session.liveliness().declare_token(self._alive_key)
         elif not connected and self._token is not None:
             token, self._token = self._token, None
-            with contextlib.suppress(zenoh.ZError):
-                token.undeclare()  # type: ignore[no-untyped-call]
+            undeclare(token)
 
     @property
     def last_seq(self) -> int:
@@ -139,13 +138,8 @@ class VehiclePublication:
         for task in self._tasks:
             await cancel_and_wait(task)
         self._tasks.clear()
-        declared: list[Any] = [*self._state.values(), self._events, self._messages, self._stream]
-        if self._token is not None:
-            declared.append(self._token)
-            self._token = None
-        for each in declared:
-            with contextlib.suppress(zenoh.ZError):  # the session is closed already
-                each.undeclare()
+        token, self._token = self._token, None
+        undeclare(*self._state.values(), self._events, self._messages, self._stream, token)
 
     def state_sample(self, published: Published) -> bytes:
         """The tier's sample of a tick: the REST body of the vehicle, wrapped."""

@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import zenoh
 
@@ -66,3 +67,12 @@ def zenoh_config(options: ZenohOptions) -> zenoh.Config:
 def open_session(options: ZenohOptions) -> zenoh.Session:
     """Open a session (blocking; call it off the event loop)."""
     return zenoh.open(zenoh_config(options))
+
+
+def undeclare(*entities: Any) -> None:
+    """Undeclare Zenoh subscribers, queryables, publishers or tokens (None is skipped);
+    one whose session closed first is gone already."""
+    for entity in entities:
+        if entity is not None:
+            with contextlib.suppress(zenoh.ZError):
+                entity.undeclare()

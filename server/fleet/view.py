@@ -17,6 +17,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+# the state's fields a row of GET /fleet/vehicles shows
+_SUMMARY_STATE_FIELDS = ("type", "mode", "armed", "connected", "global", "position_ned")
 # events queued per watcher before the oldest is dropped (a socket that stops reading)
 EVENT_BACKLOG = 256
 
@@ -64,36 +66,29 @@ class FleetVehicle:
             return holder if isinstance(holder, str) else None
         return None
 
+    def fleet_fields(self) -> dict[str, Any]:
+        """What the fleet knows of the vehicle besides its state: name, presence, ages."""
+        return {
+            "key": self.key,
+            "edge": self.edge,
+            "id": self.id,
+            "alive": self.alive,
+            "age_s": _rounded(self.age_s()),
+            "state_age_s": _rounded(self.state_age_s()),
+        }
+
     def summary(self) -> dict[str, Any]:
         """A row of GET /fleet/vehicles."""
         state = self.state or {}
         return {
-            "key": self.key,
-            "edge": self.edge,
-            "id": self.id,
-            "alive": self.alive,
-            "age_s": _rounded(self.age_s()),
-            "state_age_s": _rounded(self.state_age_s()),
+            **self.fleet_fields(),
             "controller": self.controller(),
-            "type": state.get("type"),
-            "mode": state.get("mode"),
-            "armed": state.get("armed"),
-            "connected": state.get("connected"),
-            "global": state.get("global"),
-            "position_ned": state.get("position_ned"),
+            **{name: state.get(name) for name in _SUMMARY_STATE_FIELDS},
         }
 
     def detail(self) -> dict[str, Any]:
         """GET /fleet/edges/{edge}/vehicles/{id}: the edge's state and the fleet's fields."""
-        return {
-            **(self.state or {}),
-            "edge": self.edge,
-            "id": self.id,
-            "key": self.key,
-            "alive": self.alive,
-            "age_s": _rounded(self.age_s()),
-            "state_age_s": _rounded(self.state_age_s()),
-        }
+        return {**(self.state or {}), **self.fleet_fields()}
 
     def state_message(self) -> str:
         """The fleet socket's `fleet_state` text, encoded once per version."""

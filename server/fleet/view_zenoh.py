@@ -19,6 +19,7 @@ from typing import Any
 import zenoh
 
 from server.fleet.keys import FleetKeys, StateTier
+from server.fleet.session import undeclare
 from server.fleet.view import FleetView
 
 log = logging.getLogger(__name__)
@@ -60,9 +61,7 @@ class FleetFeed:
         )
 
     def stop(self) -> None:
-        for subscriber in self._subscribers:
-            with contextlib.suppress(zenoh.ZError):  # the session closed first
-                subscriber.undeclare()
+        undeclare(*self._subscribers)
         self._subscribers = []
 
     # --- on Zenoh's threads -----------------------------------------------------------

@@ -108,26 +108,27 @@ class VehicleChannels:
         self.pose_in_frame = PoseInFrameChannel(
             f"{prefix}/pose", context=context, metadata=metadata
         )
-        self._state: foxglove.Channel | None = None
-        self._health: foxglove.Channel | None = None
+        self._live: dict[str, foxglove.Channel] = {}
 
     # live only (a .tlog holds neither): made when the bridge first asks
     @property
     def state(self) -> foxglove.Channel:
-        if self._state is None:
-            self._state = self.link.json_channel(f"{vehicle_prefix(self.sysid)}/state",
-                                                 STATE_SCHEMA)
-        return self._state
+        return self._live_channel("state", STATE_SCHEMA)
 
     @property
     def health(self) -> foxglove.Channel:
-        if self._health is None:
-            self._health = self.link.json_channel(f"{vehicle_prefix(self.sysid)}/health",
-                                                  HEALTH_SCHEMA)
-        return self._health
+        return self._live_channel("health", HEALTH_SCHEMA)
+
+    def _live_channel(self, topic: str, schema: JsonSchema) -> foxglove.Channel:
+        channel = self._live.get(topic)
+        if channel is None:
+            channel = self._live[topic] = self.link.json_channel(
+                f"{vehicle_prefix(self.sysid)}/{topic}", schema
+            )
+        return channel
 
     def close(self) -> None:
-        for channel in (self.log, self.location, self.transform, self.pose_in_frame,
-                        self._state, self._health):
-            if channel is not None:
-                channel.close()
+        for typed in (self.log, self.location, self.transform, self.pose_in_frame):
+            typed.close()
+        for channel in self._live.values():
+            channel.close()

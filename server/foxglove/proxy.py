@@ -14,15 +14,11 @@ protocol v1. This route accepts either name and speaks ``foxglove.sdk.v1`` upstr
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
-import websockets
 from fastapi import FastAPI, WebSocket
-from websockets.asyncio.client import connect
 from websockets.typing import Subprotocol
 
 from server.control.auth import token_from
-from server.scene.proxy import relay
+from server.scene.proxy import LoopbackSocketProxy
 
 SUBPROTOCOL = "foxglove.websocket.v1"
 SDK_SUBPROTOCOL = "foxglove.sdk.v1"
@@ -30,15 +26,13 @@ SDK_SUBPROTOCOL = "foxglove.sdk.v1"
 ACCEPTED = (SDK_SUBPROTOCOL, SUBPROTOCOL)
 PATH = "/api/v1/foxglove"
 WS_CLOSE_UNAUTHORIZED = 4401
-_UPSTREAM_TIMEOUT_S = 10.0
 
 
-class FoxgloveProxy:
-    def __init__(self, upstream_port: Callable[[], int],
-                 check_token: Callable[[str | None], bool]) -> None:
-        self._upstream_port = upstream_port
-        self._check_token = check_token
-        self.open_sockets = 0
+class FoxgloveProxy(LoopbackSocketProxy):
+    """The Foxglove server's socket at PATH."""
+
+    # a refused socket ends in the handshake (the client sees HTTP 403)
+    refuse_after_accept = False
 
     def mount(self, app: FastAPI) -> None:
         app.add_api_websocket_route(PATH, self.socket)
@@ -46,27 +40,15 @@ class FoxgloveProxy:
     async def socket(self, websocket: WebSocket) -> None:
         token = token_from(websocket.headers, websocket.query_params, {})
         if not self._check_token(token):
-            await websocket.close(code=WS_CLOSE_UNAUTHORIZED, reason="missing or wrong token")
+            await self.refuse(websocket, WS_CLOSE_UNAUTHORIZED, "missing or wrong token")
             return
         offered = websocket.scope.get("subprotocols", [])
         chosen = next((name for name in ACCEPTED if name in offered), None)
         if chosen is None:
-            await websocket.close(code=1002, reason=f"speak {SUBPROTOCOL}")
+            await self.refuse(websocket, 1002, f"speak {SUBPROTOCOL}")
             return
-        try:
-            upstream = await connect(
-                f"ws://127.0.0.1:{self._upstream_port()}",
-                subprotocols=[Subprotocol(SDK_SUBPROTOCOL)],
-                max_size=None, compression=None, open_timeout=_UPSTREAM_TIMEOUT_S,
-            )
-        except (OSError, RuntimeError, websockets.exceptions.WebSocketException, TimeoutError):
-            await websocket.close(code=1011, reason="Foxglove server unavailable")
-            return
-        self.open_sockets += 1
-        try:
-            await websocket.accept(subprotocol=chosen)
-            await relay(websocket, upstream)
-        finally:
-            self.open_sockets -= 1
-            await upstream.close()
+        await self.relay_upstream(
+            websocket, [Subprotocol(SDK_SUBPROTOCOL)], lambda _upstream: chosen,
+            "Foxglove server unavailable",
+        )
 

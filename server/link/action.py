@@ -16,9 +16,10 @@ from server.link import modes
 from server.link.arming_modes import mode_to_arm_in
 from server.link.commands import CommandInt, CommandOutcome, CommandResult, not_sent
 from server.link.core import VehicleCore
+from server.link.mavlink_values import enum_name
 from server.link.requests import Confirmation
 from server.link.state import VTOL_STATE_NAMES
-from server.link.telemetry import Telemetry, enum_name
+from server.link.telemetry import Telemetry
 
 MAV_CMD_NAV_RETURN_TO_LAUNCH = 20
 MAV_CMD_NAV_LAND = 21

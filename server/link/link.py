@@ -25,7 +25,8 @@ from .aio import cancel_and_wait
 from .link_stats import LinkStats, SequenceGapCounter
 from .liveness import DEFAULT_SILENCE_TIMEOUT_S, MAVLINK_HEARTBEAT_TIMEOUT_S, Liveness
 from .roster import MAV_COMP_ID_AUTOPILOT1, VehicleRoster
-from .signing import MAVLINK_MSG_ID_SETUP_SIGNING, LinkSigning, SigningKeyStore
+from .signing import MAVLINK_MSG_ID_SETUP_SIGNING, LinkSigning
+from .signing_keys import SigningKeyStore
 from .stream_channel import LinkHandover, StreamChannel, decode_sent
 from .tlog import TlogWriter
 from .transports import Peer, Transport, create_transport

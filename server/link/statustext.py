@@ -131,3 +131,26 @@ class RecentTexts:
             except TimeoutError:
                 return None
         return text
+
+
+# PX4's RTL announces its phases in STATUSTEXT ("RTL: climb to ...", "RTL: land at ...");
+# the first keyword found names the phase, so the more specific ones come first.
+_RTL_PHASES = (
+    ("landed", "LANDED"),
+    ("move to land", "MOVE_TO_LAND"),
+    ("climb", "CLIMBING"),
+    ("start return", "RETURNING"),
+    ("return at", "RETURNING"),
+    ("descend", "DESCENDING"),
+    ("loiter", "LOITERING"),
+    ("land", "LANDING"),
+    ("completed", "COMPLETED"),
+)
+
+
+def rtl_phase_announced(text: str) -> str | None:
+    """The RTL phase a PX4 text announces; None for a text that names none."""
+    lowered = text.lower()
+    if not lowered.startswith("rtl"):
+        return None
+    return next((phase for keyword, phase in _RTL_PHASES if keyword in lowered), None)

@@ -13,7 +13,14 @@ from typing import Any
 from pymavlink.dialects.v20 import development as mavlink
 
 from server.link import modes, state
-from server.link.statustext import RecentTexts, StatusTextAssembler, severity_name
+from server.link.freshness import Freshness
+from server.link.mavlink_values import battery_state, enum_name, finite, flag_names, pwm_to_unit
+from server.link.statustext import (
+    RecentTexts,
+    StatusTextAssembler,
+    rtl_phase_announced,
+    severity_name,
+)
 
 STATUSTEXT_KEEP = 20
 MAV_LANDED_STATE_ON_GROUND = 1
@@ -21,73 +28,10 @@ MAV_LANDED_STATE_ON_GROUND = 1
 # alone says the mode; HEARTBEAT takes over when it has been silent this long.
 CURRENT_MODE_FRESH_S = 2.0
 
-# The messages each live state field comes from: after a cut, a field is stale until one
-# of them arrives again. Home and origin are settings, not live readings: they stay.
-_SOURCES: dict[str, tuple[str, ...]] = {
-    "mode": ("HEARTBEAT", "CURRENT_MODE"),
-    "user_mode": ("HEARTBEAT", "CURRENT_MODE"),
-    "armed": ("HEARTBEAT",),
-    "system_status": ("HEARTBEAT",),
-    "landed_state": ("EXTENDED_SYS_STATE",),
-    "vtol_state": ("EXTENDED_SYS_STATE",),
-    "position_ned": ("LOCAL_POSITION_NED",),
-    "velocity_ned": ("LOCAL_POSITION_NED",),
-    "global_position": ("GLOBAL_POSITION_INT",),
-    "attitude": ("ATTITUDE",),
-    "target_ned": ("POSITION_TARGET_LOCAL_NED",),
-    "ground_speed_m_s": ("VFR_HUD",),
-    "air_speed_m_s": ("VFR_HUD",),
-    "climb_rate_m_s": ("VFR_HUD",),
-    "heading_deg": ("VFR_HUD", "GLOBAL_POSITION_INT"),
-    "actuator_outputs": ("SERVO_OUTPUT_RAW", "ACTUATOR_OUTPUT_STATUS"),
-    "ready_to_arm": ("SYS_STATUS",),
-    "arming_checks": ("SYS_STATUS",),
-    "battery": ("SYS_STATUS", "BATTERY_STATUS"),
-    "gps": ("GPS_RAW_INT",),
-}
 # What a state shows for the mode while it is not known since the link came back.
 MODE_WITHHELD = "UNKNOWN"
 
-# PX4's RTL announces its phases in STATUSTEXT ("RTL: climb to ...", "RTL: land at ...");
-# the first keyword found names the phase, so the more specific ones come first.
-_RTL_PHASES = (
-    ("landed", "LANDED"),
-    ("move to land", "MOVE_TO_LAND"),
-    ("climb", "CLIMBING"),
-    ("start return", "RETURNING"),
-    ("return at", "RETURNING"),
-    ("descend", "DESCENDING"),
-    ("loiter", "LOITERING"),
-    ("land", "LANDING"),
-    ("completed", "COMPLETED"),
-)
-
-
-# MAVLink renamed these VTOL types in 2024; pymavlink's generated enum still carries the
-# old reserved names, and a dashboard should show what the vehicle is.
-_RENAMED = {
-    ("MAV_TYPE", 19): "MAV_TYPE_VTOL_TAILSITTER_DUOROTOR",
-    ("MAV_TYPE", 20): "MAV_TYPE_VTOL_TAILSITTER_QUADROTOR",
-    ("MAV_TYPE", 22): "MAV_TYPE_VTOL_FIXEDROTOR",
-    ("MAV_TYPE", 23): "MAV_TYPE_VTOL_TAILSITTER",
-    ("MAV_TYPE", 24): "MAV_TYPE_VTOL_TILTWING",
-}
-
-
-def enum_name(enum: str, value: int, prefix: str) -> str:
-    renamed = _RENAMED.get((enum, value))
-    if renamed is not None:
-        return renamed.removeprefix(prefix)
-    entry = mavlink.enums[enum].get(value)
-    return entry.name.removeprefix(prefix) if entry is not None else str(value)
-
-
-def _pwm_to_unit(pwm: float) -> float:
-    """PX4 motor PWM 1000..2000 us as 0..1."""
-    return min(max((pwm - 1000.0) / 1000.0, 0.0), 1.0)
-
-
-class Telemetry:
+class Telemetry(Freshness):
     """The latest reported value of each state part, kept by one handler per message type.
 
     The values are named as in VehicleState, whose telemetry part ``reported()`` gives."""
@@ -133,7 +77,7 @@ class Telemetry:
         texts: RecentTexts,
         publish: Callable[[str, dict[str, object]], None],
     ) -> None:
-        self._clock = clock
+        super().__init__(clock)
         self._texts = texts
         self._publish = publish
         self._mode_listeners: list[Callable[[], None]] = []
@@ -144,11 +88,6 @@ class Telemetry:
         self.armed_changed_s: float | None = None
         self.disarmed_s: float | None = None  # when a reported arm last ended
         self.statustext: list[state.StatusText] = []
-        # since when the readings count as live (None: since ever; set when the link
-        # comes back); lost while the link is
-        self._heard_before: frozenset[str] = frozenset()  # kinds heard before fresh_since_s
-        self.fresh_since_s: float | None = None
-        self.lost = False
         self.handlers: dict[str, Callable[[Any], None]] = {
             "HEARTBEAT": self._on_heartbeat,
             "CURRENT_MODE": self._on_current_mode,
@@ -168,8 +107,6 @@ class Telemetry:
             "STATUSTEXT": self._on_statustext,
             "ESTIMATOR_STATUS": self._on_estimator_status,
         }
-        # when each of those message types last came (the clock's seconds)
-        self.received_s: dict[str, float] = {}
         for kind, handler in list(self.handlers.items()):
             self.handlers[kind] = self._timed(kind, handler)
 
@@ -179,10 +116,6 @@ class Telemetry:
             handler(msg)
 
         return timed
-
-    def ages_at(self, now_s: float) -> dict[str, float]:
-        """Seconds since each message type was last received (ms resolution)."""
-        return {kind: round(now_s - t, 3) for kind, t in self.received_s.items()}
 
     def reported(self) -> dict[str, Any]:
         """The telemetry part of a VehicleState, by field name. After the link came back,
@@ -200,42 +133,13 @@ class Telemetry:
             values.update(mode=MODE_WITHHELD, user_mode=None)
         return values
 
-    # -- freshness ------------------------------------------------------------------------
-    def heard_since(self, field: str, since_s: float) -> bool:
-        """A message that sets ``field`` came at or after since_s."""
-        return any(self.received_s.get(kind, -math.inf) >= since_s for kind in _SOURCES[field])
-
-    def stale_fields(self) -> tuple[str, ...]:
-        """Live fields not to be taken as current: while the link is lost, every one that
-        was reported; after it came back (or rebooted), those reported before and not since."""
-        if self.lost:
-            return tuple(f for f in _SOURCES if any(k in self.received_s for k in _SOURCES[f]))
-        if self.fresh_since_s is None:
-            return ()
-        since_s, before = self.fresh_since_s, self._heard_before
-        return tuple(
-            f for f in _SOURCES
-            if before.intersection(_SOURCES[f]) and not self.heard_since(f, since_s)
-        )
-
-    def link_lost(self) -> None:
-        self.lost = True
-
-    def link_back(self) -> None:
-        self.lost = False
-        self._heard_before = frozenset(self.received_s)
-        self.fresh_since_s = self._clock()
-
     def forget(self) -> None:
         """A rebooted vehicle: nothing it said before counts, home and origin included."""
         for name in _RESETTABLE:
             vars(self).pop(name, None)  # back to the class's "not reported" value
         self._current_mode_s = None
         self.armed_changed_s = self.disarmed_s = None
-        # what it reported before stays stale (at its "not reported" value) until reported
-        self._heard_before = frozenset(self.received_s) | self._heard_before
-        self.received_s.clear()
-        self.fresh_since_s = self._clock()
+        self.forget_received()
 
     def on_mode(self, listener: Callable[[], None]) -> None:
         """Call ``listener()`` whenever a HEARTBEAT or CURRENT_MODE told the mode."""
@@ -331,9 +235,9 @@ class Telemetry:
             & ~msg.onboard_control_sensors_health
             & ~mavlink.MAV_SYS_STATUS_PREARM_CHECK
         )
-        self.sensors_unhealthy = _flag_names("MAV_SYS_STATUS_SENSOR", unhealthy, "MAV_SYS_STATUS_")
+        self.sensors_unhealthy = flag_names("MAV_SYS_STATUS_SENSOR", unhealthy, "MAV_SYS_STATUS_")
         voltage_v = None if msg.voltage_battery == 0xFFFF else msg.voltage_battery / 1000.0
-        battery = _battery(voltage_v, msg.current_battery, msg.battery_remaining)
+        battery = battery_state(voltage_v, msg.current_battery, msg.battery_remaining)
         if self.battery is not None:  # what only BATTERY_STATUS tells stays
             battery = dataclasses.replace(
                 battery,
@@ -346,20 +250,20 @@ class Telemetry:
         cells = [v for v in msg.voltages if v != 0xFFFF]
         voltage_v = sum(cells) / 1000.0 if cells else None
         self.battery = dataclasses.replace(
-            _battery(voltage_v, msg.current_battery, msg.battery_remaining),
+            battery_state(voltage_v, msg.current_battery, msg.battery_remaining),
             # -1: not known; time_remaining 0: not known (a MAVLink 2 extension)
             consumed_mah=None if msg.current_consumed < 0 else float(msg.current_consumed),
             time_remaining_s=float(getattr(msg, "time_remaining", 0)) or None,
         )
 
     def _on_estimator_status(self, msg: mavlink.MAVLink_estimator_status_message) -> None:
-        flags = _flag_names("ESTIMATOR_STATUS_FLAGS", msg.flags, "ESTIMATOR_")
+        flags = flag_names("ESTIMATOR_STATUS_FLAGS", msg.flags, "ESTIMATOR_")
         self.estimator = state.EstimatorState(
             flags=flags,
             healthy=all(f in flags for f in _ESTIMATOR_NEEDED) and "GPS_GLITCH" not in flags,
-            pos_horiz_ratio=_finite(msg.pos_horiz_ratio),
-            pos_vert_ratio=_finite(msg.pos_vert_ratio),
-            mag_ratio=_finite(msg.mag_ratio),
+            pos_horiz_ratio=finite(msg.pos_horiz_ratio),
+            pos_vert_ratio=finite(msg.pos_vert_ratio),
+            mag_ratio=finite(msg.mag_ratio),
         )
 
     def _on_gps_raw(self, msg: mavlink.MAVLink_gps_raw_int_message) -> None:
@@ -382,13 +286,13 @@ class Telemetry:
 
     def _on_servo_output(self, msg: mavlink.MAVLink_servo_output_raw_message) -> None:
         raw = [getattr(msg, f"servo{i}_raw", 0) for i in range(1, 17)]
-        self.actuator_outputs = tuple(_pwm_to_unit(v) for v in raw if v)
+        self.actuator_outputs = tuple(pwm_to_unit(v) for v in raw if v)
 
     def _on_actuator_output(self, msg: mavlink.MAVLink_actuator_output_status_message) -> None:
         # PWM in microseconds, or already normalised: either way 0..1 for the dashboard
         values = msg.actuator[: msg.active]
         self.actuator_outputs = tuple(
-            _pwm_to_unit(v) if v > 2.0 else min(max(v, 0.0), 1.0) for v in values
+            pwm_to_unit(v) if v > 2.0 else min(max(v, 0.0), 1.0) for v in values
         )
 
     def _on_statustext(self, msg: mavlink.MAVLink_statustext_message) -> None:
@@ -421,9 +325,9 @@ class Telemetry:
         del self.statustext[:-STATUSTEXT_KEEP]
         self._texts.add(severity, text)
         self._publish("statustext", {"severity": entry.severity, "text": text})
-        lowered = text.lower()
-        if lowered.startswith("rtl"):
-            self._set_rtl_phase(next((p for k, p in _RTL_PHASES if k in lowered), self.rtl_phase))
+        phase = rtl_phase_announced(text)
+        if phase is not None:
+            self._set_rtl_phase(phase)
 
     def _set_rtl_phase(self, phase: str | None) -> None:
         if phase != self.rtl_phase:
@@ -446,25 +350,3 @@ _REPORTED = tuple(
 
 # an estimate a pilot can fly on: attitude, velocity and a horizontal position
 _ESTIMATOR_NEEDED = ("ATTITUDE", "VELOCITY_HORIZ", "POS_HORIZ_REL")
-
-
-def _flag_names(enum: str, bits: int, prefix: str) -> tuple[str, ...]:
-    """The names of the set bits of a MAVLink bitmask enum, without the prefix."""
-    return tuple(
-        entry.name.removeprefix(prefix)
-        for value, entry in sorted(mavlink.enums[enum].items())
-        if value > 0 and value & (value - 1) == 0 and bits & value
-    )
-
-
-def _finite(value: float) -> float | None:
-    return float(value) if math.isfinite(value) else None
-
-
-def _battery(voltage_v: float | None, current_ca: int, remaining_pct: int) -> state.BatteryState:
-    """MAVLink marks unknown current and remaining charge with -1."""
-    return state.BatteryState(
-        voltage_v,
-        None if current_ca < 0 else current_ca / 100.0,
-        None if remaining_pct < 0 else float(remaining_pct),
-    )

@@ -29,6 +29,7 @@ from server.link.aio import cancel_and_wait
 from server.link.arming_checks import readiness
 from server.link.core import Sender, VehicleCore
 from server.link.manual_control import ManualControl
+from server.link.mavlink_values import enum_name
 from server.link.offboard import Offboard
 from server.link.outage import OutageReport
 from server.link.params import ParamClient
@@ -39,7 +40,7 @@ from server.link.setpoint_checks import Envelope
 from server.link.setpoints import Setpoint, describe
 from server.link.state import VehicleState
 from server.link.streamer import DEFAULT_RATE_HZ
-from server.link.telemetry import Telemetry, enum_name
+from server.link.telemetry import Telemetry
 from server.link.telemetry_requests import TelemetryRequests
 
 T = TypeVar("T")

@@ -22,8 +22,8 @@ from dataclasses import dataclass
 
 import viser
 
-from .frames import Vec3, attitude_wxyz_enu, geodetic_offset_enu
-from .models import VehicleModel, build_model
+from .frames import attitude_wxyz_enu, geodetic_offset_enu
+from .models import LabelledModel
 from .styling import Rgb, state_colour
 
 LOST_COLOUR: Rgb = (90, 94, 102)
@@ -124,17 +124,12 @@ class FleetScene:
         return pending
 
 
-class FleetVehicleView:
+class FleetVehicleView(LabelledModel):
     """The scene nodes of one fleet vehicle: its model and a label."""
 
     def __init__(self, scene: viser.SceneApi, key: str, mav_type: str) -> None:
-        base = f"/fleet/{key}"
+        super().__init__(scene, f"/fleet/{key}", mav_type, label=key)
         self.key = key
-        self.mav_type = mav_type
-        self.position_enu: Vec3 | None = None
-        self._root = scene.add_frame(base, show_axes=False)
-        self.model: VehicleModel = build_model(scene, f"{base}/body", mav_type)
-        self.label = scene.add_label(f"{base}/label", text=key, anchor="bottom-center")
         self._label_text = key
 
     def update(self, pose: FleetPose, reference: tuple[float, float, float]) -> None:
@@ -149,6 +144,3 @@ class FleetVehicleView:
         if pose.label != self._label_text:
             self._label_text = pose.label
             self.label.text = pose.label
-
-    def remove(self) -> None:
-        self._root.remove()

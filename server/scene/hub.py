@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import dataclasses
 import io
 import logging
 import threading
@@ -18,6 +17,7 @@ import viser
 from fastapi import FastAPI
 
 from server.link.aio import cancel_and_wait
+from skyhelm_wire.messages import SceneClickMessage
 
 from .compass import CompassRose
 from .fleet_view import FleetPose, FleetScene, FleetVehicleView
@@ -58,24 +58,6 @@ class StateSource(Protocol):
         ...
 
 
-@dataclasses.dataclass(frozen=True)
-class ClickPoint:
-    """Where the last click in the scene met the ground (home's level), in the scene frame.
-
-    The scene frame is ENU around the first vehicle's local origin; lat/lon are filled in
-    once that origin is known.
-    """
-
-    seq: int
-    time_s: float
-    east_m: float
-    north_m: float
-    up_m: float
-    lat_deg: float | None
-    lon_deg: float | None
-    alt_amsl_m: float | None
-
-
 def local_origin(state: VehicleState) -> tuple[float, float, float] | None:
     """Geodetic point of the vehicle's local NED origin: reported by GPS_GLOBAL_ORIGIN, or
     else worked back from home, whose position PX4 gives both ways."""
@@ -99,7 +81,7 @@ class SceneHub:
         self._views: dict[int, VehicleView] = {}
         self._reference: tuple[float, float, float] | None = None
         self._ground_z = 0.0
-        self._click: ClickPoint | None = None
+        self._click: SceneClickMessage | None = None
         self._click_lock = threading.Lock()
         self._follow: viser.GuiDropdownHandle[str] | None = None
         self._followed_at: np.ndarray | None = None
@@ -114,7 +96,7 @@ class SceneHub:
         self._fleet_views: dict[str, FleetVehicleView] = {}
         self._fleet_task: asyncio.Task[None] | None = None
         # Told of every click (in viser's thread), after it is stored.
-        self.on_click: Callable[[ClickPoint], None] | None = None
+        self.on_click: Callable[[SceneClickMessage], None] | None = None
 
     @property
     def port(self) -> int:
@@ -123,7 +105,7 @@ class SceneHub:
         return int(self._server.get_port())
 
     @property
-    def last_click(self) -> ClickPoint | None:
+    def last_click(self) -> SceneClickMessage | None:
         return self._click
 
     async def start(self, states: StateSource | None = None) -> None:
@@ -169,7 +151,7 @@ class SceneHub:
 
     def _click_json(self) -> dict[str, object]:
         click = self._click
-        return {"seq": 0} if click is None else dataclasses.asdict(click)
+        return {"seq": 0} if click is None else click.model_dump(exclude={"type"})
 
     def _set_up_scene(self, server: viser.ViserServer) -> None:
         server.scene.set_up_direction("+z")
@@ -201,7 +183,11 @@ class SceneHub:
             lat, lon, alt = enu_to_geodetic(hit[0], hit[1], hit[2], *self._reference)
         with self._click_lock:
             seq = 1 if self._click is None else self._click.seq + 1
-            click = ClickPoint(seq, time.time(), hit[0], hit[1], hit[2], lat, lon, alt)
+            click = SceneClickMessage(
+                type="scene_click", seq=seq, time_s=time.time(),
+                east_m=hit[0], north_m=hit[1], up_m=hit[2],
+                lat_deg=lat, lon_deg=lon, alt_amsl_m=alt,
+            )
             self._click = click
         self._click_marker.position = hit
         self._click_marker.visible = True

@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 import viser
 import viser.transforms as vtf
 
+from .frames import Vec3
 from .styling import Rgb, rotor_colour
 
 _ROTOR_COUNTS = {"QUADROTOR": 4, "HEXAROTOR": 6, "OCTOROTOR": 8, "TRICOPTER": 3}
@@ -146,3 +147,18 @@ def build_model(scene: viser.SceneApi, name: str, mav_type: str) -> VehicleModel
         _add_fixed_wing(scene, f"{name}/fw", model)
         _add_multicopter(scene, f"{name}/mc", 4, model)
     return model
+
+
+class LabelledModel:
+    """A vehicle's nodes under one frame at ``base``: its model and a label above it."""
+
+    def __init__(self, scene: viser.SceneApi, base: str, mav_type: str, label: str) -> None:
+        self.mav_type = mav_type
+        self.position_enu: Vec3 | None = None
+        self._root = scene.add_frame(base, show_axes=False)
+        self.model: VehicleModel = build_model(scene, f"{base}/body", mav_type)
+        self.label = scene.add_label(f"{base}/label", text=label, anchor="bottom-center")
+
+    def remove(self) -> None:
+        """Removing the parent node removes every child node of this vehicle."""
+        self._root.remove()

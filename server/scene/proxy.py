@@ -54,14 +54,52 @@ async def fetch_upstream(
             await writer.wait_closed()
 
 
-class SceneProxy:
-    """Routes under `path`: the viser client page, its socket, and the small scene API."""
+class LoopbackSocketProxy:
+    """Sockets relayed, behind the token, to a server that listens on loopback only."""
+
+    # A refused socket is accepted first, so its close code and reason reach the client;
+    # False: closed during the handshake, which the client sees as a refused upgrade.
+    refuse_after_accept = True
 
     def __init__(self, upstream_port: Callable[[], int],
                  check_token: Callable[[str | None], bool]) -> None:
         self._upstream_port = upstream_port
         self._check_token = check_token
         self.open_sockets = 0
+
+    async def refuse(self, websocket: WebSocket, code: int, reason: str) -> None:
+        if self.refuse_after_accept:
+            await websocket.accept()
+        await websocket.close(code=code, reason=reason)
+
+    async def relay_upstream(
+        self,
+        websocket: WebSocket,
+        offered: list[Subprotocol] | None,
+        subprotocol: Callable[[ClientConnection], str | None],
+        unavailable: str,
+    ) -> None:
+        """Open the upstream socket offering ``offered``, accept the client's with the
+        subprotocol ``subprotocol`` names, and relay until either side closes."""
+        try:
+            upstream = await connect(
+                f"ws://127.0.0.1:{self._upstream_port()}", subprotocols=offered,
+                max_size=None, compression=None, open_timeout=_UPSTREAM_TIMEOUT_S,
+            )
+        except (OSError, RuntimeError, websockets.exceptions.WebSocketException, TimeoutError):
+            await self.refuse(websocket, 1011, unavailable)
+            return
+        self.open_sockets += 1
+        try:
+            await websocket.accept(subprotocol=subprotocol(upstream))
+            await relay(websocket, upstream)
+        finally:
+            self.open_sockets -= 1
+            await upstream.close()
+
+
+class SceneProxy(LoopbackSocketProxy):
+    """Routes under `path`: the viser client page, its socket, and the small scene API."""
 
     def authorised(self, request: Request | WebSocket) -> bool:
         token = token_from_request(request.query_params, request.cookies, request.headers)
@@ -93,30 +131,16 @@ class SceneProxy:
 
     async def socket(self, websocket: WebSocket) -> None:
         if not self.authorised(websocket):
-            await websocket.accept()
-            await websocket.close(code=WS_CLOSE_UNAUTHORIZED, reason="missing or wrong token")
+            await self.refuse(websocket, WS_CLOSE_UNAUTHORIZED, "missing or wrong token")
             return
         if not origin_matches_host(websocket.headers):
-            await websocket.accept()
-            await websocket.close(code=WS_CLOSE_FORBIDDEN_ORIGIN, reason="cross-origin")
+            await self.refuse(websocket, WS_CLOSE_FORBIDDEN_ORIGIN, "cross-origin")
             return
         offered = [Subprotocol(p) for p in websocket.scope.get("subprotocols", [])]
-        try:
-            upstream = await connect(
-                f"ws://127.0.0.1:{self._upstream_port()}", subprotocols=offered or None,
-                max_size=None, compression=None, open_timeout=_UPSTREAM_TIMEOUT_S,
-            )
-        except (OSError, websockets.exceptions.WebSocketException, TimeoutError):
-            await websocket.accept()
-            await websocket.close(code=1011, reason="scene server unavailable")
-            return
-        self.open_sockets += 1
-        try:
-            await websocket.accept(subprotocol=upstream.subprotocol)
-            await relay(websocket, upstream)
-        finally:
-            self.open_sockets -= 1
-            await upstream.close()
+        await self.relay_upstream(
+            websocket, offered or None, lambda upstream: upstream.subprotocol,
+            "scene server unavailable",
+        )
 
     def mount(self, app: FastAPI, path: str, api: dict[str, Callable[[], object]]) -> None:
         base = "/" + path.strip("/")

@@ -10,7 +10,7 @@ import numpy as np
 import viser
 
 from .frames import Vec3, attitude_wxyz_enu, ned_to_enu
-from .models import VehicleModel, build_model, model_kind
+from .models import LabelledModel, model_kind
 from .styling import Rgb, state_colour
 from .trail import Trail
 
@@ -117,17 +117,13 @@ class _Polyline:
         return bool(self._handle.visible)
 
 
-class VehicleView:
+class VehicleView(LabelledModel):
     def __init__(self, scene: viser.SceneApi, sysid: int, mav_type: str) -> None:
         base = f"/vehicles/{sysid}"
+        super().__init__(scene, base, mav_type, label=f"{sysid}")
         self.sysid = sysid
-        self.mav_type = mav_type
-        self.position_enu: Vec3 | None = None
-        self._root = scene.add_frame(base, show_axes=False)
         self._set = _Assigner()
         self._kind = model_kind(mav_type)
-        self.model: VehicleModel = build_model(scene, f"{base}/body", mav_type)
-        self.label = scene.add_label(f"{base}/label", text=f"{sysid}", anchor="bottom-center")
         self.trail = Trail()
         self._trail_handle = scene.add_line_segments(
             f"{base}/trail", points=np.zeros((1, 2, 3), dtype=np.float32), colors=(0, 0, 0),
@@ -146,10 +142,6 @@ class VehicleView:
         )
         self.home_label = scene.add_label(f"{base}/home/label", text="H", position=(0, 0, 0.3))
         self.rtl_path = _Polyline(scene, f"{base}/rtl", _RTL_COLOUR, 2.5)
-
-    def remove(self) -> None:
-        """Removing the parent node removes every child node of this vehicle."""
-        self._root.remove()
 
     def update(self, state: VehicleState, offset_enu: Vec3, now_s: float) -> None:
         colour = state_colour(

@@ -12,6 +12,7 @@ import httpx
 import pytest
 
 from server.control.auth_lockout import Lockout
+from server.control.keyed import PerKey
 from server.control.ratelimit import RateLimiter, TokenBucket
 from tests.api.conftest import OBSERVER, PILOT, Api, api_for, auth
 
@@ -48,6 +49,17 @@ def test_limiter_keeps_one_bucket_per_key() -> None:
     assert [limiter.take("pilot") for _ in range(2)] == [0.0, 0.0]
     assert limiter.take("pilot") > 0.0
     assert limiter.take("observer") == 0.0
+
+
+def test_per_key_state_forgets_the_least_recently_used_key_first() -> None:
+    keyed: PerKey[list[int]] = PerKey(list, max_keys=2)
+    keyed.use("a").append(1)
+    keyed.use("b")
+    keyed.use("a")  # now "b" is the least recently used
+    keyed.use("c")
+    assert keyed.get("b") is None
+    assert keyed.get("a") == [1]
+    assert keyed.get("c") == []
 
 
 def test_lockout_backs_off_exponentially_and_forgives_on_success() -> None:

@@ -22,11 +22,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from server.link.signing import (
-    MAVLINK_MSG_ID_SETUP_SIGNING,
-    PROVISION_CONFIRM_S,
-    PROVISION_TRIES,
-)
+from server.link.signing import MAVLINK_MSG_ID_SETUP_SIGNING
+from server.link.signing_provision import PROVISION_CONFIRM_S, PROVISION_TRIES
 from sim.runner import SimInstance
 from tests.api.conftest import Api
 from tests.api.test_signing import post, signing_sim

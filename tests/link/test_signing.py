@@ -18,14 +18,14 @@ import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
 from server.link.link import Link
-from server.link.signing import (
+from server.link.signing import LinkSigning
+from server.link.signing_keys import (
     PERSIST_MARGIN_TICKS,
-    LinkSigning,
     SigningKeyError,
     SigningKeyStore,
-    provision,
     signing_timestamp,
 )
+from server.link.signing_provision import provision
 from server.link.tlog import iter_tlog
 from server.link.vehicle import Vehicle
 from server.simproc import SimProcess

@@ -7,7 +7,7 @@ from __future__ import annotations
 from pymavlink.dialects.v20 import development as mavlink
 
 from server.link.commands import CommandOutcome
-from server.link.statustext import StatusTextAssembler
+from server.link.statustext import StatusTextAssembler, rtl_phase_announced
 from tests.link.conftest import ScriptedSession, wait_for
 
 CRITICAL = mavlink.MAV_SEVERITY_CRITICAL
@@ -110,3 +110,13 @@ async def test_a_refusal_carries_the_whole_chunked_text_as_its_reason(
     assert result.outcome is CommandOutcome.TEMPORARILY_REJECTED
     assert result.reason == REFUSAL.rstrip("\t")
     assert [t.text for t in scripted.vehicle.snapshot().statustext] == [REFUSAL.rstrip("\t")]
+
+
+def test_an_rtl_text_names_its_phase_the_most_specific_keyword_first() -> None:
+    assert rtl_phase_announced("RTL: start return at 520 m (30 m above destination)") == (
+        "RETURNING"
+    )
+    assert rtl_phase_announced("RTL: move to land waypoint") == "MOVE_TO_LAND"
+    assert rtl_phase_announced("RTL: land at destination") == "LANDING"
+    assert rtl_phase_announced("RTL: hold on") is None  # an RTL text that names no phase
+    assert rtl_phase_announced("Takeoff: climb to 10 m") is None  # not RTL's

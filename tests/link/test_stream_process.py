@@ -25,7 +25,7 @@ from pymavlink.dialects.v20 import development as mavlink
 from bench._receiver import SO_TIMESTAMPNS, kernel_receive_time
 from server.link import stream_process
 from server.link.link import Link
-from server.link.signing import SigningKeyStore
+from server.link.signing_keys import SigningKeyStore
 from server.link.streamer import SetpointStreamer
 from server.link.tlog import iter_tlog
 from tests.waiting import wait_for

@@ -21,7 +21,7 @@ import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
 from server.link.link import Link
-from server.link.signing import SigningKeyStore
+from server.link.signing_keys import SigningKeyStore
 from server.link.stream_thread import Deadlines, SenderThread
 from server.link.streamer import SetpointStreamer
 from server.link.tlog import iter_tlog

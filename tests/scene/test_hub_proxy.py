@@ -15,7 +15,8 @@ from fastapi import FastAPI
 from websockets.asyncio.client import connect
 from websockets.typing import Subprotocol
 
-from server.scene import ClickPoint, SceneHub
+from server.scene import SceneHub
+from skyhelm_wire.messages import SceneClickMessage
 from tests.api.state_fakes import PushingVehicle, pushing, scene_fed_by
 from tests.serving import uvicorn_serving
 from tests.waiting import wait_for
@@ -147,7 +148,7 @@ async def test_click_endpoint_reports_the_ground_point_with_lat_lon(served: Serv
     async with httpx.AsyncClient(base_url=f"http://{served.base}") as client:
         assert (await client.get("/scene/api/click", params={"token": TOKEN})).json() == {"seq": 0}
         await wait_for(lambda: served.hub.status()["vehicles"] == [1, 2], 5.0, "both vehicles")
-        pushed: list[ClickPoint] = []
+        pushed: list[SceneClickMessage] = []
         served.hub.on_click = pushed.append
         served.hub.record_click((0.0, -20.0, 10.0), (0.0, 1.0, -0.5))
         click = (await client.get("/scene/api/click", params={"token": TOKEN})).json()
@@ -157,3 +158,6 @@ async def test_click_endpoint_reports_the_ground_point_with_lat_lon(served: Serv
     assert click["east_m"] == pytest.approx(0.0, abs=1e-6)
     assert click["lat_deg"] == pytest.approx(47.397742, abs=1e-7)
     assert click["lon_deg"] == pytest.approx(8.545594, abs=1e-7)
+    # what the telemetry socket sends of it is the wire's scene_click message
+    message = {"type": "scene_click", **click}
+    assert SceneClickMessage.model_validate(message).model_dump() == message
