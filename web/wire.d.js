@@ -12,6 +12,7 @@
  */
 
 /**
+ * One check PX4 reports failing or warning about, in its words.
  * @typedef {Object} ArmingCheckOut
  * @property {string} text PX4's words
  * @property {string} severity PX4's log level; ERROR keeps the modes it concerns from arming
@@ -21,6 +22,7 @@
  */
 
 /**
+ * Ready to arm in the mode flown, and why not.
  * @typedef {Object} ArmingChecksOut
  * @property {boolean|null} ready arming would pass PX4's checks in `mode` (null: not told yet)
  * @property {string} mode the mode judged: the one the vehicle flies
@@ -45,9 +47,9 @@
  * @property {number|null} roll_deg
  * @property {number|null} pitch_deg
  * @property {number|null} yaw_deg
- * @property {number|null} [rollspeed_deg_s]
- * @property {number|null} [pitchspeed_deg_s]
- * @property {number|null} [yawspeed_deg_s]
+ * @property {number|null} rollspeed_deg_s
+ * @property {number|null} pitchspeed_deg_s
+ * @property {number|null} yawspeed_deg_s
  */
 
 /**
@@ -118,6 +120,8 @@
  */
 
 /**
+ * ESTIMATOR_STATUS: the flags set and the test ratios PX4 checks its innovations
+ * against (1.0 is the limit).
  * @typedef {Object} EstimatorOut
  * @property {Array<string>} flags ESTIMATOR_STATUS flags set, without ESTIMATOR_
  * @property {boolean} healthy attitude, horizontal velocity and position valid
@@ -220,22 +224,24 @@
  */
 
 /**
+ * A link's traffic: what came in, what went out, what was lost or broken.
  * @typedef {Object} LinkOut
  * @property {string} url
- * @property {boolean} connected
+ * @property {boolean} connected at least one vehicle on the link is heard (not silent)
  * @property {number} frames_in
  * @property {number} frames_out
  * @property {number} bytes_in
  * @property {number} bytes_out
- * @property {number} lost_frames
- * @property {number} bad_frames
- * @property {number} [unverified_frames] frames whose message id cannot be CRC-checked: counted and dropped
- * @property {number|null} last_heartbeat_age_s
- * @property {number} [reconnects]
+ * @property {number} lost_frames sequence gaps, per source system and component
+ * @property {number} bad_frames bad CRC, garbage, truncated frames: counted and dropped
+ * @property {number|null} last_heartbeat_age_s null before the first vehicle HEARTBEAT
+ * @property {number} reconnects
  * @property {SigningOut|null} [signing]
+ * @property {number} [unverified_frames] frames whose message id cannot be CRC-checked: counted and dropped
  */
 
 /**
+ * How well one vehicle is heard: the figures behind the lost verdict and the warning.
  * @typedef {Object} LinkQualityOut
  * @property {number} silent_s since the vehicle's last valid frame
  * @property {number} lost_after_s the silence that makes it lost: silence_timeout_s while it streams, heartbeat_timeout_s otherwise
@@ -469,14 +475,15 @@
  */
 
 /**
+ * Setpoint stream figures since it started; intervals from a bounded recent window.
  * @typedef {Object} StreamOut
- * @property {boolean} active
- * @property {number|null} rate_hz
+ * @property {boolean} [active]
+ * @property {number|null} [rate_hz]
  * @property {number|null} [interval_p50_ms]
- * @property {number|null} interval_p99_ms
- * @property {number|null} max_gap_ms
+ * @property {number|null} [interval_p99_ms]
+ * @property {number|null} [max_gap_ms]
  * @property {number} [gaps]
- * @property {number} sent
+ * @property {number} [sent]
  * @property {number|null} [since_last_ms]
  */
 
@@ -505,6 +512,7 @@
  */
 
 /**
+ * A vehicle's state: one snapshot of everything the link knows of it.
  * @typedef {Object} VehicleStateOut
  * @property {number} id
  * @property {number} sysid

@@ -61,7 +61,7 @@ class ReportedCheck:
     def shown(self) -> ArmingCheck:
         return ArmingCheck(
             self.text, log_level_name(self.log_level), mode_names(self.mode_groups),
-            self.component, self.group,
+            self.component, "health" if self.group == "health" else "arming_check",
         )  # fmt: skip
 
 

@@ -2,31 +2,12 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
-from .signing import SigningStats
+from .snapshot import LinkStats as LinkStats
 
 # MAVLink sequence numbers are one byte per sending component.
 _SEQ_MODULO = 256
 # A frame this far behind the newest of its sender is a late one, not a jump ahead.
 REORDER_WINDOW = 32
-
-
-@dataclass(frozen=True)
-class LinkStats:
-    url: str
-    connected: bool  # at least one vehicle on the link is heard (not silent, see liveness)
-    frames_in: int
-    frames_out: int
-    bytes_in: int
-    bytes_out: int
-    lost_frames: int  # sequence gaps, per source system and component
-    bad_frames: int  # bad CRC, garbage, truncated frames: counted and dropped
-    last_heartbeat_age_s: float | None  # None before the first vehicle HEARTBEAT
-    reconnects: int
-    signing: SigningStats | None = None  # MAVLink 2 signing: on or off, what was rejected
-    # frames of ids outside the dialect, whose checksum cannot be checked: counted, dropped
-    unverified_frames: int = 0
 
 
 class SequenceGapCounter:

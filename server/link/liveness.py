@@ -23,6 +23,9 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass, field
+from typing import Literal
+
+from server.link.snapshot import LinkQuality as LinkQuality
 
 # A vehicle sending at least this many frames a second is judged by its silence.
 STREAMING_RATE_HZ = 10.0
@@ -43,25 +46,6 @@ LOSS_WARN_PCT = 15.0
 LOSS_CLEAR_PCT = 10.0
 # PX4 sends its HEARTBEAT at 1 Hz: this late, although other frames arrive, is a warning.
 HEARTBEAT_WARN_S = 3.0
-
-
-@dataclass(frozen=True)
-class LinkQuality:
-    """How well one vehicle is heard: the figures behind the lost verdict and the warning."""
-
-    silent_s: float  # since its last valid frame
-    lost_after_s: float  # the silence that makes it lost (its bound now)
-    rate_hz: float  # its valid frames a second
-    # frames lost on the way, in percent over the last LOSS_WINDOW_S (None: too few frames):
-    # vehicle -> server from its sequence numbers, server -> vehicle as the vehicle reports
-    # it (PX4's LINK_NODE_STATUS), None where it does not
-    loss_in_pct: float | None
-    loss_out_pct: float | None
-    heartbeat_age_s: float
-    degraded: bool
-    # why it is degraded: "silence", "loss_in", "loss_out", "heartbeat" (see warnings)
-    causes: tuple[str, ...]
-    warnings: tuple[str, ...]  # the same, in words with the figures
 
 
 @dataclass
@@ -196,7 +180,7 @@ class Liveness:
         heartbeat_age_s = max(0.0, now_s - heard.last_heartbeat_s)
         loss_in = heard.loss_in.pct(now_s)
         loss_out = heard.loss_out.pct(now_s)
-        warnings: dict[str, str] = {}
+        warnings: dict[Literal["silence", "loss_in", "loss_out", "heartbeat"], str] = {}
         silent = silent_s > SILENCE_WARN_SHARE * bound_s
         if silent:
             warnings["silence"] = f"nothing heard for {silent_s:.1f} s (lost at {bound_s:.1f} s)"

@@ -1,5 +1,5 @@
-"""Vehicle state snapshots (frozen, JSON-able via dataclasses.asdict) and latest-wins
-subscriptions to them."""
+"""Vehicle state snapshots (the classes generated from the wire models, in snapshot.py) and
+latest-wins subscriptions to them."""
 
 from __future__ import annotations
 
@@ -8,12 +8,42 @@ import math
 import weakref
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from typing import Literal
 
 from server.link.aio import loop_time_s
-from server.link.link_stats import LinkStats
-from server.link.liveness import LinkQuality
+from server.link.snapshot import (
+    ArmingCheck,
+    ArmingChecksState,
+    AttitudeState,
+    BatteryState,
+    EstimatorState,
+    GlobalState,
+    GpsState,
+    HomeState,
+    OriginState,
+    PositionNedState,
+    StatusText,
+    StreamStats,
+    VehicleState,
+    VelocityNedState,
+)
+
+__all__ = [
+    "ArmingCheck",
+    "ArmingChecksState",
+    "AttitudeState",
+    "BatteryState",
+    "EstimatorState",
+    "GlobalState",
+    "GpsState",
+    "HomeState",
+    "OriginState",
+    "PositionNedState",
+    "StatusText",
+    "StreamStats",
+    "VehicleState",
+    "VelocityNedState",
+]
 
 LandedState = Literal["UNDEFINED", "ON_GROUND", "IN_AIR", "TAKEOFF", "LANDING"]
 VtolState = Literal["UNDEFINED", "MC", "FW", "TRANSITION_TO_FW", "TRANSITION_TO_MC"]
@@ -50,180 +80,6 @@ class RateGrid:
     def take(self, now_s: float) -> None:
         following_s = self.next_s + self.interval_s
         self.next_s = following_s if following_s > now_s else now_s + self.interval_s
-
-
-@dataclass(frozen=True)
-class PositionNedState:
-    north_m: float
-    east_m: float
-    down_m: float
-
-
-@dataclass(frozen=True)
-class VelocityNedState:
-    north_m_s: float
-    east_m_s: float
-    down_m_s: float
-
-
-@dataclass(frozen=True)
-class GlobalState:
-    lat_deg: float
-    lon_deg: float
-    alt_amsl_m: float
-    alt_rel_m: float
-
-
-@dataclass(frozen=True)
-class AttitudeState:
-    roll_deg: float
-    pitch_deg: float
-    yaw_deg: float
-    rollspeed_deg_s: float
-    pitchspeed_deg_s: float
-    yawspeed_deg_s: float
-
-
-@dataclass(frozen=True)
-class BatteryState:
-    voltage_v: float | None
-    current_a: float | None
-    remaining_pct: float | None
-    # BATTERY_STATUS only (None until one came, or when the vehicle does not know)
-    consumed_mah: float | None = None
-    time_remaining_s: float | None = None
-
-
-@dataclass(frozen=True)
-class EstimatorState:
-    """ESTIMATOR_STATUS: the ESTIMATOR_* flags set (names without the prefix), and the
-    test ratios PX4 checks its innovations against (1.0 is the limit)."""
-
-    flags: tuple[str, ...]
-    healthy: bool  # attitude, velocity and horizontal position solutions all valid
-    pos_horiz_ratio: float | None
-    pos_vert_ratio: float | None
-    mag_ratio: float | None
-
-
-@dataclass(frozen=True)
-class GpsState:
-    fix_type: str
-    satellites: int
-    hdop: float | None
-
-
-@dataclass(frozen=True)
-class HomeState:
-    lat_deg: float
-    lon_deg: float
-    alt_amsl_m: float
-    north_m: float
-    east_m: float
-    down_m: float
-
-
-@dataclass(frozen=True)
-class OriginState:
-    lat_deg: float
-    lon_deg: float
-    alt_amsl_m: float
-
-
-@dataclass(frozen=True)
-class StatusText:
-    time_s: float
-    severity: str
-    text: str
-
-
-@dataclass(frozen=True)
-class ArmingCheck:
-    """One check PX4 reports failing or warning about, in its words."""
-
-    text: str
-    severity: str  # PX4's log level: ERROR keeps the modes it names from arming
-    modes: tuple[str, ...]  # the modes it concerns
-    component: str | None  # PX4's health component ("Global position estimate")
-    kind: str  # "arming_check", or "health" for a component's health
-
-
-@dataclass(frozen=True)
-class ArmingChecksState:
-    """Ready to arm in the mode flown, and why not."""
-
-    ready: bool | None  # None until the vehicle told
-    mode: str  # the mode judged: the one flown
-    source: str  # "events": PX4's check report; "sys_status": only SYS_STATUS's bits
-    can_arm_modes: tuple[str, ...]  # the modes PX4 would arm in now (events only)
-    reasons: tuple[ArmingCheck, ...]  # the checks concerning `mode`, errors first
-    other_reasons: tuple[ArmingCheck, ...]  # the checks concerning only other modes
-
-
-@dataclass(frozen=True)
-class StreamStats:
-    """Setpoint streamer figures since it started; intervals from a bounded recent window."""
-
-    active: bool = False
-    rate_hz: float = 0.0
-    interval_p50_ms: float | None = None
-    interval_p99_ms: float | None = None
-    max_gap_ms: float | None = None
-    gaps: int = 0
-    sent: int = 0
-    since_last_ms: float | None = None
-
-
-@dataclass(frozen=True)
-class VehicleState:
-    sysid: int
-    compid: int
-    mav_type: str
-    autopilot: str
-    connected: bool
-    last_heartbeat_age_s: float
-    mode: str
-    user_mode: str | None
-    armed: bool
-    ready_to_arm: bool | None
-    system_status: str
-    landed_state: LandedState
-    vtol_state: VtolState
-    position_ned: PositionNedState | None
-    velocity_ned: VelocityNedState | None
-    global_position: GlobalState | None
-    attitude: AttitudeState | None
-    ground_speed_m_s: float | None
-    air_speed_m_s: float | None
-    climb_rate_m_s: float | None
-    heading_deg: float | None
-    battery: BatteryState | None
-    gps: GpsState | None
-    home: HomeState | None
-    origin: OriginState | None
-    setpoint: dict[str, object] | None
-    target_ned: PositionNedState | None
-    stream: StreamStats
-    actuator_outputs: tuple[float, ...]
-    statustext: tuple[StatusText, ...]
-    rtl_phase: str | None
-    link: LinkStats
-    updated_s: float
-    telemetry_refused: tuple[str, ...] = field(default=())
-    # live fields not to be taken as current: all of them while the link is lost, those
-    # not reported again since it came back (the mode then reads UNKNOWN until it is)
-    stale: tuple[str, ...] = field(default=())
-    estimator: EstimatorState | None = None
-    # SYS_STATUS: the sensors present and enabled but reported unhealthy (MAV_SYS_STATUS_
-    # names without the prefix); None until a SYS_STATUS came
-    sensors_unhealthy: tuple[str, ...] | None = None
-    # seconds since each message type that fills the state was last received, by its
-    # MAVLink name (the age of every value: a value is as old as its source message)
-    message_ages_s: dict[str, float] = field(default_factory=dict)
-    # how well the vehicle is heard, and the warning before a loss (None before the link's
-    # first look)
-    link_quality: LinkQuality | None = None
-    arming_checks: ArmingChecksState | None = None
 
 
 class StateSubscription:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -11,36 +11,46 @@ from skyhelm_wire.setpoints import SetpointBody
 from skyhelm_wire.signing import SigningOut
 
 
+class NanIsNull:
+    """Marks a number the server always has, NaN while unknown; JSON has no NaN, so it
+    travels as null. The link's snapshot (generated from these models by
+    `python -m tools.gen_link_state`) holds it as a plain float."""
+
+
+# a float on the server, null on the wire while it is NaN
+FloatNaN = Annotated[float | None, NanIsNull()]
+
+
 class _Out(BaseModel):
     model_config = ConfigDict(extra="ignore")
 
 
 class PositionNedOut(_Out):
-    north_m: float | None
-    east_m: float | None
-    down_m: float | None
+    north_m: FloatNaN
+    east_m: FloatNaN
+    down_m: FloatNaN
 
 
 class VelocityNedOut(_Out):
-    north_m_s: float | None
-    east_m_s: float | None
-    down_m_s: float | None
+    north_m_s: FloatNaN
+    east_m_s: FloatNaN
+    down_m_s: FloatNaN
 
 
 class GlobalOut(_Out):
-    lat_deg: float | None
-    lon_deg: float | None
-    alt_amsl_m: float | None
-    alt_rel_m: float | None
+    lat_deg: FloatNaN
+    lon_deg: FloatNaN
+    alt_amsl_m: FloatNaN
+    alt_rel_m: FloatNaN
 
 
 class AttitudeOut(_Out):
-    roll_deg: float | None
-    pitch_deg: float | None
-    yaw_deg: float | None
-    rollspeed_deg_s: float | None = None
-    pitchspeed_deg_s: float | None = None
-    yawspeed_deg_s: float | None = None
+    roll_deg: FloatNaN
+    pitch_deg: FloatNaN
+    yaw_deg: FloatNaN
+    rollspeed_deg_s: FloatNaN
+    pitchspeed_deg_s: FloatNaN
+    yawspeed_deg_s: FloatNaN
 
 
 class BatteryOut(_Out):
@@ -54,6 +64,9 @@ class BatteryOut(_Out):
 
 
 class EstimatorOut(_Out):
+    """ESTIMATOR_STATUS: the flags set and the test ratios PX4 checks its innovations
+    against (1.0 is the limit)."""
+
     flags: list[str] = Field(description="ESTIMATOR_STATUS flags set, without ESTIMATOR_")
     healthy: bool = Field(description="attitude, horizontal velocity and position valid")
     pos_horiz_ratio: float | None
@@ -68,49 +81,57 @@ class GpsOut(_Out):
 
 
 class HomeOut(_Out):
-    lat_deg: float | None
-    lon_deg: float | None
-    alt_amsl_m: float | None
-    north_m: float | None
-    east_m: float | None
-    down_m: float | None
+    lat_deg: FloatNaN
+    lon_deg: FloatNaN
+    alt_amsl_m: FloatNaN
+    north_m: FloatNaN
+    east_m: FloatNaN
+    down_m: FloatNaN
 
 
 class OriginOut(_Out):
-    lat_deg: float | None
-    lon_deg: float | None
-    alt_amsl_m: float | None
+    lat_deg: FloatNaN
+    lon_deg: FloatNaN
+    alt_amsl_m: FloatNaN
 
 
 class StreamOut(_Out):
-    active: bool
-    rate_hz: float | None
+    """Setpoint stream figures since it started; intervals from a bounded recent window."""
+
+    active: bool = False
+    rate_hz: FloatNaN = 0.0
     interval_p50_ms: float | None = None
-    interval_p99_ms: float | None
-    max_gap_ms: float | None
+    interval_p99_ms: float | None = None
+    max_gap_ms: float | None = None
     gaps: int = 0
-    sent: int
+    sent: int = 0
     since_last_ms: float | None = None
 
 
 class LinkOut(_Out):
+    """A link's traffic: what came in, what went out, what was lost or broken."""
+
     url: str
-    connected: bool
+    connected: bool = Field(description="at least one vehicle on the link is heard (not silent)")
     frames_in: int
     frames_out: int
     bytes_in: int
     bytes_out: int
-    lost_frames: int
-    bad_frames: int
+    lost_frames: int = Field(description="sequence gaps, per source system and component")
+    bad_frames: int = Field(description="bad CRC, garbage, truncated frames: counted and dropped")
+    last_heartbeat_age_s: float | None = Field(
+        description="null before the first vehicle HEARTBEAT"
+    )
+    reconnects: int
+    signing: SigningOut | None = None
     unverified_frames: int = Field(
         0, description="frames whose message id cannot be CRC-checked: counted and dropped"
     )
-    last_heartbeat_age_s: float | None
-    reconnects: int = 0
-    signing: SigningOut | None = None
 
 
 class LinkQualityOut(_Out):
+    """How well one vehicle is heard: the figures behind the lost verdict and the warning."""
+
     silent_s: float = Field(description="since the vehicle's last valid frame")
     lost_after_s: float = Field(
         description="the silence that makes it lost: silence_timeout_s while it streams, "
@@ -137,6 +158,8 @@ class StatusTextOut(_Out):
 
 
 class ArmingCheckOut(_Out):
+    """One check PX4 reports failing or warning about, in its words."""
+
     text: str = Field(description="PX4's words", examples=["No offboard signal"])
     severity: str = Field(
         description="PX4's log level; ERROR keeps the modes it concerns from arming",
@@ -148,6 +171,8 @@ class ArmingCheckOut(_Out):
 
 
 class ArmingChecksOut(_Out):
+    """Ready to arm in the mode flown, and why not."""
+
     ready: bool | None = Field(
         description="arming would pass PX4's checks in `mode` (null: not told yet)"
     )
@@ -177,6 +202,8 @@ class VehicleSummaryOut(_Out):
 
 
 class VehicleStateOut(_Out):
+    """A vehicle's state: one snapshot of everything the link knows of it."""
+
     model_config = ConfigDict(extra="ignore", populate_by_name=True)
 
     id: int
@@ -185,7 +212,7 @@ class VehicleStateOut(_Out):
     type: str
     autopilot: str
     connected: bool
-    last_heartbeat_age_s: float | None
+    last_heartbeat_age_s: FloatNaN
     mode: str
     user_mode: str | None
     armed: bool
@@ -211,7 +238,7 @@ class VehicleStateOut(_Out):
     target_ned: PositionNedOut | None
     stream: StreamOut
     lease: LeaseStatusOut
-    actuator_outputs: list[float | None]
+    actuator_outputs: list[FloatNaN]
     statustext: list[StatusTextOut]
     rtl_phase: str | None
     link: LinkOut
