@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import subprocess
 import sys
+import textwrap
 import types
 import typing
 from pathlib import Path
@@ -155,8 +156,9 @@ def _fields(model: type[BaseModel], name: str) -> list[tuple[str, str, str | Non
 def _class(model: type[BaseModel], name: str) -> list[str]:
     frozen = "frozen=True, kw_only=True" if name in KW_ONLY else "frozen=True"
     lines = ["", "", f"@dataclass({frozen})", f"class {name}:"]
-    doc = " ".join((model.__dict__.get("__doc__") or f"As the wire's {model.__name__}.").split())
-    lines.append(f'    """{doc}"""')
+    doc = model.__dict__.get("__doc__") or f"As the wire's {model.__name__}."
+    wrapped = textwrap.wrap(f'"""{" ".join(doc.split())}"""', 96)
+    lines.extend(f"    {line}" for line in wrapped)
     lines.append("")
     for field_name, link_type, default, description in _fields(model, name):
         lines.extend(_comment(description, "    "))

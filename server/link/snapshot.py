@@ -65,7 +65,8 @@ class BatteryState:
 
 @dataclass(frozen=True)
 class EstimatorState:
-    """ESTIMATOR_STATUS: the flags set and the test ratios PX4 checks its innovations against (1.0 is the limit)."""
+    """ESTIMATOR_STATUS: the flags set and the test ratios PX4 checks its innovations against (1.0
+    is the limit)."""
 
     # ESTIMATOR_STATUS flags set, without ESTIMATOR_
     flags: tuple[str, ...]
