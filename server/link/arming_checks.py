@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import development as mavlink
 
-from server.link.state import ArmingCheck, ArmingChecksState
+from server.link.snapshot import ArmingCheck, ArmingChecksState
 
 # libevents' log levels (the low nibble of an EVENT's log_levels is the external one)
 EVENT_LOG_LEVEL_NAMES = (

@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from server.link.geo import ground_distance_m
-from server.link.state import HomeState
+from server.link.snapshot import HomeState
 
 
 class SetpointRejected(ValueError):

@@ -26,7 +26,7 @@ from collections.abc import Callable
 
 from pymavlink.dialects.v20 import development as mavlink
 
-from server.link.state import StreamStats
+from server.link.snapshot import StreamStats
 from server.link.stream_channel import ProcessGone, StreamChannel
 from server.link.stream_thread import Deadlines, SenderThread, shared_sender
 
