@@ -29,8 +29,8 @@ from typing import Any
 
 from pymavlink.dialects.v20 import development as mavlink
 
-from sim.endpoint import UdpLink
-from sim.runner import SimCluster
+from sim.mavlink.endpoint import UdpLink
+from sim.process.runner import SimCluster
 
 SIOCGSTAMP = 0x8906  # linux/sockios.h: struct timeval of the last packet read
 _TIMEVAL = struct.Struct("@ll")

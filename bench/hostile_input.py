@@ -49,7 +49,7 @@ from bench._markdown import ratio, table
 from bench._report import Section
 from bench._results import machine_info, write_results
 from server.link import Link, Vehicle
-from sim.runner import SimCluster
+from sim.process.runner import SimCluster
 
 LOOPBACK = "127.0.0.1"
 VEHICLE_SYSID = 1

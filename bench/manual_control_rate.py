@@ -22,8 +22,8 @@ from typing import Any
 
 from bench._results import machine_info, write_results
 from server.link import Link, Sticks
-from sim.manual_control import StickSample
-from sim.runner import SimCluster
+from sim.flight.manual_control import StickSample
+from sim.process.runner import SimCluster
 
 PILOT_RATES_HZ = (8.0, 25.0, 60.0)
 BURST_S = 0.020

@@ -39,8 +39,8 @@ from websockets.asyncio.client import connect
 
 from bench._results import machine_info, write_results
 from bench._serve import cpu_seconds, percentile, served
-from sim.cli import VEHICLES_PER_PROCESS
-from sim.sim_processes import split_instances
+from sim.process.cli import VEHICLES_PER_PROCESS
+from sim.process.sim_processes import split_instances
 
 if TYPE_CHECKING:
     from bench._report import Section

@@ -17,9 +17,9 @@ from typing import Any
 from bench._markdown import table
 from bench._report import Section, save_figure
 from bench._results import machine_info, write_results
-from sim.airframes import AirframeModel, default_params, make_airframe
-from sim.sim_run import PHYSICS_DT_S, fly
-from sim.topics import TrajectorySetpoint
+from sim.lib.topics import TrajectorySetpoint
+from sim.models.airframes import AirframeModel, default_params, make_airframe
+from sim.models.sim_run import PHYSICS_DT_S, fly
 
 BLOCKS = 7
 STEPS_PER_BLOCK = 2500  # 10 s of simulated flight

@@ -27,9 +27,9 @@ from bench._markdown import ratio, table
 from bench._report import Section
 from bench._results import machine_info, write_results
 from server.link import Link, Vehicle
-from server.link.signing_keys import SigningKeyStore, signing_timestamp
-from server.link.signing_provision import provision
-from sim.runner import SimCluster
+from server.link.codec.signing_keys import SigningKeyStore, signing_timestamp
+from server.link.codec.signing_provision import provision
+from sim.process.runner import SimCluster
 
 CODEC_FRAMES = 20_000
 RATE_WINDOW_S = 3.0

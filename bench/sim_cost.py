@@ -21,8 +21,8 @@ import time
 from typing import TYPE_CHECKING, Any
 
 from bench._results import machine_info, write_results
-from sim import modes
-from sim.runner import SimCluster
+from sim.lib import modes
+from sim.process.runner import SimCluster
 from sim.vehicle import PHYSICS_DT_S
 
 if TYPE_CHECKING:

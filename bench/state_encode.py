@@ -22,8 +22,8 @@ from bench._results import machine_info, write_results
 from server.control.publisher import Published, StatePublisher
 from server.control.slots import Slot
 from server.control.views import encode_state, state_json, state_message
-from server.link import state as link
-from server.link.link_stats import LinkStats
+from server.link.core import state as link
+from server.link.core.link_stats import LinkStats
 from tests.api.state_fakes import PushingVehicle
 
 GOAL_US = 40.0

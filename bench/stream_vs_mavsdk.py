@@ -12,8 +12,8 @@ measures both in the same seconds:
   holds 50 WebSocket telemetry clients at 10 Hz and makes 50 REST reads/s on the server.
 
 The server runs once per variant of its send path: ``process`` (the sender process of
-server.link.stream_process, the default), ``thread`` (the sender thread of
-server.link.stream_thread), ``loop`` (the stream timed by the event loop;
+server.link.stream.stream_process, the default), ``thread`` (the sender thread of
+server.link.stream.stream_thread), ``loop`` (the stream timed by the event loop;
 SKYHELM_STREAM_SENDER=loop) and, with ``--variants``, ``thread-5ms`` (the thread
 with CPython's default 5 ms GIL switch interval). Figures per row: p50/p99 of
 |interval − period|, the largest interval, gaps over 100 ms, and the lateness samples
@@ -278,7 +278,7 @@ async def synthetic_load(stop: asyncio.Event) -> None:
 
 def process_sender(port: int, frame_hex: str, rate_hz: float, seconds: float) -> None:
     """The sender process: one precomputed frame on absolute deadlines, nothing else."""
-    from server.link.stream_thread import Deadlines
+    from server.link.stream.stream_thread import Deadlines
 
     frame = bytes.fromhex(frame_hex)
     deadlines = Deadlines(1.0 / rate_hz)
@@ -297,8 +297,8 @@ async def measure_sender_options(receiver: ReceiverProcess, seconds: float
                                  ) -> list[dict[str, Any]]:
     from pymavlink.dialects.v20 import development as mavlink
 
-    from server.link import streamer as streamer_module
-    from server.link.streamer import SetpointStreamer
+    from server.link.stream import streamer as streamer_module
+    from server.link.stream.streamer import SetpointStreamer
 
     rows = []
     dummy = mavlink.MAVLink(None).set_position_target_local_ned_encode(

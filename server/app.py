@@ -47,8 +47,8 @@ from server.http.errors import install_error_handlers
 from server.http.security import install_security
 from server.http.tile_archive import open_tile_archive
 from server.link import Envelope, Link
-from server.link.signing_keys import SigningKeyError, SigningKeyStore
-from server.link.urls import parse_link_url
+from server.link.codec.signing_keys import SigningKeyError, SigningKeyStore
+from server.link.codec.urls import parse_link_url
 from server.scene import FleetScene, SceneHub
 from server.settings import Settings
 from server.simproc import SimProcess

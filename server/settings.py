@@ -25,8 +25,8 @@ from pydantic_settings import (
     TomlConfigSettingsSource,
 )
 
-from server.link.streamer import DEFAULT_RATE_HZ, MAX_RATE_HZ, MIN_RATE_HZ
-from server.link.urls import LinkUrlError, parse_link_url
+from server.link.codec.urls import LinkUrlError, parse_link_url
+from server.link.stream.streamer import DEFAULT_RATE_HZ, MAX_RATE_HZ, MIN_RATE_HZ
 
 OperatorLossAction = Literal["hold", "land", "rtl", "hold-mode", "continue"]
 Airframe = Literal["quad", "hexa", "octo", "plane", "vtol", "rover"]

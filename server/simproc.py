@@ -13,7 +13,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from server.link.aio import cancel_and_wait
+from server.link.codec.aio import cancel_and_wait
 
 log = logging.getLogger(__name__)
 

@@ -1,5 +1,5 @@
-"""`python -m sim`: the simulated PX4 vehicle as a process (see sim.cli)."""
+"""`python -m sim`: the simulated PX4 vehicle as a process (see sim.process.cli)."""
 
-from sim.cli import main
+from sim.process.cli import main
 
 raise SystemExit(main())

@@ -1,7 +1,7 @@
 """One simulated PX4 vehicle: airframe model, commander, navigator, MAVLink in and out.
 
 `SimVehicle.step()` is the 250 Hz heartbeat of everything and the only thing that moves
-its time (`now_s`, sim seconds); `sim.run_loop.run_vehicles()` calls it for a group of
+its time (`now_s`, sim seconds); `sim.process.run_loop.run_vehicles()` calls it for a group of
 vehicles, paced by a wall clock.
 """
 
@@ -13,22 +13,22 @@ from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
-from sim import modes
-from sim.airframes import AirframeModel
-from sim.battery import Battery
-from sim.commander import Commander
-from sim.geo import GeoPoint, LocalOrigin
-from sim.land_detector import LandDetector, MavLandedState
-from sim.mavlink_messages import MessageFactory
-from sim.navigator import Navigator
-from sim.params import ParamReader, ParamStore
-from sim.quat import yaw_from_quat
-from sim.receiver import Receiver
-from sim.rtl_direct import RtlPhase
-from sim.sim_run import PHYSICS_DT_S
-from sim.streams import NORMAL_RATES_HZ, ONBOARD_RATES_HZ, StreamSet
-from sim.topics import ControlSetpoint, TrajectorySetpoint, VehicleStateTruth, VtolState
-from sim.vehicle_interface import Link, Message
+from sim.flight.commander import Commander
+from sim.flight.land_detector import LandDetector, MavLandedState
+from sim.flight.navigator import Navigator
+from sim.flight.rtl_direct import RtlPhase
+from sim.lib import modes
+from sim.lib.geo import GeoPoint, LocalOrigin
+from sim.lib.params import ParamReader, ParamStore
+from sim.lib.quat import yaw_from_quat
+from sim.lib.topics import ControlSetpoint, TrajectorySetpoint, VehicleStateTruth, VtolState
+from sim.mavlink.mavlink_messages import MessageFactory
+from sim.mavlink.receiver import Receiver
+from sim.mavlink.streams import NORMAL_RATES_HZ, ONBOARD_RATES_HZ, StreamSet
+from sim.mavlink.vehicle_interface import Link, Message
+from sim.models.airframes import AirframeModel
+from sim.models.sim_run import PHYSICS_DT_S
+from sim.physics.battery import Battery
 
 __all__ = [
     "BOOT_TIME_S",
@@ -61,7 +61,7 @@ DefaultsFactory = Callable[[str], dict[str, float | int]]
 
 
 def _physics() -> tuple[AirframeFactory, DefaultsFactory]:
-    from sim import airframes  # the physics side; imported late so tests can stand in
+    from sim.models import airframes
 
     return airframes.make_airframe, airframes.param_defaults
 

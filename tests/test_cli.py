@@ -195,7 +195,7 @@ def _write_recording(path: Path, duration_s: int) -> None:
 
     from pymavlink.dialects.v20 import development as mavlink
 
-    from server.link.tlog import TlogWriter
+    from server.link.codec.tlog import TlogWriter
 
     vehicle = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
     gcs = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)

@@ -19,7 +19,7 @@ import pytest
 from bench.run_all import BUDGET_S
 from server.cli import build_parser
 from server.settings import Settings
-from sim.cli import build_parser as build_sim_parser
+from sim.process.cli import build_parser as build_sim_parser
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"

@@ -13,7 +13,7 @@ import annotated_types
 import pytest
 
 from server.cli import build_parser, main
-from server.link.streamer import MAX_RATE_HZ, MIN_RATE_HZ, SetpointStreamer
+from server.link.stream.streamer import MAX_RATE_HZ, MIN_RATE_HZ, SetpointStreamer
 from server.settings import Settings, load_settings
 
 

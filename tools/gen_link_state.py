@@ -1,7 +1,7 @@
-"""Write the link's state snapshot (server/link/snapshot.py) from the wire models
+"""Write the link's state snapshot (server/link/codec/snapshot.py) from the wire models
 (skyhelm_wire.state), so a state field is defined once, on the wire.
 
-    python -m tools.gen_link_state           # rewrite server/link/snapshot.py
+    python -m tools.gen_link_state           # rewrite server/link/codec/snapshot.py
     python -m tools.gen_link_state --check   # exit 1 if the checked-in file is not current
 
 Each wire model becomes a frozen dataclass the link fills and the API encodes as it is
@@ -51,7 +51,7 @@ CLASSES: tuple[tuple[type[BaseModel], str], ...] = (
 )
 # wire models the link keeps in a module of its own: (module, class)
 ELSEWHERE: dict[type[BaseModel], tuple[str, str]] = {
-    signing.SigningOut: ("server.link.signing", "SigningStats"),
+    signing.SigningOut: ("server.link.codec.signing", "SigningStats"),
 }
 # per class, how a wire field maps onto the snapshot: a new name, a type of the link's, or
 # None for a field the API writes around the snapshot (the vehicle id, the lease)

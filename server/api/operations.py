@@ -21,7 +21,7 @@ from server.http.schemas.intents import (
     VelocityIntentBody,
 )
 from server.link import CommandResult, SentSetpoint, Vehicle, intents
-from server.link.envelope import GeoTarget, check_takeoff_altitude, check_target
+from server.link.codec.envelope import GeoTarget, check_takeoff_altitude, check_target
 from server.link.intents import IntentResult
 
 

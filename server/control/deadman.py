@@ -27,7 +27,7 @@ from server.control.control_events import ControlEvents
 from server.control.lease import OPERATOR_LOST, Lease, LeaseManager
 from server.control.registry import VehicleRegistry
 from server.link import CommandResult, SentSetpoint, Vehicle
-from server.link.aio import cancel_and_wait
+from server.link.codec.aio import cancel_and_wait
 from server.link.intents import brake_then_hold
 from server.settings import OperatorLossAction, Settings
 from skyhelm_wire.setpoint_kinds import describe as setpoint_as_dict

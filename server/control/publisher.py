@@ -37,8 +37,8 @@ from typing import Protocol
 from server.control.slots import Slot
 from server.control.views import LeaseStatus, encode_state, state_json, state_message
 from server.link import VehicleState
-from server.link.aio import cancel_and_wait, loop_time_s
-from server.link.state import WAKE_BATCH, RateGrid, StateSubscription
+from server.link.codec.aio import cancel_and_wait, loop_time_s
+from server.link.core.state import WAKE_BATCH, RateGrid, StateSubscription
 
 DEFAULT_MAX_RATE_HZ = 50.0
 # How often the vehicle's connection is checked (for the vehicle list) when no tier is due

@@ -29,7 +29,7 @@ from server.fleet.edge_publish import VehiclePublication
 from server.fleet.keys import FleetKeys, check_name
 from server.fleet.session import ZenohOptions, open_session, options_from_settings, undeclare
 from server.link import Vehicle
-from server.link.aio import cancel_and_wait
+from server.link.codec.aio import cancel_and_wait
 from server.settings import Settings
 
 log = logging.getLogger(__name__)

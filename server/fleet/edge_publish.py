@@ -33,7 +33,7 @@ from server.fleet.keys import TIER_RATE_HZ, FleetKeys, StateTier
 from server.fleet.session import undeclare
 from server.http.ws_common import EVENT_BACKLOG
 from server.link import Vehicle
-from server.link.aio import cancel_and_wait
+from server.link.codec.aio import cancel_and_wait
 
 log = logging.getLogger(__name__)
 

@@ -36,7 +36,7 @@ from server.control.views import LeaseStatus, finite, state_json, stream_dict
 from server.foxglove import wire
 from server.foxglove.derived import LEVEL_BY_SEVERITY_NAME
 from server.link import Link, Vehicle, VehicleEvent, VehicleState
-from server.link.aio import cancel_and_wait
+from server.link.codec.aio import cancel_and_wait
 
 log = logging.getLogger(__name__)
 

@@ -16,8 +16,8 @@ from pymavlink.dialects.v20 import development as mavlink
 
 from server.foxglove.channels import LinkChannels
 from server.foxglove.router import FrameRouter
-from server.link import px4_messages
-from server.link.tlog import iter_tlog
+from server.link.codec import px4_messages
+from server.link.codec.tlog import iter_tlog
 
 GCS_SYSID = 255
 GCS_COMPID = 190

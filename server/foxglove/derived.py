@@ -23,7 +23,7 @@ from foxglove.messages import (
 )
 
 from server.foxglove.channels import WORLD_FRAME, VehicleChannels
-from server.link.statustext import StatusTextAssembler
+from server.link.codec.statustext import StatusTextAssembler
 
 MAV_COMP_ID_AUTOPILOT1 = 1
 # MAV_SEVERITY 0..7 (EMERGENCY … DEBUG) as Foxglove's log levels

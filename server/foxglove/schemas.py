@@ -94,7 +94,7 @@ def mavlink_schema(msg: mavlink.MAVLink_message) -> JsonSchema:
     """A MAVLink message's fields (units and enums in their descriptions), plus `_compid`:
     the component that sent it (a vehicle's camera and autopilot share a topic). Types
     come from the dialect; where it says too little (messages defined by their wire
-    layout only, server.link.px4_messages) the first message's values tell."""
+    layout only, server.link.codec.px4_messages) the first message's values tell."""
     message_class = type(msg)
     lengths = dict(zip(message_class.ordered_fieldnames, message_class.array_lengths, strict=False))
     units: dict[str, str] = getattr(message_class, "fieldunits_by_name", {})

@@ -5,18 +5,15 @@ state a vehicle reports, and what its operations return. Nothing of HTTP, pydant
 viser is imported here.
 """
 
-from . import setpoints as _setpoints
-from .commands import CommandOutcome, CommandResult
-from .events import VehicleEvent
-from .link import Link
-from .link_stats import LinkStats
-from .liveness import LinkQuality
-from .manual_control import Sticks
-from .modes import PX4_MODE_NAMES
-from .params import ParamError
-from .setpoint_checks import Envelope, SetpointRejected, check
-from .setpoints import *  # noqa: F403  (the setpoint kinds, encode, resolve, describe)
-from .state import (
+from server.link.codec import setpoints as _setpoints
+from server.link.codec.commands import CommandOutcome, CommandResult
+from server.link.codec.modes import PX4_MODE_NAMES
+from server.link.codec.setpoint_checks import Envelope, SetpointRejected, check
+from server.link.codec.setpoints import *  # noqa: F403  (the setpoint kinds, encode, resolve, describe)
+from server.link.core.events import VehicleEvent
+from server.link.core.link_stats import LinkStats
+from server.link.core.liveness import LinkQuality
+from server.link.core.state import (
     AttitudeState,
     BatteryState,
     EstimatorState,
@@ -31,7 +28,10 @@ from .state import (
     VehicleState,
     VelocityNedState,
 )
-from .vehicle import Vehicle
+from server.link.link import Link
+from server.link.plugins.manual_control import Sticks
+from server.link.plugins.params import ParamError
+from server.link.vehicle import Vehicle
 
 __all__ = [
     "PX4_MODE_NAMES",

@@ -29,11 +29,11 @@ import weakref
 from dataclasses import dataclass
 from typing import Literal
 
-from server.link.aio import cancel_and_wait
-from server.link.commands import CommandResult
-from server.link.envelope import GeoTarget, SetpointRejected, check_target
-from server.link.geo import geodetic_from_ned_m
-from server.link.setpoints import (
+from server.link.codec.aio import cancel_and_wait
+from server.link.codec.commands import CommandResult
+from server.link.codec.envelope import GeoTarget, SetpointRejected, check_target
+from server.link.codec.geo import geodetic_from_ned_m
+from server.link.codec.setpoints import (
     MAV_FRAME_LOCAL_NED,
     POSITION_TARGET_TYPEMASK_AX_IGNORE,
     POSITION_TARGET_TYPEMASK_AY_IGNORE,

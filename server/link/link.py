@@ -20,18 +20,22 @@ from types import TracebackType
 
 from pymavlink.dialects.v20 import development as mavlink
 
-from . import px4_messages
-from .aio import cancel_and_wait
-from .link_stats import LinkStats, SequenceGapCounter
-from .liveness import DEFAULT_SILENCE_TIMEOUT_S, MAVLINK_HEARTBEAT_TIMEOUT_S, Liveness
-from .roster import MAV_COMP_ID_AUTOPILOT1, VehicleRoster
-from .signing import MAVLINK_MSG_ID_SETUP_SIGNING, LinkSigning
-from .signing_keys import SigningKeyStore
-from .stream_channel import LinkHandover, StreamChannel, decode_sent
-from .tlog import TlogWriter
-from .transports import Peer, Transport, create_transport
-from .urls import LinkUrl, parse_link_url
-from .vehicle import Vehicle
+from server.link.codec import px4_messages
+from server.link.codec.aio import cancel_and_wait
+from server.link.codec.signing import MAVLINK_MSG_ID_SETUP_SIGNING, LinkSigning
+from server.link.codec.signing_keys import SigningKeyStore
+from server.link.codec.tlog import TlogWriter
+from server.link.codec.urls import LinkUrl, parse_link_url
+from server.link.core.link_stats import LinkStats, SequenceGapCounter
+from server.link.core.liveness import (
+    DEFAULT_SILENCE_TIMEOUT_S,
+    MAVLINK_HEARTBEAT_TIMEOUT_S,
+    Liveness,
+)
+from server.link.roster import MAV_COMP_ID_AUTOPILOT1, VehicleRoster
+from server.link.stream.stream_channel import LinkHandover, StreamChannel, decode_sent
+from server.link.transports import Peer, Transport, create_transport
+from server.link.vehicle import Vehicle
 
 log = logging.getLogger(__name__)
 
@@ -72,7 +76,7 @@ class Link:
         self.address = address
         self.heartbeat_timeout_s = heartbeat_timeout_s
         self.mav = mavlink.MAVLink(None, srcSystem=gcs_sysid, srcComponent=gcs_compid)
-        # one signing state for the packer and every decoder (see server.link.signing)
+        # one signing state for the packer and every decoder (see server.link.codec.signing)
         self.signing = LinkSigning(signing_store, next(_signing_link_ids))
         self.mav.signing = self.signing.state
         transport.codec_factory = self.signing.codec
@@ -81,11 +85,11 @@ class Link:
         self._loop = asyncio.get_running_loop()
         self._loop_thread = threading.get_ident()
         # send() packs (sequence, signing), writes and counts under this lock: the setpoint
-        # sender thread sends too (server.link.stream_thread)
+        # sender thread sends too (server.link.stream.stream_thread)
         self._send_lock = threading.Lock()
         self._transport = transport
         # every frame goes out through the setpoint sender process once a stream put this
-        # link there (server.link.stream_channel): one sequence, one signing stream
+        # link there (server.link.stream.stream_channel): one sequence, one signing stream
         self._handover = LinkHandover(name, transport, self.mav, self.signing, self._loop,
                                       self._process_sent)
         self._tlog = tlog

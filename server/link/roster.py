@@ -1,5 +1,5 @@
 """The vehicles of one link: discovered by HEARTBEAT, kept alive by any valid frame, judged
-lost on silence (server.link.liveness), announced to subscribers as they appear."""
+lost on silence (server.link.core.liveness), announced to subscribers as they appear."""
 
 from __future__ import annotations
 
@@ -12,9 +12,9 @@ from typing import Any
 
 from pymavlink.dialects.v20 import development as mavlink
 
-from . import px4_messages
-from .liveness import Liveness
-from .vehicle import Vehicle
+from server.link.codec import px4_messages
+from server.link.core.liveness import Liveness
+from server.link.vehicle import Vehicle
 
 log = logging.getLogger(__name__)
 

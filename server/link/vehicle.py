@@ -5,12 +5,13 @@ every message from that system through handle_message(); the vehicle talks back 
 the ``Sender`` it was given (the Link). Like MAVSDK's plugins:
 
 - ``core``: identity, HEARTBEAT and connection, the send path, the one request protocol
-  (``commands``), events and state notifications (``server.link.core``)
+  (``commands``), events and state notifications (``server.link.core.vehicle_core``)
 - ``action``: arm, take off, land, return, hold, modes, reposition, VTOL, home and origin
 - ``offboard``: setpoints, their envelope and stream, OFFBOARD mode
-- ``params``: parameters (``server.link.params``)
+- ``params``: parameters (``server.link.plugins.params``)
 - ``telemetry``: what the vehicle reported; ``telemetry_requests``: asking for it
-- ``px4_events``: PX4's EVENTs decoded with the metadata it serves (``server.link.px4_events``)
+- ``px4_events``: PX4's EVENTs decoded with the metadata it serves
+  (``server.link.plugins.px4_events``)
 
 Every operation of a plugin is also callable on the vehicle itself (``vehicle.arm()``).
 """
@@ -24,24 +25,24 @@ from typing import Generic, Self, TypeVar, overload
 
 from pymavlink.dialects.v20 import development as mavlink
 
-from server.link.action import Action
-from server.link.aio import cancel_and_wait
-from server.link.arming_checks import readiness
-from server.link.core import Sender, VehicleCore
-from server.link.manual_control import ManualControl
-from server.link.mavlink_values import enum_name
-from server.link.offboard import Offboard
-from server.link.outage import OutageReport
-from server.link.params import ParamClient
-from server.link.px4_events import Px4Events
-from server.link.reboot import RebootWatch
-from server.link.requests import Requester
-from server.link.setpoint_checks import Envelope
-from server.link.setpoints import Setpoint, describe
-from server.link.state import VehicleState
-from server.link.streamer import DEFAULT_RATE_HZ
-from server.link.telemetry import Telemetry
-from server.link.telemetry_requests import TelemetryRequests
+from server.link.codec.aio import cancel_and_wait
+from server.link.codec.arming_checks import readiness
+from server.link.codec.setpoint_checks import Envelope
+from server.link.codec.setpoints import Setpoint, describe
+from server.link.core.requests import Requester
+from server.link.core.state import VehicleState
+from server.link.core.vehicle_core import Sender, VehicleCore
+from server.link.plugins.action import Action
+from server.link.plugins.manual_control import ManualControl
+from server.link.plugins.mavlink_values import enum_name
+from server.link.plugins.offboard import Offboard
+from server.link.plugins.outage import OutageReport
+from server.link.plugins.params import ParamClient
+from server.link.plugins.px4_events import Px4Events
+from server.link.plugins.reboot import RebootWatch
+from server.link.plugins.telemetry import Telemetry
+from server.link.plugins.telemetry_requests import TelemetryRequests
+from server.link.stream.streamer import DEFAULT_RATE_HZ
 
 T = TypeVar("T")
 log = logging.getLogger(__name__)

@@ -16,7 +16,7 @@ import numpy as np
 import viser
 from fastapi import FastAPI
 
-from server.link.aio import cancel_and_wait
+from server.link.codec.aio import cancel_and_wait
 from skyhelm_wire.messages import SceneClickMessage
 
 from .compass import CompassRose

@@ -15,7 +15,7 @@ from fastapi import FastAPI
 from server.app import create_app
 from server.link import Vehicle
 from server.settings import Settings, load_settings
-from sim.runner import SimCluster, SimInstance
+from sim.process.runner import SimCluster, SimInstance
 from tests.waiting import eventually
 
 PILOT = "pilot-token-for-tests"

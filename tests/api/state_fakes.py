@@ -11,8 +11,8 @@ from typing import cast
 
 from server.control.publishers import StatePublishers
 from server.link import Vehicle
-from server.link.aio import cancel_and_wait
-from server.link.state import StateSubscription, SubscriptionHub, VehicleState
+from server.link.codec.aio import cancel_and_wait
+from server.link.core.state import StateSubscription, SubscriptionHub, VehicleState
 from server.scene import SceneHub
 from tests.scene.conftest import FakeVehicle
 

@@ -15,7 +15,7 @@ from server.control.publishers import StatePublishers
 from server.control.slots import Slot
 from server.control.views import encode_state, state_json, state_message
 from server.http.schemas import VehicleStateOut
-from server.link.state import GlobalState, PositionNedState, VehicleState
+from server.link.core.state import GlobalState, PositionNedState, VehicleState
 from skyhelm_wire.messages import StateMessage
 from tests.api.state_fakes import PushingVehicle
 from tests.scene.conftest import make_state

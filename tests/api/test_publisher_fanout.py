@@ -12,8 +12,8 @@ import pytest
 
 from server.control.publisher import NEXT_MESSAGE_WAIT_SHARE, Published, StatePublisher
 from server.control.slots import Slot
-from server.link.aio import loop_time_s
-from server.link.state import PositionNedState
+from server.link.codec.aio import loop_time_s
+from server.link.core.state import PositionNedState
 from tests.api.state_fakes import PushingVehicle
 from tests.scene.conftest import make_state
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from sim.runner import SimCluster
+from sim.process.runner import SimCluster
 from tests.api.conftest import Api, api_for
 from tests.waiting import eventually
 

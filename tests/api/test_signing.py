@@ -14,7 +14,7 @@ from typing import Any, cast
 
 from pymavlink.dialects.v20 import development as mavlink
 
-from sim.runner import SimCluster
+from sim.process.runner import SimCluster
 from tests.api.conftest import OBSERVER, Api, api_for, auth
 from tests.sim.conftest import PointMassAirframe, point_mass_defaults
 from tests.waiting import holds_for, wait_for

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import pytest
 
 from server.link import VehicleEvent
-from sim.manual_control import StickSample
+from sim.flight.manual_control import StickSample
 from tests.api.conftest import SIM_SPEED, Api, api_for, sim_cluster
 from tests.waiting import eventually, wait_for
 

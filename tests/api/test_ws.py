@@ -16,7 +16,7 @@ import pytest
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 
-from server.link.events import VehicleEvent
+from server.link.core.events import VehicleEvent
 from tests.api.conftest import (
     OBSERVER,
     PILOT,

@@ -8,7 +8,7 @@ import asyncio
 import socket
 import time
 
-from sim.runner import SimCluster
+from sim.process.runner import SimCluster
 from tests.api.conftest import OBSERVER, SIM_SPEED, api_at
 from tests.faults.linkloss_rig import WsLog, ws_logging
 from tests.serving import uvicorn_serving

@@ -12,7 +12,7 @@ from fastapi import WebSocket, WebSocketDisconnect
 from starlette.websockets import WebSocketState
 
 from server.http.ws_common import SEND_TIMEOUT_S, Sender
-from server.link.aio import loop_time_s
+from server.link.codec.aio import loop_time_s
 
 pytestmark = pytest.mark.looptime
 

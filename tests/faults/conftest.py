@@ -8,7 +8,7 @@ import contextlib
 from collections.abc import AsyncIterator
 from typing import Any
 
-from sim.runner import SimCluster
+from sim.process.runner import SimCluster
 from tests.api.conftest import Api, api_at
 from tools.faultproxy import FaultProxy
 

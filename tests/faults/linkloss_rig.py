@@ -23,8 +23,8 @@ import httpx
 from pymavlink import mavutil
 from websockets.asyncio.client import ClientConnection, connect
 
-from server.link.tlog import iter_tlog
-from sim.runner import SimCluster
+from server.link.codec.tlog import iter_tlog
+from sim.process.runner import SimCluster
 from sim.vehicle import SimVehicle
 from tools.faultproxy import FaultProxy
 

@@ -19,9 +19,9 @@ from pymavlink.dialects.v20 import development as mavlink
 
 from bench.hostile_input import HostileFrames, run_hostile
 from server.link import Link
-from sim.endpoint import UdpLink, unknown_frame_crc_ok
-from sim.events import MAVLINK_MSG_ID_REQUEST_EVENT
-from sim.runner import SimCluster
+from sim.lib.events import MAVLINK_MSG_ID_REQUEST_EVENT
+from sim.mavlink.endpoint import UdpLink, unknown_frame_crc_ok
+from sim.process.runner import SimCluster
 from tests.sim.conftest import PointMassAirframe, point_mass_defaults
 from tests.waiting import holds_for, wait_for
 

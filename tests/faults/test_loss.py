@@ -19,8 +19,8 @@ import httpx
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
-from sim import modes
-from sim.runner import SimCluster
+from sim.lib import modes
+from sim.process.runner import SimCluster
 from tests.api.conftest import Api, sim_cluster
 from tests.faults.conftest import api_through, message_id, vehicle_behind_proxy
 from tests.waiting import wait_for

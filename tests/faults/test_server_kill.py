@@ -12,7 +12,7 @@ from typing import Any
 
 import httpx
 
-from server.link.tlog import iter_tlog
+from server.link.codec.tlog import iter_tlog
 from tests.faults.linkloss_rig import Rig, proxied_sim, read_tlog
 from tests.serve_process import Served, skyhelm_serve
 from tests.waiting import eventually, holds_for, wait_for

@@ -22,9 +22,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from server.link.signing import MAVLINK_MSG_ID_SETUP_SIGNING
-from server.link.signing_provision import PROVISION_CONFIRM_S, PROVISION_TRIES
-from sim.runner import SimInstance
+from server.link.codec.signing import MAVLINK_MSG_ID_SETUP_SIGNING
+from server.link.codec.signing_provision import PROVISION_CONFIRM_S, PROVISION_TRIES
+from sim.process.runner import SimInstance
 from tests.api.conftest import Api
 from tests.api.test_signing import post, signing_sim
 from tests.faults.conftest import api_through, vehicle_behind_proxy

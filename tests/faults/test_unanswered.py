@@ -11,7 +11,7 @@ from typing import Any
 
 import pytest
 
-from sim.runner import SimCluster
+from sim.process.runner import SimCluster
 from tests.api.conftest import Api, sim_cluster
 from tests.faults.conftest import api_through, vehicle_behind_proxy
 from tests.waiting import wait_for

@@ -26,7 +26,7 @@ from server.fleet.keys import FleetKeys
 from server.fleet.session import open_session
 from server.fleet.view_service import FleetService
 from server.http.schemas import VehicleStateOut
-from sim.runner import SimCluster
+from sim.process.runner import SimCluster
 from tests.api.conftest import (
     OBSERVER,
     PILOT,

@@ -8,7 +8,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import development as mavlink
 
-from server.link import px4_messages
+from server.link.codec import px4_messages
 
 
 def tlog_counts(records: Iterable[tuple[float, bytes]]) -> Counter[str]:

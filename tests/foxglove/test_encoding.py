@@ -17,7 +17,8 @@ from server.foxglove.derived import enu_flu_quaternion
 from server.foxglove.layout import layout_json
 from server.foxglove.mavlink_json import message_json
 from server.foxglove.schemas import HEALTH_SCHEMA, STATE_SCHEMA, foxglove_schema, mavlink_schema
-from server.link import VehicleEvent, px4_messages
+from server.link import VehicleEvent
+from server.link.codec import px4_messages
 from tests.foxglove.ws_client import check_conforms, check_foxglove_json_schema
 
 _MAV = mavlink.MAVLink(None, 1, 1)

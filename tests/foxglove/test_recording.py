@@ -12,7 +12,7 @@ import pytest_asyncio
 from mcap.reader import make_reader
 
 from server.cli import main
-from server.link.tlog import iter_tlog
+from server.link.codec.tlog import iter_tlog
 from tests.api.conftest import api_for, sim_cluster
 
 from .counts import mcap_mavlink_counts, mcap_topics, tlog_counts

@@ -13,8 +13,8 @@ from typing import Any
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
-from server.link.commands import CommandResult
-from server.link.events import VehicleEvent
+from server.link.codec.commands import CommandResult
+from server.link.core.events import VehicleEvent
 from server.link.link import Link
 from server.link.vehicle import Vehicle
 from tests.waiting import wait_for
@@ -230,7 +230,7 @@ async def open_sim(
 ) -> AsyncIterator[SimSession]:
     """The simulated vehicle on ephemeral ports, a Link to its API port, the Vehicle on it,
     once it has a position and a home (PX4 is ready to take off then)."""
-    from sim.runner import SimCluster
+    from sim.process.runner import SimCluster
 
     async with SimCluster(airframe=airframe, count=1, speed=speed) as sim:
         url = f"udpout:127.0.0.1:{sim.instances[0].api_local_port}"

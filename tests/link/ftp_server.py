@@ -8,7 +8,7 @@ import struct
 
 from pymavlink.dialects.v20 import development as mavlink
 
-from server.link.ftp import (
+from server.link.plugins.ftp import (
     FTP_DATA_LEN,
     decode_payload,
     encode_payload,

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from pymavlink.dialects.v20 import development as mavlink
 
-from server.link.state import ArmingChecksState
+from server.link.core.state import ArmingChecksState
 from tests.link.conftest import ScriptedSession
 from tests.link.test_px4_events import (
     ALL_MODE_GROUPS,

@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import pytest
 
-from server.link.arming_modes import mode_to_arm_in
-from server.link.commands import CommandOutcome
-from server.link.setpoints import PositionNed
+from server.link.codec.commands import CommandOutcome
+from server.link.codec.setpoints import PositionNed
+from server.link.plugins.arming_modes import mode_to_arm_in
 from server.link.vehicle import Vehicle
 from tests.link.conftest import SimSession, open_sim, wait_for
 

@@ -8,7 +8,7 @@ import math
 
 from pymavlink.dialects.v20 import development as mavlink
 
-from server.link.commands import CommandOutcome
+from server.link.codec.commands import CommandOutcome
 from tests.link.conftest import ScriptedSession, drain, wait_for
 from tests.waiting import holds_for
 

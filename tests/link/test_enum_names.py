@@ -1,6 +1,6 @@
 """Enum values are shown by their current MAVLink names."""
 
-from server.link.mavlink_values import enum_name
+from server.link.plugins.mavlink_values import enum_name
 
 
 def test_standard_vtol_type_is_named_fixedrotor_not_reserved() -> None:

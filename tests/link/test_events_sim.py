@@ -4,8 +4,8 @@ for an arming refusal, a mode refusal and a failsafe."""
 
 from __future__ import annotations
 
-from server.link.commands import CommandOutcome
-from server.link.setpoints import PositionNed
+from server.link.codec.commands import CommandOutcome
+from server.link.codec.setpoints import PositionNed
 from server.link.vehicle import Vehicle
 from tests.link.conftest import SimSession, arm_as_sent, drain, open_sim, wait_for
 

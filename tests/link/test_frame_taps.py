@@ -11,7 +11,7 @@ from typing import Any
 from pymavlink.dialects.v20 import development as mavlink
 
 from server.link import Link
-from server.link.tlog import iter_tlog
+from server.link.codec.tlog import iter_tlog
 
 from .test_link import _heartbeat, _peer, _statustext, _until
 

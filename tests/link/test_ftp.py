@@ -4,7 +4,13 @@ from __future__ import annotations
 
 import pytest
 
-from server.link.ftp import FtpClient, FtpError, decode_payload, encode_payload, kCmdReadFile
+from server.link.plugins.ftp import (
+    FtpClient,
+    FtpError,
+    decode_payload,
+    encode_payload,
+    kCmdReadFile,
+)
 from tests.link.conftest import ScriptedSession
 from tests.link.ftp_server import FtpServer
 

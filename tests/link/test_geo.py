@@ -2,7 +2,7 @@
 
 import pytest
 
-from server.link.geo import ground_distance_m, ned_from_geodetic_m
+from server.link.codec.geo import ground_distance_m, ned_from_geodetic_m
 
 ORIGIN = (47.397742, 8.545594, 488.0)
 

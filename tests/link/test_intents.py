@@ -10,10 +10,10 @@ import pymap3d
 import pytest
 
 from server.link import intents
-from server.link.envelope import Envelope, SetpointRejected, check_takeoff_altitude
-from server.link.setpoint_checks import Reference, check
-from server.link.setpoints import PositionNed, RawLocal, VelocityNed
-from server.link.state import GlobalState, HomeState
+from server.link.codec.envelope import Envelope, SetpointRejected, check_takeoff_altitude
+from server.link.codec.setpoint_checks import Reference, check
+from server.link.codec.setpoints import PositionNed, RawLocal, VelocityNed
+from server.link.core.state import GlobalState, HomeState
 from server.link.vehicle import Vehicle
 from tests.link.conftest import SimSession, open_sim, wait_for
 from tests.waiting import holds_for

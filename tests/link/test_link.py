@@ -13,7 +13,7 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import development as mavlink
 
 from server.link import Link
-from server.link.tlog import iter_tlog
+from server.link.codec.tlog import iter_tlog
 from tests.waiting import wait_for as _until
 
 

@@ -9,11 +9,11 @@ import asyncio
 
 from pymavlink.dialects.v20 import development as mavlink
 
-from server.link.events import VehicleEvent
-from server.link.liveness import Liveness
-from server.link.setpoints import PositionNed
-from server.link.stream_process import REPORT_PERIOD_S
-from server.link.telemetry import MODE_WITHHELD
+from server.link.codec.setpoints import PositionNed
+from server.link.core.events import VehicleEvent
+from server.link.core.liveness import Liveness
+from server.link.plugins.telemetry import MODE_WITHHELD
+from server.link.stream.stream_process import REPORT_PERIOD_S
 from tests.link.conftest import ScriptedSession, drain, wait_for
 from tests.waiting import holds_for
 

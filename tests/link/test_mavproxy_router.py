@@ -16,7 +16,7 @@ import pytest
 from pymavlink import mavutil
 
 from server.link import Link, PositionNed, Vehicle
-from sim.runner import SimCluster, SimInstance
+from sim.process.runner import SimCluster, SimInstance
 from tests.waiting import wait_for as _until
 
 pytestmark = pytest.mark.peers

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from server.link import modes
-from server.link.modes import PX4_MODE_NAMES
+from server.link.codec import modes
+from server.link.codec.modes import PX4_MODE_NAMES
 
 
 @pytest.mark.parametrize("name", PX4_MODE_NAMES)

@@ -8,8 +8,8 @@ import time
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
-from server.link.setpoint_checks import SetpointRejected
-from server.link.setpoints import OffsetBody, PositionGlobal, PositionNed, VelocityNed
+from server.link.codec.setpoint_checks import SetpointRejected
+from server.link.codec.setpoints import OffsetBody, PositionGlobal, PositionNed, VelocityNed
 from tests.link.conftest import ScriptedSession, wait_for
 from tests.waiting import holds_for
 

@@ -7,8 +7,8 @@ import math
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
-from server.link.commands import CommandOutcome
-from server.link.telemetry_requests import DEFAULT_TELEMETRY_RATES_HZ
+from server.link.codec.commands import CommandOutcome
+from server.link.plugins.telemetry_requests import DEFAULT_TELEMETRY_RATES_HZ
 from tests.link.conftest import ScriptedSession, open_scripted, wait_for
 
 HOME_ALT_M = 489.4

@@ -7,7 +7,7 @@ import struct
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
-from server.link.params import (
+from server.link.plugins.params import (
     MAV_PARAM_TYPE_INT8,
     MAV_PARAM_TYPE_INT32,
     MAV_PARAM_TYPE_REAL32,

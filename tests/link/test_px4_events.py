@@ -13,9 +13,7 @@ from typing import Any
 from pymavlink.dialects.v20 import development as mavlink
 
 from server.control.views import event_message
-from server.link.component_metadata import mavlink_crc32
-from server.link.px4_events import EventDecoder
-from server.link.px4_messages import (
+from server.link.codec.px4_messages import (
     MAVLINK_MSG_ID_COMPONENT_INFORMATION,
     MAVLINK_MSG_ID_COMPONENT_METADATA,
     MAVLINK_MSG_ID_REQUEST_EVENT,
@@ -25,6 +23,8 @@ from server.link.px4_messages import (
     EventMessage,
     ResponseEventErrorMessage,
 )
+from server.link.plugins.component_metadata import mavlink_crc32
+from server.link.plugins.px4_events import EventDecoder
 from tests.link.conftest import ScriptedSession, arm_as_sent, drain
 from tests.link.ftp_server import FtpServer
 from tests.waiting import wait_for

@@ -6,8 +6,8 @@ from __future__ import annotations
 
 from pymavlink.dialects.v20 import development as mavlink
 
-from server.link import px4_messages
-from server.link.px4_messages import EventMessage, decode_unknown
+from server.link.codec import px4_messages
+from server.link.codec.px4_messages import EventMessage, decode_unknown
 
 
 def _frame() -> bytes:

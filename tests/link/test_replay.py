@@ -12,8 +12,8 @@ from pathlib import Path
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
+from server.link.codec.tlog import TlogWriter, iter_tlog
 from server.link.link import Link
-from server.link.tlog import TlogWriter, iter_tlog
 from server.link.transports.replay import vehicle_frames
 from server.link.vehicle import Vehicle
 from tests.link.conftest import wait_for
@@ -43,7 +43,7 @@ def _alt_rel_m(vehicle: Vehicle) -> float:
 
 async def _record_flight(log_dir: Path) -> Recording:
     """Arm, take off, land and disarm the simulated quad with a recording link."""
-    from sim.runner import SimCluster
+    from sim.process.runner import SimCluster
 
     modes: set[str] = set()
     max_alt_rel_m = 0.0

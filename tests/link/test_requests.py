@@ -9,9 +9,9 @@ from collections.abc import Callable
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
-from server.link.commands import CommandOutcome
-from server.link.requests import Confirmation, Requester
-from server.link.statustext import RecentTexts
+from server.link.codec.commands import CommandOutcome
+from server.link.codec.statustext import RecentTexts
+from server.link.core.requests import Confirmation, Requester
 
 pytestmark = pytest.mark.looptime
 

@@ -6,8 +6,8 @@ import math
 
 import pytest
 
-from server.link import setpoints as sp
-from server.link.setpoint_checks import (
+from server.link.codec import setpoints as sp
+from server.link.codec.setpoint_checks import (
     Envelope,
     Reference,
     SetpointRejected,

@@ -8,8 +8,8 @@ import struct
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
-from server.link import setpoints as sp
-from server.link.setpoints import encode, resolve
+from server.link.codec import setpoints as sp
+from server.link.codec.setpoints import encode, resolve
 from skyhelm_wire.setpoint_kinds import kind_fields
 
 MAV = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)

@@ -17,19 +17,19 @@ from typing import TypeVar, cast
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
-from server.link.link import Link
-from server.link.signing import LinkSigning
-from server.link.signing_keys import (
+from server.link.codec.signing import LinkSigning
+from server.link.codec.signing_keys import (
     PERSIST_MARGIN_TICKS,
     SigningKeyError,
     SigningKeyStore,
     signing_timestamp,
 )
-from server.link.signing_provision import provision
-from server.link.tlog import iter_tlog
+from server.link.codec.signing_provision import provision
+from server.link.codec.tlog import iter_tlog
+from server.link.link import Link
 from server.link.vehicle import Vehicle
 from server.simproc import SimProcess
-from sim.runner import SimCluster
+from sim.process.runner import SimCluster
 from tests.sim.conftest import PointMassAirframe, point_mass_defaults
 from tests.waiting import wait_for
 

@@ -12,7 +12,8 @@ import time
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
-from server.link.state import (
+from server.link.codec.statustext import StatusTextAssembler
+from server.link.core.state import (
     WAKE_BATCH,
     BatteryState,
     GpsState,
@@ -20,7 +21,6 @@ from server.link.state import (
     SubscriptionHub,
     VehicleState,
 )
-from server.link.statustext import StatusTextAssembler
 from tests.link.conftest import ScriptedSession, drain, wait_for
 
 HOLD = 0x3040000

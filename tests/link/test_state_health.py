@@ -8,7 +8,7 @@ import asyncio
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
-from server.link.state import BatteryState
+from server.link.core.state import BatteryState
 from tests.link.conftest import ScriptedSession, wait_for
 
 _EKF_GOOD = (

@@ -6,8 +6,8 @@ from __future__ import annotations
 
 from pymavlink.dialects.v20 import development as mavlink
 
-from server.link.commands import CommandOutcome
-from server.link.statustext import StatusTextAssembler, rtl_phase_announced
+from server.link.codec.commands import CommandOutcome
+from server.link.codec.statustext import StatusTextAssembler, rtl_phase_announced
 from tests.link.conftest import ScriptedSession, wait_for
 
 CRITICAL = mavlink.MAV_SEVERITY_CRITICAL

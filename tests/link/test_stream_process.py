@@ -23,11 +23,11 @@ import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
 from bench._receiver import SO_TIMESTAMPNS, kernel_receive_time
-from server.link import stream_process
+from server.link.codec.signing_keys import SigningKeyStore
+from server.link.codec.tlog import iter_tlog
 from server.link.link import Link
-from server.link.signing_keys import SigningKeyStore
-from server.link.streamer import SetpointStreamer
-from server.link.tlog import iter_tlog
+from server.link.stream import stream_process
+from server.link.stream.streamer import SetpointStreamer
 from tests.waiting import wait_for
 
 MAV = mavlink.MAVLink(None)
@@ -182,8 +182,8 @@ _CHILD = """
 import asyncio, sys
 from bench._receiver import SO_TIMESTAMPNS, kernel_receive_time
 from server.link.link import Link
-from server.link.streamer import SetpointStreamer
-from server.link import stream_channel
+from server.link.stream.streamer import SetpointStreamer
+from server.link.stream import stream_channel
 from pymavlink.dialects.v20 import development as mavlink
 
 async def main():

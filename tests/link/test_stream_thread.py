@@ -20,11 +20,11 @@ from pathlib import Path
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
+from server.link.codec.signing_keys import SigningKeyStore
+from server.link.codec.tlog import iter_tlog
 from server.link.link import Link
-from server.link.signing_keys import SigningKeyStore
-from server.link.stream_thread import Deadlines, SenderThread
-from server.link.streamer import SetpointStreamer
-from server.link.tlog import iter_tlog
+from server.link.stream.stream_thread import Deadlines, SenderThread
+from server.link.stream.streamer import SetpointStreamer
 from tests.waiting import wait_for
 
 MAV = mavlink.MAVLink(None)

@@ -12,7 +12,7 @@ from collections.abc import Callable
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
-from server.link.streamer import SetpointStreamer
+from server.link.stream.streamer import SetpointStreamer
 
 pytestmark = pytest.mark.looptime
 

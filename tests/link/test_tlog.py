@@ -4,7 +4,7 @@ from pathlib import Path
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import development as mavlink
 
-from server.link.tlog import TlogWriter, iter_tlog, tlog_path
+from server.link.codec.tlog import TlogWriter, iter_tlog, tlog_path
 from tests.waiting import wait_for
 
 

@@ -8,6 +8,7 @@ from typing import Any
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
+from server.link.codec.urls import parse_link_url
 from server.link.transports import (
     FrameDecoder,
     Peer,
@@ -18,7 +19,6 @@ from server.link.transports import (
     UdpInTransport,
     UdpOutTransport,
 )
-from server.link.urls import parse_link_url
 from tests.waiting import wait_for as _until
 
 

@@ -8,8 +8,8 @@ import math
 
 from pymavlink.dialects.v20 import development as mavlink
 
-from server.link.commands import CommandOutcome, CommandResult
-from server.link.setpoints import PositionNed
+from server.link.codec.commands import CommandOutcome, CommandResult
+from server.link.codec.setpoints import PositionNed
 from tests.link.conftest import ScriptedSession, open_sim, wait_for
 
 STREAM_RATE_HZ = 50.0

@@ -1,6 +1,6 @@
 import pytest
 
-from server.link.urls import DEFAULT_SERIAL_BAUD, LinkUrl, LinkUrlError, parse_link_url
+from server.link.codec.urls import DEFAULT_SERIAL_BAUD, LinkUrl, LinkUrlError, parse_link_url
 
 
 @pytest.mark.parametrize(

@@ -8,9 +8,9 @@ import math
 
 import pytest
 
-from server.link.commands import CommandOutcome
-from server.link.setpoints import PositionNed, VelocityBody, VelocityNed
-from server.link.state import HomeState
+from server.link.codec.commands import CommandOutcome
+from server.link.codec.setpoints import PositionNed, VelocityBody, VelocityNed
+from server.link.core.state import HomeState
 from server.link.vehicle import Vehicle
 from tests.link.conftest import SimSession, arm_as_sent, drain, open_sim, wait_for
 

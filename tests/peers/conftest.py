@@ -10,7 +10,7 @@ from typing import Any
 
 import pytest
 
-from sim.runner import SimCluster
+from sim.process.runner import SimCluster
 
 # MAVSDK's command timeouts and heartbeat checks run on wall time; these speeds keep
 # the sim well inside them while saving wall time in flight phases.

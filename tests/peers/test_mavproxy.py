@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from sim.runner import SimCluster
+from sim.process.runner import SimCluster
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.peers

@@ -99,7 +99,7 @@ async def test_goto_location_then_return_to_launch_lands_at_home(
 
 
 async def test_vtol_transitions_to_fixed_wing_and_back(mavsdk_drone: MavsdkFactory) -> None:
-    from sim import airframes
+    from sim.models import airframes
 
     try:
         airframes.make_airframe("vtol", airframes.default_params("vtol"))

@@ -1,9 +1,9 @@
-"""What real PX4 v1.16 does where the simulated vehicle was made to match it (sim/commander.py)
-and the server chooses a mode to arm in (server/link/arming_modes.py): disarmed, any mode is
-taken; in RTL, LAND, and OFFBOARD without a stream PX4 will not arm ("Mode not suitable for
-arming", "No offboard signal"); the server's arm leaves such a mode for HOLD, its takeoff
-goes through TAKEOFF, and a refusal in the pilot's own mode (MISSION with no mission) stays
-a 409."""
+"""What real PX4 v1.16 does where the simulated vehicle was made to match it
+(sim/flight/commander.py) and the server chooses a mode to arm in
+(server/link/plugins/arming_modes.py): disarmed, any mode is taken; in RTL, LAND, and
+OFFBOARD without a stream PX4 will not arm ("Mode not suitable for arming", "No offboard
+signal"); the server's arm leaves such a mode for HOLD, its takeoff goes through TAKEOFF,
+and a refusal in the pilot's own mode (MISSION with no mission) stays a 409."""
 
 from __future__ import annotations
 

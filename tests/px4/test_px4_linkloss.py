@@ -21,7 +21,7 @@ import httpx
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
-from server.link.modes import name_from_custom_mode
+from server.link.codec.modes import name_from_custom_mode
 from tests.api.conftest import Api, api_for
 from tests.faults.linkloss_rig import read_tlog, rest_state
 from tests.px4.conftest import Px4Process, Px4Sitl

@@ -14,8 +14,8 @@ from typing import Any
 import pytest
 import viser
 
-from server.link.link_stats import LinkStats
-from server.link.state import (
+from server.link.core.link_stats import LinkStats
+from server.link.core.state import (
     AttitudeState,
     HomeState,
     OriginState,

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import viser
 
-from server.link.state import HomeState
+from server.link.core.state import HomeState
 from server.scene import SceneHub
 from server.scene.compass import (
     CARDINALS,

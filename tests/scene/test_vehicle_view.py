@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import viser
 
-from server.link.state import HomeState, PositionNedState, VehicleState
+from server.link.core.state import HomeState, PositionNedState, VehicleState
 from server.scene.frames import attitude_wxyz_enu, enu_to_geodetic
 from server.scene.hub import local_origin
 from server.scene.styling import STATE_COLOURS, StateCategory

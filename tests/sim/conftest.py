@@ -15,10 +15,10 @@ from typing import Any
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
-from sim.endpoint import MavlinkCodec
-from sim.numeric import clamp, finite_or
-from sim.params import ParamReader
-from sim.topics import ControlSetpoint, TrajectorySetpoint, VehicleStateTruth, VtolState
+from sim.lib.numeric import clamp, finite_or
+from sim.lib.params import ParamReader
+from sim.lib.topics import ControlSetpoint, TrajectorySetpoint, VehicleStateTruth, VtolState
+from sim.mavlink.endpoint import MavlinkCodec
 from sim.vehicle import PHYSICS_DT_S, READY_TIME_S, SimVehicle
 
 GCS_SYSID = 255

@@ -16,7 +16,7 @@ from typing import Any
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
-from sim.cli import (
+from sim.process.cli import (
     SITL_API_LOCAL_PORT,
     SITL_API_REMOTE_PORT,
     SITL_GCS_LOCAL_PORT,
@@ -26,7 +26,7 @@ from sim.cli import (
     build_parser,
     process_count,
 )
-from sim.sim_processes import split_instances
+from sim.process.sim_processes import split_instances
 
 README = Path(__file__).resolve().parents[2] / "README.md"
 

@@ -7,8 +7,8 @@ import math
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
-from sim import modes
-from sim.failsafe_actions import ObLossAction
+from sim.flight.failsafe_actions import ObLossAction
+from sim.lib import modes
 from tests.sim.conftest import Harness, HarnessFactory
 
 POSITION_AND_YAW = 0b0000_1011_1111_1000

@@ -8,7 +8,7 @@ import struct
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
-from sim import modes
+from sim.lib import modes
 from tests.sim.conftest import GCS_COMPID, GCS_SYSID, Harness, HarnessFactory
 
 ACCEPTED = mavlink.MAV_RESULT_ACCEPTED

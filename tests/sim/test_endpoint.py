@@ -10,10 +10,10 @@ from typing import Any, cast
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
-from sim.clock import ManualClock
-from sim.endpoint import MavlinkCodec, UdpLink
-from sim.run_loop import MIN_WAKE_PERIOD_S
-from sim.runner import SimCluster
+from sim.mavlink.endpoint import MavlinkCodec, UdpLink
+from sim.process.clock import ManualClock
+from sim.process.run_loop import MIN_WAKE_PERIOD_S
+from sim.process.runner import SimCluster
 from sim.vehicle import PHYSICS_DT_S, READY_TIME_S
 from tests.sim.conftest import PointMassAirframe, point_mass_defaults
 

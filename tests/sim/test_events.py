@@ -10,9 +10,9 @@ from typing import Any
 
 from pymavlink.dialects.v20 import development as mavlink
 
-from sim import modes
-from sim.commander import MAV_RESULT_TEMPORARILY_REJECTED
-from sim.events import EVENT_BUFFER_CAPACITY, CustomMessage
+from sim.flight.commander import MAV_RESULT_TEMPORARILY_REJECTED
+from sim.lib import modes
+from sim.lib.events import EVENT_BUFFER_CAPACITY, CustomMessage
 from tests.sim.conftest import Harness, RecordingLink
 from tests.sim.test_endpoint import cluster, heartbeat, open_peer
 from tests.waiting import wait_for

@@ -8,7 +8,7 @@ import math
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
-from sim.geo import LocalOrigin
+from sim.lib.geo import LocalOrigin
 from sim.vehicle import SimVehicle
 from tests.sim.conftest import Harness, HarnessFactory
 

@@ -7,10 +7,10 @@ import random
 
 import pytest
 
-from sim.aero import WingGeometry, forces_and_moments, lift_coefficient
-from sim.airframes import AirframeModel, default_params, make_airframe
-from sim.sim_run import fly, fly_peak
-from sim.topics import ControlSetpoint, RatesSetpoint, TrajectorySetpoint
+from sim.lib.topics import ControlSetpoint, RatesSetpoint, TrajectorySetpoint
+from sim.models.airframes import AirframeModel, default_params, make_airframe
+from sim.models.sim_run import fly, fly_peak
+from sim.physics.aero import WingGeometry, forces_and_moments, lift_coefficient
 
 WING = WingGeometry(area_m2=0.35, span_m=1.5, chord_m=0.24)
 TRIM_M_S = 15.0

@@ -1,4 +1,4 @@
-"""Outgoing frames packed by sim.frames are byte for byte what pymavlink packs."""
+"""Outgoing frames packed by sim.mavlink.frames are byte for byte what pymavlink packs."""
 
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pymavlink.dialects.v20 import development as mavlink
 
-from sim import modes
-from sim.endpoint import MavlinkCodec
-from sim.frames import pack_frame
-from sim.streams import FIXED_WING_ONLY
+from sim.lib import modes
+from sim.mavlink.endpoint import MavlinkCodec
+from sim.mavlink.frames import pack_frame
+from sim.mavlink.streams import FIXED_WING_ONLY
 from sim.vehicle import SimVehicle
 
 

@@ -10,8 +10,8 @@ from typing import Any
 
 from pymavlink.dialects.v20 import development as mavlink
 
-from sim import mavlink_ftp as ftp
-from sim.component_metadata import mavlink_crc32
+from sim.mavlink import mavlink_ftp as ftp
+from sim.mavlink.component_metadata import mavlink_crc32
 from tests.sim.conftest import Harness
 from tests.sim.test_events import DISARMED_BY, _payload
 

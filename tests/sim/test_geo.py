@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from sim.geo import LocalOrigin
+from sim.lib.geo import LocalOrigin
 
 
 @pytest.mark.parametrize("ned", [(0.0, 0.0, 0.0), (40.0, -30.0, -20.0), (800.0, 650.0, -120.0),

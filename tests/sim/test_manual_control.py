@@ -9,8 +9,7 @@ import math
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
-from sim import modes
-from sim.manual_control import (
+from sim.flight.manual_control import (
     SOURCE_MAVLINK_0,
     ManualFlight,
     RcInMode,
@@ -18,8 +17,9 @@ from sim.manual_control import (
     expo_deadzone,
     stick_sample,
 )
-from sim.params import PX4_DEFAULTS, ParamStore
-from sim.topics import AttitudeSetpoint, TrajectorySetpoint, VehicleStateTruth
+from sim.lib import modes
+from sim.lib.params import PX4_DEFAULTS, ParamStore
+from sim.lib.topics import AttitudeSetpoint, TrajectorySetpoint, VehicleStateTruth
 from tests.sim.conftest import Harness, RecordingLink
 
 SET_MODE = mavlink.MAV_CMD_DO_SET_MODE

@@ -6,10 +6,10 @@ import math
 
 import pytest
 
-from sim.airframes import AirframeModel, StaticParams, default_params, make_airframe
-from sim.quat import euler_from_quat, quat_from_euler, yaw_from_quat
-from sim.sim_run import fly, fly_peak
-from sim.topics import AttitudeSetpoint, RatesSetpoint, TrajectorySetpoint
+from sim.lib.quat import euler_from_quat, quat_from_euler, yaw_from_quat
+from sim.lib.topics import AttitudeSetpoint, RatesSetpoint, TrajectorySetpoint
+from sim.models.airframes import AirframeModel, StaticParams, default_params, make_airframe
+from sim.models.sim_run import fly, fly_peak
 
 HOVER_DOWN_M = -5.0
 

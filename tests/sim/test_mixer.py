@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sim.mixer import GEOMETRIES, Mixer
+from sim.physics.mixer import GEOMETRIES, Mixer
 
 ALL_GEOMETRIES = sorted(GEOMETRIES)
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from sim import modes
-from sim.modes import Px4Mode, decode_custom_mode
+from sim.lib import modes
+from sim.lib.modes import Px4Mode, decode_custom_mode
 
 
 @pytest.mark.parametrize(

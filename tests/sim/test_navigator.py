@@ -7,8 +7,8 @@ import math
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
-from sim import modes
-from sim.navigator import RtlPhase
+from sim.flight.navigator import RtlPhase
+from sim.lib import modes
 from tests.sim.conftest import Harness, HarnessFactory
 
 NAN7 = [math.nan] * 7

@@ -7,7 +7,7 @@ import struct
 
 from pymavlink.dialects.v20 import development as mavlink
 
-from sim.params import ParamStore, decode_param_value, encode_param_value
+from sim.lib.params import ParamStore, decode_param_value, encode_param_value
 from tests.sim.conftest import Harness
 
 

@@ -7,8 +7,8 @@ import math
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
-from sim import modes
-from sim.topics import AttitudeSetpoint, RatesSetpoint, TrajectorySetpoint
+from sim.lib import modes
+from sim.lib.topics import AttitudeSetpoint, RatesSetpoint, TrajectorySetpoint
 from tests.sim.conftest import Harness, HarnessFactory
 
 POSITION_ONLY = 0b0000_1011_1111_1000  # position and yaw: velocity, accel, yaw rate ignored

@@ -7,16 +7,16 @@ import random
 
 import pytest
 
-from sim.airframes import AIRFRAME_NAMES, default_params, make_airframe
-from sim.rigid_body import GRAVITY_M_S2, RigidBody
-from sim.sim_run import PHYSICS_DT_S, fly
-from sim.topics import (
+from sim.lib.topics import (
     AttitudeSetpoint,
     ControlSetpoint,
     RatesSetpoint,
     TrajectorySetpoint,
     VehicleStateTruth,
 )
+from sim.models.airframes import AIRFRAME_NAMES, default_params, make_airframe
+from sim.models.sim_run import PHYSICS_DT_S, fly
+from sim.physics.rigid_body import GRAVITY_M_S2, RigidBody
 
 
 def _body(truth: VehicleStateTruth, kdv: float = 0.0) -> RigidBody:

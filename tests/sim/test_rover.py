@@ -7,10 +7,10 @@ import random
 
 import pytest
 
-from sim.airframes import AirframeModel, default_params, make_airframe
-from sim.quat import yaw_from_quat
-from sim.sim_run import fly, fly_peak
-from sim.topics import ControlSetpoint, RatesSetpoint, TrajectorySetpoint, VtolState
+from sim.lib.quat import yaw_from_quat
+from sim.lib.topics import ControlSetpoint, RatesSetpoint, TrajectorySetpoint, VtolState
+from sim.models.airframes import AirframeModel, default_params, make_airframe
+from sim.models.sim_run import fly, fly_peak
 
 
 def _rover(yaw_rad: float = 0.0) -> AirframeModel:

@@ -9,8 +9,8 @@ import math
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
-from sim.navigator import RtlPhase
-from sim.topics import VtolState
+from sim.flight.navigator import RtlPhase
+from sim.lib.topics import VtolState
 from sim.vehicle import SimVehicle
 from tests.sim.conftest import Harness, HarnessFactory
 

@@ -12,9 +12,9 @@ from collections.abc import AsyncIterator, Awaitable, Callable
 
 import pytest
 
-from sim.clock import ManualClock
-from sim.run_loop import MIN_WAKE_PERIOD_S, STEPS_PER_WAKE, LoopStats, run_vehicles
-from sim.sim_run import PHYSICS_DT_S
+from sim.models.sim_run import PHYSICS_DT_S
+from sim.process.clock import ManualClock
+from sim.process.run_loop import MIN_WAKE_PERIOD_S, STEPS_PER_WAKE, LoopStats, run_vehicles
 
 
 class CountingVehicle:

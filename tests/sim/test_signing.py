@@ -16,8 +16,8 @@ from typing import Any, cast
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
-from sim.runner import SimCluster
-from sim.signing import MAVLINK_SECRET_FILE
+from sim.mavlink.signing import MAVLINK_SECRET_FILE
+from sim.process.runner import SimCluster
 from tests.sim.conftest import PointMassAirframe, point_mass_defaults
 from tests.waiting import holds_for, wait_for
 

@@ -8,10 +8,12 @@ from collections import Counter
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
-from sim import modes
-from sim.events import CURRENT_SEQUENCE_INTERVAL_S, MAVLINK_MSG_ID_EVENT
-from sim.mavlink_custom import MAVLINK_MSG_ID_CURRENT_EVENT_SEQUENCE as CURRENT_EVENT_SEQUENCE_ID
-from sim.streams import FIXED_WING_ONLY, NORMAL_RATES_HZ, ONBOARD_RATES_HZ
+from sim.lib import modes
+from sim.lib.events import CURRENT_SEQUENCE_INTERVAL_S, MAVLINK_MSG_ID_EVENT
+from sim.lib.mavlink_custom import (
+    MAVLINK_MSG_ID_CURRENT_EVENT_SEQUENCE as CURRENT_EVENT_SEQUENCE_ID,
+)
+from sim.mavlink.streams import FIXED_WING_ONLY, NORMAL_RATES_HZ, ONBOARD_RATES_HZ
 from tests.sim.conftest import Harness, HarnessFactory
 
 WINDOW_S = 10.0

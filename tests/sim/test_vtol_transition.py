@@ -7,11 +7,11 @@ import random
 
 import pytest
 
-from sim.airframes import AirframeModel, StaticParams, default_params, make_airframe
-from sim.quat import rotate_ned_to_body
-from sim.sim_run import PHYSICS_DT_S, fly, fly_peak
-from sim.topics import TrajectorySetpoint, VtolState
-from sim.vtol import VtolTransition
+from sim.lib.quat import rotate_ned_to_body
+from sim.lib.topics import TrajectorySetpoint, VtolState
+from sim.models.airframes import AirframeModel, StaticParams, default_params, make_airframe
+from sim.models.sim_run import PHYSICS_DT_S, fly, fly_peak
+from sim.models.vtol import VtolTransition
 
 HOLD = TrajectorySetpoint(position_ned_m=[0.0, 0.0, -30.0])
 

@@ -16,8 +16,8 @@ from fastapi import APIRouter, Request
 from server.http.deps import Context, Pilot, Reader
 from server.http.errors import AUTH_RESPONSES, ApiError
 from server.link import Link
-from server.link.signing_keys import SigningKeyStore, new_key
-from server.link.signing_provision import ProvisionError, provision
+from server.link.codec.signing_keys import SigningKeyStore, new_key
+from server.link.codec.signing_provision import ProvisionError, provision
 from skyhelm_wire.common import ErrorOut
 from skyhelm_wire.signing import (
     LinkSigningOut,

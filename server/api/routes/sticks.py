@@ -15,7 +15,7 @@ from server.http.deps import Context, ControlledVehicle, KnownVehicle
 from server.http.errors import CONTROL_RESPONSES, READ_RESPONSES
 from server.http.schemas.sticks import SticksBody, SticksOut
 from server.link import Sticks, Vehicle
-from server.link.manual_control import MANUAL_CONTROL_RATE_HZ
+from server.link.plugins.manual_control import MANUAL_CONTROL_RATE_HZ
 from skyhelm_wire.state import StreamOut
 
 router = APIRouter(prefix="/vehicles/{vehicle_id}", tags=["sticks"])

@@ -12,12 +12,12 @@ a full socket backlog) drops it and says so by returning False.
 
 from __future__ import annotations
 
-from ..urls import LinkUrl
-from .base import FrameDecoder, FrameSink, Peer, Transport
-from .replay import ReplayTransport
-from .serial_port import SerialTransport
-from .tcp import TcpClientTransport, TcpServerTransport
-from .udp import UdpInTransport, UdpOutTransport
+from server.link.codec.urls import LinkUrl
+from server.link.transports.base import FrameDecoder, FrameSink, Peer, Transport
+from server.link.transports.replay import ReplayTransport
+from server.link.transports.serial_port import SerialTransport
+from server.link.transports.tcp import TcpClientTransport, TcpServerTransport
+from server.link.transports.udp import UdpInTransport, UdpOutTransport
 
 __all__ = [
     "FrameDecoder",

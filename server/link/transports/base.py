@@ -10,8 +10,8 @@ from typing import Any, Protocol
 
 from pymavlink.dialects.v20 import development as mavlink
 
-from ..aio import loop_time_s
-from ..urls import LinkUrl
+from server.link.codec.aio import loop_time_s
+from server.link.codec.urls import LinkUrl
 
 Peer = Hashable  # a UDP (host, port) address, a TCP client, or None for point-to-point links
 

@@ -21,10 +21,10 @@ from pathlib import Path
 
 from pymavlink.dialects.v20 import development as mavlink
 
-from ..aio import cancel_and_wait
-from ..tlog import iter_tlog
-from ..urls import LinkUrl
-from .base import FrameDecoder, FrameSink, Transport, deliver
+from server.link.codec.aio import cancel_and_wait
+from server.link.codec.tlog import iter_tlog
+from server.link.codec.urls import LinkUrl
+from server.link.transports.base import FrameDecoder, FrameSink, Transport, deliver
 
 log = logging.getLogger(__name__)
 

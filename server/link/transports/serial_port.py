@@ -9,8 +9,8 @@ import logging
 import threading
 from typing import Any
 
-from ..urls import LinkUrl
-from .base import FrameDecoder, FrameSink, Transport, deliver
+from server.link.codec.urls import LinkUrl
+from server.link.transports.base import FrameDecoder, FrameSink, Transport, deliver
 
 log = logging.getLogger(__name__)
 

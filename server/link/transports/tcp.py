@@ -10,9 +10,17 @@ import logging
 
 from pymavlink.dialects.v20 import development as mavlink
 
-from ..aio import cancel_and_wait
-from ..urls import LinkUrl
-from .base import FrameDecoder, FrameSink, Peer, PeerRouter, Transport, deliver, host_port
+from server.link.codec.aio import cancel_and_wait
+from server.link.codec.urls import LinkUrl
+from server.link.transports.base import (
+    FrameDecoder,
+    FrameSink,
+    Peer,
+    PeerRouter,
+    Transport,
+    deliver,
+    host_port,
+)
 
 log = logging.getLogger(__name__)
 

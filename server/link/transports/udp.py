@@ -24,9 +24,17 @@ from typing import Any, cast
 
 from pymavlink.dialects.v20 import development as mavlink
 
-from ..px4_messages import decode_unknown
-from ..urls import LinkUrl
-from .base import FrameDecoder, FrameSink, Peer, PeerRouter, Transport, deliver, host_port
+from server.link.codec.px4_messages import decode_unknown
+from server.link.codec.urls import LinkUrl
+from server.link.transports.base import (
+    FrameDecoder,
+    FrameSink,
+    Peer,
+    PeerRouter,
+    Transport,
+    deliver,
+    host_port,
+)
 
 log = logging.getLogger(__name__)
 

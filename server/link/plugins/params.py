@@ -1,0 +1,210 @@
+"""Parameter protocol client with PX4's bytewise encoding.
+
+PX4 carries integer parameters bit for bit inside PARAM_VALUE's float field (an INT32 of 1
+arrives as 1.4e-45 when read as a float), so values are encoded and decoded by param_type.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import struct
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from pymavlink.dialects.v20 import development as mavlink
+
+from server.link.core.requests import Requester
+
+MAV_PARAM_TYPE_UINT8 = 1
+MAV_PARAM_TYPE_INT8 = 2
+MAV_PARAM_TYPE_UINT16 = 3
+MAV_PARAM_TYPE_INT16 = 4
+MAV_PARAM_TYPE_UINT32 = 5
+MAV_PARAM_TYPE_INT32 = 6
+MAV_PARAM_TYPE_REAL32 = 9
+
+# struct format of each integer type within the 4 payload bytes (little endian)
+_INT_FORMATS = {
+    MAV_PARAM_TYPE_UINT8: "<B",
+    MAV_PARAM_TYPE_INT8: "<b",
+    MAV_PARAM_TYPE_UINT16: "<H",
+    MAV_PARAM_TYPE_INT16: "<h",
+    MAV_PARAM_TYPE_UINT32: "<I",
+    MAV_PARAM_TYPE_INT32: "<i",
+}
+PARAM_ID_LEN = 16
+
+
+class ParamError(Exception):
+    """The vehicle refused a parameter value or answered with another one."""
+
+
+def decode_param_value(raw: float, param_type: int) -> float | int:
+    """A PARAM_VALUE's float field as the value it carries."""
+    fmt = _INT_FORMATS.get(param_type)
+    if fmt is None:
+        return float(struct.unpack("<f", struct.pack("<f", raw))[0])
+    payload = struct.pack("<f", raw)
+    return int(struct.unpack(fmt, payload[: struct.calcsize(fmt)])[0])
+
+
+def encode_param_value(value: float | int, param_type: int) -> float:
+    """The float to put in PARAM_SET so the vehicle reads ``value`` of ``param_type``."""
+    fmt = _INT_FORMATS.get(param_type)
+    if fmt is None:
+        return float(value)
+    if float(value) != int(value):
+        raise ParamError(f"{value!r} is not an integer")
+    payload = struct.pack(fmt, int(value)).ljust(4, b"\0")
+    return float(struct.unpack("<f", payload)[0])
+
+
+def same_value(a: float | int, b: float | int, param_type: int) -> bool:
+    if param_type in _INT_FORMATS:
+        return int(a) == int(b)
+    f32 = struct.Struct("<f")
+    a32 = f32.unpack(f32.pack(float(a)))[0]
+    b32 = f32.unpack(f32.pack(float(b)))[0]
+    return bool(a32 == b32 or (math.isnan(a32) and math.isnan(b32)))
+
+
+@dataclass(frozen=True)
+class ParamEntry:
+    value: float | int
+    param_type: int
+    index: int
+    count: int
+
+
+class ParamClient:
+    """get / get many / get all / set, for one component, with a cache of what it said."""
+
+    timeout_s = 0.5  # per try; the number of retries is the requester's
+    list_quiet_s = 0.5  # a list is complete, or has gaps, once it has been quiet this long
+    list_rounds = 8  # of asking for the gaps by index in a row with no answer
+
+    def __init__(self, requests: Requester) -> None:
+        self._requests = requests
+        self.cache: dict[str, ParamEntry] = {}
+        self._by_index: dict[int, str] = {}
+        self._count: int | None = None
+        self._received = 0  # PARAM_VALUEs taken in, so a wait can tell a new one came
+        self._set_lock = asyncio.Lock()
+
+    def handle_param_value(self, msg: mavlink.MAVLink_param_value_message) -> None:
+        name = _param_name(msg.param_id)
+        entry = ParamEntry(
+            decode_param_value(msg.param_value, msg.param_type),
+            msg.param_type,
+            msg.param_index,
+            msg.param_count,
+        )
+        self.cache[name] = entry
+        if 0 <= msg.param_index < 0xFFFF:
+            self._by_index[msg.param_index] = name
+        self._count = msg.param_count
+        self._received += 1
+
+    async def _wait_value(self, timeout_s: float) -> bool:
+        """True when a PARAM_VALUE arrives within timeout_s."""
+        seen = self._received
+        return await self._requests.wait_until(lambda: self._received != seen, timeout_s)
+
+    def _request_read(self, wire_name: bytes, index: int = -1) -> None:
+        """PARAM_REQUEST_READ by name, or by index when one is given."""
+        requests = self._requests
+        requests.send(requests.mav.param_request_read_encode(*requests.target, wire_name, index))
+
+    async def get(self, name: str) -> float | int:
+        """Read one parameter. TimeoutError when the vehicle stays silent: PX4 never answers
+        for a name it does not know."""
+        wire_name = name.encode("ascii")[:PARAM_ID_LEN]
+        self.cache.pop(name, None)
+
+        if not await self._requests.until(
+            lambda: self._request_read(wire_name), lambda: name in self.cache, self.timeout_s
+        ):
+            raise TimeoutError(f"no answer for parameter {name}")
+        return self.cache[name].value
+
+    async def reread(self) -> dict[str, float | int]:
+        """A rebooted vehicle: forget what it said and read again what had been read."""
+        names = sorted(self.cache)
+        self.cache.clear()
+        self._by_index.clear()
+        self._count = None
+        return await self.get_many(names) if names else {}
+
+    async def get_many(self, names: Sequence[str]) -> dict[str, float | int]:
+        values = await asyncio.gather(*(self.get(n) for n in names))
+        return dict(zip(names, values, strict=True))
+
+    async def get_all(self) -> dict[str, float | int]:
+        """PARAM_REQUEST_LIST, then PARAM_REQUEST_READ by index for whatever went missing."""
+        self._by_index.clear()
+        self._count = None
+
+        requests = self._requests
+
+        def request() -> None:
+            requests.send(requests.mav.param_request_list_encode(*requests.target))
+
+        if not await requests.until(request, lambda: self._count is not None, self.timeout_s):
+            raise TimeoutError("no answer to PARAM_REQUEST_LIST")
+        # On a lossy link every round of reads by index brings some back: give up only after
+        # list_rounds rounds in a row that brought nothing.
+        fruitless = 0
+        before = self._count or 0
+        while fruitless < self.list_rounds:
+            while await self._wait_value(self.list_quiet_s):
+                if self._missing() == []:
+                    break
+            missing = self._missing()
+            if not missing:
+                return {name: self.cache[name].value for name in self._by_index.values()}
+            fruitless = fruitless + 1 if len(missing) >= before else 0
+            before = len(missing)
+            for index in missing:
+                self._request_read(b"", index)
+        raise TimeoutError(
+            f"parameters still missing after {self.list_rounds} rounds without an answer: "
+            f"{len(self._missing())} of {self._count}"
+        )
+
+    def _missing(self) -> list[int]:
+        if self._count is None:
+            return []
+        return [i for i in range(self._count) if i not in self._by_index]
+
+    async def set(self, name: str, value: float | int) -> float | int:
+        """PARAM_SET, then the PARAM_VALUE echo must carry the same value."""
+        async with self._set_lock:
+            entry = self.cache.get(name)
+            if entry is None:
+                await self.get(name)
+                entry = self.cache[name]
+            param_type = entry.param_type
+            wire = encode_param_value(value, param_type)
+            wire_name = name.encode("ascii")[:PARAM_ID_LEN]
+            self.cache.pop(name, None)
+
+            requests = self._requests
+
+            def request() -> None:
+                requests.send(
+                    requests.mav.param_set_encode(*requests.target, wire_name, wire, param_type)
+                )
+
+            if not await requests.until(request, lambda: name in self.cache, self.timeout_s):
+                raise TimeoutError(f"no echo for parameter {name}")
+            echoed = self.cache[name].value
+            if not same_value(echoed, value, param_type):
+                raise ParamError(f"{name}: asked for {value!r}, vehicle kept {echoed!r}")
+            return echoed
+
+
+def _param_name(param_id: str | bytes) -> str:
+    if isinstance(param_id, bytes):
+        param_id = param_id.decode("ascii", "replace")
+    return param_id.rstrip("\0")

@@ -1,0 +1,1 @@
+"""The rigid body, aerodynamics, the mixer and the battery."""
