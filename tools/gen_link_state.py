@@ -28,7 +28,7 @@ from pydantic_core import PydanticUndefined
 
 from skyhelm_wire import messages, signing, state
 
-OUT = Path(__file__).resolve().parent.parent / "server" / "link" / "snapshot.py"
+OUT = Path(__file__).resolve().parent.parent / "server" / "link" / "codec" / "snapshot.py"
 
 # each wire model and the snapshot class generated from it, in dependency order
 CLASSES: tuple[tuple[type[BaseModel], str], ...] = (
