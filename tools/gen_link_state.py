@@ -14,7 +14,6 @@ or adds around the snapshot (`id`, `lease`) are mapped in FIELDS below.
 
 from __future__ import annotations
 
-import argparse
 import subprocess
 import sys
 import textwrap
@@ -27,6 +26,7 @@ from pydantic import BaseModel
 from pydantic_core import PydanticUndefined
 
 from skyhelm_wire import messages, signing, state
+from tools.generated import write_or_check
 
 OUT = Path(__file__).resolve().parent.parent / "server" / "link" / "codec" / "snapshot.py"
 
@@ -195,17 +195,7 @@ def generate() -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
-    parser.add_argument("--check", action="store_true", help="only check that it is current")
-    args = parser.parse_args(argv)
-    text = generate()
-    if args.check:
-        current = OUT.exists() and OUT.read_text() == text
-        if not current:
-            print(f"{OUT} is not current: run python -m tools.gen_link_state", file=sys.stderr)
-        return 0 if current else 1
-    OUT.write_text(text)
-    return 0
+    return write_or_check(argv, __doc__, OUT, generate, "python -m tools.gen_link_state")
 
 
 if __name__ == "__main__":

@@ -12,8 +12,6 @@ the browser never runs anything in the file.
 
 from __future__ import annotations
 
-import argparse
-import sys
 import typing
 from pathlib import Path
 from typing import Any
@@ -22,6 +20,7 @@ from pydantic import BaseModel, TypeAdapter
 from pydantic.json_schema import models_json_schema
 
 from skyhelm_wire import commands, common, control, messages, setpoints, signing, state
+from tools.generated import write_or_check
 
 OUT = Path(__file__).resolve().parent.parent / "web" / "wire.d.js"
 _REF = "#/$defs/"
@@ -115,17 +114,7 @@ def generate() -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
-    parser.add_argument("--check", action="store_true", help="only check that it is current")
-    args = parser.parse_args(argv)
-    text = generate()
-    if args.check:
-        current = OUT.exists() and OUT.read_text() == text
-        if not current:
-            print(f"{OUT} is not current: run python -m tools.gen_wire_js", file=sys.stderr)
-        return 0 if current else 1
-    OUT.write_text(text)
-    return 0
+    return write_or_check(argv, __doc__, OUT, generate, "python -m tools.gen_wire_js")
 
 
 if __name__ == "__main__":

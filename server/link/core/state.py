@@ -11,39 +11,10 @@ from collections.abc import Callable
 from typing import Literal
 
 from server.link.codec.aio import loop_time_s
-from server.link.codec.snapshot import (
-    ArmingCheck,
-    ArmingChecksState,
-    AttitudeState,
-    BatteryState,
-    EstimatorState,
-    GlobalState,
-    GpsState,
-    HomeState,
-    OriginState,
-    PositionNedState,
-    StatusText,
-    StreamStats,
-    VehicleState,
-    VelocityNedState,
-)
 
-__all__ = [
-    "ArmingCheck",
-    "ArmingChecksState",
-    "AttitudeState",
-    "BatteryState",
-    "EstimatorState",
-    "GlobalState",
-    "GpsState",
-    "HomeState",
-    "OriginState",
-    "PositionNedState",
-    "StatusText",
-    "StreamStats",
-    "VehicleState",
-    "VelocityNedState",
-]
+# the snapshot's classes, importable from here as from where they were once written
+from server.link.codec.snapshot import *  # noqa: F403
+from server.link.codec.snapshot import VehicleState
 
 LandedState = Literal["UNDEFINED", "ON_GROUND", "IN_AIR", "TAKEOFF", "LANDING"]
 VtolState = Literal["UNDEFINED", "MC", "FW", "TRANSITION_TO_FW", "TRANSITION_TO_MC"]
