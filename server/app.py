@@ -123,7 +123,7 @@ def create_app(settings: Settings, *, freeze_gc_at_start: bool = False) -> FastA
             if fleet is not None:
                 await _start_fleet(fleet)
             if edge is not None:
-                await _start_edge(edge, app)
+                await _start_edge(edge, context)
             if hub is not None:
                 hub.on_click = _on_loop(publishers.publish_click)
                 await hub.start(publishers)
@@ -246,9 +246,9 @@ async def _start_fleet(fleet: FleetService) -> None:
         raise StartupError(f"cannot join the fleet over Zenoh: {exc}") from exc
 
 
-async def _start_edge(edge: EdgeService, app: FastAPI) -> None:
+async def _start_edge(edge: EdgeService, context: ApiContext) -> None:
     try:
-        await edge.start(app)
+        await edge.start(context)
     except Exception as exc:  # zenoh.ZError: a bad endpoint, config or port in use
         raise StartupError(f"cannot publish to the fleet over Zenoh: {exc}") from exc
 
