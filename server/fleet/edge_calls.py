@@ -59,13 +59,16 @@ class EdgeCalls:
         """The answer to ``method path?query`` (``headers`` with lower-case names, ``body``
         parsed JSON or None), as the REST app would give it."""
         try:
-            return await self._run(method, path, query, headers, body)
+            reply = await self._run(method, path, query, headers, body)
         except ANSWERED_ERRORS as exc:
             answer = error_status(exc)
             assert answer is not None  # every answered error has a status
             status, detail = answer
             extra = exc.headers if isinstance(exc, ApiError) and exc.headers else {}
             return Reply(status, _encode({"detail": detail}), {**JSON, **_lower(extra)})
+        if reply.body and "content-type" not in reply.headers:
+            reply.headers.update(JSON)
+        return reply
 
     async def _run(
         self, method: str, path: str, query: str, headers: Mapping[str, str], body: Any
