@@ -25,6 +25,7 @@ from server.fleet.edge_publish import Sequence
 from server.fleet.proxy import call_timeout_s
 from server.fleet.session import open_session
 from server.http.deps import ApiContext
+from server.http.vehicle_calls import CALLS
 from tests.api.conftest import OBSERVER, PILOT, app_running, make_settings
 from tests.fleet.fake_edge import free_tcp_endpoint, loopback_options
 from tests.waiting import eventually
@@ -224,3 +225,18 @@ async def test_no_log_line_carries_the_callers_token(
     assert secret not in caplog.text
     # nothing logs the call's URL (a token in its query), even where no redaction is set up
     assert not [r for r in caplog.records if r.name.startswith(("httpx", "httpcore"))]
+
+
+async def test_every_rest_call_under_a_vehicle_is_one_the_edge_runs() -> None:
+    """A route added under /vehicles/{vehicle_id} is added to the edge's table too."""
+    app = create_app(make_settings("udpout:127.0.0.1:9"))
+    prefix = "/api/v1/vehicles/{vehicle_id}"
+    rest = {
+        (method.upper(), path.removeprefix(prefix).removeprefix("/"))
+        for path, operations in app.openapi()["paths"].items()
+        if path.startswith(prefix)
+        for method in operations
+    }
+    offered = {(call.method, call.path) for call in CALLS}
+    assert len(rest) > 30
+    assert rest == offered
