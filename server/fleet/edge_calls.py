@@ -32,6 +32,7 @@ from server.http.vehicle_calls import (
     validate,
     validated,
 )
+from server.link import Vehicle
 
 log = logging.getLogger(__name__)
 
@@ -113,7 +114,7 @@ class EdgeCalls:
     async def _call(
         self,
         call: VehicleCall,
-        vehicle: Any,
+        vehicle: Vehicle,
         lease_id: str | None,
         body: Any,
         query: Mapping[str, str],
