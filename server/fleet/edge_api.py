@@ -51,10 +51,10 @@ METHODS = frozenset({"GET", "HEAD", "POST", "PUT", "PATCH", "DELETE", "OPTIONS"}
 # the caller's request headers that are read: its token, its lease
 REQUEST_HEADERS = frozenset({"authorization", "x-lease-id"})
 # the answer's headers the caller gets
-REPLY_HEADERS = ("content-type", "retry-after", "www-authenticate", "location")
+REPLY_HEADERS = ("content-type", "retry-after", "www-authenticate")
 # a REST call answers on its own (504 when the vehicle is silent) well within this
 CALL_TIMEOUT_S = 60.0
-# calls run at once; more are refused with 503 (the app's rate limit counts the rest)
+# calls run at once; more are refused with 503 (the rate limit counts the rest)
 MAX_IN_FLIGHT = 64
 # a REST call's JSON is small; a larger query payload is refused before it is parsed
 MAX_PAYLOAD_BYTES = 1 << 20
