@@ -14,9 +14,6 @@ from typing import Any
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 from pydantic import TypeAdapter
 
-from server.api.operations import INTENT_NAMES, OPERATIONS, run_intent, sent_out
-from server.api.routes.control import AskerGone, lease_out, unless_gone
-from server.api.routes.sticks import fly_sticks, stop_sticks
 from server.control.auth import Role
 from server.control.lease import (
     Lease,
@@ -26,6 +23,7 @@ from server.control.lease import (
     TtlOutOfBounds,
     UnknownRequest,
 )
+from server.control.lease_ops import AskerGone, lease_out, unless_gone
 from server.http.deps import ApiContext
 from server.http.errors import (
     COMMAND_STATUS,
@@ -35,8 +33,10 @@ from server.http.errors import (
     non_finite_field,
     refuse_non_finite,
 )
+from server.http.operations import INTENT_NAMES, OPERATIONS, run_intent, sent_out
 from server.http.schemas import SetpointBody
 from server.http.schemas.sticks import SticksBody
+from server.http.vehicle_ops import fly_sticks, stop_sticks
 from server.http.ws_common import (
     CLOSE_BAD_REQUEST,
     CLOSE_LEASE_HELD,
@@ -79,7 +79,7 @@ async def control(
     session = _ControlSession(context, target, lease, sender)
     try:
         await sender.send_json(
-            {"type": "lease", **lease_out(lease, context, target).model_dump(mode="json")}
+            {"type": "lease", **lease_out(context.leases, lease, target).model_dump(mode="json")}
         )
         await session.run(websocket)
     except WebSocketDisconnect:
@@ -292,10 +292,10 @@ class _ControlSession:
         try:
             with self._held():
                 if message.get("stop") is True:
-                    out = stop_sticks(self._context, self._vehicle)
+                    out = stop_sticks(self._context.deadman, self._vehicle)
                 else:
                     body = SticksBody.model_validate(message.get("sticks") or {})
-                    out = fly_sticks(self._context, self._vehicle, body)
+                    out = fly_sticks(self._context.deadman, self._vehicle, body)
         except Exception as exc:
             await self._reply_error(request_id, "sticks", exc)
             return

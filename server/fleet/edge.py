@@ -23,11 +23,12 @@ from collections.abc import Callable
 import zenoh
 
 from server.control.publishers import StatePublishers
-from server.fleet.asgi_call import Asgi
 from server.fleet.edge_api import EdgeApi
+from server.fleet.edge_calls import EdgeCalls
 from server.fleet.edge_publish import VehiclePublication
 from server.fleet.keys import FleetKeys, check_name
 from server.fleet.session import ZenohOptions, open_session, options_from_settings, undeclare
+from server.http.deps import ApiContext
 from server.link import Vehicle
 from server.link.codec.aio import cancel_and_wait
 from server.settings import Settings
@@ -86,11 +87,13 @@ class EdgeService:
             publishers,
         )
 
-    async def start(self, app: Asgi) -> None:
-        """Join the fleet (a zenoh.ZError when Zenoh cannot start) and publish."""
+    async def start(self, context: ApiContext) -> None:
+        """Join the fleet (a zenoh.ZError when Zenoh cannot start) and publish; calls over
+        Zenoh run on ``context``'s control core."""
         self.session = session = await asyncio.to_thread(open_session, self.options)
         try:
-            self.api = EdgeApi(app, self.keys.api(self.name))
+            calls = EdgeCalls(context, self._publishers)
+            self.api = EdgeApi(calls, self.keys.api(self.name))
             self.api.bind()
             # on Zenoh's Python callback thread (indirect): measured under load, calling back
             # on Zenoh's network thread itself was slower (the GIL taken from the network

@@ -1,6 +1,6 @@
 """The edge's api queryable: a REST call sent over Zenoh (``skyhelm/<fleet>/<edge>/api``),
-run through this server's own ASGI app, so every check (token, observer read-only, lease,
-rate limit, 422/409/504) is exactly REST's.
+run on this server's control core by edge_calls.py with REST's checks and functions, so
+every check (token, observer read-only, lease, rate limit, 422/409/504) is exactly REST's.
 
 Query payload (JSON)::
 
@@ -9,16 +9,14 @@ Query payload (JSON)::
 
 Reply payload (JSON): ``{"status": 200, "headers": {"content-type": ...}, "body": ...}``.
 
-Only the caller's own authority counts: of its headers only Authorization, X-Lease-Id and
-Accept reach the app; the fleet server that forwards the call adds none of its own. Only
-paths under /api/v1/ are run (the fleet's own routes are not: a call is never forwarded on);
-anything else answers 404, a payload that is not such an object 422. The app sees the call
-as coming from the client address ``zenoh`` (its lockout and logs say so). Tokens are never
-logged.
+Only the caller's own authority counts: of its headers only Authorization and X-Lease-Id
+are read; the fleet server that forwards the call adds none of its own. Only the calls
+under /api/v1/vehicles/{id} are run (the fleet's own routes are not: a call is never
+forwarded on); anything else answers 404, a payload that is not such an object 422. The
+call counts as coming from the address ``zenoh`` (the lockout and logs say so). Tokens are
+never logged.
 
-The call runs straight through the app's ASGI interface (asgi_call.py: no HTTP client in
-between), and the app's JSON answer goes into the reply as the app wrote it (checked, not
-decoded and encoded again).
+The answer's JSON goes into the reply as it was encoded (not decoded and encoded again).
 
 Threads: Zenoh calls back on its callback thread; the payload is read there and the call
 handed to the event loop, which runs it; the reply is handed to one reply thread and the
@@ -40,7 +38,9 @@ from urllib.parse import unquote
 
 import zenoh
 
-from server.fleet.asgi_call import Asgi, AsgiAnswer, call_app
+from server.fleet.edge_calls import EdgeCalls
+from server.http.errors import non_finite_field
+from server.http.vehicle_calls import Reply
 
 log = logging.getLogger(__name__)
 
@@ -48,15 +48,13 @@ API_PREFIX = "/api/v1/"
 # routes a remote caller may not reach through an edge: another hop of the fleet
 NOT_FORWARDED = ("/api/v1/fleet",)
 METHODS = frozenset({"GET", "HEAD", "POST", "PUT", "PATCH", "DELETE", "OPTIONS"})
-# the caller's request headers the app gets: its token, its lease, what it accepts
-REQUEST_HEADERS = frozenset({"authorization", "x-lease-id", "accept"})
-# the app's answer headers the caller gets
-REPLY_HEADERS = ("content-type", "retry-after", "www-authenticate", "location")
-# the client address the app sees for a call that came over Zenoh
-ZENOH_CLIENT = ("zenoh", 0)
+# the caller's request headers that are read: its token, its lease
+REQUEST_HEADERS = frozenset({"authorization", "x-lease-id"})
+# the answer's headers the caller gets
+REPLY_HEADERS = ("content-type", "retry-after", "www-authenticate")
 # a REST call answers on its own (504 when the vehicle is silent) well within this
 CALL_TIMEOUT_S = 60.0
-# calls run at once; more are refused with 503 (the app's rate limit counts the rest)
+# calls run at once; more are refused with 503 (the rate limit counts the rest)
 MAX_IN_FLIGHT = 64
 # a REST call's JSON is small; a larger query payload is refused before it is parsed
 MAX_PAYLOAD_BYTES = 1 << 20
@@ -134,11 +132,11 @@ def check_path(path: str) -> None:
 
 
 class EdgeApi:
-    """Runs calls through the app; answers queries of the api queryable."""
+    """Runs calls on the control core; answers queries of the api queryable."""
 
     def __init__(
         self,
-        app: Asgi,
+        calls: EdgeCalls,
         reply_key: str,
         *,
         call_timeout_s: float = CALL_TIMEOUT_S,
@@ -148,8 +146,8 @@ class EdgeApi:
         self.call_timeout_s = call_timeout_s
         self.max_in_flight = max_in_flight
         self.calls = 0
-        self.refused = 0  # malformed or refused before the app saw them
-        self._app = app
+        self.refused = 0  # malformed or refused before they ran
+        self._calls = calls
         self._loop: asyncio.AbstractEventLoop | None = None
         self._tasks: set[asyncio.Task[None]] = set()
         self._running = 0
@@ -181,20 +179,16 @@ class EdgeApi:
             self.refused += 1
             return _encode(exc.reply())
         self.calls += 1
-        headers = dict(call["headers"])
-        content = b""
-        if call["body"] is not None:
-            try:
-                content = json.dumps(call["body"], allow_nan=False).encode()
-            except ValueError:
-                return _encode(CallError(422, "body: numbers must be finite", "body").reply())
-            headers["content-type"] = "application/json"
+        field = non_finite_field(call["body"])
+        if field is not None:
+            reason = "body: numbers must be finite"
+            return _encode(CallError(422, reason, "body").reply())
         try:
             async with asyncio.timeout(self.call_timeout_s):
-                answer = await call_app(
-                    self._app, call["method"], call["path"], call["query"], headers, content,
-                    ZENOH_CLIENT,
-                )
+                answer = await self._calls.run(
+                    call["method"], unquote(call["path"]), call["query"], call["headers"],
+                    call["body"],
+                )  # fmt: skip
         except TimeoutError:
             reason = f"the call did not finish within {self.call_timeout_s:g} s"
             return _encode(CallError(504, reason).reply())
@@ -296,31 +290,11 @@ def _encode(reply: dict[str, Any]) -> bytes:
     return json.dumps(reply, allow_nan=False).encode()
 
 
-def encode_answer(answer: AsgiAnswer) -> bytes:
-    """The reply payload for the app's answer: its status, the headers a caller may act on,
-    and its body: JSON as the app wrote it (after checking it is JSON), other text as a
-    JSON string, nothing as null."""
+def encode_answer(answer: Reply) -> bytes:
+    """The reply payload for an answer: its status, the headers a caller may act on, and
+    its JSON body as encoded (none: null)."""
     headers = {name: answer.headers[name] for name in REPLY_HEADERS if name in answer.headers}
     head = json.dumps({"status": answer.status, "headers": headers})
-    body = answer.body
-    if not body:
-        encoded_body = b"null"
-    elif _is_json(body):
-        encoded_body = body.strip()
-    else:
-        encoded_body = json.dumps(body.decode("utf-8", "replace")).encode()
+    encoded_body = answer.body.strip() or b"null"
     # {"status": .., "headers": {..}, "body": <body>}: the head without its closing brace
     return head[:-1].encode() + b', "body": ' + encoded_body + b"}"
-
-
-def _is_json(body: bytes) -> bool:
-    """One JSON value, without NaN or infinities (what json.loads of Python would let by)."""
-    try:
-        json.loads(body, parse_constant=_refuse_constant)
-    except ValueError:  # also bad UTF-8
-        return False
-    return True
-
-
-def _refuse_constant(name: str) -> Any:
-    raise ValueError(f"{name} is not JSON")

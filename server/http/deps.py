@@ -19,6 +19,7 @@ from server.control.audit import AuditLog
 from server.control.auth import Role, TokenChecker, token_from
 from server.control.deadman import Deadman
 from server.control.lease import Lease, LeaseManager
+from server.control.lease_ops import holder_name
 from server.control.registry import VehicleRegistry
 from server.http.errors import ApiError
 from server.http.security import Guards
@@ -48,14 +49,14 @@ class ApiContext:
     def audit(self) -> AuditLog:
         return self.deadman.audit
 
+    @property
+    def pilot_name(self) -> str:
+        return self.tokens.name_of(Role.PILOT)
+
     def holder_name(self, client_name: str | None, session: str, client: Address | None) -> str:
-        """A session's name: the token's name, then the client's label, or where it
-        connects from when it gave none ("pilot · Chrome tab 7f3a", "pilot · rest
-        10.0.0.2:5121")."""
-        label = (client_name or "").strip()[:64]
-        if not label:
-            label = f"{session} {client.host}:{client.port}" if client else session
-        return f"{self.tokens.name_of(Role.PILOT)} · {label}"
+        """A session's name (lease_ops.holder_name)."""
+        where = (client.host, client.port) if client else None
+        return holder_name(self.pilot_name, client_name, session, where)
 
 
 async def get_context(connection: HTTPConnection) -> ApiContext:
@@ -76,7 +77,11 @@ async def get_role(
     _bearer_token: Annotated[HTTPAuthorizationCredentials | None, Security(_bearer)] = None,
     _query: Annotated[str | None, Security(_query_token)] = None,
 ) -> Role:
-    token = token_from(request.headers, request.query_params, request.cookies)
+    return role_of(context, token_from(request.headers, request.query_params, request.cookies))
+
+
+def role_of(context: ApiContext, token: str | None) -> Role:
+    """The token's role, or 401."""
     role = context.tokens.role_of(token)
     if role is None:
         raise ApiError(401, "missing or wrong token", headers={"WWW-Authenticate": "Bearer"})
@@ -90,6 +95,11 @@ READ_ONLY_REASON = "read-only replay: this server shows a recording and sends no
 
 
 async def require_pilot(role: Reader, context: Context) -> Role:
+    return pilot_only(context, role)
+
+
+def pilot_only(context: ApiContext, role: Role) -> Role:
+    """The pilot's role, or 403 (an observer, or a read-only replay)."""
     if context.read_only:
         raise ApiError(403, READ_ONLY_REASON)
     if role is not Role.PILOT:
@@ -102,6 +112,11 @@ VehicleId = Annotated[int, Path(ge=0, le=255, description="the vehicle's MAVLink
 
 
 async def get_vehicle(vehicle_id: VehicleId, context: Context, _: Reader) -> Vehicle:
+    return known_vehicle(context, vehicle_id)
+
+
+def known_vehicle(context: ApiContext, vehicle_id: int) -> Vehicle:
+    """The vehicle, or 404."""
     vehicle = context.registry.get(vehicle_id)
     if vehicle is None:
         raise ApiError(404, f"no vehicle {vehicle_id}")

@@ -4,6 +4,7 @@ a 409 carrying its MAV_RESULT and reason, no answer a 504, a lost vehicle a 503:
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import Any
 
 from fastapi import FastAPI, Request
@@ -12,7 +13,14 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel, ValidationError
 
-from server.control.lease import LeaseInvalid
+from server.control.lease import (
+    LeaseHeld,
+    LeaseInvalid,
+    TakeoverRefused,
+    TtlOutOfBounds,
+    UnknownRequest,
+)
+from server.control.lease_ops import AskerGone
 from server.http.schemas import CommandResultOut, ErrorOut, UnprocessableOut
 from server.link import CommandOutcome, CommandResult, ParamError, SetpointRejected
 
@@ -103,6 +111,17 @@ def error_status(exc: Exception) -> tuple[int, dict[str, Any]] | None:
     REST handlers and the WebSocket control session both answer through this."""
     if isinstance(exc, ApiError):
         return exc.status_code, exc.detail
+    if isinstance(exc, LeaseHeld):
+        return 409, {"reason": str(exc), "holder": exc.lease.holder}
+    if isinstance(exc, TakeoverRefused):
+        return 409, {"reason": str(exc), "holder": exc.holder}
+    if isinstance(exc, TtlOutOfBounds):
+        return 422, {"reason": str(exc), "field": "ttl_s", "limit": exc.limit}
+    if isinstance(exc, UnknownRequest):
+        return 404, {"reason": str(exc)}
+    if isinstance(exc, AskerGone):
+        # nobody reads this answer; 499 is what proxies log for a client that left
+        return 499, {"reason": "the client asking for control went away"}
     if isinstance(exc, SetpointRejected):
         return 422, {"reason": exc.reason, "field": exc.field, "limit": exc.limit}
     if isinstance(exc, ValidationError):
@@ -180,11 +199,22 @@ async def _invalid_request(_: Request, exc: Exception) -> JSONResponse:
     """FastAPI's 422, with the offending input echoed safely (Python's JSON parser takes
     NaN and Infinity, which the answer could not encode: a 500 instead of the 422)."""
     assert isinstance(exc, RequestValidationError)
-    errors = [json_safe(jsonable_encoder(error)) for error in exc.errors()]
-    return JSONResponse({"detail": errors}, status_code=422)
+    return JSONResponse({"detail": validation_detail(exc.errors())}, status_code=422)
+
+
+def validation_detail(errors: Sequence[Any]) -> list[Any]:
+    """The ``detail`` of a 422 for invalid input: FastAPI's errors, safe to encode."""
+    return [json_safe(jsonable_encoder(error)) for error in errors]
+
+
+# the failures answered as error_status says; anything else is a bug (500)
+ANSWERED_ERRORS: tuple[type[Exception], ...] = (
+    ApiError, SetpointRejected, LeaseInvalid, ParamError, TimeoutError, LeaseHeld,
+    TakeoverRefused, TtlOutOfBounds, UnknownRequest, AskerGone,
+)  # fmt: skip
 
 
 def install_error_handlers(app: FastAPI) -> None:
-    for exc_type in (ApiError, SetpointRejected, LeaseInvalid, ParamError, TimeoutError):
+    for exc_type in ANSWERED_ERRORS:
         app.add_exception_handler(exc_type, _handle)
     app.add_exception_handler(RequestValidationError, _invalid_request)

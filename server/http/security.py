@@ -166,6 +166,47 @@ class Guards:
             ws_close_after=settings.ws_abuse_close_after,
         )
 
+    def admit_token(
+        self, tokens: TokenChecker, address: str, token: str
+    ) -> tuple[Role | None, Refusal | None]:
+        """The token's role (None: wrong), or a refusal while the address is locked out;
+        a wrong token counts against the address, a right one clears it."""
+        wait_s = self.lockout.retry_after_s(address)
+        if wait_s > 0:
+            return None, Refusal(LOCKED_OUT_REASON, wait_s)
+        role = tokens.role_of(token)
+        if role is None:
+            self.lockout.failed(address)
+        else:
+            self.lockout.succeeded(address)
+        return role, None
+
+    def admit_call(self, role: Role, method: str) -> Refusal | None:
+        """A refusal when a control call (any method but GET/HEAD/OPTIONS) goes over the
+        token's rate limit."""
+        if method in SAFE_METHODS:
+            return None
+        wait_s = self.control.take(role.value)
+        if wait_s <= 0:
+            return None
+        reason = (
+            f"rate limit: {self.control.rate_per_s:g} control calls/s "
+            f"(burst {self.control.burst:g}) per token"
+        )
+        return Refusal(reason, wait_s)
+
+
+LOCKED_OUT_REASON = "too many wrong tokens from this address; try again later"
+
+
+@dataclass(frozen=True)
+class Refusal:
+    """A call refused before it runs: 429, with the wait for Retry-After."""
+
+    reason: str
+    retry_after_s: float
+    status: int = 429
+
 
 def retry_after_header(wait_s: float) -> str:
     """Retry-After is whole seconds; never 0 for a refusal."""
@@ -204,35 +245,20 @@ class SecurityMiddleware:
         token = _token(scope, headers) if checks_token else None
         role: Role | None = None
         if token and checks_token:
-            wait_s = self.guards.lockout.retry_after_s(address)
-            if wait_s > 0:
-                reason = "too many wrong tokens from this address; try again later"
-                await _refuse(scope, receive, send, 429, reason, wait_s)
+            role, refusal = self.guards.admit_token(self.tokens, address, token)
+            if refusal is not None:
+                await _refuse(scope, receive, send, 429, refusal.reason, refusal.retry_after_s)
                 return
-            role = self.tokens.role_of(token)
-            if role is None:
-                self.guards.lockout.failed(address)
-            else:
-                self.guards.lockout.succeeded(address)
         if not origin_allowed(headers, self.allowed_origins) and (
             (kind == "websocket" and path.startswith(API_PATH))
             or (kind == "http" and scope["method"] not in SAFE_METHODS)
         ):
             await _refuse(scope, receive, send, 403, "origin not allowed", field="Origin")
             return
-        if (
-            kind == "http"
-            and role is not None
-            and scope["method"] not in SAFE_METHODS
-            and path.startswith(API_PATH)
-        ):
-            wait_s = self.guards.control.take(role.value)
-            if wait_s > 0:
-                reason = (
-                    f"rate limit: {self.guards.control.rate_per_s:g} control calls/s "
-                    f"(burst {self.guards.control.burst:g}) per token"
-                )
-                await _refuse(scope, receive, send, 429, reason, wait_s)
+        if kind == "http" and role is not None and path.startswith(API_PATH):
+            refusal = self.guards.admit_call(role, scope["method"])
+            if refusal is not None:
+                await _refuse(scope, receive, send, 429, refusal.reason, refusal.retry_after_s)
                 return
         if kind == "http":
             await self.app(scope, receive, _with_headers(send, csp_for(path)))

@@ -1,7 +1,8 @@
-"""The edge's api queryable against a small app of its own (no vehicle): what of a query
-reaches the app, what of the app's answer goes back, and the answers the edge gives itself
-(bad path or payload, a call too slow, too many at once), over real Zenoh on loopback; and
-how the edge numbers a vehicle's state samples."""
+"""The edge's api queryable over an edge with no vehicle: what of a query counts (the
+caller's token and lease, from the address ``zenoh``), what of an answer goes back, and the
+answers the edge gives itself (bad path or payload, too many at once), over real Zenoh on
+loopback; and how the edge numbers a vehicle's state samples. The same calls with a
+vehicle, next to REST: test_edge_parity.py."""
 
 from __future__ import annotations
 
@@ -15,15 +16,17 @@ from typing import Any
 import pytest
 import pytest_asyncio
 import zenoh
-from fastapi import FastAPI, Request, Response
 
-from server.app import StartupError
+from server.app import StartupError, create_app
 from server.control.publisher import Published
 from server.fleet.edge_api import EdgeApi, check_path
+from server.fleet.edge_calls import ZENOH_ADDRESS, EdgeCalls
 from server.fleet.edge_publish import Sequence
 from server.fleet.proxy import call_timeout_s
 from server.fleet.session import open_session
-from tests.api.conftest import app_running, make_settings
+from server.http.deps import ApiContext
+from server.http.vehicle_calls import CALLS
+from tests.api.conftest import OBSERVER, PILOT, app_running, make_settings
 from tests.fleet.fake_edge import free_tcp_endpoint, loopback_options
 from tests.waiting import eventually
 
@@ -32,95 +35,78 @@ pytestmark = pytest.mark.asyncio(loop_scope="module")
 KEY = "skyhelm/apitest/edge-u/api"
 
 
-def echo_app() -> FastAPI:
-    app = FastAPI()
-
-    @app.post("/api/v1/echo")
-    async def echo(request: Request) -> dict[str, Any]:
-        client = request.client
-        return {
-            "client": [client.host, client.port] if client else None,
-            "headers": sorted(request.headers.keys()),
-            "authorization": request.headers.get("authorization"),
-            "query": str(request.query_params),
-            "body": await request.json(),
-        }
-
-    @app.get("/api/v1/busy")
-    async def busy() -> Response:
-        return Response(
-            b"slow down", status_code=429, media_type="text/plain",
-            headers={"Retry-After": "3", "X-Internal": "no"},
-        )
-
-    @app.get("/api/v1/slow")
-    async def slow() -> dict[str, bool]:
-        await asyncio.sleep(30.0)
-        return {"late": True}
-
-    @app.get("/api/v1/boom")
-    async def boom() -> None:
-        raise RuntimeError("the app failed")
-
-    @app.delete("/api/v1/empty", status_code=204)
-    async def empty() -> Response:
-        return Response(status_code=204)
-
-    return app
+def no_vehicle_calls(**overrides: Any) -> EdgeCalls:
+    """The calls of an app linked to nowhere (its lifespan not run: no vehicle)."""
+    app = create_app(make_settings("udpout:127.0.0.1:9", **overrides))
+    return EdgeCalls(app.state.api, app.state.publishers)
 
 
 @pytest_asyncio.fixture(loop_scope="module", scope="module")
 async def edge_api() -> AsyncIterator[EdgeApi]:
-    api = EdgeApi(echo_app(), KEY, call_timeout_s=0.5)
+    api = EdgeApi(no_vehicle_calls(), KEY, call_timeout_s=0.5)
     yield api
     await api.close()
 
 
-async def test_the_app_sees_the_callers_authority_only_from_address_zenoh(
+def _call(method: str, path: str, token: str | None = PILOT, **more: Any) -> bytes:
+    headers = {"Authorization": f"Bearer {token}"} if token else {}
+    return json.dumps({"method": method, "path": path, "headers": headers, **more}).encode()
+
+
+async def test_only_the_callers_bearer_token_counts_and_wrong_ones_lock_out_zenoh() -> None:
+    calls = no_vehicle_calls(lockout_free_failures=2, lockout_base_s=60.0)
+    api = EdgeApi(calls, KEY)
+    try:
+        # a cookie or an Origin is not the caller's authority here: no token at all
+        cookie = {"method": "GET", "path": "/api/v1/vehicles/1/control",
+                  "headers": {"Cookie": f"skyhelm_token={PILOT}", "Origin": "http://x"}}
+        missing = await api.run(json.dumps(cookie).encode())
+        assert missing["status"] == 401, missing
+        assert missing["headers"]["www-authenticate"] == "Bearer"
+        assert missing["body"] == {"detail": {"reason": "missing or wrong token"}}
+        known = await api.run(_call("GET", "/api/v1/vehicles/1/control", OBSERVER))
+        assert known["status"] == 404  # the token is right; there is no vehicle 1
+        assert known["body"] == {"detail": {"reason": "no vehicle 1"}}
+        for _ in range(3):  # the third wrong token past the free ones locks the address
+            assert (await api.run(_call("GET", "/api/v1/vehicles/1", "wrong")))["status"] == 401
+        context: ApiContext = calls.context
+        assert context.guards.lockout.failures(ZENOH_ADDRESS) == 3
+        locked = await api.run(_call("GET", "/api/v1/vehicles/1", "wrong"))
+        assert locked["status"] == 429, locked
+        assert int(locked["headers"]["retry-after"]) >= 1
+        # while locked out even the right token waits, as it does over REST
+        assert (await api.run(_call("GET", "/api/v1/vehicles/1")))["status"] == 429
+    finally:
+        await api.close()
+
+
+async def test_control_calls_share_the_tokens_rate_limit() -> None:
+    api = EdgeApi(no_vehicle_calls(control_rate_per_s=0.01, control_burst=2), KEY)
+    try:
+        statuses = [(await api.run(_call("POST", "/api/v1/vehicles/1/arm", body={})))["status"]
+                    for _ in range(3)]
+        assert statuses == [404, 404, 429]
+        limited = await api.run(_call("POST", "/api/v1/vehicles/1/arm", body={}))
+        assert limited["body"]["detail"]["reason"].startswith("rate limit")
+        assert "retry-after" in limited["headers"]
+        # reads are not control calls
+        assert (await api.run(_call("GET", "/api/v1/vehicles/1")))["status"] == 404
+    finally:
+        await api.close()
+
+
+async def test_what_the_edge_does_not_offer_is_404_and_a_wrong_method_405(
     edge_api: EdgeApi,
 ) -> None:
-    call = {
-        "method": "post", "path": "/api/v1/echo", "query": "a=1&b=two",
-        "headers": {"Authorization": "Bearer abc", "X-Lease-Id": "L1", "Cookie": "t=x",
-                    "Origin": "http://evil.example", "X-Forwarded-For": "10.0.0.1"},
-        "body": {"altitude_m": 5.0, "list": [1, None]},
-    }
-    reply = await edge_api.run(json.dumps(call).encode())
-    assert reply["status"] == 200, reply
-    body = reply["body"]
-    assert body["client"] == ["zenoh", 0]
-    assert body["authorization"] == "Bearer abc"
-    assert "cookie" not in body["headers"]
-    assert "origin" not in body["headers"]
-    assert "x-forwarded-for" not in body["headers"]
-    assert "x-lease-id" in body["headers"]
-    assert body["query"] == "a=1&b=two"
-    assert body["body"] == {"altitude_m": 5.0, "list": [1, None]}
-    assert reply["headers"] == {"content-type": "application/json"}
-
-
-async def test_the_apps_answer_goes_back_with_its_status_and_selected_headers(
-    edge_api: EdgeApi,
-) -> None:
-    busy = await edge_api.run(b'{"method": "GET", "path": "/api/v1/busy"}')
-    assert busy["status"] == 429
-    assert busy["body"] == "slow down"  # not JSON: the text
-    assert busy["headers"]["retry-after"] == "3"
-    assert "x-internal" not in busy["headers"]
-    empty = await edge_api.run(b'{"method": "DELETE", "path": "/api/v1/empty"}')
-    assert empty["status"] == 204
-    assert empty["body"] is None
-    missing = await edge_api.run(b'{"method": "GET", "path": "/api/v1/nothing-here"}')
-    assert missing["status"] == 404
-    failed = await edge_api.run(b'{"method": "GET", "path": "/api/v1/boom"}')
-    assert failed["status"] == 500  # the app's own answer to its error; the edge goes on
-    assert (await edge_api.run(b'{"method": "DELETE", "path": "/api/v1/empty"}'))["status"] == 204
-
-
-async def test_a_call_that_does_not_finish_is_504(edge_api: EdgeApi) -> None:
-    reply = await edge_api.run(b'{"method": "GET", "path": "/api/v1/slow"}')
-    assert reply["status"] == 504
-    assert "did not finish" in reply["body"]["detail"]["reason"]
+    for path in ("/api/v1/vehicles", "/api/v1/health", "/api/v1/signing",
+                 "/api/v1/control/audit", "/api/v1/vehicles/1/nothing-here"):
+        reply = await edge_api.run(_call("GET", path))
+        assert reply["status"] == 404, (path, reply)
+        assert reply["body"]["detail"]["field"] == "path"
+    wrong = await edge_api.run(_call("GET", "/api/v1/vehicles/1/arm"))
+    assert wrong["status"] == 405
+    assert wrong["body"] == {"detail": "Method Not Allowed"}
+    assert wrong["headers"] == {"content-type": "application/json"}
 
 
 @pytest.mark.parametrize(
@@ -136,7 +122,9 @@ async def test_a_call_that_does_not_finish_is_504(edge_api: EdgeApi) -> None:
         (b'{"method": "GET", "path": "/api/v1/../../etc/passwd"}', 404, "path"),
         (b'{"method": "GET", "path": "/api/v1/fleet/edges/x/vehicles/1"}', 404, "path"),
         (b'{"method": "GET", "path": "/api/v1/echo\\r\\nX: y"}', 404, "path"),
-        (b'{"method": "POST", "path": "/api/v1/echo", "body": NaN}', 422, "body"),
+        (b'{"method": "POST", "path": "/api/v1/vehicles/1/arm", "body": NaN}', 422, "body"),
+        (b'{"method": "PUT", "path": "/api/v1/vehicles/1/setpoint", "body": {"x": [1, NaN]}}',
+         422, "body"),
         (b"{" + b" " * (1 << 20) + b"}", 413, "payload"),
     ],
 )
@@ -169,7 +157,7 @@ async def test_every_query_is_answered_even_when_busy_or_stopping() -> None:
     endpoint = free_tcp_endpoint()
     edge_session = await asyncio.to_thread(open_session, loopback_options(listen=[endpoint]))
     caller = await asyncio.to_thread(open_session, loopback_options(connect=[endpoint]))
-    api = EdgeApi(echo_app(), KEY, max_in_flight=0)
+    api = EdgeApi(no_vehicle_calls(), KEY, max_in_flight=0)
     api.bind()
     queryable = edge_session.declare_queryable(
         KEY, zenoh.handlers.Callback(api.on_query), complete=True
@@ -228,11 +216,27 @@ async def test_no_log_line_carries_the_callers_token(
 ) -> None:
     caplog.set_level(logging.DEBUG)
     secret = "s3cret-token-value"
-    call = {"method": "POST", "path": "/api/v1/echo", "query": f"token={secret}",
+    call = {"method": "POST", "path": "/api/v1/vehicles/1/arm", "query": f"token={secret}",
             "headers": {"authorization": f"Bearer {secret}"}, "body": {}}
     reply = await edge_api.run(json.dumps(call).encode())
-    assert reply["status"] == 200
-    assert any("zenoh call POST /api/v1/echo" in r.getMessage() for r in caplog.records)
+    assert reply["status"] == 401
+    assert any("zenoh call POST /api/v1/vehicles/1/arm" in r.getMessage()
+               for r in caplog.records)
     assert secret not in caplog.text
     # nothing logs the call's URL (a token in its query), even where no redaction is set up
     assert not [r for r in caplog.records if r.name.startswith(("httpx", "httpcore"))]
+
+
+async def test_every_rest_call_under_a_vehicle_is_one_the_edge_runs() -> None:
+    """A route added under /vehicles/{vehicle_id} is added to the edge's table too."""
+    app = create_app(make_settings("udpout:127.0.0.1:9"))
+    prefix = "/api/v1/vehicles/{vehicle_id}"
+    rest = {
+        (method.upper(), path.removeprefix(prefix).removeprefix("/"))
+        for path, operations in app.openapi()["paths"].items()
+        if path.startswith(prefix)
+        for method in operations
+    }
+    offered = {(call.method, call.path) for call in CALLS}
+    assert len(rest) > 30
+    assert rest == offered

@@ -11,7 +11,7 @@ from fastapi import APIRouter
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel
 
-from server.api.operations import run_intent
+from server.http import operations
 from server.http.deps import Context, ControlledVehicle
 from server.http.errors import COMMAND_RESPONSES
 from server.http.schemas.intents import (
@@ -32,9 +32,7 @@ router = APIRouter(
 async def answer_intent(
     context: Context, vehicle: Vehicle, name: str, body: BaseModel | None
 ) -> JSONResponse:
-    """Run an intent and tell the deadman whether the input is live now."""
-    answer = await run_intent(name, vehicle, body)
-    context.deadman.watch_live(vehicle.sysid, live=answer.live)
+    answer = await operations.answer_intent(context.deadman, vehicle, name, body)
     return JSONResponse(answer.body, status_code=answer.status)
 
 

@@ -6,11 +6,11 @@ from typing import Annotated
 
 from fastapi import APIRouter, Body, Query
 
-from server.api.operations import sent_out
 from server.control.deadman import LIVE_DESCRIPTION
 from server.http.deps import Context, ControlledVehicle
 from server.http.errors import CONTROL_RESPONSES
 from server.http.schemas import SentSetpointOut, SetpointBody
+from server.http.vehicle_ops import put_setpoint as put_setpoint_of
 
 router = APIRouter(prefix="/vehicles/{vehicle_id}", tags=["setpoint"])
 
@@ -24,6 +24,4 @@ async def put_setpoint(
 ) -> SentSetpointOut:
     """Replace the streamed setpoint. Refused with 422 (field, reason, limit) when it breaks
     the envelope or is a combination PX4 would drop for this vehicle type."""
-    sent = await vehicle.set_setpoint(body.to_link())
-    context.deadman.watch_live(vehicle.sysid, live=live)
-    return sent_out(sent)
+    return await put_setpoint_of(context.deadman, vehicle, body, live=live)

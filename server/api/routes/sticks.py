@@ -7,42 +7,14 @@ round."""
 
 from __future__ import annotations
 
-from dataclasses import asdict
-
 from fastapi import APIRouter
 
 from server.http.deps import Context, ControlledVehicle, KnownVehicle
 from server.http.errors import CONTROL_RESPONSES, READ_RESPONSES
 from server.http.schemas.sticks import SticksBody, SticksOut
-from server.link import Sticks, Vehicle
-from server.link.plugins.manual_control import MANUAL_CONTROL_RATE_HZ
-from skyhelm_wire.state import StreamOut
+from server.http.vehicle_ops import fly_sticks, sticks_out, stop_sticks
 
 router = APIRouter(prefix="/vehicles/{vehicle_id}", tags=["sticks"])
-
-
-def sticks_out(vehicle: Vehicle) -> SticksOut:
-    manual = vehicle.manual_control
-    sticks = manual.sticks
-    return SticksOut(
-        active=manual.active,
-        sticks=SticksBody(**asdict(sticks)) if sticks is not None else None,
-        rate_hz=MANUAL_CONTROL_RATE_HZ,
-        stream=StreamOut(**asdict(manual.stats())),
-    )
-
-
-def fly_sticks(context: Context, vehicle: Vehicle, body: SticksBody) -> SticksOut:
-    """Send these sticks from the next tick on and feed the deadman."""
-    vehicle.manual_control.set_sticks(Sticks(**body.model_dump()))
-    context.deadman.feed_sticks(vehicle.sysid)
-    return sticks_out(vehicle)
-
-
-def stop_sticks(context: Context, vehicle: Vehicle) -> SticksOut:
-    vehicle.manual_control.stop("stopped by the pilot")
-    context.deadman.stop_sticks_watch(vehicle.sysid)
-    return sticks_out(vehicle)
 
 
 @router.get("/sticks", response_model=SticksOut, responses=READ_RESPONSES)
@@ -55,10 +27,10 @@ async def get_sticks(vehicle: KnownVehicle) -> SticksOut:
 async def put_sticks(vehicle: ControlledVehicle, context: Context, body: SticksBody) -> SticksOut:
     """Fly with these sticks (MANUAL_CONTROL at 25 Hz). Live: send again within
     deadman_timeout_s, or the sticks are centred and then no longer sent."""
-    return fly_sticks(context, vehicle, body)
+    return fly_sticks(context.deadman, vehicle, body)
 
 
 @router.delete("/sticks", response_model=SticksOut, responses=CONTROL_RESPONSES)
 async def delete_sticks(vehicle: ControlledVehicle, context: Context) -> SticksOut:
     """Stop sending MANUAL_CONTROL (PX4 sees manual control lost after COM_RC_LOSS_T)."""
-    return stop_sticks(context, vehicle)
+    return stop_sticks(context.deadman, vehicle)

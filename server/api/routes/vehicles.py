@@ -7,10 +7,11 @@ from typing import Any
 from fastapi import APIRouter, Request, Response
 
 from server.control.publishers import StatePublishers
-from server.control.views import stream_dict, summary_dict
+from server.control.views import summary_dict
 from server.http.deps import Context, KnownVehicle, Reader
 from server.http.errors import AUTH_RESPONSES, READ_RESPONSES
 from server.http.schemas import StreamOut, VehicleStateOut, VehicleSummaryOut
+from server.http.vehicle_ops import state_json, stream_out
 
 router = APIRouter(tags=["vehicles"])
 
@@ -25,11 +26,10 @@ async def get_vehicle_state(vehicle: KnownVehicle, request: Request) -> Response
     """The state publisher's latest encoding (the one the telemetry sockets send), with
     the lease as it is now."""
     publishers: StatePublishers = request.app.state.publishers
-    body = publishers.for_vehicle(vehicle).rest_json()
-    return Response(body, media_type="application/json")
+    return Response(state_json(publishers, vehicle), media_type="application/json")
 
 
 @router.get("/vehicles/{vehicle_id}/stream", response_model=StreamOut, responses=READ_RESPONSES)
-async def get_stream_stats(vehicle: KnownVehicle) -> dict[str, Any]:
+async def get_stream_stats(vehicle: KnownVehicle) -> StreamOut:
     """Setpoint streamer figures, measured since the stream last started."""
-    return stream_dict(vehicle.stream_stats())
+    return stream_out(vehicle)

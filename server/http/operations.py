@@ -10,6 +10,7 @@ from typing import Any
 
 from pydantic import BaseModel
 
+from server.control.deadman import Deadman
 from server.http import schemas
 from server.http.errors import COMMAND_STATUS, ApiError, command_out
 from server.http.schemas.intents import (
@@ -115,6 +116,12 @@ OPERATIONS: dict[str, Operation] = {
     "offboard_start": Operation(schemas.OffboardStartBody, offboard_start),
     "offboard_stop": Operation(schemas.OffboardStopBody, offboard_stop),
 }
+
+
+async def run_command(name: str, vehicle: Vehicle, body: BaseModel | None) -> CommandResult:
+    """Run the operation ``name`` with its body (None: the body's defaults)."""
+    operation = OPERATIONS[name]
+    return await operation.run(vehicle, body if body is not None else operation.body())
 
 
 def _check_reposition_envelope(vehicle: Vehicle, body: schemas.RepositionBody) -> None:
@@ -229,3 +236,12 @@ async def run_intent(name: str, vehicle: Vehicle, args: object) -> IntentAnswer:
     live = bool(getattr(body, "live", False)) and result.sent is not None
     status = 200 if result.command is None else COMMAND_STATUS[result.command.outcome]
     return IntentAnswer(status, intent_out(result, live=live).model_dump(mode="json"), live)
+
+
+async def answer_intent(
+    deadman: Deadman, vehicle: Vehicle, name: str, args: object
+) -> IntentAnswer:
+    """Run an intent and tell the deadman whether the input is live now."""
+    answer = await run_intent(name, vehicle, args)
+    deadman.watch_live(vehicle.sysid, live=answer.live)
+    return answer

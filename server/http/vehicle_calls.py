@@ -1,0 +1,341 @@
+"""The calls under ``/api/v1/vehicles/{vehicle_id}`` as a table: for each method and path,
+who may make it, its body, query and path parameters, and the function its REST route runs
+(lease_ops, vehicle_ops, operations). The fleet edge runs a call that came over Zenoh
+through this table (server/fleet/edge_calls.py); each REST route calls the same function,
+so both answer alike. ``tests/fleet/test_edge_parity.py`` holds the two side by side."""
+
+from __future__ import annotations
+
+import asyncio
+import enum
+import json
+from collections.abc import Awaitable, Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Annotated, Any
+
+from pydantic import BaseModel, Field, TypeAdapter, ValidationError
+
+from server.control import lease_ops
+from server.control.publishers import StatePublishers
+from server.http import operations, vehicle_ops
+from server.http.deps import ApiContext
+from server.http.errors import COMMAND_STATUS, command_out
+from server.http.schemas import ParamValueBody, SetpointBody
+from server.http.schemas.intents import GotoIntentBody, OffsetIntentBody, VelocityIntentBody
+from server.http.schemas.sticks import SticksBody
+from server.link import Vehicle
+from skyhelm_wire.control import ControlBody, RenewBody, TakeoverAnswerBody
+
+
+class Access(enum.Enum):
+    """What a call asks of its caller, checked in REST's order."""
+
+    READ = "read"  # any token; the vehicle known
+    CONNECTED = "connected"  # any token; the vehicle known and connected
+    PILOT = "pilot"  # the pilot token; the vehicle known (the lease calls)
+    CONTROL = "control"  # the pilot token, the vehicle, its lease (X-Lease-Id), connected
+
+
+@dataclass
+class Reply:
+    """An answer: its status, its JSON body (b"": none) and the headers a caller acts on."""
+
+    status: int
+    body: bytes = b""
+    headers: dict[str, str] = field(default_factory=dict)
+
+
+def model_reply(model: BaseModel, status: int = 200) -> Reply:
+    return Reply(status, model.model_dump_json(by_alias=True).encode())
+
+
+@dataclass
+class CallArgs:
+    """One call's checked inputs."""
+
+    context: ApiContext
+    publishers: StatePublishers
+    vehicle: Vehicle
+    lease_id: str | None
+    client: lease_ops.Client | None
+    body: Any = None
+    query: dict[str, Any] = field(default_factory=dict)
+    params: dict[str, Any] = field(default_factory=dict)
+
+
+Run = Callable[[CallArgs], Awaitable[Reply]]
+
+
+@dataclass(frozen=True)
+class Param:
+    """A query or path parameter: its type as the route declares it, and its default."""
+
+    name: str
+    adapter: TypeAdapter[Any]
+    default: Any = None
+
+
+@dataclass(frozen=True)
+class VehicleCall:
+    method: str
+    path: str  # under the vehicle, "" for the vehicle itself; {name} for a path parameter
+    access: Access
+    run: Run
+    body: TypeAdapter[Any] | None = None  # None: the call takes no body
+    body_required: bool = False
+    query: tuple[Param, ...] = ()
+    params: tuple[Param, ...] = ()
+
+
+# -- the calls --------------------------------------------------------------------------------
+
+
+async def _state(args: CallArgs) -> Reply:
+    return Reply(200, vehicle_ops.state_json(args.publishers, args.vehicle))
+
+
+async def _stream(args: CallArgs) -> Reply:
+    return model_reply(vehicle_ops.stream_out(args.vehicle))
+
+
+async def _never() -> None:
+    # a Zenoh querier cannot be seen to leave: the ask ends by the holder's answer or timeout
+    await asyncio.Event().wait()
+
+
+async def _acquire(args: CallArgs) -> Reply:
+    context = args.context
+    lease = await lease_ops.acquire(
+        context.leases, args.vehicle, args.body or ControlBody(), args.lease_id,
+        pilot=context.pilot_name, client=args.client,
+        ask_s=context.settings.takeover_ask_s, gone=_never,
+    )  # fmt: skip
+    return model_reply(lease)
+
+
+async def _renew(args: CallArgs) -> Reply:
+    context = args.context
+    lease = lease_ops.renew(
+        context.leases, args.vehicle, args.body or RenewBody(), args.lease_id,
+        pilot=context.pilot_name,
+    )
+    return model_reply(lease)
+
+
+async def _status(args: CallArgs) -> Reply:
+    return model_reply(lease_ops.status(args.context.leases, args.vehicle.sysid))
+
+
+async def _release(args: CallArgs) -> Reply:
+    lease_ops.release(args.context.leases, args.vehicle, args.lease_id)
+    return Reply(204)
+
+
+async def _answer_takeover(args: CallArgs) -> Reply:
+    answer = lease_ops.answer_takeover(
+        args.context.leases, args.vehicle, args.lease_id, args.params["request_id"], args.body
+    )
+    return model_reply(answer)
+
+
+async def _setpoint(args: CallArgs) -> Reply:
+    sent = await vehicle_ops.put_setpoint(
+        args.context.deadman, args.vehicle, args.body, live=args.query["live"]
+    )
+    return model_reply(sent)
+
+
+async def _get_sticks(args: CallArgs) -> Reply:
+    return model_reply(vehicle_ops.sticks_out(args.vehicle))
+
+
+async def _put_sticks(args: CallArgs) -> Reply:
+    return model_reply(vehicle_ops.fly_sticks(args.context.deadman, args.vehicle, args.body))
+
+
+async def _delete_sticks(args: CallArgs) -> Reply:
+    return model_reply(vehicle_ops.stop_sticks(args.context.deadman, args.vehicle))
+
+
+async def _get_params(args: CallArgs) -> Reply:
+    return model_reply(await vehicle_ops.get_params(args.vehicle, args.query["names"]))
+
+
+async def _get_param(args: CallArgs) -> Reply:
+    return model_reply(await vehicle_ops.get_param(args.vehicle, args.params["name"]))
+
+
+async def _set_param(args: CallArgs) -> Reply:
+    return model_reply(
+        await vehicle_ops.set_param(args.vehicle, args.params["name"], args.body)
+    )
+
+
+def _command(name: str) -> Run:
+    async def run(args: CallArgs) -> Reply:
+        result = await operations.run_command(name, args.vehicle, args.body)
+        return model_reply(command_out(result), COMMAND_STATUS[result.outcome])
+
+    return run
+
+
+def _intent(name: str) -> Run:
+    async def run(args: CallArgs) -> Reply:
+        answer = await operations.answer_intent(
+            args.context.deadman, args.vehicle, name, args.body
+        )
+        return Reply(answer.status, _json(answer.body))
+
+    return run
+
+
+def _json(body: Any) -> bytes:
+    return json.dumps(body, allow_nan=False).encode()
+
+
+def _body(model: Any) -> TypeAdapter[Any]:
+    return TypeAdapter(model)
+
+
+def _command_call(name: str, path: str) -> VehicleCall:
+    """As routes/commands.py declares it: no body for an empty model, an optional one when
+    every field has a default."""
+    model = operations.OPERATIONS[name].body
+    if not model.model_fields:
+        return VehicleCall("POST", path, Access.CONTROL, _command(name))
+    required = any(f.is_required() for f in model.model_fields.values())
+    return VehicleCall("POST", path, Access.CONTROL, _command(name), _body(model), required)
+
+
+# the command routes' paths (routes/commands.py)
+COMMAND_PATHS = {
+    "arm": "arm", "disarm": "disarm", "takeoff": "takeoff", "land": "land", "rtl": "rtl",
+    "hold": "hold", "mode": "mode", "reposition": "reposition",
+    "vtol_transition": "vtol/transition", "origin": "origin", "home": "home",
+    "offboard_start": "offboard/start", "offboard_stop": "offboard/stop",
+}  # fmt: skip
+
+VEHICLE_ID = Param("vehicle_id", TypeAdapter(Annotated[int, Field(ge=0, le=255)]))
+_PARAM_NAME = Param(
+    "name", TypeAdapter(Annotated[str, Field(pattern=vehicle_ops.PARAM_NAME_PATTERN)])
+)
+
+CALLS: tuple[VehicleCall, ...] = (
+    VehicleCall("GET", "", Access.READ, _state),
+    VehicleCall("GET", "stream", Access.READ, _stream),
+    VehicleCall("GET", "control", Access.READ, _status),
+    VehicleCall("POST", "control", Access.PILOT, _acquire, _body(ControlBody)),
+    VehicleCall("PUT", "control", Access.PILOT, _renew, _body(RenewBody)),
+    VehicleCall("DELETE", "control", Access.PILOT, _release),
+    VehicleCall(
+        "POST", "control/requests/{request_id}", Access.PILOT, _answer_takeover,
+        _body(TakeoverAnswerBody), True, params=(Param("request_id", TypeAdapter(str)),),
+    ),
+    VehicleCall(
+        "PUT", "setpoint", Access.CONTROL, _setpoint, _body(SetpointBody), True,
+        query=(Param("live", TypeAdapter(bool), False),),
+    ),
+    VehicleCall("GET", "sticks", Access.READ, _get_sticks),
+    VehicleCall("PUT", "sticks", Access.CONTROL, _put_sticks, _body(SticksBody), True),
+    VehicleCall("DELETE", "sticks", Access.CONTROL, _delete_sticks),
+    VehicleCall(
+        "GET", "params", Access.CONNECTED, _get_params,
+        query=(Param("names", TypeAdapter(str | None)),),
+    ),
+    VehicleCall("GET", "params/{name}", Access.CONNECTED, _get_param, params=(_PARAM_NAME,)),
+    VehicleCall(
+        "PUT", "params/{name}", Access.CONTROL, _set_param, _body(ParamValueBody), True,
+        params=(_PARAM_NAME,),
+    ),
+    *(_command_call(name, path) for name, path in COMMAND_PATHS.items()),
+    VehicleCall("POST", "intents/brake", Access.CONTROL, _intent("brake")),
+    VehicleCall(
+        "PUT", "intents/velocity", Access.CONTROL, _intent("velocity"),
+        _body(VelocityIntentBody), True,
+    ),
+    VehicleCall(
+        "POST", "intents/offset", Access.CONTROL, _intent("offset"),
+        _body(OffsetIntentBody), True,
+    ),
+    VehicleCall(
+        "POST", "intents/goto", Access.CONTROL, _intent("goto"), _body(GotoIntentBody), True
+    ),
+)
+
+
+@dataclass(frozen=True)
+class Match:
+    call: VehicleCall | None  # None: the path is offered, not with this method (405)
+    vehicle_id: str
+    params: dict[str, str]
+
+
+def _pattern(path: str) -> tuple[str, ...]:
+    return tuple(path.split("/")) if path else ()
+
+
+_BY_SHAPE: dict[tuple[str, ...], dict[str, VehicleCall]] = {}
+for _call in CALLS:
+    _BY_SHAPE.setdefault(_pattern(_call.path), {})[_call.method] = _call
+
+
+def match(method: str, rest: str) -> Match | None:
+    """The call for ``method`` and the path after ``/vehicles/`` (``1/control``); None when
+    no call has that path."""
+    vehicle_id, _, under = rest.partition("/")
+    segments = tuple(under.split("/")) if under else ()
+    for shape, by_method in _BY_SHAPE.items():
+        if len(shape) != len(segments):
+            continue
+        params: dict[str, str] = {}
+        for part, segment in zip(shape, segments, strict=True):
+            if part.startswith("{"):
+                if not segment:
+                    break
+                params[part[1:-1]] = segment
+            elif part != segment:
+                break
+        else:
+            return Match(by_method.get(method), vehicle_id, params)
+    return None
+
+
+def validate(
+    call: VehicleCall, body: Any, query: Mapping[str, str], params: Mapping[str, str]
+) -> tuple[Any, dict[str, Any], dict[str, Any], list[dict[str, Any]]]:
+    """The call's body, query and path values as FastAPI validates them for its route, and
+    the errors it would answer 422 with (its format: type, loc, msg, input)."""
+    errors: list[dict[str, Any]] = []
+    path_values = {p.name: _value(p, params.get(p.name), ("path", p.name), errors)
+                   for p in call.params}  # fmt: skip
+    query_values = {p.name: _value(p, query.get(p.name), ("query", p.name), errors)
+                    for p in call.query}  # fmt: skip
+    value = None
+    if call.body is not None:
+        if body is None:
+            if call.body_required:
+                errors.append(missing(("body",)))
+        else:
+            value = validated(call.body, body, ("body",), errors)
+    return value, query_values, path_values, errors
+
+
+def _value(param: Param, raw: str | None, loc: tuple[str, ...], errors: list[Any]) -> Any:
+    if raw is None:
+        return param.default
+    return validated(param.adapter, raw, loc, errors)
+
+
+def validated(
+    adapter: TypeAdapter[Any], raw: Any, loc: tuple[str, ...], errors: list[Any]
+) -> Any:
+    try:
+        return adapter.validate_python(raw, from_attributes=True)
+    except ValidationError as exc:
+        errors.extend({**e, "loc": loc + tuple(e["loc"])} for e in exc.errors(include_url=False))
+        return None
+
+
+def missing(loc: tuple[str, ...]) -> dict[str, Any]:
+    """FastAPI's error for a required input that is absent."""
+    return {"type": "missing", "loc": loc, "msg": "Field required", "input": None}

@@ -1,0 +1,94 @@
+"""A vehicle's reads, setpoint, sticks and parameters as REST and the fleet edge run them:
+plain arguments in, the answer's model out, refusals raised as what ``errors.error_status``
+answers (the commands and intents are ``operations.py``)."""
+
+from __future__ import annotations
+
+import re
+from dataclasses import asdict
+
+from server.control.deadman import Deadman
+from server.control.publishers import StatePublishers
+from server.control.views import finite, stream_dict
+from server.http.errors import ApiError
+from server.http.operations import sent_out
+from server.http.schemas import ParamOut, ParamsOut, ParamValueBody, SentSetpointOut, SetpointBody
+from server.http.schemas.sticks import SticksBody, SticksOut
+from server.link import Sticks, Vehicle
+from server.link.plugins.manual_control import MANUAL_CONTROL_RATE_HZ
+from skyhelm_wire.state import StreamOut
+
+# PX4 parameter ids are at most 16 characters.
+PARAM_NAME_PATTERN = r"^[A-Za-z0-9_]{1,16}$"
+_NAME = re.compile(r"[A-Za-z0-9_]{1,16}")
+
+
+def state_json(publishers: StatePublishers, vehicle: Vehicle) -> bytes:
+    """The state publisher's latest encoding (the one the telemetry sockets send), with the
+    lease as it is now."""
+    return publishers.for_vehicle(vehicle).rest_json()
+
+
+def stream_out(vehicle: Vehicle) -> StreamOut:
+    """Setpoint streamer figures, measured since the stream last started."""
+    return StreamOut.model_validate(stream_dict(vehicle.stream_stats()))
+
+
+async def put_setpoint(
+    deadman: Deadman, vehicle: Vehicle, body: SetpointBody, *, live: bool
+) -> SentSetpointOut:
+    """Replace the streamed setpoint (the link refuses what breaks the envelope or what PX4
+    would drop) and tell the deadman whether it is live input."""
+    sent = await vehicle.set_setpoint(body.to_link())
+    deadman.watch_live(vehicle.sysid, live=live)
+    return sent_out(sent)
+
+
+def sticks_out(vehicle: Vehicle) -> SticksOut:
+    manual = vehicle.manual_control
+    sticks = manual.sticks
+    return SticksOut(
+        active=manual.active,
+        sticks=SticksBody(**asdict(sticks)) if sticks is not None else None,
+        rate_hz=MANUAL_CONTROL_RATE_HZ,
+        stream=StreamOut(**asdict(manual.stats())),
+    )
+
+
+def fly_sticks(deadman: Deadman, vehicle: Vehicle, body: SticksBody) -> SticksOut:
+    """Send these sticks from the next tick on and feed the deadman."""
+    vehicle.manual_control.set_sticks(Sticks(**body.model_dump()))
+    deadman.feed_sticks(vehicle.sysid)
+    return sticks_out(vehicle)
+
+
+def stop_sticks(deadman: Deadman, vehicle: Vehicle) -> SticksOut:
+    vehicle.manual_control.stop("stopped by the pilot")
+    deadman.stop_sticks_watch(vehicle.sysid)
+    return sticks_out(vehicle)
+
+
+def param_names(names: str | None) -> list[str] | None:
+    """A comma-separated list of parameter ids, or 422 naming ``names``."""
+    if names is None:
+        return None
+    wanted = [name.strip() for name in names.split(",") if name.strip()]
+    for name in wanted:
+        if len(name) > 16:
+            raise ApiError(422, f"parameter name {name!r} is longer than 16", field="names")
+        if _NAME.fullmatch(name) is None:
+            # the same rule as a single name in the path: PX4's ids are ASCII
+            raise ApiError(422, f"parameter name {name!r} is not [A-Za-z0-9_]", field="names")
+    return wanted
+
+
+async def get_params(vehicle: Vehicle, names: str | None) -> ParamsOut:
+    return ParamsOut(params=finite(await vehicle.get_params(param_names(names))))
+
+
+async def get_param(vehicle: Vehicle, name: str) -> ParamOut:
+    return ParamOut(name=name, value=finite(await vehicle.get_param(name)))
+
+
+async def set_param(vehicle: Vehicle, name: str, body: ParamValueBody) -> ParamOut:
+    return ParamOut(name=name, value=finite(await vehicle.set_param(name, body.value)))
