@@ -31,6 +31,11 @@ import zenoh
 from server.fleet.keys import FleetKeys
 
 QUERY_TIMEOUT_S = 5.0
+# A command runs on the vehicle before the edge answers: OFFBOARD's pre-stream, the command's
+# ACK with its retries and the mode's confirmation, once more when PX4 accepts but does not
+# enter the mode; on a loaded edge that passes 5 s. The edge answers 504 itself when the
+# vehicle is silent, so the fleet waits for that answer rather than guessing.
+COMMAND_TIMEOUT_S = 15.0
 QUERY_PRIORITY = zenoh.Priority.INTERACTIVE_HIGH
 
 
@@ -109,9 +114,10 @@ async def edge_call(
 def call_timeout_s(
     method: str, rest: str, body: Any, takeover_ask_s: float, base_s: float = QUERY_TIMEOUT_S
 ) -> float:
-    """How long the edge has to answer a call on ``.../vehicles/{id}/{rest}``: ``base_s``,
-    plus ``takeover_ask_s`` for an ask for control, which the edge holds that long for the
-    holder's answer (a forced takeover is answered at once)."""
+    """How long the edge has to answer a call on ``.../vehicles/{id}/{rest}``: ``base_s``
+    for a read, at least ``COMMAND_TIMEOUT_S`` for anything else, plus ``takeover_ask_s`` for
+    an ask for control, which the edge holds that long for the holder's answer (a forced
+    takeover is answered at once)."""
     asks = (
         method == "POST"
         and rest.strip("/") == "control"
@@ -119,7 +125,10 @@ def call_timeout_s(
         and body.get("takeover") is True
         and body.get("force") is not True
     )
-    return base_s + takeover_ask_s if asks else base_s
+    if method in ("GET", "HEAD"):
+        return base_s
+    writes_s = max(base_s, COMMAND_TIMEOUT_S)
+    return writes_s + takeover_ask_s if asks else writes_s
 
 
 def _on_loop(loop: asyncio.AbstractEventLoop, call: Callable[..., None], *args: Any) -> None:

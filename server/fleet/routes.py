@@ -43,8 +43,8 @@ PROXY_RESPONSES: dict[int | str, dict[str, Any]] = {
     **CONTROL_RESPONSES,
     502: {"model": ErrorOut, "description": "the edge answered with a Zenoh error"},
     503: {"model": ErrorOut, "description": "the edge is not alive (lost)"},
-    504: {"model": ErrorOut, "description": "the edge did not answer within 5 s (an ask "
-          "for control: takeover_ask_s + 5 s)"},
+    504: {"model": ErrorOut, "description": "the edge did not answer within 5 s (a read), "
+          "15 s (a command), takeover_ask_s + 15 s (an ask for control)"},
 }
 
 

@@ -136,16 +136,18 @@ async def test_what_is_not_a_call_is_answered_with_why(
     assert reply["body"]["detail"]["field"] == field
 
 
-async def test_an_ask_for_control_has_the_holders_time_on_top_of_the_call_timeout() -> None:
+async def test_a_read_has_5_s_a_command_15_s_and_an_ask_the_holders_time_on_top() -> None:
     ask = {"takeover": True, "client_name": "me"}
-    assert call_timeout_s("POST", "control", ask, takeover_ask_s=10.0) == 15.0
-    assert call_timeout_s("POST", "control", ask, takeover_ask_s=3.0, base_s=1.0) == 4.0
-    # answered at once: a forced takeover, a plain acquire, anything else
-    assert call_timeout_s("POST", "control", {**ask, "force": True}, 10.0) == 5.0
-    assert call_timeout_s("POST", "control", {}, 10.0) == 5.0
-    assert call_timeout_s("POST", "control", None, 10.0) == 5.0
-    assert call_timeout_s("PUT", "control", ask, 10.0) == 5.0
-    assert call_timeout_s("POST", "arm", ask, 10.0) == 5.0
+    assert call_timeout_s("GET", "state", None, takeover_ask_s=10.0) == 5.0
+    assert call_timeout_s("GET", "state", None, 10.0, base_s=1.0) == 1.0
+    assert call_timeout_s("POST", "control", ask, takeover_ask_s=10.0) == 25.0
+    assert call_timeout_s("POST", "control", ask, takeover_ask_s=3.0, base_s=20.0) == 23.0
+    # answered without waiting for a holder: a forced takeover, a plain acquire, anything else
+    assert call_timeout_s("POST", "control", {**ask, "force": True}, 10.0) == 15.0
+    assert call_timeout_s("POST", "control", {}, 10.0) == 15.0
+    assert call_timeout_s("POST", "control", None, 10.0) == 15.0
+    assert call_timeout_s("PUT", "control", ask, 10.0) == 15.0
+    assert call_timeout_s("POST", "offboard/start", ask, 10.0) == 15.0
 
 
 async def test_paths_under_the_api_only() -> None:
