@@ -117,7 +117,7 @@ class Deadman:
         if vehicle is None:
             return
         self._live[vehicle_id] = _LiveWatch(
-            self._leases.now() + self.live_timeout_s, vehicle.offboard.setpoint
+            self._leases.now() + self.live_timeout_s, vehicle.setpoint
         )
 
     def stop_live(self, vehicle_id: int) -> None:
@@ -148,18 +148,18 @@ class Deadman:
             if watch.due_at > now:
                 continue
             vehicle = self._registry.get(vehicle_id)
-            if vehicle is None or not _sends_sticks(vehicle):
+            if vehicle is None or not vehicle.sticks_active:
                 del self._sticks[vehicle_id]
             elif not watch.centred:
                 self._centre_sticks(vehicle, watch, "live_timeout")
             else:
                 del self._sticks[vehicle_id]
-                vehicle.manual_control.stop("deadman: sticks silent")
+                vehicle.stop_sticks("deadman: sticks silent")
                 self.events.publish(vehicle_id, "deadman", {
                     "action": "stop_sticks", "cause": "live_timeout", "ok": True})
 
     def _centre_sticks(self, vehicle: Vehicle, watch: _SticksWatch, cause: str) -> None:
-        vehicle.manual_control.centre()
+        vehicle.centre_sticks()
         watch.centred = True
         watch.due_at = self._leases.now() + self.sticks_centred_s
         self.events.publish(vehicle.sysid, "deadman", {
@@ -176,7 +176,7 @@ class Deadman:
             # a setpoint set since (a script's, a brake, a hold) is not the live one any more
             if vehicle is None or not vehicle.streamer_active:
                 continue
-            if vehicle.offboard.setpoint != watch.setpoint:
+            if vehicle.setpoint != watch.setpoint:
                 continue
             self._run(self._brake_for_silence(vehicle))
 
@@ -208,7 +208,7 @@ class Deadman:
         # nobody flies it now: the operator-loss action decides, not the live-input brake
         self._live.pop(lease.vehicle_id, None)
         vehicle = self._registry.get(lease.vehicle_id)
-        if vehicle is not None and _sends_sticks(vehicle):
+        if vehicle is not None and vehicle.sticks_active:
             # nobody holds the sticks: centred now, then not sent (PX4's failsafe decides)
             watch = self._sticks.setdefault(lease.vehicle_id, _SticksWatch(0.0))
             self._centre_sticks(vehicle, watch, what)
@@ -242,9 +242,3 @@ class Deadman:
         if self.action == "rtl":
             return await vehicle.return_to_launch()
         return await vehicle.set_mode("HOLD")
-
-
-def _sends_sticks(vehicle: Vehicle) -> bool:
-    """Whether MANUAL_CONTROL is being sent (a vehicle without sticks support sends none)."""
-    manual = getattr(vehicle, "manual_control", None)
-    return bool(manual is not None and manual.active)

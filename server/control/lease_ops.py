@@ -46,7 +46,7 @@ def holder_name(pilot: str, client_name: str | None, session: str, client: Clien
 def lease_out(leases: LeaseManager, lease: Lease, vehicle: Vehicle | None) -> LeaseOut:
     """The lease as its holder sees it, with the setpoint being flown so it starts from it."""
     now = leases.now()
-    flying = vehicle.offboard.setpoint if vehicle is not None and vehicle.streamer_active else None
+    flying = vehicle.setpoint if vehicle is not None and vehicle.streamer_active else None
     return LeaseOut(
         lease_id=lease.lease_id,
         holder=lease.holder,

@@ -56,8 +56,9 @@ class PublishedVehicle(Protocol):
     """What a publisher reads of a vehicle."""
 
     sysid: int
-    connected: bool
 
+    @property
+    def connected(self) -> bool: ...
     @property
     def state_version(self) -> int: ...
     def snapshot(self) -> VehicleState: ...

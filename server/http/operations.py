@@ -127,7 +127,7 @@ async def run_command(name: str, vehicle: Vehicle, body: BaseModel | None) -> Co
 def _check_reposition_envelope(vehicle: Vehicle, body: schemas.RepositionBody) -> None:
     """The envelope guards repositions as it guards setpoints: they fly the vehicle too.
     Without a home neither the distance nor an AMSL altitude's height can be known."""
-    home = vehicle.telemetry.home
+    home = vehicle.home
     alt_rel_m = body.alt_rel_m
     if alt_rel_m is None and body.alt_amsl_m is not None and home is not None:
         alt_rel_m = body.alt_amsl_m - home.alt_amsl_m

@@ -45,25 +45,24 @@ async def put_setpoint(
 
 
 def sticks_out(vehicle: Vehicle) -> SticksOut:
-    manual = vehicle.manual_control
-    sticks = manual.sticks
+    sticks = vehicle.sticks
     return SticksOut(
-        active=manual.active,
+        active=vehicle.sticks_active,
         sticks=SticksBody(**asdict(sticks)) if sticks is not None else None,
         rate_hz=MANUAL_CONTROL_RATE_HZ,
-        stream=StreamOut(**asdict(manual.stats())),
+        stream=StreamOut(**asdict(vehicle.sticks_stats())),
     )
 
 
 def fly_sticks(deadman: Deadman, vehicle: Vehicle, body: SticksBody) -> SticksOut:
     """Send these sticks from the next tick on and feed the deadman."""
-    vehicle.manual_control.set_sticks(Sticks(**body.model_dump()))
+    vehicle.set_sticks(Sticks(**body.model_dump()))
     deadman.feed_sticks(vehicle.sysid)
     return sticks_out(vehicle)
 
 
 def stop_sticks(deadman: Deadman, vehicle: Vehicle) -> SticksOut:
-    vehicle.manual_control.stop("stopped by the pilot")
+    vehicle.stop_sticks("stopped by the pilot")
     deadman.stop_sticks_watch(vehicle.sysid)
     return sticks_out(vehicle)
 

@@ -13,22 +13,21 @@ the ``Sender`` it was given (the Link). Like MAVSDK's plugins:
 - ``px4_events``: PX4's EVENTs decoded with the metadata it serves
   (``server.link.plugins.px4_events``)
 
-Every operation of a plugin is also callable on the vehicle itself (``vehicle.arm()``).
+Outside the link a plugin is reached only through the vehicle's operations
+(``vehicle.arm()``), each defined once in ``server.link.vehicle_operations``.
 """
 
 from __future__ import annotations
 
 import asyncio
 import logging
-from collections.abc import Mapping, Sequence
-from typing import Generic, Self, TypeVar, overload
+from collections.abc import Mapping
 
 from pymavlink.dialects.v20 import development as mavlink
 
 from server.link.codec.aio import cancel_and_wait
 from server.link.codec.arming_checks import readiness
-from server.link.codec.setpoint_checks import Envelope
-from server.link.codec.setpoints import Setpoint, describe
+from server.link.codec.setpoints import describe
 from server.link.core.requests import Requester
 from server.link.core.state import VehicleState
 from server.link.core.vehicle_core import Sender, VehicleCore
@@ -43,52 +42,13 @@ from server.link.plugins.reboot import RebootWatch
 from server.link.plugins.telemetry import Telemetry
 from server.link.plugins.telemetry_requests import TelemetryRequests
 from server.link.stream.streamer import DEFAULT_RATE_HZ
+from server.link.vehicle_operations import VehicleOperations
 
-T = TypeVar("T")
 log = logging.getLogger(__name__)
 
 
-class _OnPlugin(Generic[T]):
-    """A vehicle attribute that lives on one of its plugins ("plugin.attribute")."""
-
-    def __init__(self, path: str, *, writable: bool = True) -> None:
-        *self._owner_path, self._name = path.split(".")
-        self._writable = writable
-
-    def _owner(self, vehicle: Vehicle) -> object:
-        owner: object = vehicle
-        for name in self._owner_path:
-            owner = getattr(owner, name)
-        return owner
-
-    @overload
-    def __get__(self, vehicle: None, owner: type) -> Self: ...
-    @overload
-    def __get__(self, vehicle: Vehicle, owner: type) -> T: ...
-    def __get__(self, vehicle: Vehicle | None, owner: type) -> Self | T:
-        if vehicle is None:
-            return self
-        value: T = getattr(self._owner(vehicle), self._name)
-        return value
-
-    def __set__(self, vehicle: Vehicle, value: T) -> None:
-        if not self._writable:
-            raise AttributeError(f"{self._name} is reported by the vehicle, not set")
-        setattr(self._owner(vehicle), self._name, value)
-
-
-class Vehicle:
+class Vehicle(VehicleOperations):
     """A PX4 vehicle seen on a link. Created by the Link on discovery."""
-
-    envelope = _OnPlugin[Envelope]("offboard.envelope")
-    offboard_prestream_s = _OnPlugin[float]("offboard.prestream_s")
-    stream_rate_hz = _OnPlugin[float]("offboard.streamer.rate_hz")
-    streamer_active = _OnPlugin[bool]("offboard.streamer.active", writable=False)
-    mode_confirm_timeout_s = _OnPlugin[float]("action.mode_confirm_timeout_s")
-    origin_timeout_s = _OnPlugin[float]("action.origin_timeout_s")
-    connected = _OnPlugin[bool]("core.connected", writable=False)  # see set_connected
-    mav_type = _OnPlugin[int]("core.mav_type", writable=False)
-    autopilot = _OnPlugin[int]("core.autopilot", writable=False)
 
     def __init__(
         self,
@@ -123,30 +83,6 @@ class Vehicle:
         self.telemetry_requests = TelemetryRequests(core, self.telemetry, telemetry_rates_hz)
         self.px4_events = Px4Events(core, self.telemetry)
         self.outage = OutageReport(core, self.telemetry)
-
-        # the plugins' operations, callable on the vehicle itself
-        self.handle_message = core.handle_message
-        self.set_connected = core.set_connected
-        self.set_link_quality = core.set_link_quality
-        self.subscribe = core.subscribe
-        self.subscribe_events = core.subscribe_events
-        self.unsubscribe_events = core.unsubscribe_events
-        self.publish_event = core.publish_event
-        self.wait_until = core.wait_until
-        action = self.action
-        self.command_long = action.command_long
-        self.arm, self.disarm, self.hold = action.arm, action.disarm, action.hold
-        self.takeoff, self.land = action.takeoff, action.land
-        self.return_to_launch = action.return_to_launch
-        self.set_mode = action.set_mode
-        self.reposition = action.reposition
-        self.vtol_transition = action.vtol_transition
-        self.set_gps_origin, self.set_home = action.set_gps_origin, action.set_home
-        self.set_setpoint = self.offboard.set_setpoint
-        self.hold_position_setpoint = self.offboard.hold_position
-        self.start_offboard, self.stop_offboard = self.offboard.start, self.offboard.stop
-        self.stream_stats = self.offboard.streamer.stats
-        self.get_param, self.set_param = self.params.get, self.params.set
 
     @property
     def commands(self) -> Requester:
@@ -195,15 +131,6 @@ class Vehicle:
             "reread": True, "count": len(values),
             "text": f"{len(values)} parameters read again after the reboot",
         })  # fmt: skip
-
-    def check_setpoint(self, sp: Setpoint) -> None:
-        """SetpointRejected if the setpoint would be refused."""
-        self.offboard.check(sp)
-
-    async def get_params(self, names: Sequence[str] | None = None) -> dict[str, float | int]:
-        if names is None:
-            return await self.params.get_all()
-        return await self.params.get_many(names)
 
     # -- observing --------------------------------------------------------------------
     @property

@@ -30,16 +30,17 @@ class _Vehicle:
     """What the deadman uses of a vehicle: the streamed setpoint, events, the hold."""
 
     sysid = 1
+    sticks_active = False
 
     def __init__(self) -> None:
         self.streamer_active = True
-        self.offboard = SimpleNamespace(setpoint=None)
+        self.setpoint: object = None
         self.events: list[tuple[float, str, dict[str, object]]] = []
         self.actions: list[str] = []
 
     def fly(self, setpoint: object) -> None:
         """A setpoint accepted and streamed, as set_setpoint leaves it."""
-        self.offboard.setpoint = setpoint
+        self.setpoint = setpoint
 
     def publish_event(self, kind: str, data: dict[str, object]) -> None:
         self.events.append((asyncio.get_running_loop().time(), kind, data))

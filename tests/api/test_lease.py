@@ -117,6 +117,7 @@ class _Vehicle:
     """What the deadman uses of a vehicle; records the events and the actions taken."""
 
     sysid = 1
+    sticks_active = False
 
     def __init__(self, *, streaming: bool = True, fails: bool = False) -> None:
         self.streamer_active = streaming
