@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Callable, Sequence
+from typing import Generic, Self, TypeVar, overload
 
 from pymavlink.dialects.v20 import development as mavlink
 
@@ -26,6 +27,37 @@ from server.link.plugins.offboard import Offboard
 from server.link.plugins.params import ParamClient
 from server.link.plugins.telemetry import Telemetry
 
+T = TypeVar("T")
+
+
+class PluginSetting(Generic[T]):
+    """A value of the vehicle's core or one of its plugins ("plugin.attribute"), read (and,
+    when writable, set) on the vehicle itself."""
+
+    def __init__(self, path: str, *, writable: bool = True) -> None:
+        *self._owner_path, self._name = path.split(".")
+        self._writable = writable
+
+    def _owner(self, vehicle: object) -> object:
+        for name in self._owner_path:
+            vehicle = getattr(vehicle, name)
+        return vehicle
+
+    @overload
+    def __get__(self, vehicle: None, owner: type) -> Self: ...
+    @overload
+    def __get__(self, vehicle: object, owner: type) -> T: ...
+    def __get__(self, vehicle: object | None, owner: type) -> Self | T:
+        if vehicle is None:
+            return self
+        value: T = getattr(self._owner(vehicle), self._name)
+        return value
+
+    def __set__(self, vehicle: object, value: T) -> None:
+        if not self._writable:
+            raise AttributeError(f"{self._name} is reported by the vehicle, not set")
+        setattr(self._owner(vehicle), self._name, value)
+
 
 class VehicleOperations:
     """The Vehicle's operations and settings, each handed to the plugin that owns it."""
@@ -36,6 +68,25 @@ class VehicleOperations:
     manual_control: ManualControl
     params: ParamClient
     telemetry: Telemetry
+
+    # what the core reports, read here
+    connected = PluginSetting[bool]("core.connected", writable=False)
+    """Whether the link hears the vehicle (``VehicleCore``; changed by set_connected)."""
+    mav_type = PluginSetting[int]("core.mav_type", writable=False)
+    """MAV_TYPE from its last HEARTBEAT (``VehicleCore``)."""
+    autopilot = PluginSetting[int]("core.autopilot", writable=False)
+    """MAV_AUTOPILOT from its last HEARTBEAT (``VehicleCore``)."""
+    # settings that live on a plugin, read and set here
+    mode_confirm_timeout_s = PluginSetting[float]("action.mode_confirm_timeout_s")
+    """How long set_mode waits for the vehicle to report the mode (``Action``)."""
+    origin_timeout_s = PluginSetting[float]("action.origin_timeout_s")
+    """How long each try of set_gps_origin waits for its echo (``Action``)."""
+    envelope = PluginSetting[Envelope]("offboard.envelope")
+    """The limits every setpoint is checked against (``Offboard.envelope``)."""
+    stream_rate_hz = PluginSetting[float]("offboard.streamer.rate_hz")
+    """The setpoint stream's rate (``Offboard.streamer``)."""
+    offboard_prestream_s = PluginSetting[float]("offboard.prestream_s")
+    """How long setpoints stream before OFFBOARD is asked for (``Offboard``)."""
 
     # -- core: feeding, connection, observing ---------------------------------------------
     def handle_message(self, msg: mavlink.MAVLink_message) -> None:
@@ -53,16 +104,16 @@ class VehicleOperations:
         self.core.set_link_quality(quality)
 
     def subscribe(self, min_interval_s: float = 0.0) -> StateSubscription:
-        """Latest-wins state changes (``VehicleCore.subscribe``)."""
-        return self.core.subscribe(min_interval_s)
+        """Latest-wins state changes (``SubscriptionHub.subscribe``)."""
+        return self.core.hub.subscribe(min_interval_s)
 
     def subscribe_events(self, maxsize: int = 256) -> asyncio.Queue[VehicleEvent]:
-        """A queue of this vehicle's events (``VehicleCore.subscribe_events``)."""
-        return self.core.subscribe_events(maxsize)
+        """A queue of this vehicle's events (``EventHub.subscribe``)."""
+        return self.core.events.subscribe(maxsize)
 
     def unsubscribe_events(self, queue: asyncio.Queue[VehicleEvent]) -> None:
-        """Stop filling ``queue`` (``VehicleCore.unsubscribe_events``)."""
-        self.core.unsubscribe_events(queue)
+        """Stop filling ``queue`` (``EventHub.unsubscribe``)."""
+        self.core.events.unsubscribe(queue)
 
     def publish_event(self, kind: str, data: dict[str, object]) -> None:
         """Tell every event subscriber (``VehicleCore.publish_event``)."""
@@ -71,21 +122,6 @@ class VehicleOperations:
     async def wait_until(self, predicate: Callable[[], bool], timeout_s: float) -> bool:
         """Wait until ``predicate()`` holds after some message (``VehicleCore.wait_until``)."""
         return await self.core.wait_until(predicate, timeout_s)
-
-    @property
-    def connected(self) -> bool:
-        """Whether the link hears the vehicle (``VehicleCore``; changed by set_connected)."""
-        return self.core.connected
-
-    @property
-    def mav_type(self) -> int:
-        """MAV_TYPE from its last HEARTBEAT (``VehicleCore``)."""
-        return self.core.mav_type
-
-    @property
-    def autopilot(self) -> int:
-        """MAV_AUTOPILOT from its last HEARTBEAT (``VehicleCore``)."""
-        return self.core.autopilot
 
     # -- action: commands and modes -------------------------------------------------------
     async def command_long(
@@ -164,24 +200,6 @@ class VehicleOperations:
         """Set home at a place, or here (``Action.set_home``)."""
         return await self.action.set_home(lat_deg, lon_deg, alt_amsl_m)
 
-    @property
-    def mode_confirm_timeout_s(self) -> float:
-        """How long set_mode waits for the vehicle to report the mode (``Action``)."""
-        return self.action.mode_confirm_timeout_s
-
-    @mode_confirm_timeout_s.setter
-    def mode_confirm_timeout_s(self, value: float) -> None:
-        self.action.mode_confirm_timeout_s = value
-
-    @property
-    def origin_timeout_s(self) -> float:
-        """How long each try of set_gps_origin waits for its echo (``Action``)."""
-        return self.action.origin_timeout_s
-
-    @origin_timeout_s.setter
-    def origin_timeout_s(self, value: float) -> None:
-        self.action.origin_timeout_s = value
-
     # -- offboard: setpoints and their stream ---------------------------------------------
     def check_setpoint(self, sp: Setpoint) -> None:
         """SetpointRejected if the setpoint would be refused (``Offboard.check``)."""
@@ -217,33 +235,6 @@ class VehicleOperations:
     def streamer_active(self) -> bool:
         """Whether setpoints are being streamed now (``Offboard.streamer``)."""
         return self.offboard.streamer.active
-
-    @property
-    def envelope(self) -> Envelope:
-        """The limits every setpoint is checked against (``Offboard.envelope``)."""
-        return self.offboard.envelope
-
-    @envelope.setter
-    def envelope(self, value: Envelope) -> None:
-        self.offboard.envelope = value
-
-    @property
-    def stream_rate_hz(self) -> float:
-        """The setpoint stream's rate (``Offboard.streamer``)."""
-        return self.offboard.streamer.rate_hz
-
-    @stream_rate_hz.setter
-    def stream_rate_hz(self, value: float) -> None:
-        self.offboard.streamer.rate_hz = value
-
-    @property
-    def offboard_prestream_s(self) -> float:
-        """How long setpoints stream before OFFBOARD is asked for (``Offboard``)."""
-        return self.offboard.prestream_s
-
-    @offboard_prestream_s.setter
-    def offboard_prestream_s(self, value: float) -> None:
-        self.offboard.prestream_s = value
 
     # -- manual_control: sticks -----------------------------------------------------------
     def set_sticks(self, sticks: Sticks) -> Sticks:

@@ -14,11 +14,11 @@ from typing import Any, Protocol
 from pymavlink.dialects.v20 import development as mavlink
 
 from server.link.codec.statustext import RecentTexts
-from server.link.core.events import EventHub, VehicleEvent
+from server.link.core.events import EventHub
 from server.link.core.link_stats import LinkStats
 from server.link.core.liveness import LinkQuality
 from server.link.core.requests import Requester
-from server.link.core.state import StateSubscription, SubscriptionHub, VehicleState
+from server.link.core.state import SubscriptionHub, VehicleState
 from server.link.stream.stream_channel import StreamChannel
 
 MessageHandler = Callable[[Any], None]
@@ -168,15 +168,6 @@ class VehicleCore:
     def publish_event(self, kind: str, data: dict[str, object]) -> None:
         self.events.publish(kind, data)
 
-    def subscribe(self, min_interval_s: float = 0.0) -> StateSubscription:
-        """Latest-wins state changes; at most one per min_interval_s (see StateSubscription)."""
-        return self.hub.subscribe(min_interval_s)
-
-    def subscribe_events(self, maxsize: int = 256) -> asyncio.Queue[VehicleEvent]:
-        return self.events.subscribe(maxsize)
-
-    def unsubscribe_events(self, queue: asyncio.Queue[VehicleEvent]) -> None:
-        self.events.unsubscribe(queue)
 
     async def wait_until(self, predicate: Callable[[], bool], timeout_s: float) -> bool:
         """Wait until ``predicate()`` holds after some message; False on timeout."""
