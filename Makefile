@@ -56,9 +56,10 @@ lint: $(TSTAMP)
 audit: $(TSTAMP)
 	$(PY) -m tools.audit
 
-## Three workers: most tests wait on a real-time simulated vehicle, not on a core; the browser
-## tests share one worker (tests/conftest.py). TEST_WORKERS=0 runs everything in one process.
-TEST_WORKERS ?= 3
+## Four workers on two cores: most tests wait on a real-time simulated vehicle, not on a core;
+## the browser tests run in two groups, the longest modules first (tests/conftest.py).
+## TEST_WORKERS=0 runs everything in one process.
+TEST_WORKERS ?= 4
 
 test: $(TSTAMP) chromium lint audit
 	$(VENV)/bin/pytest -q -p no:cacheprovider -n $(TEST_WORKERS)
