@@ -22,6 +22,7 @@ from pymavlink.dialects.v20 import development as mavlink
 
 from server.link.codec import px4_messages
 from server.link.codec.aio import cancel_and_wait
+from server.link.codec.frame_record import FrameRecord, FrameTap
 from server.link.codec.signing import MAVLINK_MSG_ID_SETUP_SIGNING, LinkSigning
 from server.link.codec.signing_keys import SigningKeyStore
 from server.link.codec.tlog import TlogWriter
@@ -48,8 +49,6 @@ LOOP_STALL_S = 0.25
 _SETUP_SIGNING_ID = MAVLINK_MSG_ID_SETUP_SIGNING.to_bytes(3, "little")
 
 VehicleFactory = Callable[..., Vehicle]
-# Sees every frame the .tlog records, decoded, on the loop: (message, sent by us, Unix time).
-FrameTap = Callable[[mavlink.MAVLink_message, bool, float], None]
 # MAVLink signing link ids, one per link of this process
 _signing_link_ids = itertools.count()
 
@@ -92,8 +91,7 @@ class Link:
         # link there (server.link.stream.stream_channel): one sequence, one signing stream
         self._handover = LinkHandover(name, transport, self.mav, self.signing, self._loop,
                                       self._process_sent)
-        self._tlog = tlog
-        self._taps: list[FrameTap] = []
+        self._record = FrameRecord(tlog)
         self._vehicle_factory = vehicle_factory or Vehicle
         self._roster = VehicleRoster(
             name, Liveness(heartbeat_timeout_s, silence_timeout_s), self._make_vehicle)
@@ -175,9 +173,7 @@ class Link:
         await self._roster.close()
         await self._transport.close()
         await self.signing.close()
-        if self._tlog is not None:
-            await self._tlog.close()
-        self._taps.clear()  # as the .tlog closes: both have recorded the same frames
+        await self._record.close()
         log.info("link %s closed", self.name)
 
     @property
@@ -186,7 +182,7 @@ class Link:
 
     @property
     def tlog_path(self) -> Path | None:
-        return self._tlog.path if self._tlog is not None else None
+        return self._record.tlog_path
 
     @property
     def local_address(self) -> tuple[str, int] | None:
@@ -208,11 +204,10 @@ class Link:
         """Call ``tap`` on the loop with every frame the .tlog records (both directions,
         whether or not a .tlog is written). A frame sent from the setpoint sender thread
         reaches it one loop iteration later; the tap must be quick."""
-        self._taps.append(tap)
+        self._record.add_tap(tap)
 
     def remove_frame_tap(self, tap: FrameTap) -> None:
-        with contextlib.suppress(ValueError):
-            self._taps.remove(tap)
+        self._record.remove_tap(tap)
 
     def stats(self) -> LinkStats:
         last = self._roster.last_heartbeat_s
@@ -257,8 +252,7 @@ class Link:
                 return
             self._frames_out += 1
             self._bytes_out += len(frame)
-        recorded = self._tlog is not None or self._taps
-        if recorded and msg.get_msgId() != MAVLINK_MSG_ID_SETUP_SIGNING:
+        if self._record.active and msg.get_msgId() != MAVLINK_MSG_ID_SETUP_SIGNING:
             if on_loop:
                 self._record_sent(msg, frame, time.time())  # a key is never recorded
             else:
@@ -266,10 +260,7 @@ class Link:
                     self._loop.call_soon_threadsafe(self._record_sent, msg, frame, time.time())
 
     def _record_sent(self, msg: mavlink.MAVLink_message, frame: bytes, unix_time_s: float) -> None:
-        if self._tlog is not None:
-            self._tlog.record(frame, unix_time_s)
-        for tap in self._taps:
-            tap(msg, True, unix_time_s)
+        self._record.record(frame, msg, True, unix_time_s)
 
     def stream_channel(self, on_ticks: Callable[[int, list[float]], None]
                        ) -> StreamChannel | None:
@@ -287,12 +278,9 @@ class Link:
         self._frames_out += len(records)
         self._bytes_out += sum(len(frame) for _, frame in records)
         for unix_s, frame in records:  # a key is never recorded; taps get the frame decoded
-            if frame[7:10] != _SETUP_SIGNING_ID and (self._tlog is not None or self._taps):
-                msg = decode_sent(frame) if self._taps else None
-                if self._tlog is not None:
-                    self._tlog.record(frame, unix_s)
-                for tap in self._taps if msg is not None else ():
-                    tap(msg, True, unix_s)
+            if frame[7:10] != _SETUP_SIGNING_ID and self._record.active:
+                msg = decode_sent(frame) if self._record.tapped else None
+                self._record.record(frame, msg, True, unix_s)
 
     def _write_off_loop(self, frame: bytes, target_system: int | None) -> bool:
         writer = self._transport.thread_writer()
@@ -328,12 +316,8 @@ class Link:
         self.signing.note_received(msg)
         if msg.get_msgId() == MAVLINK_MSG_ID_SETUP_SIGNING:
             return  # a key: never recorded, and no vehicle of ours takes one from a peer
-        if self._tlog is not None or self._taps:
-            unix_time_s = time.time()  # one time for both: a tap's frames match the .tlog's
-            if self._tlog is not None:
-                self._tlog.record(msg.get_msgbuf(), unix_time_s)
-            for tap in self._taps:
-                tap(msg, False, unix_time_s)
+        if self._record.active:  # one time for both: a tap's frames match the .tlog's
+            self._record.record(msg.get_msgbuf(), msg, False, time.time())
         self._roster.frame_received(msg, missing, self.now())
         vehicle = self._roster.vehicles.get(src_system)
         if vehicle is not None:
@@ -366,8 +350,8 @@ class Link:
             loop.create_task(self._send_gcs_heartbeats(), name=f"gcs-heartbeat:{self.name}"),
             loop.create_task(self._watch_heartbeats(), name=f"heartbeat-watch:{self.name}"),
         ]
-        if self._tlog is not None:
-            self._tlog.start()
+        if self._record.tlog is not None:
+            self._record.tlog.start()
         self.signing.start()
 
     async def _send_gcs_heartbeats(self) -> None:
