@@ -56,9 +56,14 @@ class _Pilot:
 
 @pytest.fixture(scope="module")
 def pilot(px4: Px4Sitl, served_px4: Served) -> Iterator[_Pilot]:
-    listed = httpx.get(f"{served_px4.api}/vehicles",
-                       headers={"Authorization": f"Bearer {served_px4.pilot_token}"})  # fmt: skip
-    assert listed.status_code == 200, listed.text
+    def listed() -> bool:
+        auth = {"Authorization": f"Bearer {served_px4.pilot_token}"}
+        answer = httpx.get(f"{served_px4.api}/vehicles", headers=auth)
+        assert answer.status_code == 200, answer.text
+        return px4.sysid in [v["id"] for v in answer.json()]
+
+    # the server may be up before PX4's first HEARTBEAT reached it
+    wait_for_blocking("PX4 listed", listed, 30.0, 0.2)
     pilot = _Pilot(served_px4, px4.sysid)
     # answers 503 until the vehicle has reported; PX4 passes its checks a few seconds in
     wait_for_blocking("PX4 ready to arm", lambda: pilot.state().get("ready_to_arm"), 60.0, 0.5)
