@@ -66,7 +66,7 @@ test: $(TSTAMP) chromium lint audit
 
 ## The whole chain of documented flows (README and docs/api.md curl sessions, the examples,
 ## a page flight, scripts killed half-way) on the simulated quad at real speed, default
-## settings (about 10 min; `make test` runs a shorter chain at 8x).
+## settings (7–10 min; `make test` runs a shorter chain at 8x).
 test-chain: $(TSTAMP) chromium
 	$(VENV)/bin/pytest -q -p no:cacheprovider -m chain -rs tests/browser/test_flow_chain_full.py
 
