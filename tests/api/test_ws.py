@@ -197,7 +197,7 @@ async def test_control_session_gets_lease_and_answers_every_message(quad: Served
 async def test_control_socket_refuses_observer_and_second_pilot(quad: Served) -> None:
     async with connect(quad.url("control", token=OBSERVER, vehicle=1)) as ws:
         assert await close_code(ws) == 4403
-    async with connect(quad.url("control", vehicle=1, client_name="first")) as first:
+    async with connect(quad.url("control", vehicle=1, client_name="first", ttl_s=30)) as first:
         await receive(first)
         async with connect(quad.url("control", vehicle=1)) as second:
             refusal = await receive(second)
