@@ -123,6 +123,7 @@ export function socketUrl(path, params) {
 }
 
 export const CLOSE_UNAUTHORIZED = 4401;
+export const CLOSE_NOT_FOUND = 4404;
 export const RECONNECT_FIRST_MS = 500;
 export const RECONNECT_MAX_MS = 15000;
 

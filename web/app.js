@@ -10,7 +10,8 @@ import {
 } from "./control.js";
 import {
   answerPrompt, clientLabel, clientName, inControl, onControlEvent, releaseControl, renderHolder,
-  setClientLabel, tabId, takeControl, takeControlClicked, updateControls,
+  serverBack, setClientLabel, tabId, takeControl, takeControlClicked, updateControls,
+  vehicleHeard,
 } from "./handover.js";
 import { confirmAction, wireConfirm } from "./confirm.js";
 import { FleetView } from "./fleet.js";
@@ -45,6 +46,7 @@ function onTelemetry(message) {
     map.onState(message);
     if (message.vehicle !== page.vehicleId) return; // a socket for every vehicle, before one is chosen
     showState(message);
+    vehicleHeard();
   } else if (message.type === "vehicles") {
     showVehicles(message.vehicles);
   } else if (message.type === "scene_click") {
@@ -118,6 +120,7 @@ function onTelemetryStatus(status) {
 }
 
 function reloadAfterReconnect() {
+  serverBack();
   // the vehicle list comes by itself on the new socket
   showScene($("scene-enable").checked);
   loadParams();

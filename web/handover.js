@@ -2,7 +2,9 @@
 // the holder first, or forcing it after a confirmation), answering another tab's request, and
 // what the page shows when control is taken from it.
 
-import { ControlSession, describeError, reconnectDelayMs, request } from "./api.js";
+import {
+  CLOSE_NOT_FOUND, ControlSession, describeError, reconnectDelayMs, request,
+} from "./api.js";
 import { FleetControlSession } from "./fleet-control.js";
 import { page, vehiclePath } from "./page.js";
 import { $, banner, log, setText } from "./ui.js";
@@ -69,11 +71,15 @@ export function inControl() {
 
 let retakeAttempt = 0;
 let retakeTimer = null;
+// the last try was answered "no such vehicle" (a server restarted before its vehicle came
+// back): take control again as soon as the vehicle is heard, not at the end of a backoff
+let retakeWhenHeard = false;
 
 /** how: "take" (free control), "ask" (ask the holder), "force" (take it at once). */
 export function takeControl(how = "take") {
   if (page.vehicleId === null || page.rejected) return;
   clearTimeout(retakeTimer);
+  retakeWhenHeard = false;
   page.control?.close();
   page.wantControl = true;
   const asking = how === "ask";
@@ -129,7 +135,9 @@ function closed(session, info) {
     log("WARNING", `control lease ended (${info.ended?.state || info.reason || "expired"})`);
   } else if (page.wantControl) {
     // A blip of the control socket alone: retry with backoff while the telemetry socket is
-    // up (a server restart is handled when telemetry reconnects).
+    // up (a server restart is handled when telemetry reconnects); a vehicle not there yet,
+    // also as soon as it is heard (vehicleHeard).
+    retakeWhenHeard = info.code === CLOSE_NOT_FOUND;
     const delayMs = reconnectDelayMs(retakeAttempt++);
     log("WARNING", `control connection lost; taking control again in ${(delayMs / 1000).toFixed(1)} s`);
     retakeTimer = setTimeout(() => {
@@ -140,9 +148,24 @@ function closed(session, info) {
   updateControls();
 }
 
+/** Telemetry from the current vehicle: the pilot who wanted control and was told the
+ * vehicle was not there takes it now. */
+export function vehicleHeard() {
+  if (retakeWhenHeard && page.wantControl && !page.control && page.connected) {
+    retakeAttempt = 0;
+    takeControl("take");
+  }
+}
+
+/** The server answers again after a restart: the next retries start from a short delay. */
+export function serverBack() {
+  retakeAttempt = 0;
+}
+
 export function releaseControl() {
   page.wantControl = false;
   clearTimeout(retakeTimer);
+  retakeWhenHeard = false;
   page.control?.close();
   page.control = null;
   hooks.onLost();

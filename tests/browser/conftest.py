@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Generator, Iterator
 from typing import Any
 
 import httpx
@@ -16,6 +16,27 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     for item in items:
         if "tests/browser" in str(item.fspath):
             item.add_marker(pytest.mark.browser)
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(
+    item: pytest.Item, call: pytest.CallInfo[None]
+) -> Generator[None, Any, None]:
+    """A failed browser test reports what its pages logged (the page's own log panel)."""
+    outcome = yield
+    report = outcome.get_result()
+    if call.when != "call" or not report.failed:
+        return
+    funcargs = getattr(item, "funcargs", {})
+    for name in ("page", "second_page"):
+        page = funcargs.get(name)
+        if page is None or page.is_closed():
+            continue
+        try:
+            text = page.inner_text("#log", timeout=2_000)
+        except Exception as exc:  # a report about a broken page must still be made
+            text = f"(no log: {exc})"
+        report.sections.append((f"{name} log", text))
 
 
 @pytest.fixture(scope="module")
