@@ -20,9 +20,10 @@ $(STAMP): pyproject.toml wire/pyproject.toml clients/python/pyproject.toml | $(P
 	$(PIP) install -q -e ./wire -e ./clients/python -e .
 	touch $@
 
-$(TSTAMP): pyproject.toml $(STAMP)
+# One pip call for the product and its test tools: a second would resolve everything again.
+$(TSTAMP): pyproject.toml wire/pyproject.toml clients/python/pyproject.toml | $(PY)
 	$(PIP) install -q -e ./wire -e ./clients/python -e '.[test]'
-	touch $@
+	touch $(STAMP) $@
 
 $(BSTAMP): pyproject.toml $(TSTAMP)
 	$(PIP) install -q -e ./wire -e ./clients/python -e '.[test,bench]'

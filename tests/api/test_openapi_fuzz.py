@@ -24,7 +24,7 @@ from schemathesis.specs.openapi.checks import (
 from server.app import create_app
 from tests.api.conftest import PILOT, api_for, eventually, make_settings, sim_cluster
 
-CASES_PER_OPERATION = 48
+CASES_PER_OPERATION = 36
 # Mode changes take the vehicle's two acks and a report (≈ 0.13 s each): fewer of them.
 FEWER_CASES = {"/mode": 20, "/hold": 20, "/offboard/start": 20, "/offboard/stop": 20}
 # Operations whose failure paths wait for vehicle timeouts (no answer to unknown parameter
