@@ -231,8 +231,10 @@ async def test_silent_pilot_loses_the_lease_after_ttl(quad: Served) -> None:
 
 async def fly_offboard_at_2_m_s(served: Served) -> ClientConnection:
     """A WS pilot takes off, starts offboard flying north at 2 m/s, and keeps heartbeating
-    (every 0.25 s, as the page does, also while a command is answered) until it closes."""
-    ws = await connect(served.url("control", vehicle=1))
+    (every 0.25 s, as the page does, also while a command is answered) until it closes. Its
+    lease lasts 10 s: the tests end it by closing the socket, and a loaded machine can hold
+    this in-process server's loop for longer than the module's 1 s TTL."""
+    ws = await connect(served.url("control", vehicle=1, ttl_s=10))
     await receive(ws)
     beating = asyncio.get_running_loop().create_task(_heartbeats(ws))
     _HEARTBEATS.add(beating)
