@@ -61,13 +61,8 @@ def serve(
     args = getattr(request.module, "SERVE_ARGS", [])
     if callable(args):
         args = args(tmp_path_factory.mktemp("serve"))
-    server = Serve(extra_args=list(args))
-    server.start()
-    try:
+    with Serve(extra_args=list(args)).running() as server:
         yield server
-    finally:
-        server.stop()
-        server.discard_log()
 
 
 @pytest.fixture(scope="module")

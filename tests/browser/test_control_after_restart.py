@@ -66,13 +66,8 @@ def vehicle() -> Iterator[SimulatedVehicle]:
 @pytest.fixture(scope="module")
 def serve(vehicle: SimulatedVehicle) -> Iterator[Serve]:
     """The server linked to the vehicle's port, as to an autopilot's (no embedded sim)."""
-    server = Serve(extra_args=["--connect", f"udpout:127.0.0.1:{vehicle.port}"])
-    server.start()
-    try:
+    with Serve(extra_args=["--connect", f"udpout:127.0.0.1:{vehicle.port}"]).running() as server:
         yield server
-    finally:
-        server.stop()
-        server.discard_log()
 
 
 def test_control_is_taken_again_as_soon_as_the_vehicle_is_back_after_a_server_restart(
