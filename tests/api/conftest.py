@@ -70,9 +70,12 @@ class Api:
         result: dict[str, Any] = response.json()
         return result
 
-    async def take_control(self, vehicle_id: int | None = None) -> dict[str, str]:
+    async def take_control(
+        self, vehicle_id: int | None = None, ttl_s: float | None = None
+    ) -> dict[str, str]:
         vehicle_id = vehicle_id or self.default_vehicle
-        response = await self.client.post(f"/api/v1/vehicles/{vehicle_id}/control", json={})
+        body = {} if ttl_s is None else {"ttl_s": ttl_s}
+        response = await self.client.post(f"/api/v1/vehicles/{vehicle_id}/control", json=body)
         assert response.status_code == 200, response.text
         self.lease_headers = {"X-Lease-Id": response.json()["lease_id"]}
         return self.lease_headers
