@@ -139,7 +139,10 @@ function closed(session, info) {
     // also as soon as it is heard (vehicleHeard).
     retakeWhenHeard = info.code === CLOSE_NOT_FOUND;
     const delayMs = reconnectDelayMs(retakeAttempt++);
-    log("WARNING", `control connection lost; taking control again in ${(delayMs / 1000).toFixed(1)} s`);
+    const inS = `${(delayMs / 1000).toFixed(1)} s`;
+    log("WARNING", retakeWhenHeard
+      ? `vehicle ${page.vehicleId} not heard yet; taking control once it is, or in ${inS}`
+      : `control connection lost; taking control again in ${inS}`);
     retakeTimer = setTimeout(() => {
       if (page.wantControl && !page.control && page.connected) takeControl("take");
     }, delayMs);

@@ -7,7 +7,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 from collections.abc import AsyncIterator
-from dataclasses import dataclass, field
 
 import pytest
 
@@ -19,28 +18,18 @@ from tests.waiting import eventually, wait_for
 DEADMAN_S = 0.4
 
 
-@dataclass
-class Arrivals:
-    """MANUAL_CONTROL as the sim took it, with the wall-clock time it arrived."""
-
-    samples: list[tuple[float, StickSample]] = field(default_factory=list)
-
-    def since(self, t0: float) -> list[tuple[float, StickSample]]:
-        return [(t, s) for t, s in self.samples if t >= t0]
-
-
-def record_sticks(api: Api) -> Arrivals:
-    arrivals = Arrivals()
+def record_sticks(api: Api) -> list[StickSample]:
+    """MANUAL_CONTROL as the sim takes it, in order."""
+    samples: list[StickSample] = []
     commander = api.inst.vehicle.commander
     take = commander.on_manual_control
-    loop = asyncio.get_running_loop()
 
     def recording(sample: StickSample, now_s: float) -> None:
-        arrivals.samples.append((loop.time(), sample))
+        samples.append(sample)
         take(sample, now_s)
 
     commander.on_manual_control = recording  # type: ignore[method-assign]
-    return arrivals
+    return samples
 
 
 @contextlib.asynccontextmanager
@@ -122,10 +111,10 @@ async def test_sticks_arrive_at_25_hz_at_the_sim_whatever_the_pilots_rate(
     sent = control.stats().sent
 
     async def all_arrived() -> bool:
-        return len(arrivals.samples) >= sent
+        return len(arrivals) >= sent
 
     await eventually(all_arrived, 2.0, "every MANUAL_CONTROL at the sim")
-    last = arrivals.samples[-1][1]
+    last = arrivals[-1]
     assert (last.pitch, last.roll, last.throttle, last.yaw) == (0.5, 0.0, 0.0, 0.0)
     answer = (await api.client.get("/api/v1/vehicles/1/sticks")).json()
     assert answer["active"] is True
@@ -140,15 +129,15 @@ async def test_silent_sticks_are_centred_then_no_longer_sent(sticks_api: Api) ->
     await put_sticks(api, pitch=0.8, roll=-0.3, throttle=0.9)
     centred = await next_event(events, "deadman", action="centre_sticks")
     assert centred.data["cause"] == "live_timeout"
-    await wait_for(lambda: arrivals.samples and arrivals.samples[-1][1].pitch == 0.0, 2.0,
+    await wait_for(lambda: arrivals and arrivals[-1].pitch == 0.0, 2.0,
                    "centred sticks at the sim")
-    last = arrivals.samples[-1][1]
+    last = arrivals[-1]
     assert (last.pitch, last.roll, last.throttle, last.yaw) == (0.0, 0.0, 0.0, 0.0)
     await next_event(events, "manual_control", active=False)
     await next_event(events, "deadman", action="stop_sticks")
-    count = len(arrivals.samples)
+    count = len(arrivals)
     await asyncio.sleep(0.3)
-    assert len(arrivals.samples) == count  # nothing more is sent
+    assert len(arrivals) == count  # nothing more is sent
     assert not api.vehicle().manual_control.active
 
 
