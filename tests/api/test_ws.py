@@ -27,10 +27,11 @@ from tests.api.conftest import (
 from tests.serving import uvicorn_serving
 from tests.waiting import eventually
 
+# The lease of every pilot here whose lease is not under test: these servers share the test's
+# loop with the simulated vehicle, and a loaded machine stalls it for longer than a second.
+LEASE_TTL_S = 10.0
+# The short lease the expiry tests ask for.
 TTL_S = 1.0
-# the policy tests end the lease by closing the socket: a longer TTL keeps a loaded
-# machine's stall before the pilot's first command from ending it first
-POLICY_TTL_S = 3.0
 
 
 @dataclass
@@ -45,7 +46,7 @@ class Served:
 
 @contextlib.asynccontextmanager
 async def served(airframe: str = "quad", **overrides: Any) -> AsyncIterator[Served]:
-    settings = {"lease_ttl_s": TTL_S, **overrides}
+    settings = {"lease_ttl_s": LEASE_TTL_S, **overrides}
     async with sim_cluster(airframe) as sim, api_for(sim, **settings) as api:
         await api.wait_ready()
         async with uvicorn_serving(api.app) as host:
@@ -134,7 +135,7 @@ async def _state_texts(ws: ClientConnection, until_s: float) -> list[str]:
 async def test_telemetry_carries_events_for_commands_and_lease(quad: Served) -> None:
     async with connect(quad.url("telemetry", vehicle=1, rate_hz=1)) as ws:
         await receive_until(ws, {"type": "state"})
-        await quad.api.take_control(ttl_s=30.0)  # not under test: the module's 1 s is short
+        await quad.api.take_control()
         lease = await receive_until(ws, {"type": "event", "kind": "lease"})
         assert lease["data"]["action"] == "acquired"
         assert (await quad.api.control("mode", {"mode": "POSCTL"})).status_code == 200
@@ -177,7 +178,7 @@ async def test_control_session_gets_lease_and_answers_every_message(quad: Served
     async with connect(quad.url("control", vehicle=1, client_name="ws-pilot")) as ws:
         lease = await receive(ws)
         assert lease["type"] == "lease"
-        assert lease["ttl_s"] == TTL_S
+        assert lease["ttl_s"] == LEASE_TTL_S
         await ws.send(json.dumps({"type": "heartbeat", "id": 1}))
         assert (await receive(ws))["id"] == 1
         await ws.send(json.dumps({"type": "command", "id": 2, "name": "arm", "args": {}}))
@@ -221,7 +222,7 @@ async def test_silent_pilot_loses_the_lease_after_ttl(quad: Served) -> None:
     # the lease starts once the socket is accepted: after this instant, whatever the
     # machine's load delays in between
     started = time.monotonic()
-    async with connect(quad.url("control", vehicle=1)) as ws:
+    async with connect(quad.url("control", vehicle=1, ttl_s=TTL_S)) as ws:
         await receive(ws)
         lost = await receive_until(ws, {"type": "lease"}, timeout_s=TTL_S + 2.0)
         assert lost["state"] == "expired"
@@ -231,10 +232,8 @@ async def test_silent_pilot_loses_the_lease_after_ttl(quad: Served) -> None:
 
 async def fly_offboard_at_2_m_s(served: Served) -> ClientConnection:
     """A WS pilot takes off, starts offboard flying north at 2 m/s, and keeps heartbeating
-    (every 0.25 s, as the page does, also while a command is answered) until it closes. Its
-    lease lasts 10 s: the tests end it by closing the socket, and a loaded machine can hold
-    this in-process server's loop for longer than the module's 1 s TTL."""
-    ws = await connect(served.url("control", vehicle=1, ttl_s=10))
+    (every 0.25 s, as the page does, also while a command is answered) until it closes."""
+    ws = await connect(served.url("control", vehicle=1))
     await receive(ws)
     beating = asyncio.get_running_loop().create_task(_heartbeats(ws))
     _HEARTBEATS.add(beating)
@@ -305,7 +304,7 @@ async def test_deadman_holds_position_when_the_pilot_socket_closes(quad: Served)
 
 async def test_deadman_holds_when_rest_renewals_stop(quad: Served) -> None:
     api = quad.api
-    await api.take_control()
+    await api.take_control(ttl_s=TTL_S)
     # every step renews the lease: control calls hold it, wait_state renews on each poll
     assert (await api.control("arm")).status_code == 200
     assert (await api.control("takeoff", {"altitude_m": 4.0})).status_code == 200
@@ -341,7 +340,7 @@ async def _next_event(
     ("policy", "mode"), [("land", "LAND"), ("rtl", "RTL"), ("hold-mode", "HOLD")]
 )
 async def test_deadman_applies_land_rtl_and_hold_mode_policies(policy: str, mode: str) -> None:
-    async with served(on_operator_loss=policy, lease_ttl_s=POLICY_TTL_S) as s:
+    async with served(on_operator_loss=policy) as s:
         ws = await fly_offboard_at_2_m_s(s)
         await ws.close()
         # the socket's close ends the lease at once; the upper bound leaves a loaded machine
