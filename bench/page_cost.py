@@ -1,0 +1,288 @@
+"""What the dashboard page costs the machine it runs on: CPU time of Chromium's whole process
+tree (browser, renderer, GPU and utility processes; CPU time, not wall time) and the page's
+JS heap, in the states a pilot leaves a page in: landed, hovering in OFFBOARD, flying a
+square in OFFBOARD, four vehicles, each with and without the 3D view, and the page in a
+background tab. The server and its simulated vehicles are measured apart (their own CPU
+over the same window), so what the page costs is not mixed with what it watches.
+
+Headless Chromium with software rendering (as on a laptop without a usable GPU), 1280x800.
+
+Run: .venv/bin/python -m bench.page_cost [--seconds 20] [--only landed,hovering]
+     .venv/bin/python -m bench.page_cost --heap-minutes 30    # JS heap growth over 30 min
+Writes bench/results/page_cost.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import httpx
+
+from bench._results import machine_info, write_results
+from bench._serve import cpu_seconds
+from tests.browser.flows import open_dashboard, settle_vehicle
+from tests.browser.harness import CHROMIUM, CHROMIUM_ARGS, Serve, altitude_m, vehicle_state
+from tests.waiting import wait_for_blocking as wait_for
+
+ALTITUDE_M = 5.0
+# Headless Chromium keeps every page "visible" (another tab in front, a minimised window: both
+# seen), so the background tab is told it is hidden the way a browser tells it: the property
+# and the event. The page's own reaction is measured; a real browser also throttles timers.
+HIDE_PAGE = """
+() => {
+  Object.defineProperty(document, "visibilityState", { configurable: true, get: () => "hidden" });
+  Object.defineProperty(document, "hidden", { configurable: true, get: () => true });
+  document.dispatchEvent(new Event("visibilitychange"));
+}
+"""
+SQUARE_SIDE_M = 10.0
+
+
+def descendants(root: int) -> list[int]:
+    """Every live process below ``root`` (from /proc's parent links)."""
+    children: dict[int, list[int]] = {}
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            stat = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        children.setdefault(int(stat[1]), []).append(int(entry.name))
+    found: list[int] = []
+    todo = [root]
+    while todo:
+        for child in children.get(todo.pop(), []):
+            found.append(child)
+            todo.append(child)
+    return found
+
+
+def _exe(pid: int) -> str:
+    try:
+        return os.readlink(f"/proc/{pid}/exe")
+    except OSError:
+        return ""
+
+
+def tree_cpu_s(select: Callable[[str], bool]) -> dict[int, float]:
+    """CPU seconds so far of each process below this one whose executable ``select`` takes."""
+    cpu: dict[int, float] = {}
+    for pid in descendants(os.getpid()):
+        if select(_exe(pid)):
+            try:
+                cpu[pid] = cpu_seconds(pid)
+            except OSError:
+                continue  # gone between the listing and the read
+    return cpu
+
+
+def _is_chromium(exe: str) -> bool:
+    return "chrom" in Path(exe).name
+
+
+def _is_python(exe: str) -> bool:
+    return Path(exe).name.startswith("python")
+
+
+def cpu_share(before: dict[int, float], after: dict[int, float], seconds: float) -> float:
+    """Percent of one core used over the window by the processes seen at its end (a process
+    that started inside the window counts from zero)."""
+    used = sum(after[pid] - before.get(pid, 0.0) for pid in after)
+    return 100.0 * used / seconds
+
+
+def js_heap_mb(page: Any) -> float:
+    session = page.context.new_cdp_session(page)
+    try:
+        usage = session.send("Runtime.getHeapUsage")
+    finally:
+        session.detach()
+    return round(float(usage["usedSize"]) / 1e6, 2)
+
+
+class Pilot:
+    """Flies vehicle 1 over REST with a lease, as a script would beside the page."""
+
+    def __init__(self, api: httpx.Client) -> None:
+        self.api = api
+        taken = api.post("/vehicles/1/control", json={"takeover": True, "force": True,
+                                                      "ttl_s": 600})
+        taken.raise_for_status()
+        self.headers = {"X-Lease-Id": taken.json()["lease_id"]}
+
+    def call(self, method: str, path: str, body: dict[str, Any] | None = None) -> None:
+        answer = self.api.request(method, f"/vehicles/1/{path}", json=body or {},
+                                  headers=self.headers)
+        if answer.status_code != 200:
+            raise RuntimeError(f"{method} {path}: {answer.status_code} {answer.text}")
+
+    def hover_in_offboard(self) -> dict[str, float]:
+        """OFFBOARD holding where the vehicle is (settled in a hover before the lease)."""
+        here = vehicle_state(self.api)["position_ned"]
+        self.call("POST", "offboard/start", {"setpoint": {
+            "type": "position_ned", "north_m": here["north_m"], "east_m": here["east_m"],
+            "down_m": here["down_m"]}})
+        wait_for("OFFBOARD", lambda: vehicle_state(self.api)["mode"] == "OFFBOARD", 15.0)
+        return {"north_m": here["north_m"], "east_m": here["east_m"], "down_m": here["down_m"]}
+
+    def release(self) -> None:
+        self.api.delete("/vehicles/1/control", headers=self.headers)
+
+
+def fly_square(pilot: Pilot, start: dict[str, float], seconds: float) -> None:
+    """Position setpoints around a square until ``seconds`` have passed."""
+    corners = [(SQUARE_SIDE_M, 0.0), (SQUARE_SIDE_M, SQUARE_SIDE_M), (0.0, SQUARE_SIDE_M),
+               (0.0, 0.0)]
+    deadline = time.monotonic() + seconds
+    k = 0
+    while time.monotonic() < deadline:
+        north, east = corners[k % len(corners)]
+        pilot.call("PUT", "setpoint", {"type": "position_ned", "north_m": start["north_m"] + north,
+                                       "east_m": start["east_m"] + east,
+                                       "down_m": start["down_m"]})
+        pilot.call("PUT", "control")  # renew
+        k += 1
+        time.sleep(min(4.0, max(0.0, deadline - time.monotonic())))
+
+
+@contextmanager
+def browser_page(url: str, scene: bool) -> Iterator[Any]:
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as playwright:
+        browser = playwright.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS,
+                                             headless=True)
+        context = browser.new_context(viewport={"width": 1280, "height": 800}, bypass_csp=True)
+        try:
+            yield open_dashboard(context, url, scene=scene)
+        finally:
+            browser.close()
+
+
+def measure_window(page: Any, seconds: float, during: Callable[[], None] | None) -> dict[str, Any]:
+    chromium0, server0 = tree_cpu_s(_is_chromium), tree_cpu_s(_is_python)
+    t0 = time.monotonic()
+    if during is None:
+        time.sleep(seconds)  # not a wait: the measuring window
+    else:
+        during()
+    elapsed = time.monotonic() - t0
+    chromium1, server1 = tree_cpu_s(_is_chromium), tree_cpu_s(_is_python)
+    return {
+        "window_s": round(elapsed, 1),
+        "page_cpu_pct": round(cpu_share(chromium0, chromium1, elapsed), 1),
+        "server_and_sim_cpu_pct": round(cpu_share(server0, server1, elapsed), 1),
+        "js_heap_mb": js_heap_mb(page),
+        "visibility": page.evaluate("document.visibilityState"),
+    }
+
+
+def scenario(name: str, seconds: float) -> dict[str, Any]:
+    """One scenario: its own server and browser, settled, then measured."""
+    vehicles = 4 if name.startswith("four_vehicles") else 1
+    scene = not name.endswith("_no3d")
+    serve = Serve(extra_args=["--sim-count", str(vehicles)] if vehicles > 1 else [])
+    serve.start()
+    load_before = os.getloadavg()
+    try:
+        with serve.client() as api:
+            wait_for("the vehicle", lambda: api.get("/vehicles").json(), 30.0)
+            wait_for("a home position", lambda: vehicle_state(api)["home"] is not None, 60.0)
+            pilot: Pilot | None = None
+            during: Callable[[], None] | None = None
+            if name.startswith(("hovering", "square", "background")):
+                settle_vehicle(api, flying=True, altitude=ALTITUDE_M)
+                pilot = Pilot(api)
+                start = pilot.hover_in_offboard()
+                if name.startswith("square"):
+                    def during() -> None:
+                        assert pilot is not None
+                        fly_square(pilot, start, seconds)
+            with browser_page(serve.url, scene) as page:
+                if name.startswith("background"):
+                    page.evaluate(HIDE_PAGE)
+                time.sleep(3.0)  # the page's start-up (scripts, first states, scene) settles
+                if pilot is not None:
+                    wait_for("still hovering",
+                             lambda: altitude_m(vehicle_state(api)) > ALTITUDE_M - 1.0, 10.0)
+                result = measure_window(page, seconds, during)
+            if pilot is not None:
+                pilot.release()
+    finally:
+        serve.stop()
+        serve.discard_log()
+    return {"scenario": name, "vehicles": vehicles, "scene": scene, **result,
+            "machine": machine_info(load_before)}
+
+
+SCENARIOS = ["landed", "landed_no3d", "hovering", "hovering_no3d", "square", "square_no3d",
+             "four_vehicles", "four_vehicles_no3d", "background_no3d"]
+
+
+def heap_growth(minutes: float) -> dict[str, Any]:
+    """The JS heap of a page watching a hovering vehicle, sampled each minute."""
+    serve = Serve()
+    serve.start()
+    samples: list[tuple[float, float]] = []
+    try:
+        with serve.client() as api:
+            wait_for("a home position", lambda: vehicle_state(api).get("home") is not None, 60.0)
+            settle_vehicle(api, flying=True, altitude=ALTITUDE_M)
+            pilot = Pilot(api)
+            pilot.hover_in_offboard()
+            with browser_page(serve.url, scene=True) as page:
+                t0 = time.monotonic()
+                while (elapsed := time.monotonic() - t0) < minutes * 60.0:
+                    samples.append((round(elapsed / 60.0, 2), js_heap_mb(page)))
+                    pilot.call("PUT", "control")
+                    time.sleep(min(60.0, minutes * 60.0 - elapsed))
+                samples.append((round((time.monotonic() - t0) / 60.0, 2), js_heap_mb(page)))
+            pilot.release()
+    finally:
+        serve.stop()
+        serve.discard_log()
+    at5 = next((mb for minute, mb in samples if minute >= 5.0), None)
+    return {"minutes": minutes, "samples_min_mb": samples,
+            "growth_after_5_min": round(samples[-1][1] / at5, 3) if at5 else None}
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=20.0, help="each measuring window")
+    parser.add_argument("--only", default="", help=f"comma-separated of {','.join(SCENARIOS)}")
+    parser.add_argument("--quick", action="store_true", help="landed and hovering, 8 s each")
+    parser.add_argument("--heap-minutes", type=float, default=0.0,
+                        help="also sample the JS heap of a page over this many minutes")
+    args = parser.parse_args()
+    if not CHROMIUM.exists():
+        print("no /usr/bin/chromium: run `make chromium` as root", file=sys.stderr)
+        return 1
+    names = [n for n in args.only.split(",") if n] or (
+        ["landed_no3d", "hovering_no3d"] if args.quick else SCENARIOS)
+    seconds = 8.0 if args.quick else args.seconds
+    rows = []
+    for name in names:
+        row = scenario(name, seconds)
+        rows.append(row)
+        print(f"{name:>20}: page {row['page_cpu_pct']:5.1f} % of a core, server+sim "
+              f"{row['server_and_sim_cpu_pct']:5.1f} %, JS heap {row['js_heap_mb']} MB "
+              f"({row['visibility']}, {row['window_s']} s)", flush=True)
+    result: dict[str, Any] = {"scenarios": rows, "machine": machine_info()}
+    if args.heap_minutes > 0:
+        result["heap"] = heap_growth(args.heap_minutes)
+        print(f"JS heap over {args.heap_minutes} min: {result['heap']['samples_min_mb']}; "
+              f"last / at 5 min = {result['heap']['growth_after_5_min']}")
+    write_results("page_cost", result)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
