@@ -485,7 +485,7 @@
  * @property {number} [gaps]
  * @property {number} [sent]
  * @property {number|null} [since_last_ms]
- * @property {string} [sender] who sends the stream's frames now: 'process' (the setpoint sender process), 'thread' (the server's sender thread: no process, or it failed) or 'loop'
+ * @property {string} [sender] who sends the stream's frames now: 'process' (the setpoint sender process), 'thread' (the server's sender thread: no process, or it failed), 'loop' or 'none' (stopped)
  * @property {number} [sender_restarts] setpoint sender processes started after a fault
  * @property {string|null} [sender_fault] the sender process's last fault and its cause (null: none)
  */

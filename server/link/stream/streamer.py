@@ -260,7 +260,10 @@ class SetpointStreamer:
 
     @property
     def sender(self) -> str:
-        """Who times this stream: "process", "thread" or "loop"."""
+        """Who sends this stream's frames now: "process", "thread" or "loop" ("none" while
+        it is stopped)."""
+        if not self._active:
+            return "none"
         if self._channel is not None:
             return "process"
         return "thread" if self._threaded else "loop"
