@@ -349,6 +349,17 @@ def supervisor() -> SenderSupervisor:
         return _supervisor
 
 
+def sender_status() -> dict[str, Any] | None:
+    """The sender process as the API shows it (None: none was ever asked for)."""
+    sup = _supervisor
+    if sup is None:
+        return None
+    status = sup.status()
+    return {"name": "setpoint sender", "running": status.running, "pid": status.pid,
+            "restarts": status.restarts, "faults": status.faults,
+            "last_fault": status.last_fault, "gave_up": status.gave_up}
+
+
 def shared_process() -> SenderProcess:
     """This server's sender process, started when first asked for (ProcessGone if it
     cannot start, or while a process that ended is being replaced)."""
