@@ -186,6 +186,8 @@ class SenderSupervisor:
         return RESTART_BACKOFF_S[min(max(self.failed_in_row, 1), len(RESTART_BACKOFF_S)) - 1]
 
     def _restart(self) -> None:
+        # under the lock, so its loss (reported from its reader thread) waits until it is the
+        # current process; starting is a fork and exec, milliseconds
         with self._lock:
             if self.gave_up:
                 return
