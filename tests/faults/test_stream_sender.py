@@ -277,10 +277,12 @@ def _p99(samples: list[float]) -> float:
     return ordered[max(1, math.ceil(0.99 * len(ordered))) - 1]
 
 
-async def test_kill_9_of_the_sender_while_flying_sticks_in_posctl(
-    tmp_path: Path, supervisor: SenderSupervisor
+@pytest.mark.parametrize("fault", ["kill", "stop"])
+async def test_the_sender_killed_or_stopped_while_flying_sticks_in_posctl(
+    tmp_path: Path, supervisor: SenderSupervisor, fault: str
 ) -> None:
     feeder: list[asyncio.Task[None]] = []
+    bound_s = KILL_GAP_S if fault == "kill" else STOP_GAP_S
     async with flight(tmp_path, signed=False) as f:
         api = f.api
         try:
@@ -288,10 +290,15 @@ async def test_kill_9_of_the_sender_while_flying_sticks_in_posctl(
             await asyncio.sleep(1.0)
             changes = _mode_changes(f)
             watched_s = time.time()
-            os.kill(_sender_pid(supervisor), signal.SIGKILL)
+            pid = _sender_pid(supervisor)
+            os.kill(pid, signal.SIGKILL if fault == "kill" else signal.SIGSTOP)
             await wait_for(lambda: api.vehicle().sticks_stats().sender == "thread", 1.0,
                            "the thread takes over")
             during = (await api.client.get("/api/v1/vehicles/1/sticks")).json()
+            if fault == "stop":
+                await asyncio.sleep(STOP_S)
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(pid, signal.SIGCONT)
             await wait_for(lambda: api.vehicle().sticks_stats().sender == "process", 5.0,
                            "a restarted process takes over")
             await asyncio.sleep(1.0)
@@ -307,14 +314,15 @@ async def test_kill_9_of_the_sender_while_flying_sticks_in_posctl(
     sticks = [h for h in f.relay.since(watched_s - 0.5, STICKS_ID) if h.unix_s <= ended_s]
     gap_s = _largest_gap_s(sticks)
     rate_hz = (len(sticks) - 1) / (sticks[-1].unix_s - sticks[0].unix_s)
-    print(f"kill -9 in POSCTL: largest MANUAL_CONTROL gap at the vehicle {gap_s * 1000:.1f} ms, "
-          f"{rate_hz:.1f} Hz over {len(sticks)} frames")
-    assert gap_s <= KILL_GAP_S
+    print(f"{fault} of the sender in POSCTL: largest MANUAL_CONTROL gap at the vehicle "
+          f"{gap_s * 1000:.1f} ms, {rate_hz:.1f} Hz over {len(sticks)} frames")
+    assert gap_s <= bound_s
     assert 23.0 <= rate_hz <= 27.0
     _check_sequence(f.relay, watched_s - 0.5)
     assert _modes_since(f.relay, watched_s - 0.5) == {POSCTL_MODE}
     assert state["mode"] == "POSCTL"
     assert during["stream"]["sender"] == "thread"
-    assert "SIGKILL" in during["stream"]["sender_fault"]
+    assert ("SIGKILL" if fault == "kill" else "stopped answering") in \
+        during["stream"]["sender_fault"]
     assert after["stream"]["sender"] == "process"
     assert after["stream"]["sender_restarts"] == 1
