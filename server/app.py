@@ -11,6 +11,7 @@ import time
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
 from pathlib import Path
+from typing import Any
 
 from fastapi import APIRouter, FastAPI
 from fastapi.middleware.cors import CORSMiddleware
@@ -94,6 +95,14 @@ def create_app(settings: Settings, *, freeze_gc_at_start: bool = False) -> FastA
     foxglove = _foxglove_bridge(settings)
     attach = foxglove.attach if foxglove is not None else None
 
+    def tell_vehicles(data: dict[str, Any]) -> None:
+        """A supervised process's fault or recovery, as a ``process`` event of every vehicle."""
+        for vehicle in registry.all():
+            vehicle.core.publish_event("process", data)
+
+    if foxglove is not None:
+        foxglove.on_change.append(tell_vehicles)
+
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         sim: SimProcess | None = None
@@ -111,6 +120,7 @@ def create_app(settings: Settings, *, freeze_gc_at_start: bool = False) -> FastA
                     signing_dir=_sim_signing_dir(signing_store),
                 )
                 app.state.sim = sim
+                sim.on_change.append(tell_vehicles)
                 instances = await sim.start()
                 await _open_links(
                     registry, settings, [i.url for i in instances], signing_store, attach

@@ -1,6 +1,11 @@
 """The embedded simulated vehicle as a child process (`python -m sim`), so its 250 Hz physics
 never competes with the streamer's event loop. The server never imports `sim`: it starts the
-process, reads its one ready line, and talks MAVLink to the ports it reports."""
+process, reads its one ready line, and talks MAVLink to the ports it reports.
+
+Its end, other than by stop(), is a fault: seen at once (a task waits on its exit), logged
+once with the cause (its exit status or signal), told to ``on_change`` listeners (the
+vehicles' ``process`` event) and shown by ``status()``. It is not restarted: a new one
+would listen on other ports, and its vehicles would start over on the ground."""
 
 from __future__ import annotations
 
@@ -10,8 +15,10 @@ import json
 import logging
 import signal
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from server.link.codec.aio import cancel_and_wait
 
@@ -51,6 +58,10 @@ class SimProcess:
         self.instances: list[SimInstance] = []
         self._process: asyncio.subprocess.Process | None = None
         self._reader: asyncio.Task[None] | None = None
+        self._watcher: asyncio.Task[None] | None = None
+        self.faults = 0
+        self.last_fault: str | None = None
+        self.on_change: list[Callable[[dict[str, Any]], None]] = []
 
     @property
     def pid(self) -> int | None:
@@ -106,8 +117,39 @@ class SimProcess:
             for item in ready["instances"]
         ]
         self._reader = asyncio.create_task(self._forward_output())
+        self._watcher = asyncio.create_task(self._watch(self._process))
         log.info("simulated %s x%d running as pid %s", self.airframe, self.count, self.pid)
         return self.instances
+
+    def status(self) -> dict[str, Any]:
+        """The process as the API shows it."""
+        process = self._process
+        running = process is not None and process.returncode is None
+        return {"name": "simulated vehicle", "running": running,
+                "pid": process.pid if running and process is not None else None,
+                "restarts": 0, "faults": self.faults, "last_fault": self.last_fault,
+                "gave_up": self.faults > 0}
+
+    async def _watch(self, process: asyncio.subprocess.Process) -> None:
+        """Its end while it should run: a fault, said once with the cause."""
+        returncode = await process.wait()
+        if process is not self._process:
+            return  # stop() ended it
+        cause = f"exit status {returncode}"
+        if returncode < 0:
+            with contextlib.suppress(ValueError):
+                cause = f"killed by {signal.Signals(-returncode).name}"
+        self.faults += 1
+        self.last_fault = cause
+        log.error("the simulated vehicle's process %s ended (%s): its vehicles are gone; it is "
+                  "not restarted (restart the server to fly it again)", process.pid, cause)
+        data = {"process": "simulated vehicle", "running": False, "fault": cause,
+                "text": f"simulated vehicle's process ended ({cause})"}
+        for listener in list(self.on_change):
+            try:
+                listener(data)
+            except Exception:
+                log.exception("a simulated vehicle status listener failed")
 
     async def _read_ready_line(self) -> dict[str, list[dict[str, int]]]:
         assert self._process is not None
@@ -157,5 +199,6 @@ class SimProcess:
         if process.stdin is not None:
             process.stdin.close()
         await cancel_and_wait(self._reader)
-        self._reader = None
+        await cancel_and_wait(self._watcher)
+        self._reader = self._watcher = None
         log.info("simulated vehicle stopped (exit code %s)", process.returncode)

@@ -141,6 +141,12 @@ function renderStream(s) {
   setText("stream-since", millis(s.since_last_ms));
   setText("stream-sent", `${s.sent ?? "–"}`);
   $("stream-gap").style.color = s.max_gap_ms > 500 ? "var(--bad)" : s.max_gap_ms > 100 ? "var(--warn)" : "";
+  // who sends the frames (the sender process, or the thread after it failed), its restarts
+  // and last fault (the stream went on; a "stream" event in the log told when)
+  const restarts = s.sender_restarts ? `, ${s.sender_restarts} restart${s.sender_restarts > 1 ? "s" : ""}` : "";
+  setText("stream-sender", s.sender ? `${s.sender}${restarts}` : "–");
+  $("stream-sender").title = s.sender_fault ? `last fault: ${s.sender_fault}` : "";
+  $("stream-sender").style.color = s.sender_fault && s.sender !== "process" ? "var(--warn)" : "";
 }
 
 const TRANSITION_GUESS_S = { TRANSITION_TO_FW: 3.5, TRANSITION_TO_MC: 1.5 };

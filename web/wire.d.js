@@ -72,6 +72,18 @@
  */
 
 /**
+ * A process the server runs and supervises.
+ * @typedef {Object} ChildProcessOut
+ * @property {string} name 'setpoint sender', 'foxglove worker' or 'simulated vehicle'
+ * @property {boolean} running
+ * @property {number|null} [pid]
+ * @property {number} [restarts] started again after a fault
+ * @property {number} [faults] deaths and stops seen (kill, crash, no answer)
+ * @property {string|null} [last_fault] the last fault and its cause
+ * @property {boolean} [gave_up] not started again: it failed too often
+ */
+
+/**
  * @typedef {Object} CommandResultOut
  * @property {string} command
  * @property {"ACCEPTED"|"TEMPORARILY_REJECTED"|"DENIED"|"UNSUPPORTED"|"FAILED"|"IN_PROGRESS"|"CANCELLED"|"TIMEOUT"|"LINK_LOST"|"NOT_CONFIRMED"} result
@@ -162,6 +174,7 @@
  * @property {string} version
  * @property {number} vehicles
  * @property {boolean} [read_only] a replayed recording: control calls answer 403
+ * @property {Array<ChildProcessOut>} [processes] the processes the server runs, as supervised
  */
 
 /**
@@ -485,6 +498,9 @@
  * @property {number} [gaps]
  * @property {number} [sent]
  * @property {number|null} [since_last_ms]
+ * @property {string} [sender] who sends the stream's frames now: 'process' (the setpoint sender process), 'thread' (the server's sender thread: no process, or it failed), 'loop' or 'none' (stopped)
+ * @property {number} [sender_restarts] setpoint sender processes started after a fault
+ * @property {string|null} [sender_fault] the sender process's last fault and its cause (null: none)
  */
 
 /**

@@ -13,6 +13,17 @@ PIPE_LIMIT_BYTES for a worker that does not keep up; beyond either, frames are d
 (counted in ``frames_dropped``), never the link slowed. The SDK's server checks no token,
 so it binds 127.0.0.1 only; the way in from elsewhere is the app's proxied socket
 (proxy.py). Each client's queue is the SDK's (4096 messages, oldest dropped).
+
+The worker is supervised: its end is seen at once (its stdout's end of file), logged once
+with the cause, told to ``on_change`` listeners (the vehicles' ``process`` event) and shown
+by ``status()``; it is started again after a back-off (``RESTART_BACKOFF_S``; after
+``MAX_FAILED_RESTARTS`` quick failures in a row it is not), on the same port when one was
+asked for (the proxied route follows the new one either way: clients reconnect), with the
+links, vehicles and recording as they were: each link's recording goes on in a new MCAP
+part beside the first (``name.1.mcap``, ...). A spare worker waits, its imports done
+(``--standby``), so a restart takes milliseconds, not the seconds a new Python process takes
+on a busy machine; a new spare follows each restart. The worker finishes an MCAP chunk at
+least every ``MCAP_FLUSH_S`` (worker.py), so a crash loses at most about that much of it.
 """
 
 from __future__ import annotations
@@ -22,11 +33,13 @@ import contextlib
 import dataclasses
 import json
 import logging
+import signal
 import sys
 import time
 from collections import deque
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from foxglove.messages import LogLevel
 from pymavlink.dialects.v20 import development as mavlink
@@ -52,6 +65,11 @@ PENDING_FRAMES = 10_000
 FRAME_BATCH = 256
 # What may wait in the pipe to the worker before frames are dropped.
 PIPE_LIMIT_BYTES = 4 << 20
+# A worker that ends is started again after these delays (quick failures in a row pick the
+# next; one that ran STABLE_AFTER_S starts the count again); after all of them, never.
+RESTART_BACKOFF_S = (0.0, 1.0, 4.0)
+MAX_FAILED_RESTARTS = len(RESTART_BACKOFF_S)
+STABLE_AFTER_S = 10.0
 # Events other than these are information.
 _EVENT_LEVELS = {"reboot": LogLevel.Warning, "link_restored": LogLevel.Warning}
 
@@ -81,6 +99,19 @@ class FoxgloveBridge:
         self._tasks: list[asyncio.Task[None]] = []
         self._publishers: StatePublishers | None = None
         self._dropped_in_pipe = 0
+        # supervision: what the API shows, and who hears of a fault or recovery
+        self.restarts = 0
+        self.faults = 0
+        self.last_fault: str | None = None
+        self.gave_up = False
+        self.on_change: list[Callable[[dict[str, Any]], None]] = []
+        self._closing = False
+        self._failed_in_row = 0
+        self._started_s = 0.0
+        self._mcaps: list[Path | None] = []  # per link: where its recording began
+        self._vehicles: list[tuple[int, int]] = []  # (link index, sysid) the worker was told
+        self._standby: asyncio.subprocess.Process | None = None  # a spare, imports done
+        self._standby_ready: asyncio.Task[bool] | None = None
 
     @property
     def port(self) -> int:
@@ -93,19 +124,79 @@ class FoxgloveBridge:
         return self._dropped_in_pipe + sum(queue.dropped for _, queue in self._links)
 
     async def open(self) -> None:
-        port = [] if self.requested_port is None else ["--port", str(self.requested_port)]
-        process = self._process = await asyncio.create_subprocess_exec(
-            sys.executable, "-m", "server.foxglove.worker", *port,
-            stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE,
-        )
+        await self._spawn(self.requested_port)
+
+    async def _spawn(self, port_wanted: int | None) -> None:
+        process = await self._take_standby(port_wanted)
+        if process is None:
+            port = [] if port_wanted is None else ["--port", str(port_wanted)]
+            process = await asyncio.create_subprocess_exec(
+                sys.executable, "-m", "server.foxglove.worker", *port,
+                stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE,
+            )
+        self._process = process
         assert process.stdout is not None
         line = await asyncio.wait_for(process.stdout.readline(), READY_TIMEOUT_S)
         if not line:
             raise RuntimeError("the Foxglove process did not start (see the log above)")
         self.server_port = json.loads(line)["ready"]
+        self._started_s = time.monotonic()
         if self.server_port is not None:
             log.info("Foxglove WebSocket server on ws://%s:%d", LOOPBACK, self.server_port)
-        self._tasks.append(asyncio.create_task(self._read_worker(process.stdout)))
+        self._tasks.append(asyncio.create_task(self._read_worker(process, process.stdout)))
+        self._start_standby()
+
+    def _start_standby(self) -> None:
+        async def start() -> bool:
+            standby = self._standby = await asyncio.create_subprocess_exec(
+                sys.executable, "-m", "server.foxglove.worker", "--standby",
+                stdin=asyncio.subprocess.PIPE, stdout=asyncio.subprocess.PIPE,
+            )
+            assert standby.stdout is not None
+            line = await standby.stdout.readline()
+            return bool(line) and json.loads(line).get("standby") is True
+
+        if self._standby is None and not self._closing:
+            self._standby_ready = asyncio.create_task(start())
+
+    async def _take_standby(self, port: int | None) -> asyncio.subprocess.Process | None:
+        """The spare worker, told its port, if it is ready (else it is ended)."""
+        standby, ready = self._standby, self._standby_ready
+        self._standby = self._standby_ready = None
+        if standby is None or ready is None:
+            return None
+        if not ready.done() or ready.exception() is not None or not ready.result() \
+                or standby.returncode is not None:
+            log.info("the spare Foxglove worker was not ready: starting a new one")
+            await self._end_standby(standby, ready)
+            return None
+        assert standby.stdin is not None
+        standby.stdin.write(json.dumps({"port": port}).encode() + b"\n")
+        return standby
+
+    async def _end_standby(self, standby: asyncio.subprocess.Process | None,
+                           ready: asyncio.Task[bool] | None) -> None:
+        await cancel_and_wait(ready)
+        if standby is not None and standby.returncode is None:
+            with contextlib.suppress(ProcessLookupError):
+                standby.kill()
+            await standby.wait()
+
+    @property
+    def spare_ready(self) -> bool:
+        """Whether a spare worker waits, ready to take over at once."""
+        ready = self._standby_ready
+        return (ready is not None and ready.done() and ready.exception() is None
+                and ready.result())
+
+    def status(self) -> dict[str, Any]:
+        """The worker as the API shows it."""
+        process = self._process
+        running = process is not None and process.returncode is None
+        return {"name": "foxglove worker", "running": running,
+                "pid": process.pid if running and process is not None else None,
+                "restarts": self.restarts, "faults": self.faults,
+                "last_fault": self.last_fault, "gave_up": self.gave_up}
 
     def attach(self, link: Link) -> None:
         index = len(self._links)
@@ -114,8 +205,8 @@ class FoxgloveBridge:
             mcap = link.tlog_path.with_suffix(".mcap")
             self.mcap_paths.append(mcap)
             log.info("recording %s", mcap)
-        self._send(wire.record(wire.LINK, index, 0, 0.0, json.dumps(
-            {"name": link.name, "mcap": None if mcap is None else str(mcap)}).encode()))
+        self._mcaps.append(mcap)
+        self._send_link(index, link.name, mcap)
         queue = FrameQueue(lambda frames: self._send_frames(index, frames))
         link.add_frame_tap(queue.put)
         self._links.append((link, queue))
@@ -125,7 +216,15 @@ class FoxgloveBridge:
         for index, (link, _) in enumerate(self._links):
             self._tasks.append(asyncio.create_task(self._discover(index, link)))
 
+    def _send_link(self, index: int, name: str, mcap: Path | None) -> None:
+        self._send(wire.record(wire.LINK, index, 0, 0.0, json.dumps(
+            {"name": name, "mcap": None if mcap is None else str(mcap)}).encode()))
+
     async def close(self) -> None:
+        self._closing = True
+        standby, ready = self._standby, self._standby_ready
+        self._standby = self._standby_ready = None
+        await self._end_standby(standby, ready)
         for task in self._tasks:
             await cancel_and_wait(task)
         self._tasks.clear()
@@ -168,13 +267,69 @@ class FoxgloveBridge:
 
     # -- from the worker -----------------------------------------------------------------
 
-    async def _read_worker(self, stdout: asyncio.StreamReader) -> None:
+    async def _read_worker(self, process: asyncio.subprocess.Process,
+                           stdout: asyncio.StreamReader) -> None:
         while line := await stdout.readline():
             readers = json.loads(line).get("readers")
             if readers is not None:
                 self.readers = set(readers)
                 self._readers_changed.set()
-        log.warning("the Foxglove process ended")
+        if self._closing or process is not self._process:
+            return
+        # its end of file: it has exited (or is about to); its status says why
+        returncode = await process.wait()
+        await self._worker_ended(_cause(returncode))
+
+    async def _worker_ended(self, why: str) -> None:
+        stable = time.monotonic() - self._started_s >= STABLE_AFTER_S
+        self._failed_in_row = 1 if stable else self._failed_in_row + 1
+        self.faults += 1
+        self.last_fault = why
+        self.gave_up = self._failed_in_row > MAX_FAILED_RESTARTS
+        self.readers = set()
+        self._readers_changed.set()
+        delay_s = RESTART_BACKOFF_S[min(self._failed_in_row, len(RESTART_BACKOFF_S)) - 1]
+        log.error("the Foxglove process ended (%s): live view and MCAP recording stop%s", why,
+                  "; it failed too often and is not started again" if self.gave_up
+                  else f" until it is restarted in {delay_s:g} s")
+        self._tell({"running": False, "fault": why})
+        if self.gave_up:
+            return
+        await asyncio.sleep(delay_s)
+        if self._closing:
+            return
+        # the same port when one was asked for, else a new one (the proxy follows it)
+        try:
+            await self._spawn(self.requested_port)
+        except (OSError, RuntimeError, TimeoutError) as exc:
+            self._tasks.append(asyncio.create_task(self._worker_ended(f"cannot restart: {exc}")))
+            return
+        self.restarts += 1
+        for index, (link, _) in enumerate(self._links):
+            mcap = self._mcaps[index]
+            if mcap is not None:
+                mcap = _next_part(mcap)
+                self.mcap_paths.append(mcap)
+                log.info("recording goes on in %s", mcap)
+            self._send_link(index, link.name, mcap)
+        for index, sysid in self._vehicles:
+            self._send(wire.record(wire.VEHICLE, index, sysid, 0.0, b""))
+        log.warning("the Foxglove process restarted (pid %s)", self._process.pid
+                    if self._process is not None else None)
+        self._tell({"running": True, "recovered": True})
+
+    def _tell(self, change: dict[str, Any]) -> None:
+        text = ("Foxglove worker restarted: live view and MCAP recording go on"
+                if change.get("recovered") else
+                f"Foxglove worker ended ({change.get('fault')}): "
+                + ("not restarted again" if self.gave_up else "restarting it"))
+        data = {"process": "foxglove worker", **change, "restarts": self.restarts,
+                "gave_up": self.gave_up, "text": text}
+        for listener in list(self.on_change):
+            try:
+                listener(data)
+            except Exception:
+                log.exception("a Foxglove status listener failed")
 
     # -- per vehicle ---------------------------------------------------------------------
 
@@ -187,6 +342,7 @@ class FoxgloveBridge:
                 if vehicle.sysid in watched:
                     continue
                 watched.add(vehicle.sysid)
+                self._vehicles.append((index, vehicle.sysid))
                 self._send(wire.record(wire.VEHICLE, index, vehicle.sysid, 0.0, b""))
                 self._tasks.append(asyncio.create_task(self._states(index, vehicle)))
                 self._tasks.append(asyncio.create_task(self._events(index, vehicle)))
@@ -270,6 +426,23 @@ class FrameQueue:
     def flush(self) -> None:
         while self._pending:
             self._drain()
+
+
+def _cause(returncode: int) -> str:
+    if returncode < 0:
+        with contextlib.suppress(ValueError):
+            return f"killed by {signal.Signals(-returncode).name}"
+    return f"exit status {returncode}"
+
+
+def _next_part(path: Path) -> Path:
+    """``name.mcap`` -> ``name.1.mcap`` -> ``name.2.mcap``: the first free one."""
+    stem = path.name.removesuffix(".mcap")
+    for part in range(1, 10_000):
+        candidate = path.with_name(f"{stem}.{part}.mcap")
+        if not candidate.exists():
+            return candidate
+    raise RuntimeError(f"no free MCAP part beside {path}")
 
 
 def _unix_time_s() -> float:

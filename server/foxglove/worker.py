@@ -3,7 +3,9 @@ WebSocket server (on 127.0.0.1) and the MCAP writers, and turns what the server 
 (wire.py) into their channels: it decodes and encodes every frame here, so none of that,
 nor the SDK's calls (which hold the GIL, sometimes for milliseconds while a client is
 served), happens in the server's process, whose GIL the setpoint sender thread needs.
-It ends when its stdin does, after closing the MCAP files."""
+It ends when its stdin does, after closing the MCAP files. Every MCAP_FLUSH_S it finishes
+the MCAP files' current chunks (a thread of its own, also when no record comes), so a crash
+loses at most about that much of a recording (its size-bound chunks held ~10 s)."""
 
 from __future__ import annotations
 
@@ -11,6 +13,7 @@ import argparse
 import json
 import signal
 import sys
+import threading
 import time
 import traceback
 from typing import BinaryIO
@@ -27,6 +30,8 @@ from server.foxglove.router import FrameRouter
 # How often the vehicles' state and health channels are looked at for readers.
 READER_CHECK_S = 0.25
 MESSAGE_BACKLOG = 4096
+# The MCAP files' chunks are finished at least this often: what a crash can lose.
+MCAP_FLUSH_S = 0.5
 _LEVELS = {level.value: level for level in (
     LogLevel.Unknown, LogLevel.Debug, LogLevel.Info, LogLevel.Warning, LogLevel.Error,
     LogLevel.Fatal,
@@ -50,6 +55,8 @@ class Worker:
         self.readers: frozenset[int] = frozenset()
         self.checked_s = 0.0
         self.failed = False
+        # handle() and the flushing thread take turns with the writers
+        self.lock = threading.Lock()
         self.say({"ready": self.server.port if self.server is not None else None})
 
     def say(self, message: dict[str, object]) -> None:
@@ -100,9 +107,17 @@ class Worker:
             self.readers = readers
             self.say({"readers": sorted(readers)})
 
+    def flush_periodically(self) -> None:
+        while True:
+            time.sleep(MCAP_FLUSH_S)
+            with self.lock:
+                for writer in self.writers:
+                    writer.flush()
+
     def close(self) -> None:
         for writer in self.writers:
             writer.close()
+        self.writers.clear()
         for router in self.routers:
             router.channels.close()
         if self.server is not None:
@@ -120,7 +135,8 @@ def serve(source: BinaryIO, worker: Worker) -> None:
         if len(payload) < length:
             return
         try:
-            worker.handle(kind, link, argument, time_s, payload)
+            with worker.lock:
+                worker.handle(kind, link, argument, time_s, payload)
         except Exception:  # one record it cannot show must not end the others
             if not worker.failed:
                 worker.failed = True
@@ -130,17 +146,28 @@ def serve(source: BinaryIO, worker: Worker) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--port", type=int, help="the WebSocket server's port (none: no server)")
+    parser.add_argument("--standby", action="store_true",
+                        help="import everything, say so, then wait for a line {\"port\": N} "
+                             "(a spare that replaces a worker that ended at once)")
     args = parser.parse_args()
+    if args.standby:
+        print(json.dumps({"standby": True}), flush=True)
+        line = sys.stdin.buffer.readline()
+        if not line:
+            return  # the server closed it unused
+        args.port = json.loads(line)["port"]
     # Ctrl-C reaches the whole process group, and a service manager's SIGTERM every process
     # of the service: the server closes this process's stdin once it has handed over its
     # last frames, and that ends it, the MCAP files closed (a dead server's pipe ends too)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
     worker = Worker(args.port, sys.stdout.buffer)
+    threading.Thread(target=worker.flush_periodically, name="mcap-flush", daemon=True).start()
     try:
         serve(sys.stdin.buffer, worker)
     finally:
-        worker.close()
+        with worker.lock:
+            worker.close()
 
 
 if __name__ == "__main__":

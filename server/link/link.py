@@ -90,7 +90,7 @@ class Link:
         # every frame goes out through the setpoint sender process once a stream put this
         # link there (server.link.stream.stream_channel): one sequence, one signing stream
         self._handover = LinkHandover(name, transport, self.mav, self.signing, self._loop,
-                                      self._process_sent)
+                                      self._process_sent, self._send_lock)
         self._record = FrameRecord(tlog)
         self._vehicle_factory = vehicle_factory or Vehicle
         self._roster = VehicleRoster(
@@ -269,7 +269,7 @@ class Link:
         hands this link's sending over to the process for good."""
         if self._closed:
             return None
-        return self._handover.channel(on_ticks, self._send_lock)
+        return self._handover.channel(on_ticks)
 
     def _process_sent(self, records: list[tuple[float, bytes]], dropped: int,
                       _timestamp: int) -> None:

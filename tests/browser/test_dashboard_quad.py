@@ -227,6 +227,7 @@ def test_start_offboard_then_altitude_slider_moves_the_vehicle(
         30.0,
     )
     assert page.text_content("#stream-active") == "streaming"
+    assert page.text_content("#stream-sender") == "process"  # the sender process sends
     assert "Hz" in (page.text_content("#stream-rate") or "")
     assert "ms" in (page.text_content("#stream-p99") or "")
 

@@ -251,13 +251,17 @@ def test_without_cap_sys_nice_the_process_warns_once_and_streams_anyway() -> Non
         socket.send_fds(ours, [pickle.dumps(("link", 1, 0, None))], [sock.fileno()])
         ours.send(pickle.dumps(("stream", 7, 1, frame, _msg(1).crc_extra, None, 0.02)))
         ours.settimeout(5.0)
-        notes = [pickle.loads(ours.recv(1 << 20)) for _ in range(3)]
+        notes = [pickle.loads(ours.recv(1 << 20)) for _ in range(4)]  # ready, warning, sent, ticks
         warnings = [note[1] for note in notes if note[0] == "warning"]
         assert len(warnings) == 1
         assert "normal priority" in warnings[0]
         assert "--cap-add SYS_NICE" in warnings[0]
         assert "--ulimit rtprio=30" in warnings[0]
+        assert notes[0][0] == "ready"
         assert any(note[0] == "ticks" and note[1] == 7 for note in notes)
+        until = time.monotonic() + 5.0
+        while len(receiver.frames) < 3 and time.monotonic() < until:
+            time.sleep(0.02)
     finally:
         ours.close()  # end of file: the process ends
         proc.wait(5)

@@ -46,11 +46,25 @@ class ErrorOut(BaseModel):
     detail: ErrorDetail
 
 
+class ChildProcessOut(BaseModel):
+    """A process the server runs and supervises."""
+
+    name: str = Field(description="'setpoint sender', 'foxglove worker' or 'simulated vehicle'")
+    running: bool
+    pid: int | None = None
+    restarts: int = Field(0, description="started again after a fault")
+    faults: int = Field(0, description="deaths and stops seen (kill, crash, no answer)")
+    last_fault: str | None = Field(None, description="the last fault and its cause")
+    gave_up: bool = Field(False, description="not started again: it failed too often")
+
+
 class HealthOut(BaseModel):
     status: Literal["ok"]
     version: str
     vehicles: int
     read_only: bool = Field(False, description="a replayed recording: control calls answer 403")
+    processes: list[ChildProcessOut] = Field(
+        default_factory=list, description="the processes the server runs, as supervised")
 
 
 class UnprocessableOut(BaseModel):

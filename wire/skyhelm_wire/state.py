@@ -106,6 +106,15 @@ class StreamOut(_Out):
     gaps: int = 0
     sent: int = 0
     since_last_ms: float | None = None
+    sender: str = Field(
+        default="none",
+        description="who sends the stream's frames now: 'process' (the setpoint sender "
+        "process), 'thread' (the server's sender thread: no process, or it failed), 'loop' "
+        "or 'none' (stopped)")
+    sender_restarts: int = Field(
+        default=0, description="setpoint sender processes started after a fault")
+    sender_fault: str | None = Field(
+        default=None, description="the sender process's last fault and its cause (null: none)")
 
 
 class LinkOut(_Out):

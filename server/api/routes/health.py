@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import functools
 from importlib.metadata import PackageNotFoundError, version
+from typing import Any
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Request
 
 from server.http.deps import Context
-from server.http.schemas import HealthOut
+from server.http.schemas import ChildProcessOut, HealthOut
+from server.link.stream.stream_channel import sender_status
 
 router = APIRouter(tags=["health"])
 
@@ -22,10 +24,19 @@ def _version() -> str:
 
 
 @router.get("/health", response_model=HealthOut)
-async def health(context: Context) -> HealthOut:
+async def health(context: Context, request: Request) -> HealthOut:
+    processes: list[dict[str, Any]] = []
+    sender = sender_status()
+    if sender is not None:
+        processes.append(sender)
+    for child in (getattr(request.app.state, "foxglove", None),
+                  getattr(request.app.state, "sim", None)):
+        if child is not None:
+            processes.append(child.status())
     return HealthOut(
         status="ok",
         version=_version(),
         vehicles=len(context.registry.all()),
         read_only=context.read_only,
+        processes=[ChildProcessOut(**p) for p in processes],
     )

@@ -19,6 +19,7 @@ from server.http.schemas.params import ParamOut, ParamsOut, ParamValueBody
 from skyhelm_wire.commands import CommandResultName, CommandResultOut
 from skyhelm_wire.common import (
     AltM,
+    ChildProcessOut,
     ErrorDetail,
     ErrorOut,
     HealthOut,
@@ -59,6 +60,7 @@ __all__ = [
     "ArmBody",
     "AttitudeOut",
     "BatteryOut",
+    "ChildProcessOut",
     "CommandResultName",
     "CommandResultOut",
     "ControlBody",

@@ -162,6 +162,13 @@ class StreamStats:
     gaps: int = 0
     sent: int = 0
     since_last_ms: float | None = None
+    # who sends the stream's frames now: 'process' (the setpoint sender process), 'thread' (the
+    # server's sender thread: no process, or it failed), 'loop' or 'none' (stopped)
+    sender: str = "none"
+    # setpoint sender processes started after a fault
+    sender_restarts: int = 0
+    # the sender process's last fault and its cause (null: none)
+    sender_fault: str | None = None
 
 
 @dataclass(frozen=True)

@@ -15,11 +15,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 from server.link.core.state import StreamStats
 from server.link.core.vehicle_core import VehicleCore
 from server.link.plugins.offboard import Offboard
-from server.link.stream.streamer import SetpointStreamer
+from server.link.stream.streamer import SetpointStreamer, sender_event
 
 MANUAL_CONTROL_RATE_HZ = 25.0  # QGroundControl's joystick rate
 # MANUAL_CONTROL.z is 0..1000; 500 is the centred throttle stick
@@ -66,6 +67,7 @@ class ManualControl:
         self._offboard = offboard
         self.streamer = SetpointStreamer(
             core.send, rate_hz=MANUAL_CONTROL_RATE_HZ, channel=core.stream_channel)
+        self.streamer.on_sender_change = self._sender_changed
         self.sticks: Sticks | None = None  # what is sent now (None: not sending)
         offboard.on_stream_start(self._stop_for_offboard)
 
@@ -105,6 +107,11 @@ class ManualControl:
 
     def stats(self) -> StreamStats:
         return self.streamer.stats()
+
+    def _sender_changed(self, change: dict[str, Any]) -> None:
+        """The sender process failed (the sticks went on from the thread) or is back."""
+        self._core.publish_event("stream", sender_event("sticks", change))
+        self._core.hub.notify()
 
     def _stop_for_offboard(self) -> None:
         self.stop("offboard stream started")

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Callable
+from typing import Any
 
 from server.link.codec.commands import CommandResult
 from server.link.codec.setpoint_checks import (
@@ -25,7 +26,7 @@ from server.link.codec.setpoints import (
 from server.link.core.vehicle_core import VehicleCore
 from server.link.plugins.action import Action
 from server.link.plugins.telemetry import Telemetry
-from server.link.stream.streamer import DEFAULT_RATE_HZ, SetpointStreamer
+from server.link.stream.streamer import DEFAULT_RATE_HZ, SetpointStreamer, sender_event
 
 
 class Offboard:
@@ -48,6 +49,7 @@ class Offboard:
         self.setpoint: Setpoint | None = None  # what is streamed now, offsets resolved
         self.streamer = SetpointStreamer(
             core.send, rate_hz=stream_rate_hz, channel=core.stream_channel)  # its rate, stats
+        self.streamer.on_sender_change = self._sender_changed
         self._engaged = False
         self._starting = False  # start() asking for OFFBOARD: its stream must not stop
         self._on_stream_start: list[Callable[[], None]] = []
@@ -104,6 +106,11 @@ class Offboard:
                 "text": "setpoint stream stays stopped after the link loss: send a setpoint "
                         "or start offboard to fly again",
             })  # fmt: skip
+
+    def _sender_changed(self, change: dict[str, Any]) -> None:
+        """The sender process failed (the stream went on from the thread) or is back."""
+        self._core.publish_event("stream", sender_event("offboard", change))
+        self._core.hub.notify()
 
     def _stop_by_link(self, why: str) -> None:
         if self.streamer.active:

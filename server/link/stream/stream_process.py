@@ -4,7 +4,8 @@ A stream timed by a thread of the server still needs the GIL to send, and the th
 it may have been preempted: on a machine with busy cores a tick then waits for the OS to
 run the server again. This process holds no GIL but its own and runs no event loop: it
 sleeps until the earliest deadline of any stream, at real-time priority (SCHED_FIFO) where
-the OS allows it, and sends.
+the OS allows it, and sends. It waits with poll(), so any descriptor number works (a
+server with more than 1024 open sockets hands over fds above FD_SETSIZE).
 
 It owns the sending side of each link it is given (the link's own UDP socket, passed over
 the control socket, so the source port is the link's): the MAVLink sequence number and,
@@ -18,8 +19,9 @@ Stdlib only, run by path (``python -S stream_process.py``): it starts in millise
 imports nothing of the server. The control socket (SOCK_SEQPACKET, its fd the third
 argument) carries pickled tuples; the server's messages:
 
-- ``("link", key, seq, signing)`` + the socket's fd: a link to send for;
-  ``signing`` is ``(secret_key, link_id, timestamp)`` or None; ``("unlink", key)``;
+- ``("link", key, seq, signing[, slot])`` + the socket's fd: a link to send for;
+  ``signing`` is ``(secret_key, link_id, timestamp)`` or None; ``slot`` its place in the
+  shared state (or -1); ``("unlink", key)``;
 - ``("sign", key, signing)``: the link's key changed;
 - ``("send", key, frame, crc_extra, dests)``: write once (dests: addresses, or None on a
   connected socket);
@@ -32,7 +34,15 @@ Its reports, batched every ``REPORT_PERIOD_S``: ``("sent", key, [(unix_s, frame)
 signing_timestamp)`` (the tlog records and counters), ``("ticks", sid, [monotonic_s])``
 (the stream's statistics, on the same CLOCK_MONOTONIC as the server's), ``("unlinked",
 key)`` once a link's last frames are reported, and once, if it
-cannot have real-time scheduling, ``("warning", text)``.
+cannot have real-time scheduling, ``("warning", text)``. Its first report, at once, is
+``("ready", pid)``.
+
+The optional fourth argument is a shared memory file (memfd) it keeps current for the
+server's supervisor (server.link.stream.sender_supervisor): at offset 0 the CLOCK_MONOTONIC
+time of its last loop (``<d``; a stuck process stops moving it), and per link slot (the
+``slot`` of the "link" message, ``STATE_SLOT_BYTES`` each from ``STATE_SLOTS_AT``) the next
+sequence number and the last signing timestamp it wrote (``<IQ``), so a server that takes
+the link back after this process died goes on from the last frame actually written.
 
 It ends when the server does: at the control socket's end of file, and by
 PR_SET_PDEATHSIG (SIGKILL) should the server die without closing it.
@@ -47,6 +57,7 @@ import hashlib
 import heapq
 import itertools
 import math
+import mmap
 import os
 import pickle
 import select
@@ -71,6 +82,13 @@ SIGNING_TICKS_PER_S = 100_000
 # Unsent reports kept while the server does not read them; older tlog records go first.
 MAX_PENDING_RECORDS = 20_000
 MAX_PENDING_NOTES = 1_000  # ~50 s of reports
+# The shared state (see the module's docstring).
+STATE_HEARTBEAT = struct.Struct("<d")
+STATE_LINK = struct.Struct("<IQ")
+STATE_SLOTS_AT = 64
+STATE_SLOT_BYTES = 16
+STATE_SLOTS = 256
+STATE_BYTES = STATE_SLOTS_AT + STATE_SLOTS * STATE_SLOT_BYTES
 
 
 class Deadlines:
@@ -150,14 +168,19 @@ class Stamper:
 class LinkOut:
     """A link's socket and stamper, and what was written since the last report."""
 
-    def __init__(self, sock: socket.socket, stamper: Stamper) -> None:
+    def __init__(self, sock: socket.socket, stamper: Stamper,
+                 state: tuple[mmap.mmap, int] | None = None) -> None:
         self.sock = sock
         self.stamper = stamper
         self.records: list[tuple[float, bytes]] = []
         self.dropped = 0
+        self.state = state  # (shared state, offset of this link's slot)
 
     def write(self, frame: bytes, crc_extra: int, dests: Iterable[Any] | None) -> bool:
         stamped = self.stamper.stamp(frame, crc_extra)
+        if self.state is not None:
+            STATE_LINK.pack_into(self.state[0], self.state[1], self.stamper.seq,
+                                 self.stamper.timestamp)
         try:
             if dests is None:
                 self.sock.send(stamped)
@@ -192,8 +215,9 @@ class Stream:
 
 
 class SenderProcess:
-    def __init__(self, control: socket.socket) -> None:
+    def __init__(self, control: socket.socket, state: mmap.mmap | None = None) -> None:
         self.control = control
+        self.state = state
         self.links: dict[int, LinkOut] = {}
         self.streams: dict[int, Stream] = {}
         self.heap: list[tuple[float, int, int, int]] = []  # (deadline, order, sid, generation)
@@ -204,13 +228,17 @@ class SenderProcess:
     def handle(self, message: tuple[Any, ...], fds: list[int]) -> None:
         kind = message[0]
         if kind == "link":
-            _, key, seq, signing = message
+            key, seq, signing = message[1:4]
+            slot = message[4] if len(message) > 4 else -1
             old = self.links.pop(key, None)
             if old is not None:
                 old.sock.close()
             sock = socket.socket(fileno=fds[0])
             sock.setblocking(False)
-            self.links[key] = LinkOut(sock, Stamper(seq, signing))
+            state = None
+            if self.state is not None and 0 <= slot < STATE_SLOTS:
+                state = (self.state, STATE_SLOTS_AT + slot * STATE_SLOT_BYTES)
+            self.links[key] = LinkOut(sock, Stamper(seq, signing), state)
             return
         for fd in fds:  # only "link" carries one
             os.close(fd)
@@ -327,11 +355,19 @@ class SenderProcess:
             self.run_due()  # a burst of the server's frames does not hold a due tick back
 
     def run(self) -> None:
-        next_report_s = time.monotonic() + REPORT_PERIOD_S
+        next_report_s = time.monotonic()  # the first report ("ready") goes at once
+        poller = select.poll()  # not select(): the control socket's fd may be above 1023
+        poller.register(self.control, select.POLLIN)
         while True:
             now = time.monotonic()
+            if self.state is not None:
+                STATE_HEARTBEAT.pack_into(self.state, 0, now)
             until = min(next_report_s, self.heap[0][0] if self.heap else math.inf)
-            readable, _, _ = select.select([self.control], [], [], max(0.0, until - now))
+            wait_s = max(0.0, until - now)
+            if wait_s < 0.001:  # poll counts whole milliseconds: the rest is slept
+                time.sleep(wait_s)
+                wait_s = 0.0
+            readable = poller.poll(int(wait_s * 1000.0))  # early by < 1 ms: comes round
             self.run_due()
             if readable and not self.read_control():
                 return
@@ -372,7 +408,13 @@ def main() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # a Ctrl-C stops the server, then us
     control = socket.socket(fileno=control_fd)
     control.setblocking(False)
-    process = SenderProcess(control)
+    state = None
+    if len(sys.argv) > 4:
+        state_fd = int(sys.argv[4])
+        state = mmap.mmap(state_fd, STATE_BYTES)
+        os.close(state_fd)
+    process = SenderProcess(control, state)
+    process.notes.append(("ready", os.getpid()))
     warning = _raise_priority(priority)
     if warning is not None:
         process.notes.append(("warning", warning))

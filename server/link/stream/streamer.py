@@ -11,6 +11,11 @@ run), the process's sender thread (server.link.stream.stream_thread). Under a vi
 (looptime in tests) the event loop itself (loop.call_at), so virtual time drives the stream
 exactly. SKYHELM_STREAM_SENDER (``process``, ``thread`` or ``loop``) caps the choice;
 bench/stream_vs_mavsdk.py and bench/stream_contention.py compare them.
+
+A stream outlives its sender process: when the process dies or stops answering, its
+supervisor (server.link.stream.sender_supervisor) moves the stream to the sender thread at
+once, with its current setpoint and schedule, and back to a restarted process later; the
+stream's ``on_sender_change`` hears of both (the ``stream`` event).
 """
 
 from __future__ import annotations
@@ -23,11 +28,13 @@ import threading
 import time
 from array import array
 from collections.abc import Callable
+from typing import Any
 
 from pymavlink.dialects.v20 import development as mavlink
 
 from server.link.codec.snapshot import StreamStats
-from server.link.stream.stream_channel import ProcessGone, StreamChannel
+from server.link.stream.sender_supervisor import STUCK_AFTER_S, ProcessGone
+from server.link.stream.stream_channel import StreamChannel, supervisor
 from server.link.stream.stream_thread import Deadlines, SenderThread, shared_sender
 
 MIN_RATE_HZ = 2.0
@@ -62,6 +69,11 @@ class SetpointStreamer:
         self._send = send
         self._channel_factory = channel
         self._channel: StreamChannel | None = None  # set while the process times the stream
+        # on the thread for want of the process (lost, being restarted): back when it runs
+        self._fell_back = False
+        # told (on the loop) when the stream changes sender after a fault: a dict for the
+        # ``stream`` event
+        self.on_sender_change: Callable[[dict[str, Any]], None] | None = None
         self._sid: int | None = None
         self._deadlines = Deadlines(1.0 / self._checked_rate(rate_hz))
         self._msg: mavlink.MAVLink_message | None = None
@@ -81,6 +93,8 @@ class SetpointStreamer:
         # statistics; the interval window is preallocated and overwritten in a ring
         self._intervals = array("d", bytes(8 * window))
         self._reset_stats()
+        if channel is not None:
+            supervisor().watch(self)
 
     @property
     def _period_s(self) -> float:
@@ -145,6 +159,7 @@ class SetpointStreamer:
             self._sid = self._channel.stream(msg, self._period_s)
         except ProcessGone:
             self._channel = None
+            self._fell_back = True
             self._choose_thread()
             return False
         return True
@@ -152,6 +167,7 @@ class SetpointStreamer:
     def _choose_clock(self, loop: asyncio.AbstractEventLoop) -> None:
         self._loop = loop
         self._channel = None
+        self._fell_back = False
         real_time = _real_time_loop(loop)
         if real_time and SENDER == "process" and self._channel_factory is not None:
             self._channel = self._channel_factory(self._process_ticks)
@@ -159,6 +175,7 @@ class SetpointStreamer:
                 self._threaded = False
                 self._clock = time.monotonic  # the process's clock: CLOCK_MONOTONIC
                 return
+            self._fell_back = True  # where the link has no process, sender_back finds none
         self._choose_thread()
 
     def _choose_thread(self) -> None:
@@ -178,10 +195,88 @@ class SetpointStreamer:
             if self.active:
                 self._msg = msg
                 if self._channel is not None:
-                    with contextlib.suppress(ProcessGone):  # the stream stops with it
+                    try:
                         self._channel.update(msg)
+                    except ProcessGone:  # the thread goes on with it
+                        self._to_thread()
                 return
         self.stream(msg)
+
+    # -- the sender process's supervisor --
+    def sender_lost(self, process: object) -> None:
+        """The process timing this stream is gone: the thread takes the stream over now,
+        with its current setpoint, on its schedule (a tick already due goes at once)."""
+        with self._lock:
+            if self._channel is None or self._channel.process is not process:
+                return
+            was_active = self._active
+            self._to_thread()
+        if was_active:
+            self._tell({"sender": "thread", "fault": supervisor().last_fault})
+
+    def _to_thread(self) -> None:
+        with self._lock:
+            self._channel = None
+            self._sid = None
+            self._fell_back = True
+            self._choose_thread()
+            if self._active:
+                self._rephase()
+
+    def sender_back(self) -> None:
+        """A new process runs: the stream moves back to it (its first frame goes at once)."""
+        with self._lock:
+            if not self._fell_back or self._channel is not None:
+                return
+            if not self._active or self._msg is None or self._loop is None:
+                self._fell_back = False
+                return
+            channel = self._channel_factory(self._process_ticks) if self._channel_factory else None
+            if channel is None:
+                return
+            self._generation += 1  # the thread's jobs end
+            self._channel = channel
+            self._fell_back = False
+            self._threaded = False
+            self._clock = time.monotonic
+            if not self._stream_in_process(self._msg):
+                self._rephase()
+                return
+        self._tell({"sender": "process", "recovered": True})
+
+    def streams_in(self, process: object) -> bool:
+        """Whether this stream runs in ``process`` now (the supervisor's watchdog asks)."""
+        channel = self._channel
+        return self._active and channel is not None and channel.process is process
+
+    def _tell(self, data: dict[str, Any]) -> None:
+        listener, loop = self.on_sender_change, self._loop
+        if listener is None or loop is None:
+            return
+        status = supervisor().status()
+        data = {**data, "restarts": status.restarts, "gave_up": status.gave_up}
+        with contextlib.suppress(RuntimeError):  # the loop has closed
+            loop.call_soon_threadsafe(listener, data)
+
+    @property
+    def sender(self) -> str:
+        """Who sends this stream's frames now: "process", "thread" or "loop" ("none" while
+        it is stopped)."""
+        if not self._active:
+            return "none"
+        if self._channel is not None:
+            return "process"
+        return "thread" if self._threaded else "loop"
+
+    def _frames_leaving(self) -> bool:
+        """Active, and its sender is running (a process that stopped answering is not)."""
+        if not self._active:
+            return False
+        channel = self._channel
+        if channel is None:
+            return True
+        age_s = channel.process.heartbeat_age_s()
+        return age_s is not None and age_s < STUCK_AFTER_S
 
     def _reset_stats(self) -> None:
         self._ring_next = 0
@@ -280,8 +375,14 @@ class SetpointStreamer:
         since_last_ms = None
         if self._last_s is not None:
             since_last_ms = (self._clock() - self._last_s) * 1000.0
+        restarts, fault = 0, None
+        if self._channel_factory is not None:
+            status = supervisor().status()
+            restarts, fault = status.restarts, status.last_fault
         if not self._ring_len:
-            return StreamStats(active=self.active, sent=self._sent, since_last_ms=since_last_ms)
+            return StreamStats(active=self._frames_leaving(), sent=self._sent,
+                               since_last_ms=since_last_ms, sender=self.sender,
+                               sender_restarts=restarts, sender_fault=fault)
         # the rate over the last ~1 s, so it follows a rate change; percentiles use the window
         recent = self._recent(max(2, round(self.rate_hz)))
         if self._percentiles is None or self._percentiles[0] != self._sent:
@@ -289,7 +390,7 @@ class SetpointStreamer:
             self._percentiles = (self._sent, _percentile(ordered, 0.50), _percentile(ordered, 0.99))
         _, p50_s, p99_s = self._percentiles
         return StreamStats(
-            active=self.active,
+            active=self._frames_leaving(),
             rate_hz=len(recent) / sum(recent) if sum(recent) > 0 else 0.0,
             interval_p50_ms=p50_s * 1000.0,
             interval_p99_ms=p99_s * 1000.0,
@@ -297,6 +398,9 @@ class SetpointStreamer:
             gaps=self._gaps,
             sent=self._sent,
             since_last_ms=since_last_ms,
+            sender=self.sender,
+            sender_restarts=restarts,
+            sender_fault=fault,
         )
 
     def _recent(self, count: int) -> list[float]:
@@ -306,6 +410,20 @@ class SetpointStreamer:
             self._intervals[(self._ring_next - 1 - i) % size]
             for i in range(min(count, self._ring_len))
         ]
+
+
+def sender_event(stream: str, change: dict[str, Any]) -> dict[str, object]:
+    """The ``stream`` event of a sender change (``on_sender_change``'s argument) of the
+    stream named ``stream`` ("offboard" or "sticks")."""
+    if change.get("recovered"):
+        text = f"{stream} stream back on a restarted setpoint sender process"
+    elif change.get("gave_up"):
+        text = (f"{stream} stream goes on from the server's sender thread: the setpoint sender "
+                f"process failed ({change.get('fault')}) and is not restarted again")
+    else:
+        text = (f"{stream} stream goes on from the server's sender thread: the setpoint sender "
+                f"process failed ({change.get('fault')}); restarting it")
+    return {"active": True, "stream": stream, **change, "text": text}
 
 
 def _percentile(ordered: list[float], q: float) -> float:

@@ -1,0 +1,263 @@
+"""The setpoint sender process's supervisor: its death or silence is a fault, never a silent stop.
+
+The sender process (server.link.stream.stream_process) sends every frame of the UDP links
+handed to it and times their streams. When it dies (its control socket's end of file, its
+exit status) or stops answering (its shared heartbeat does not move while streams run), the
+supervisor at once:
+
+- takes every link back (each link sends itself again, from the sequence number and signing
+  timestamp the process last wrote: the frames go on contiguous and never replayed);
+- moves every stream to the sender thread (server.link.stream.stream_thread), with its
+  current setpoint and schedule;
+- logs the fault once with its cause and tells its listeners (the streams' ``stream``
+  events, the state).
+
+Then it starts a new process after a back-off (``RESTART_BACKOFF_S``) and moves the links and
+streams back to it (real-time priority again, where allowed). A process that dies within
+``STABLE_AFTER_S`` of its start counts as a failed restart; after ``MAX_FAILED_RESTARTS`` in a
+row the supervisor gives up: the streams stay on the thread and the status says so.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+import weakref
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Protocol
+
+log = logging.getLogger(__name__)
+
+# The process writes its heartbeat at least every report period (50 ms). No movement for
+# this long while streams run is a stuck process (SIGSTOP, a blocked write)...
+STUCK_AFTER_S = 0.15
+# ...or for this long when the OS says it is runnable (a busy machine that has not run it
+# yet: the thread would wait for the same cores).
+STARVED_AFTER_S = 0.5
+WATCH_PERIOD_S = 0.025
+RESTART_BACKOFF_S = (0.25, 1.0, 4.0)
+MAX_FAILED_RESTARTS = len(RESTART_BACKOFF_S)
+STABLE_AFTER_S = 10.0
+# a restarted process must run its loop this soon, or it failed (it is killed)
+READY_TIMEOUT_S = 2.0
+
+
+class ProcessGone(RuntimeError):
+    """The sender process is not running (it could not start, or it died)."""
+
+
+class Process(Protocol):
+    """What the supervisor needs of a sender process (stream_channel.SenderProcess)."""
+
+    pid: int | None
+    alive: bool
+    started_s: float
+
+    def heartbeat_age_s(self) -> float | None: ...
+
+    def wait_ready(self, timeout_s: float) -> bool: ...
+
+    def kill(self, why: str) -> None: ...
+
+
+class Supervised(Protocol):
+    """A link's handover or a stream: told when the process is lost and when one is back."""
+
+    def sender_lost(self, process: object) -> None: ...
+
+    def sender_back(self) -> None: ...
+
+    def streams_in(self, process: object) -> bool: ...
+
+
+@dataclass(frozen=True)
+class SenderStatus:
+    """The sender process as the API shows it."""
+
+    running: bool  # a sender process runs now (else every stream is on the thread)
+    pid: int | None
+    restarts: int  # processes started after a fault
+    faults: int
+    last_fault: str | None
+    last_fault_unix_s: float | None
+    gave_up: bool  # restarts kept failing: the streams stay on the thread
+
+
+class SenderSupervisor:
+    """Starts the sender process when first asked, watches it, replaces it after a fault."""
+
+    def __init__(self, start: Callable[[Callable[[Process, str], None]], Process]) -> None:
+        self._start = start  # starts a process that calls its argument when it is gone
+        self._lock = threading.RLock()
+        self._process: Process | None = None
+        self._handled: set[int] = set()  # ids of processes whose loss was handled
+        self._members: weakref.WeakSet[Supervised] = weakref.WeakSet()
+        self._handovers: weakref.WeakSet[Supervised] = weakref.WeakSet()
+        self._listeners: list[Callable[[SenderStatus], None]] = []
+        self._restart_timer: threading.Timer | None = None
+        self._watchdog: threading.Thread | None = None
+        self.restarts = 0
+        self.faults = 0
+        self.failed_in_row = 0
+        self.gave_up = False
+        self.last_fault: str | None = None
+        self.last_fault_unix_s: float | None = None
+
+    # -- members --
+    def watch_handover(self, handover: Supervised) -> None:
+        self._handovers.add(handover)
+
+    def watch(self, member: Supervised) -> None:
+        self._members.add(member)
+
+    def on_change(self, listener: Callable[[SenderStatus], None]) -> None:
+        self._listeners.append(listener)
+
+    def status(self) -> SenderStatus:
+        with self._lock:
+            process = self._process
+            running = process is not None and process.alive
+            return SenderStatus(
+                running=running, pid=process.pid if running and process else None,
+                restarts=self.restarts, faults=self.faults, last_fault=self.last_fault,
+                last_fault_unix_s=self.last_fault_unix_s, gave_up=self.gave_up)
+
+    def current(self) -> Process | None:
+        """The running process, if any (never starts one)."""
+        with self._lock:
+            process = self._process
+            return process if process is not None and process.alive else None
+
+    def process(self) -> Process:
+        """The running process, started at the first call; ProcessGone while one is being
+        replaced or after the supervisor gave up."""
+        with self._lock:
+            process = self._process
+            if process is not None and process.alive:
+                return process
+            if process is not None or self.gave_up:
+                raise ProcessGone(self.last_fault or "the setpoint sender process has ended")
+            try:
+                self._process = self._start(self.lost)
+            except ProcessGone as exc:
+                self._fault(f"cannot start: {exc}")
+                self.gave_up = True
+                raise
+            self._start_watchdog()
+            return self._process
+
+    # -- faults --
+    def lost(self, process: Process, why: str) -> None:
+        """The process died or was killed (any thread; once per process)."""
+        with self._lock:
+            if id(process) in self._handled or process is not self._process:
+                return
+            self._handled.add(id(process))
+            stable = time.monotonic() - process.started_s >= STABLE_AFTER_S
+            self.failed_in_row = 1 if stable else self.failed_in_row + 1
+            self._fault(why)
+            give_up = self.failed_in_row > MAX_FAILED_RESTARTS
+            if give_up:
+                self.gave_up = True
+        log.error("setpoint sender process %s ended (%s): its links send themselves and its "
+                  "streams go on from the sender thread%s", process.pid, why,
+                  "; it failed too often and is not started again" if give_up else
+                  f"; restarting it in {self._backoff_s():g} s")
+        for handover in list(self._handovers):
+            handover.sender_lost(process)
+        for member in list(self._members):
+            member.sender_lost(process)
+        self._tell()
+        if not give_up:
+            with self._lock:
+                self._restart_timer = threading.Timer(self._backoff_s(), self._restart)
+                self._restart_timer.daemon = True
+                self._restart_timer.start()
+
+    def _fault(self, why: str) -> None:
+        self.faults += 1
+        self.last_fault = why
+        self.last_fault_unix_s = time.time()
+
+    def _backoff_s(self) -> float:
+        return RESTART_BACKOFF_S[min(max(self.failed_in_row, 1), len(RESTART_BACKOFF_S)) - 1]
+
+    def _restart(self) -> None:
+        # under the lock, so its loss (reported from its reader thread) waits until it is the
+        # current process; starting is a fork and exec, milliseconds
+        with self._lock:
+            if self.gave_up:
+                return
+            try:
+                process = self._process = self._start(self.lost)
+            except ProcessGone as exc:
+                self._process = None
+                self.failed_in_row += 1
+                self._fault(f"cannot restart: {exc}")
+                self.gave_up = self.failed_in_row > MAX_FAILED_RESTARTS
+                if not self.gave_up:
+                    self._restart_timer = threading.Timer(self._backoff_s(), self._restart)
+                    self._restart_timer.daemon = True
+                    self._restart_timer.start()
+                self._tell()
+                return
+            self.restarts += 1
+        # the streams move when it runs its loop: until then the thread keeps them going
+        if not process.wait_ready(READY_TIMEOUT_S):
+            process.kill(f"a restarted process did not start in {READY_TIMEOUT_S:g} s")
+            return
+        if not process.alive:
+            return  # it died at once: its loss was handled
+        log.warning("setpoint sender process restarted (pid %s): streams move back to it",
+                    process.pid)
+        for handover in list(self._handovers):
+            handover.sender_back()
+        for member in list(self._members):
+            member.sender_back()
+        self._tell()
+
+    def _tell(self) -> None:
+        status = self.status()
+        for listener in list(self._listeners):
+            try:
+                listener(status)
+            except Exception:
+                log.exception("setpoint sender: a status listener failed")
+
+    # -- the watchdog: a stuck process --
+    def _start_watchdog(self) -> None:
+        if self._watchdog is None:
+            self._watchdog = threading.Thread(target=self._watch, name="setpoint-watchdog",
+                                              daemon=True)
+            self._watchdog.start()
+
+    def _watch(self) -> None:
+        while True:
+            time.sleep(WATCH_PERIOD_S)
+            process = self.current()
+            if process is None:
+                continue
+            age_s = process.heartbeat_age_s()
+            if age_s is None or age_s < STUCK_AFTER_S:
+                continue
+            if not any(member.streams_in(process) for member in list(self._members)):
+                continue  # idle: nothing waits on it (it reports once a stream starts)
+            state = run_state(process.pid)
+            if state == "R" and age_s < STARVED_AFTER_S:
+                continue
+            process.kill(f"stopped answering: no heartbeat for {age_s * 1000:.0f} ms "
+                         f"(process state {state or '?'})")
+
+
+def run_state(pid: int | None) -> str | None:
+    """The process's state letter from /proc (R running, S sleeping, T stopped...)."""
+    if pid is None:
+        return None
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    return stat.rsplit(")", 1)[1].split()[0]

@@ -1,0 +1,328 @@
+"""The setpoint sender process killed (-9) or stopped (SIGSTOP, 3 s) mid-flight, on the
+simulated vehicle in real time: hovering in OFFBOARD, and flying sticks in POSCTL, with
+signing off and on. The vehicle never leaves its mode; the largest gap between two setpoints
+(MANUAL_CONTROL) as a relay in front of the vehicle receives them (kernel receive times)
+stays under what it can feel; the server's sequence reaches it contiguous and signed frames
+pass its replay check; the API says which sender runs, its restarts and the fault, and a
+``stream`` event tells the fault and the recovery. While the sender is stopped, the REST API
+answers as fast as before, also with a script changing the setpoint at the rate limit."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+import math
+import os
+import signal
+import time
+from collections.abc import AsyncIterator, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import pytest
+from pymavlink.dialects.v20 import development as mavlink
+
+from server.link import VehicleEvent
+from server.link.stream import stream_channel
+from server.link.stream.sender_supervisor import SenderSupervisor
+from sim.process.runner import SimCluster
+from tests.api.conftest import Api, api_at
+from tests.faults.sender_relay import Heard, SenderRelay
+from tests.waiting import wait_for
+
+KILL_GAP_S = 0.150
+STOP_GAP_S = 0.250
+STOP_S = 3.0
+OFFBOARD_MODE = 6 << 16  # PX4's custom_mode: main mode in bits 16..23
+POSCTL_MODE = 3 << 16
+SETPOINT_ID = mavlink.MAVLINK_MSG_ID_SET_POSITION_TARGET_LOCAL_NED
+STICKS_ID = mavlink.MAVLINK_MSG_ID_MANUAL_CONTROL
+GCS_SYSID = 255
+# the setpoint script's rate: the REST control rate limit (control_rate_per_s)
+SCRIPT_RATE_HZ = 100.0
+
+
+@pytest.fixture
+def supervisor(monkeypatch: pytest.MonkeyPatch) -> Iterator[SenderSupervisor]:
+    """A supervisor (and sender process) of this test's own."""
+    sup = SenderSupervisor(stream_channel.SenderProcess)
+    monkeypatch.setattr(stream_channel, "_supervisor", sup)
+    yield sup
+    sup.gave_up = True
+    process = sup.current()
+    if process is not None:
+        process.kill("the test ended")
+
+
+@dataclass
+class Flight:
+    api: Api
+    relay: SenderRelay
+    sim: SimCluster
+    events: asyncio.Queue[VehicleEvent]
+
+
+@contextlib.asynccontextmanager
+async def flight(tmp_path: Path, *, signed: bool) -> AsyncIterator[Flight]:
+    """The sim in real time behind a relay, SkyHelm in front, the lease taken."""
+    sim_args: dict[str, Any] = {"signing_dir": tmp_path / "sim"} if signed else {}
+    async with SimCluster(airframe="quad", count=1, speed=1.0, **sim_args) as sim:
+        await sim.wait_ready(timeout_s=30.0)
+        relay = SenderRelay(("127.0.0.1", sim.instances[0].api_local_port))
+        overrides: dict[str, Any] = {}
+        if signed:
+            overrides["signing_key_file"] = tmp_path / "keys" / "signing.key"
+        try:
+            async with api_at(f"udpout:127.0.0.1:{relay.port}", sim, client_timeout_s=60.0,
+                              appear_within_s=20.0, **overrides) as api:
+                await api.wait_ready()
+                if signed:
+                    response = await api.client.post("/api/v1/signing",
+                                                     json={"action": "generate"})
+                    assert response.status_code == 200, response.text
+                    await api.wait_state(lambda s: s["link"]["signing"]["vehicles_signed"],
+                                         10.0, "the vehicle signed")
+                await api.take_control(ttl_s=60.0)
+                yield Flight(api, relay, sim, api.vehicle().subscribe_events())
+        finally:
+            relay.close()
+
+
+async def _hover_in_offboard(api: Api) -> None:
+    assert (await api.control("arm")).status_code == 200
+    assert (await api.control("takeoff", {"altitude_m": 3.0})).status_code == 200
+    await api.wait_state(lambda s: s["position_ned"]["down_m"] < -2.5, 20.0, "climb to 2.5 m")
+    here = (await api.state())["position_ned"]
+    start = await api.control("offboard/start", {"setpoint": {
+        "type": "position_ned", "north_m": here["north_m"], "east_m": here["east_m"],
+        "down_m": -3.0}})
+    assert start.status_code == 200, start.text
+    await api.wait_state(lambda s: s["mode"] == "OFFBOARD", 5.0, "OFFBOARD")
+
+
+async def _fly_sticks_in_posctl(api: Api, feeder: list[asyncio.Task[None]]) -> None:
+    assert (await api.control("arm")).status_code == 200
+    assert (await api.control("takeoff", {"altitude_m": 3.0})).status_code == 200
+    await api.wait_state(lambda s: s["mode"] == "HOLD", 25.0, "takeoff done")
+
+    async def feed() -> None:
+        while True:  # the pilot's sticks at 10 Hz, a hover
+            response = await api.client.put("/api/v1/vehicles/1/sticks",
+                                            json={"throttle": 0.5}, headers=api.lease_headers)
+            assert response.status_code == 200, response.text
+            await asyncio.sleep(0.1)
+
+    feeder.append(asyncio.create_task(feed()))
+    await asyncio.sleep(0.3)
+    mode = await api.control("mode", {"mode": "POSCTL"})
+    assert mode.status_code == 200, mode.text
+    await api.wait_state(lambda s: s["mode"] == "POSCTL", 5.0, "POSCTL")
+
+
+def _sender_pid(supervisor: SenderSupervisor) -> int:
+    process = supervisor.current()
+    assert process is not None
+    assert process.pid is not None
+    return process.pid
+
+
+def _largest_gap_s(heard: list[Heard]) -> float:
+    times = [h.unix_s for h in heard]
+    return max(b - a for a, b in itertools.pairwise(times))
+
+
+def _check_sequence(relay: SenderRelay, since_s: float) -> None:
+    """Every frame of the server reached the relay in sequence (no jump back, no gap)."""
+    seqs = [h.seq for h in relay.heard if h.unix_s >= since_s and h.sysid == GCS_SYSID]
+    jumps = [(a, b) for a, b in itertools.pairwise(seqs) if (b - a) % 256 != 1]
+    assert jumps == [], f"the sequence jumps at the vehicle: {jumps[:5]}"
+
+
+def _modes_since(relay: SenderRelay, since_s: float) -> set[int]:
+    """The modes of the vehicle's HEARTBEATs (1 Hz) since ``since_s``."""
+    modes = [mode for t, mode in relay.modes if t >= since_s]
+    assert len(modes) >= 2, "too few HEARTBEATs to tell"
+    return set(modes)
+
+
+def _mode_changes(f: Flight) -> int:
+    """The sim's count of its mode changes (every one, not only those a HEARTBEAT shows)."""
+    return int(f.sim.instances[0].vehicle.commander.mode_changes)
+
+
+async def _stream_events(queue: asyncio.Queue[VehicleEvent]) -> list[dict[str, Any]]:
+    found = []
+    while not queue.empty():
+        event = queue.get_nowait()
+        if event.kind == "stream" and "sender" in event.data:
+            found.append(dict(event.data))
+    return found
+
+
+@pytest.mark.parametrize("signed", [False, True], ids=["unsigned", "signed"])
+async def test_kill_9_of_the_sender_while_hovering_in_offboard(
+    tmp_path: Path, supervisor: SenderSupervisor, signed: bool
+) -> None:
+    async with flight(tmp_path, signed=signed) as f:
+        api = f.api
+        await _hover_in_offboard(api)
+        assert (await api.client.get("/api/v1/vehicles/1/stream")).json()["sender"] == "process"
+        rejected = f.sim.instances[0].signing.rejected if signed else 0  # type: ignore[union-attr]
+        await asyncio.sleep(1.0)
+        changes = _mode_changes(f)
+        watched_s = time.time()
+        os.kill(_sender_pid(supervisor), signal.SIGKILL)
+        await wait_for(lambda: api.vehicle().stream_stats().sender == "thread", 1.0,
+                       "the thread takes over")
+        during = (await api.client.get("/api/v1/vehicles/1/stream")).json()
+        await wait_for(lambda: api.vehicle().stream_stats().sender == "process", 5.0,
+                       "a restarted process takes over")
+        await asyncio.sleep(1.0)
+        after = (await api.client.get("/api/v1/vehicles/1/stream")).json()
+        state = await api.state()
+        ended_s = time.time()
+        assert _mode_changes(f) == changes, "the vehicle changed mode"
+        events = await _stream_events(f.events)
+        if signed:
+            assert f.sim.instances[0].signing is not None
+            assert f.sim.instances[0].signing.rejected == rejected, "frames the vehicle refused"
+    setpoints = [h for h in f.relay.since(watched_s - 0.5, SETPOINT_ID) if h.unix_s <= ended_s]
+    gap_s = _largest_gap_s(setpoints)
+    print(f"kill -9 in OFFBOARD ({'signed' if signed else 'unsigned'}): largest setpoint gap "
+          f"at the vehicle {gap_s * 1000:.1f} ms over {len(setpoints)} setpoints")
+    assert gap_s <= KILL_GAP_S
+    _check_sequence(f.relay, watched_s - 0.5)
+    assert _modes_since(f.relay, watched_s - 0.5) == {OFFBOARD_MODE}
+    assert state["mode"] == "OFFBOARD"
+    assert during["sender"] == "thread"
+    assert during["active"] is True
+    assert "SIGKILL" in during["sender_fault"]
+    assert after["sender"] == "process"
+    assert after["sender_restarts"] == 1
+    assert after["active"] is True
+    assert state["stream"]["sender"] == "process"
+    assert [e["sender"] for e in events] == ["thread", "process"]
+    assert "SIGKILL" in events[0]["fault"]
+    assert events[1]["recovered"] is True
+
+
+async def test_a_3_s_sigstop_of_the_sender_with_setpoints_at_the_rate_limit(
+    tmp_path: Path, supervisor: SenderSupervisor
+) -> None:
+    async with flight(tmp_path, signed=False) as f:
+        api = f.api
+        await _hover_in_offboard(api)
+        here = (await api.state())["position_ned"]
+
+        async def script() -> None:
+            for i in itertools.count():  # a new setpoint each time, at the rate limit
+                response = await api.control("setpoint", {
+                    "type": "position_ned", "north_m": here["north_m"] + 0.01 * (i % 10),
+                    "east_m": here["east_m"], "down_m": -3.0})
+                assert response.status_code == 200, response.text
+                await asyncio.sleep(1.0 / SCRIPT_RATE_HZ)
+
+        async def rest_latencies_s(seconds: float) -> list[float]:
+            loop = asyncio.get_running_loop()
+            out = []
+            end = loop.time() + seconds
+            while loop.time() < end:
+                began = time.perf_counter()
+                response = await api.client.get("/api/v1/vehicles/1")
+                out.append(time.perf_counter() - began)
+                assert response.status_code == 200
+                await asyncio.sleep(0.01)
+            return out
+
+        changes = _mode_changes(f)
+        scripted = asyncio.create_task(script())
+        try:
+            before = await rest_latencies_s(STOP_S)
+            watched_s = time.time()
+            pid = _sender_pid(supervisor)
+            os.kill(pid, signal.SIGSTOP)
+            try:
+                during = await rest_latencies_s(STOP_S)
+            finally:
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(pid, signal.SIGCONT)
+        finally:
+            scripted.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await scripted
+        await asyncio.sleep(1.0)
+        stats = (await api.client.get("/api/v1/vehicles/1/stream")).json()
+        state = await api.state()
+        ended_s = time.time()
+        assert _mode_changes(f) == changes, "the vehicle changed mode"
+    setpoints = [h for h in f.relay.since(watched_s - 0.5, SETPOINT_ID) if h.unix_s <= ended_s]
+    gap_s = _largest_gap_s(setpoints)
+    p99_before, p99_during = _p99(before), _p99(during)
+    print(f"SIGSTOP 3 s in OFFBOARD, setpoints at {SCRIPT_RATE_HZ:g}/s: largest setpoint gap at "
+          f"the vehicle {gap_s * 1000:.1f} ms; REST p99 {p99_before * 1000:.1f} ms before, "
+          f"{p99_during * 1000:.1f} ms during ({len(before)}, {len(during)} requests)")
+    assert gap_s <= STOP_GAP_S
+    assert p99_during <= 3 * p99_before
+    _check_sequence(f.relay, watched_s - 0.5)
+    assert _modes_since(f.relay, watched_s - 0.5) == {OFFBOARD_MODE}
+    assert state["mode"] == "OFFBOARD"
+    assert "stopped answering" in stats["sender_fault"]
+    assert stats["active"] is True
+
+
+def _p99(samples: list[float]) -> float:
+    ordered = sorted(samples)
+    return ordered[max(1, math.ceil(0.99 * len(ordered))) - 1]
+
+
+@pytest.mark.parametrize("fault", ["kill", "stop"])
+async def test_the_sender_killed_or_stopped_while_flying_sticks_in_posctl(
+    tmp_path: Path, supervisor: SenderSupervisor, fault: str
+) -> None:
+    feeder: list[asyncio.Task[None]] = []
+    bound_s = KILL_GAP_S if fault == "kill" else STOP_GAP_S
+    async with flight(tmp_path, signed=False) as f:
+        api = f.api
+        try:
+            await _fly_sticks_in_posctl(api, feeder)
+            await asyncio.sleep(1.0)
+            changes = _mode_changes(f)
+            watched_s = time.time()
+            pid = _sender_pid(supervisor)
+            os.kill(pid, signal.SIGKILL if fault == "kill" else signal.SIGSTOP)
+            await wait_for(lambda: api.vehicle().sticks_stats().sender == "thread", 1.0,
+                           "the thread takes over")
+            during = (await api.client.get("/api/v1/vehicles/1/sticks")).json()
+            if fault == "stop":
+                await asyncio.sleep(STOP_S)
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(pid, signal.SIGCONT)
+            await wait_for(lambda: api.vehicle().sticks_stats().sender == "process", 5.0,
+                           "a restarted process takes over")
+            await asyncio.sleep(1.0)
+            after = (await api.client.get("/api/v1/vehicles/1/sticks")).json()
+            state = await api.state()
+            ended_s = time.time()
+            assert _mode_changes(f) == changes, "the vehicle changed mode"
+        finally:
+            for task in feeder:
+                task.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await task
+    sticks = [h for h in f.relay.since(watched_s - 0.5, STICKS_ID) if h.unix_s <= ended_s]
+    gap_s = _largest_gap_s(sticks)
+    rate_hz = (len(sticks) - 1) / (sticks[-1].unix_s - sticks[0].unix_s)
+    print(f"{fault} of the sender in POSCTL: largest MANUAL_CONTROL gap at the vehicle "
+          f"{gap_s * 1000:.1f} ms, {rate_hz:.1f} Hz over {len(sticks)} frames")
+    assert gap_s <= bound_s
+    assert 23.0 <= rate_hz <= 27.0
+    _check_sequence(f.relay, watched_s - 0.5)
+    assert _modes_since(f.relay, watched_s - 0.5) == {POSCTL_MODE}
+    assert state["mode"] == "POSCTL"
+    assert during["stream"]["sender"] == "thread"
+    assert ("SIGKILL" if fault == "kill" else "stopped answering") in \
+        during["stream"]["sender_fault"]
+    assert after["stream"]["sender"] == "process"
+    assert after["stream"]["sender_restarts"] == 1

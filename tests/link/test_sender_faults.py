@@ -1,0 +1,262 @@
+"""The setpoint sender process fails mid-stream (kill -9, SIGSTOP, a control channel it
+stops reading, descriptors above 1023): the stream goes on from the sender thread with no
+gap a vehicle can feel, the sequence stays contiguous and signed frames pass a replay check,
+a restarted process takes the stream back, and the figures say what happened. Times are the
+kernel's receive times at a UDP receiver (a busy test process does not move them)."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+import os
+import resource
+import secrets
+import signal
+import socket
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+from pymavlink.dialects.v20 import development as mavlink
+
+from server.link.codec.signing_keys import SigningKeyStore
+from server.link.link import Link
+from server.link.stream import stream_channel
+from server.link.stream.sender_supervisor import ProcessGone, SenderSupervisor
+from server.link.stream.streamer import SetpointStreamer
+from tests.link.test_stream_process import Receiver
+from tests.waiting import wait_for
+
+MAV = mavlink.MAVLink(None)
+RATE_HZ = 20.0
+# the largest gap a vehicle may see when the sender dies, and when it stops answering
+KILL_GAP_S = 0.150
+STOP_GAP_S = 0.250
+SETPOINT_ID = mavlink.MAVLINK_MSG_ID_SET_POSITION_TARGET_LOCAL_NED
+
+
+def _msg(x: float) -> mavlink.MAVLink_message:
+    return MAV.set_position_target_local_ned_encode(
+        0, 1, 1, 1, 2552, x, 0, -5, 0, 0, 0, 0, 0, 0, 0, 0
+    )
+
+
+@pytest.fixture
+def supervisor(monkeypatch: pytest.MonkeyPatch) -> Iterator[SenderSupervisor]:
+    """A supervisor (and sender process) of this test's own."""
+    sup = SenderSupervisor(stream_channel.SenderProcess)
+    monkeypatch.setattr(stream_channel, "_supervisor", sup)
+    yield sup
+    sup.gave_up = True  # no restart after the test
+    process = sup.current()
+    if process is not None:
+        process.kill("the test ended")
+
+
+class Flight:
+    """A link streaming setpoints at RATE_HZ to a receiver, and what it heard."""
+
+    def __init__(self, link: Link, receiver: Receiver, key: bytes | None) -> None:
+        self.link = link
+        self.receiver = receiver
+        self.key = key
+        self.streamer = SetpointStreamer(link.send, rate_hz=RATE_HZ, channel=link.stream_channel)
+        self.changes: list[dict[str, Any]] = []
+        self.streamer.on_sender_change = self.changes.append
+
+    def decoded(self) -> list[tuple[float, mavlink.MAVLink_message]]:
+        """Every frame received, checked as a vehicle would (signature, replay)."""
+        checker = mavlink.MAVLink(None)
+        if self.key is not None:
+            checker.signing.secret_key = self.key
+            checker.signing.sign_outgoing = False
+        out = []
+        for t, frame in self.receiver.frames:
+            msgs = checker.parse_buffer(frame)
+            assert msgs is not None
+            assert len(msgs) == 1
+            assert msgs[0].get_type() != "BAD_DATA", "a frame the vehicle would reject"
+            out.append((t, msgs[0]))
+        if self.key is not None:
+            assert checker.signing.badsig_count == 0
+        return out
+
+
+async def _flight(tmp_path: Path, signed: bool) -> tuple[Flight, Receiver]:
+    receiver = Receiver()
+    key = None
+    store = None
+    if signed:
+        key = secrets.token_bytes(32)
+        store = SigningKeyStore(tmp_path / "signing.key")
+        store.replace_key(key)
+    link = await Link.open(f"udpout:127.0.0.1:{receiver.port}", signing_store=store)
+    return Flight(link, receiver, key), receiver
+
+
+def _check_wire(flight: Flight, gap_bound_s: float) -> float:
+    """The setpoints' largest gap at the receiver (asserted ≤ ``gap_bound_s``), after
+    checking every frame: sequence contiguous, signed and never replayed."""
+    decoded = flight.decoded()
+    seqs = [m.get_seq() for _, m in decoded]
+    jumps = [(a, b) for a, b in itertools.pairwise(seqs) if (b - a) % 256 != 1]
+    assert jumps == [], f"the sequence jumps: {jumps[:5]}"
+    if flight.key is not None:
+        assert all(m._signed for _, m in decoded)
+    times = [t for t, m in decoded if m.get_msgId() == SETPOINT_ID]
+    largest = max(b - a for a, b in itertools.pairwise(times))
+    print(f"largest setpoint gap at the receiver: {largest * 1000:.1f} ms")
+    assert largest <= gap_bound_s, f"a {largest * 1000:.0f} ms gap at the vehicle"
+    return largest
+
+
+async def _stream_through(flight: Flight, fault: Any, after_s: float) -> None:
+    streamer = flight.streamer
+    streamer.stream(_msg(1))
+    assert streamer.in_process
+    await asyncio.sleep(0.5)
+    await fault()
+    await asyncio.sleep(after_s)
+
+
+@pytest.mark.parametrize("signed", [False, True], ids=["unsigned", "signed"])
+async def test_kill_9_of_the_sender_the_thread_takes_over_and_a_new_process_takes_back(
+    tmp_path: Path, supervisor: SenderSupervisor, signed: bool
+) -> None:
+    flight, receiver = await _flight(tmp_path, signed)
+    streamer = flight.streamer
+    seen: list[dict[str, Any]] = []
+    try:
+        async def kill() -> None:
+            process = supervisor.current()
+            assert process is not None
+            assert process.pid is not None
+            os.kill(process.pid, signal.SIGKILL)
+            await wait_for(lambda: streamer.sender == "thread", 1.0, "the thread takes over")
+            stats = streamer.stats()
+            seen.append({"sender": stats.sender, "active": stats.active,
+                         "fault": stats.sender_fault})
+            streamer.update(_msg(2))  # a new setpoint reaches the vehicle from the thread
+
+        await _stream_through(flight, kill, 0.3)
+        await wait_for(lambda: streamer.sender == "process", 3.0, "a new process takes over")
+        streamer.update(_msg(3))
+        await asyncio.sleep(0.5)
+        stats = streamer.stats()
+        streamer.stop()
+    finally:
+        await flight.link.close()
+    await wait_for(lambda: len(receiver.frames) >= flight.link.stats().frames_out, 5.0,
+                   "every frame at the receiver")
+    receiver.close()
+    assert seen[0]["sender"] == "thread"
+    assert seen[0]["active"]
+    assert "SIGKILL" in seen[0]["fault"]
+    assert stats.sender == "process"
+    assert stats.sender_restarts == 1
+    assert stats.active
+    _check_wire(flight, KILL_GAP_S)
+    xs = [m.x for _, m in flight.decoded() if m.get_msgId() == SETPOINT_ID]
+    assert xs[0] == 1.0
+    assert 2.0 in xs
+    assert xs[-1] == 3.0
+    await asyncio.sleep(0)  # the loop delivers the changes
+    assert [c.get("sender") for c in flight.changes] == ["thread", "process"]
+
+
+async def test_a_stopped_sender_is_killed_and_the_thread_takes_over(
+    tmp_path: Path, supervisor: SenderSupervisor
+) -> None:
+    flight, receiver = await _flight(tmp_path, signed=True)
+    streamer = flight.streamer
+    try:
+        async def stop() -> None:
+            process = supervisor.current()
+            assert process is not None
+            assert process.pid is not None
+            os.kill(process.pid, signal.SIGSTOP)
+            # new setpoints while it is stopped: latest wins, the loop never waits
+            for i in range(2000):
+                streamer.update(_msg(10 + i))
+            assert isinstance(process, stream_channel.SenderProcess)
+            assert len(process._outbox) <= 1  # one stream: one queued message at most
+            await asyncio.sleep(3.0)
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(process.pid, signal.SIGCONT)
+
+        await _stream_through(flight, stop, 0.5)
+        stats = streamer.stats()
+        streamer.stop()
+    finally:
+        await flight.link.close()
+    await wait_for(lambda: len(receiver.frames) >= flight.link.stats().frames_out, 5.0,
+                   "every frame at the receiver")
+    receiver.close()
+    assert stats.sender_fault is not None
+    assert "stopped answering" in stats.sender_fault
+    assert supervisor.faults == 1
+    _check_wire(flight, STOP_GAP_S)
+    xs = [m.x for _, m in flight.decoded() if m.get_msgId() == SETPOINT_ID]
+    assert xs[-1] == 10.0 + 1999  # the newest setpoint, whoever sent it
+
+
+def test_a_full_control_channel_is_a_fault_not_a_blocked_caller(
+    supervisor: SenderSupervisor,
+) -> None:
+    process = supervisor.process()
+    assert isinstance(process, stream_channel.SenderProcess)
+    assert process.pid is not None
+    os.kill(process.pid, signal.SIGSTOP)
+    failure: ProcessGone | None = None
+    try:
+        for _ in range(100_000):  # each distinct: none replaces another
+            try:
+                process.post(("send", 1, b"x" * 200, 0, None))
+            except ProcessGone as exc:
+                failure = exc
+                break
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(process.pid, signal.SIGCONT)
+    assert failure is not None, "the channel never filled"
+    assert "control channel is full" in str(failure)
+    assert len(process._outbox) <= stream_channel.MAX_OUTBOX
+    until = time.monotonic() + 5.0
+    while supervisor.last_fault is None and time.monotonic() < until:
+        time.sleep(0.01)
+    assert supervisor.last_fault is not None
+    assert "control channel is full" in supervisor.last_fault  # killed for it, and said so
+
+
+async def test_streams_work_above_descriptor_1023(
+    tmp_path: Path, supervisor: SenderSupervisor
+) -> None:
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    if hard != resource.RLIM_INFINITY and hard < 2048:
+        pytest.skip(f"the descriptor limit is {hard}")
+    resource.setrlimit(resource.RLIMIT_NOFILE, (max(soft, 4096), hard))
+    idle = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(1100)]
+    try:
+        assert max(s.fileno() for s in idle) > 1024
+        flight, receiver = await _flight(tmp_path, signed=False)
+        try:
+            flight.streamer.stream(_msg(1))
+            assert flight.streamer.in_process
+            await asyncio.sleep(1.0)
+            stats = flight.streamer.stats()
+            flight.streamer.stop()
+        finally:
+            await flight.link.close()
+        receiver.close()
+    finally:
+        for s in idle:
+            s.close()
+        resource.setrlimit(resource.RLIMIT_NOFILE, (soft, hard))
+    assert supervisor.faults == 0, supervisor.last_fault
+    assert stats.sender == "process"
+    assert stats.active
+    assert stats.sent >= 15
+    _check_wire(flight, KILL_GAP_S)

@@ -1,0 +1,140 @@
+"""The sender supervisor's policy, on stand-in processes: a loss tells every link and stream
+once, a restart comes after the back-off and brings them back, quick failures in a row back
+off further and then give up (the streams stay on the thread, the status says so), and a
+stuck process is killed only while it carries a stream."""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+
+import pytest
+
+from server.link.stream import sender_supervisor
+from server.link.stream.sender_supervisor import ProcessGone, SenderSupervisor
+from tests.waiting import wait_for_blocking
+
+
+class FakeProcess:
+    def __init__(self, on_gone: Callable[[FakeProcess, str], None], pid: int) -> None:
+        self.on_gone = on_gone
+        self.pid: int | None = pid
+        self.alive = True
+        self.started_s = time.monotonic()
+        self.beat_s = time.monotonic()
+        self.killed: str | None = None
+
+    def heartbeat_age_s(self) -> float | None:
+        return time.monotonic() - self.beat_s if self.alive else None
+
+    def wait_ready(self, timeout_s: float) -> bool:
+        return self.alive
+
+    def kill(self, why: str) -> None:
+        self.killed = why
+        self.die(f"killed: {why}")
+
+    def die(self, why: str) -> None:
+        self.alive = False
+        self.on_gone(self, why)
+
+
+class Member:
+    """A stream (or a link's handover) as the supervisor sees it."""
+
+    def __init__(self) -> None:
+        self.lost: list[object] = []
+        self.back = 0
+        self.streaming_in: object | None = None
+
+    def sender_lost(self, process: object) -> None:
+        self.lost.append(process)
+
+    def sender_back(self) -> None:
+        self.back += 1
+
+    def streams_in(self, process: object) -> bool:
+        return self.streaming_in is process
+
+
+def _supervisor() -> tuple[SenderSupervisor, list[FakeProcess]]:
+    started: list[FakeProcess] = []
+
+    def start(on_gone: Callable[[FakeProcess, str], None]) -> FakeProcess:
+        process = FakeProcess(on_gone, 100 + len(started))
+        started.append(process)
+        return process
+
+    return SenderSupervisor(start), started
+
+
+@pytest.fixture(autouse=True)
+def _short_backoff(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(sender_supervisor, "RESTART_BACKOFF_S", (0.01, 0.02, 0.04))
+
+
+def test_a_loss_tells_everyone_once_and_a_restart_brings_them_back() -> None:
+    sup, started = _supervisor()
+    member, handover = Member(), Member()
+    sup.watch(member)
+    sup.watch_handover(handover)
+    first = sup.process()
+    first.die("killed by SIGKILL")  # type: ignore[attr-defined]
+    first.die("killed by SIGKILL")  # type: ignore[attr-defined]  # twice: handled once
+    assert member.lost == [first]
+    assert handover.lost == [first]
+    assert sup.last_fault == "killed by SIGKILL"
+    wait_for_blocking("the restart", lambda: member.back == 1, 2.0, 0.005)
+    assert handover.back == 1
+    assert sup.process() is started[1]
+    status = sup.status()
+    assert (status.running, status.restarts, status.faults, status.gave_up) == (
+        True, 1, 1, False)
+
+
+def test_quick_failures_in_a_row_give_up_and_say_so() -> None:
+    sup, started = _supervisor()
+    member = Member()
+    sup.watch(member)
+    sup.process()
+    for n in range(sender_supervisor.MAX_FAILED_RESTARTS + 1):
+        wait_for_blocking(f"process {n + 1}", lambda n=n: len(started) == n + 1, 2.0, 0.005)
+        started[n].die("exit status 1")
+    wait_for_blocking("giving up", lambda: sup.gave_up, 2.0, 0.005)
+    time.sleep(0.2)
+    assert len(started) == sender_supervisor.MAX_FAILED_RESTARTS + 1  # none after
+    assert sup.status().gave_up
+    assert not sup.status().running
+    with pytest.raises(ProcessGone):
+        sup.process()
+    assert len(member.lost) == len(started)
+
+
+def test_a_stuck_process_is_killed_only_while_it_carries_a_stream() -> None:
+    sup, _ = _supervisor()
+    member = Member()
+    sup.watch(member)
+    process = sup.process()
+    assert isinstance(process, FakeProcess)
+    process.beat_s = time.monotonic() - 10.0  # stuck, but idle: nothing waits on it
+    time.sleep(5 * sender_supervisor.WATCH_PERIOD_S)
+    assert process.killed is None
+    member.streaming_in = process
+    wait_for_blocking("the kill", lambda: process.killed is not None, 2.0, 0.005)
+    assert "stopped answering" in str(process.killed)
+    assert member.lost == [process]
+
+
+def test_a_restart_waits_until_the_new_process_runs(monkeypatch: pytest.MonkeyPatch) -> None:
+    sup, started = _supervisor()
+    member = Member()
+    sup.watch(member)
+    gate = threading.Event()
+    monkeypatch.setattr(FakeProcess, "wait_ready", lambda self, timeout_s: gate.wait(timeout_s))
+    sup.process().die("killed by SIGKILL")  # type: ignore[attr-defined]
+    wait_for_blocking("the new process", lambda: len(started) == 2, 2.0, 0.005)
+    time.sleep(0.1)
+    assert member.back == 0  # the thread keeps the streams until it runs its loop
+    gate.set()
+    wait_for_blocking("the streams moved back", lambda: member.back == 1, 2.0, 0.005)
