@@ -290,6 +290,54 @@
  */
 
 /**
+ * A named value (``values``: the value) or a bit of a bitmask (``bitmask``: its index).
+ * @typedef {Object} ParamChoiceOut
+ * @property {number} value
+ * @property {string} description
+ */
+
+/**
+ * One parameter as the vehicle's metadata describes it; empty or null where it says
+ * nothing. ``min``, ``max``, ``default`` and ``increment`` are in ``units``.
+ * @typedef {Object} ParamInfoOut
+ * @property {string} name
+ * @property {string} type PX4's type name: Float or Int32
+ * @property {string} group e.g. "Multicopter Position Control"
+ * @property {string} category Standard or Developer
+ * @property {string} short_desc
+ * @property {string} long_desc
+ * @property {string} units e.g. "m/s"; empty for none
+ * @property {number|null} min
+ * @property {number|null} max
+ * @property {number|null} default the firmware's default
+ * @property {number|null} decimal_places
+ * @property {number|null} increment
+ * @property {boolean} reboot_required a new value takes effect after a reboot
+ * @property {Array<ParamChoiceOut>} values named values, for an enumeration
+ * @property {Array<ParamChoiceOut>} bitmask named bits (value = bit index)
+ */
+
+/**
+ * Every parameter the vehicle's metadata describes, by name. A vehicle that serves no
+ * metadata answers ``available`` false with the reason in ``error``.
+ * @typedef {Object} ParamMetadataOut
+ * @property {boolean} available
+ * @property {string|null} [error]
+ * @property {Object<string, ParamInfoOut>} parameters
+ */
+
+/**
+ * @typedef {Object} ParamOut
+ * @property {string} name
+ * @property {number|null} value the value the vehicle echoed
+ */
+
+/**
+ * @typedef {Object} ParamsOut
+ * @property {Object<string, number|null>} params
+ */
+
+/**
  * A global position; the altitude is AMSL, above home or above terrain.
  * @typedef {Object} PositionGlobalBody
  * @property {"position_global"} type
