@@ -45,7 +45,13 @@ def _server_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", type=Path, help="TOML file with the same settings")
     parser.add_argument("--host", help="bind address (default 127.0.0.1)")
     parser.add_argument("--port", type=int, help="HTTP port; 0 picks a free one (default 8000)")
-    parser.add_argument("--token", help="pilot token (default: generated)")
+    parser.add_argument(
+        "--token", help="pilot token (default: generated once, kept in --token-file)"
+    )
+    parser.add_argument(
+        "--token-file", type=Path, metavar="FILE",
+        help="where the generated token is kept, 0600 (default $XDG_STATE_HOME/skyhelm/token)",
+    )
     parser.add_argument("--observer-token", help="read-only token")
     parser.add_argument("--cors-origin", action="append", dest="cors_origins", metavar="ORIGIN")
     parser.add_argument("--no-scene", action="store_true", help="do not start the 3D scene")
@@ -219,7 +225,7 @@ def settings_from_args(args: argparse.Namespace) -> Settings:
         flags["scene"] = False
     if getattr(args, "no_access_log", False):
         flags["access_log"] = False
-    return load_settings(getattr(args, "config", None), **flags)
+    return load_settings(getattr(args, "config", None), keep_token=True, **flags)
 
 
 def ready_url(settings: Settings, port: int) -> str:

@@ -12,6 +12,10 @@
 
 from __future__ import annotations
 
+import os
+import shutil
+import tempfile
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -64,6 +68,25 @@ MODULE_SECONDS: dict[str, float] = {
     "tests/faults/test_unanswered.py": 20,
     "tests/client/test_readme_session.py": 20,
 }
+
+
+# What a server keeps for its user (the generated token, PX4's metadata) goes to directories
+# of the run, never to the real home: set before any test and before the workers start
+# (they inherit the environment).
+_KEPT = {
+    "XDG_STATE_HOME": "state",
+    "XDG_CONFIG_HOME": "config",
+    "SKYHELM_CACHE_DIR": "cache",
+}
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        return  # the controller set them
+    home = Path(tempfile.mkdtemp(prefix="skyhelm-tests-"))
+    for name, folder in _KEPT.items():
+        os.environ[name] = str(home / folder)
+    config.add_cleanup(lambda: shutil.rmtree(home, ignore_errors=True))
 
 
 def _module(nodeid: str) -> str:

@@ -61,6 +61,9 @@ def mavlink_crc32(data: bytes, crc: int = 0) -> int:
 
 
 def default_cache_dir() -> Path:
+    """$SKYHELM_CACHE_DIR, else $XDG_CACHE_HOME/skyhelm (~/.cache/skyhelm)."""
+    if chosen := os.environ.get("SKYHELM_CACHE_DIR"):
+        return Path(chosen)
     base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
     return Path(base) / "skyhelm"
 
