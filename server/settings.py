@@ -153,7 +153,7 @@ class Settings(BaseSettings):
     map_tiles: Path | None = Field(
         None,
         description="offline 2D map tiles: a PMTiles or MBTiles archive of raster tiles, "
-        "served at /api/v1/tiles/{z}/{x}/{y}.{png|jpg|webp} (python -m tools.make_tiles)",
+        "served at /api/v1/tiles/{z}/{x}/{y}.{png|jpg|webp} (skyhelm tiles makes one)",
     )
     web_dir: Path | None = Field(default_factory=_default_web_dir)
     # Abuse limits (docs/api.md, "Security"): per token, per client address.
