@@ -473,7 +473,7 @@
  * @property {string} system_status
  * @property {"UNDEFINED"|"ON_GROUND"|"IN_AIR"|"TAKEOFF"|"LANDING"} landed_state
  * @property {"UNDEFINED"|"MC"|"FW"|"TRANSITION_TO_FW"|"TRANSITION_TO_MC"} vtol_state
- * @property {PositionNedOut|null} position_ned
+ * @property {PositionNedOut|null} position_ned metres north, east and down of the estimator's local origin (PX4's EKF origin, the state's `origin`: set where the estimator first had a position, normally where the vehicle was switched on, or by POST /origin), not of home or of where a flight started: a script that flies a leg reads it at the start and compares with that
  * @property {VelocityNedOut|null} velocity_ned
  * @property {GlobalOut|null} global
  * @property {AttitudeOut|null} attitude
@@ -576,7 +576,7 @@
  * @property {string} system_status
  * @property {"UNDEFINED"|"ON_GROUND"|"IN_AIR"|"TAKEOFF"|"LANDING"} landed_state
  * @property {"UNDEFINED"|"MC"|"FW"|"TRANSITION_TO_FW"|"TRANSITION_TO_MC"} vtol_state
- * @property {PositionNedOut|null} position_ned
+ * @property {PositionNedOut|null} position_ned metres north, east and down of the estimator's local origin (PX4's EKF origin, the state's `origin`: set where the estimator first had a position, normally where the vehicle was switched on, or by POST /origin), not of home or of where a flight started: a script that flies a leg reads it at the start and compares with that
  * @property {VelocityNedOut|null} velocity_ned
  * @property {GlobalOut|null} global
  * @property {AttitudeOut|null} attitude
