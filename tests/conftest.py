@@ -41,9 +41,10 @@ MODULE_SECONDS: dict[str, float] = {
     "tests/browser/test_map_fleet.py": 12,
     "tests/browser/test_ready_to_fly.py": 12,
     "tests/browser/test_plots.py": 11,
+    "tests/browser/test_params_editor.py": 11,
     "tests/api/test_ws.py": 92,
     "tests/api/test_openapi_fuzz.py": 60,
-    "tests/client/test_flow_chain.py": 82,
+    "tests/client/test_flow_chain.py": 95,
     "tests/fleet/test_fleet_processes.py": 81,
     "tests/faults/test_radio_faults.py": 52,
     "tests/api/test_rest_flight.py": 51,
@@ -66,7 +67,7 @@ MODULE_SECONDS: dict[str, float] = {
     "tests/link/test_truthful_answers.py": 22,
     "tests/faults/test_server_kill.py": 21,
     "tests/faults/test_unanswered.py": 20,
-    "tests/client/test_readme_session.py": 20,
+    "tests/client/test_readme_session.py": 33,
 }
 
 
