@@ -16,6 +16,7 @@ from typing import Any
 
 import uvicorn
 
+from server import map_tiles
 from server.http.security import RedactTokens
 from server.settings import Settings, SettingsError, load_settings
 
@@ -45,14 +46,20 @@ def _server_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", type=Path, help="TOML file with the same settings")
     parser.add_argument("--host", help="bind address (default 127.0.0.1)")
     parser.add_argument("--port", type=int, help="HTTP port; 0 picks a free one (default 8000)")
-    parser.add_argument("--token", help="pilot token (default: generated)")
+    parser.add_argument(
+        "--token", help="pilot token (default: generated once, kept in --token-file)"
+    )
+    parser.add_argument(
+        "--token-file", type=Path, metavar="FILE",
+        help="where the generated token is kept, 0600 (default $XDG_STATE_HOME/skyhelm/token)",
+    )
     parser.add_argument("--observer-token", help="read-only token")
     parser.add_argument("--cors-origin", action="append", dest="cors_origins", metavar="ORIGIN")
     parser.add_argument("--no-scene", action="store_true", help="do not start the 3D scene")
     parser.add_argument("--map-tile-url", help="2D map tiles ({z}/{x}/{y}); default: a grid")
     parser.add_argument(
         "--map-tiles", type=Path, metavar="FILE",
-        help="offline 2D map tiles: a PMTiles or MBTiles archive (python -m tools.make_tiles)",
+        help="offline 2D map tiles: a PMTiles or MBTiles archive (skyhelm tiles makes one)",
     )
     parser.add_argument("--tls-cert", type=Path, help="PEM certificate: serve https and wss")
     parser.add_argument("--tls-key", type=Path, help="PEM private key of --tls-cert")
@@ -163,6 +170,11 @@ def build_parser() -> argparse.ArgumentParser:
     convert.add_argument("tlog", type=Path, help="the .tlog to read")
     convert.add_argument("mcap", type=Path, help="the MCAP file to write")
     convert.add_argument("--force", action="store_true", help="overwrite an existing MCAP file")
+    tiles = sub.add_parser(
+        "tiles", help="fetch an offline 2D map archive for --map-tiles (while online)",
+        description=map_tiles.__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
+    )  # fmt: skip
+    map_tiles.add_arguments(tiles)
     return parser
 
 
@@ -219,7 +231,7 @@ def settings_from_args(args: argparse.Namespace) -> Settings:
         flags["scene"] = False
     if getattr(args, "no_access_log", False):
         flags["access_log"] = False
-    return load_settings(getattr(args, "config", None), **flags)
+    return load_settings(getattr(args, "config", None), keep_token=True, **flags)
 
 
 def ready_url(settings: Settings, port: int) -> str:
@@ -282,6 +294,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     configure_logging(getattr(args, "log_level", "info"))
     if args.command == "router":
         return run_router_command(args)
+    if args.command == "tiles":
+        return map_tiles.run(args)
     if args.command == "convert":
         from server.foxglove.convert import run_convert_command
 

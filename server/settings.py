@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import hmac
+import logging
+import os
 import secrets
 from contextvars import ContextVar
 from pathlib import Path
@@ -30,6 +32,8 @@ from server.link.stream.streamer import DEFAULT_RATE_HZ, MAX_RATE_HZ, MIN_RATE_H
 
 OperatorLossAction = Literal["hold", "land", "rtl", "hold-mode", "continue"]
 Airframe = Literal["quad", "hexa", "octo", "plane", "vtol", "rover"]
+
+log = logging.getLogger(__name__)
 
 # The TOML path is only known at load time; pydantic-settings builds sources per class.
 _CONFIG_FILE: ContextVar[Path | None] = ContextVar("skyhelm_config_file", default=None)
@@ -82,6 +86,11 @@ class Settings(BaseSettings):
     host: str = "127.0.0.1"
     port: int = Field(8000, ge=0, le=65535)
     token: SecretStr | None = Field(None, description="pilot token; generated when unset")
+    token_file: Path | None = Field(
+        None,
+        description="where `skyhelm serve` keeps the token it generated (0600), so its URL "
+        "survives a restart; default $XDG_STATE_HOME/skyhelm/token",
+    )
     observer_token: SecretStr | None = None
     connect: Annotated[list[str], NoDecode] = Field(
         default_factory=list, description="MAVLink URLs of real vehicles; none = start the sim"
@@ -144,7 +153,7 @@ class Settings(BaseSettings):
     map_tiles: Path | None = Field(
         None,
         description="offline 2D map tiles: a PMTiles or MBTiles archive of raster tiles, "
-        "served at /api/v1/tiles/{z}/{x}/{y}.{png|jpg|webp} (python -m tools.make_tiles)",
+        "served at /api/v1/tiles/{z}/{x}/{y}.{png|jpg|webp} (skyhelm tiles makes one)",
     )
     web_dir: Path | None = Field(default_factory=_default_web_dir)
     # Abuse limits (docs/api.md, "Security"): per token, per client address.
@@ -290,8 +299,47 @@ class SettingsError(ValueError):
     """A setting has a bad value; the message names the setting and the reason."""
 
 
-def load_settings(config_file: Path | None = None, **overrides: Any) -> Settings:
-    """Build settings from overrides (CLI flags), SKYHELM_* env, then the TOML file."""
+def default_token_file() -> Path:
+    """$XDG_STATE_HOME/skyhelm/token (~/.local/state/skyhelm/token): state the server makes
+    and keeps, as the XDG base directory specification places it."""
+    base = os.environ.get("XDG_STATE_HOME") or str(Path.home() / ".local" / "state")
+    return Path(base) / "skyhelm" / "token"
+
+
+def kept_token(path: Path) -> str:
+    """The token kept in ``path``, or a new one written there readable by its owner only
+    (0600, in a 0700 directory). A file others may read is made 0600 first; a token file
+    that cannot be read or written leaves a token for this run only, with a warning."""
+    try:
+        if path.is_file():
+            if path.stat().st_mode & 0o077:
+                path.chmod(0o600)
+                log.warning("token file %s was readable by others: made 0600", path)
+            kept = path.read_text().strip()
+            if len(kept) >= 8:
+                return kept
+            log.warning("token file %s holds no token: writing a new one", path)
+        path.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
+        token = secrets.token_urlsafe(24)
+        # written whole under another name, then renamed: a second server starting at the
+        # same moment reads a whole token, never half of one
+        partial = path.with_name(f".{path.name}.{os.getpid()}")
+        fd = os.open(partial, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+        with os.fdopen(fd, "w") as out:
+            out.write(token + "\n")
+        partial.replace(path)
+        return token
+    except OSError as exc:
+        log.warning("cannot keep the token in %s (%s): it changes at the next start", path, exc)
+        return secrets.token_urlsafe(24)
+
+
+def load_settings(
+    config_file: Path | None = None, *, keep_token: bool = False, **overrides: Any
+) -> Settings:
+    """Build settings from overrides (CLI flags), SKYHELM_* env, then the TOML file. Without
+    a token one is generated: with ``keep_token`` (``skyhelm serve``) the one kept in the
+    token file, so the printed URL stays the same from one start to the next."""
     if config_file is not None and not config_file.is_file():
         raise SettingsError(f"config file {config_file} does not exist")
     reset = _CONFIG_FILE.set(config_file)
@@ -304,7 +352,12 @@ def load_settings(config_file: Path | None = None, **overrides: Any) -> Settings
     finally:
         _CONFIG_FILE.reset(reset)
     if settings.token is None:
-        settings = settings.model_copy(update={"token": SecretStr(secrets.token_urlsafe(24))})
+        token = (
+            kept_token(settings.token_file or default_token_file())
+            if keep_token
+            else secrets.token_urlsafe(24)
+        )
+        settings = settings.model_copy(update={"token": SecretStr(token)})
     return settings
 
 

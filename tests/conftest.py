@@ -12,6 +12,10 @@
 
 from __future__ import annotations
 
+import os
+import shutil
+import tempfile
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -37,9 +41,10 @@ MODULE_SECONDS: dict[str, float] = {
     "tests/browser/test_map_fleet.py": 12,
     "tests/browser/test_ready_to_fly.py": 12,
     "tests/browser/test_plots.py": 11,
+    "tests/browser/test_params_editor.py": 11,
     "tests/api/test_ws.py": 92,
     "tests/api/test_openapi_fuzz.py": 60,
-    "tests/client/test_flow_chain.py": 82,
+    "tests/client/test_flow_chain.py": 95,
     "tests/fleet/test_fleet_processes.py": 81,
     "tests/faults/test_radio_faults.py": 52,
     "tests/api/test_rest_flight.py": 51,
@@ -62,8 +67,27 @@ MODULE_SECONDS: dict[str, float] = {
     "tests/link/test_truthful_answers.py": 22,
     "tests/faults/test_server_kill.py": 21,
     "tests/faults/test_unanswered.py": 20,
-    "tests/client/test_readme_session.py": 20,
+    "tests/client/test_readme_session.py": 33,
 }
+
+
+# What a server keeps for its user (the generated token, PX4's metadata) goes to directories
+# of the run, never to the real home: set before any test and before the workers start
+# (they inherit the environment).
+_KEPT = {
+    "XDG_STATE_HOME": "state",
+    "XDG_CONFIG_HOME": "config",
+    "SKYHELM_CACHE_DIR": "cache",
+}
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        return  # the controller set them
+    home = Path(tempfile.mkdtemp(prefix="skyhelm-tests-"))
+    for name, folder in _KEPT.items():
+        os.environ[name] = str(home / folder)
+    config.add_cleanup(lambda: shutil.rmtree(home, ignore_errors=True))
 
 
 def _module(nodeid: str) -> str:

@@ -10,16 +10,20 @@ SITL (tests/px4)."""
 
 from __future__ import annotations
 
+import contextlib
 import importlib.metadata
 import json
+import math
 import os
 import re
 import select
 import signal
 import subprocess
 import sys
+import threading
 import time
 import tomllib
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -34,6 +38,8 @@ README = ROOT / "README.md"
 API_DOC = ROOT / "docs" / "api.md"
 URL_LINE = re.compile(r"^URL='[^']*'.*$", re.MULTILINE)
 FLIGHT_TIMEOUT_S = 400.0
+LEG_M = 10.0  # the curl sessions' leg north
+LEG_FLOWN = re.compile(r"leg flown: (-?[\d.]+) m north of its start")
 
 # Runs an example as `python examples/x.py URL` would, with every module of a distribution
 # outside the runtime dependencies hidden, as in the environment `make run` creates.
@@ -142,19 +148,83 @@ class Chain:
     # -- the flows ---------------------------------------------------------------------
 
     def curl_session(self, doc: Path) -> str:
-        """The document's curl session in bash; it must fly to the end and land."""
+        """The document's curl session in bash; it must fly to the end and land, and fly its
+        leg: 10 m north of where the leg starts, whatever `position_ned` read at the start
+        (a flight before may have ended away from the estimator's origin). The leg is
+        measured here, from the state sampled while the session runs, not taken from the
+        session's word."""
         script = curl_session(doc, self.url)
         assert self.token in script
-        result = subprocess.run(
-            ["bash", "-c", script], capture_output=True, text=True,
-            timeout=FLIGHT_TIMEOUT_S, check=False,
-        )  # fmt: skip
+        start_north_m = self.state()["position_ned"]["north_m"]
+        with self._northmost() as northmost:
+            result = subprocess.run(
+                ["bash", "-c", script], capture_output=True, text=True,
+                timeout=FLIGHT_TIMEOUT_S, check=False,
+            )  # fmt: skip
         self._log(f"curl-{doc.stem}", result.stdout + result.stderr)
         assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
         assert '"result":"ACCEPTED"' in result.stdout  # arm, takeoff, offboard, rtl
         assert '"limit":12.0' in result.stdout  # the envelope's refusal, as shown
+        said = LEG_FLOWN.search(result.stdout)
+        assert said is not None, result.stdout[-3000:]
+        assert float(said.group(1)) >= LEG_M, said.group(0)
+        flown_m = northmost[0] - start_north_m
+        assert flown_m >= LEG_M - 0.5, (
+            f"the leg was not flown: {flown_m:.1f} m north of {start_north_m:.1f}"
+        )
         self.after_a_flight()
         return result.stdout
+
+    @contextlib.contextmanager
+    def _northmost(self) -> Iterator[list[float]]:
+        """The greatest position_ned.north_m seen while the block runs (sampled at 5 Hz)."""
+        seen = [-math.inf]
+        done = threading.Event()
+
+        def sample() -> None:
+            with self.client() as api:
+                while not done.wait(0.2):
+                    try:
+                        where = api.get(f"/vehicles/{self.vehicle}").json()["position_ned"]
+                    except (httpx.HTTPError, KeyError, ValueError):
+                        continue
+                    if where and where.get("north_m") is not None:
+                        seen[0] = max(seen[0], float(where["north_m"]))
+
+        sampler = threading.Thread(target=sample, daemon=True)
+        sampler.start()
+        try:
+            yield seen
+        finally:
+            done.set()
+            sampler.join(timeout=10)
+
+    def flight_ending_away(self, north_m: float = 10.5) -> None:
+        """A flight that lands ``north_m`` north of where it took off (a pilot's earlier
+        flight): afterwards position_ned reads that far north on the ground, since it is
+        measured from the estimator's origin, not from where a flight starts."""
+        vehicle = f"/vehicles/{self.vehicle}"
+        with self.client() as api:
+            start = self.state()["position_ned"]["north_m"]
+            lease = api.post(f"{vehicle}/control", json={"client_name": "flight ending away"})
+            lease.raise_for_status()
+            api.headers["X-Lease-Id"] = lease.json()["lease_id"]
+            try:
+                _accepted(api.post(f"{vehicle}/takeoff", json={"altitude_m": 5}))
+                wait_for_blocking("the take-off", lambda: _alt_rel_m(self.state()) > 4.2, 120.0)
+                offset = {"north_m": north_m, "east_m": 0.0, "up_m": 0.0}
+                api.post(f"{vehicle}/intents/offset", json=offset).raise_for_status()
+                wait_for_blocking(
+                    "the hop north",
+                    lambda: self.state()["position_ned"]["north_m"] > start + north_m - 0.5,
+                    120.0,
+                )  # fmt: skip
+                _accepted(api.post(f"{vehicle}/land"))
+                wait_for_blocking("landed away", lambda: not self.state()["armed"], 180.0, 0.5)
+            finally:
+                api.delete(f"{vehicle}/control")
+        self.after_a_flight()
+        assert self.state()["position_ned"]["north_m"] > start + north_m - 1.0
 
     def example(self, name: str) -> str:
         """An example run to its end: the square flown, landed."""
@@ -255,7 +325,9 @@ class Chain:
 def full_chain(chain: Chain, context: Any) -> None:
     """Every documented flow in turn: the README session three times, the two examples, a
     page flight, the README session again; then scripts killed half-way (Ctrl-C, SIGKILL)
-    and the next ones still flying, the docs/api.md session last."""
+    and the next ones still flying, the docs/api.md session last. The first README session
+    starts where a flight that ended 10.5 m from the estimator's origin left the vehicle."""
+    chain.flight_ending_away()
     for _ in range(3):
         chain.curl_session(README)
     chain.example("fly_square.py")
@@ -266,7 +338,12 @@ def full_chain(chain: Chain, context: Any) -> None:
     chain.example_killed_half_way("fly_square_async.py", signal.SIGKILL)
     chain.example("fly_square.py")
     chain.curl_session(API_DOC)
-    assert chain.flows == 11
+    assert chain.flows == 12
+
+
+def _accepted(answer: httpx.Response) -> None:
+    assert answer.status_code == 200, answer.text
+    assert answer.json()["result"] == "ACCEPTED", answer.text
 
 
 def _alt_rel_m(state: dict[str, Any]) -> float:

@@ -1,5 +1,5 @@
 """Small offline map archives the tests make themselves: generated PNG tiles (a colour per
-tile, so each tile is told apart) around a point, written by tools.make_tiles."""
+tile, so each tile is told apart) around a point, written by server.map_tiles (`skyhelm tiles`)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import struct
 import zlib
 from pathlib import Path
 
-from tools.make_tiles import ArchiveInfo, Tile, tile_xy, write_archive
+from server.map_tiles import ArchiveInfo, Tile, tile_xy, write_archive
 
 # the simulated vehicle's home (PX4's SIH origin)
 HOME_LAT_DEG, HOME_LON_DEG = 47.397742, 8.545594

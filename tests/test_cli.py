@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -142,13 +143,90 @@ def test_bad_connect_url_and_missing_config_are_refused(tmp_path: Path) -> None:
         )
 
 
-def test_generated_token_is_random_and_configured_token_is_kept() -> None:
-    first = settings_from_args(build_parser().parse_args(["serve"])).pilot_token()
-    second = settings_from_args(build_parser().parse_args(["serve"])).pilot_token()
-    assert first != second
+def _serve_token(*args: str) -> str:
+    return settings_from_args(build_parser().parse_args(["serve", *args])).pilot_token()
+
+
+def test_generated_token_is_kept_in_a_0600_file_and_a_given_token_wins(tmp_path: Path) -> None:
+    kept = tmp_path / "kept" / "token"
+    first = _serve_token("--token-file", str(kept))
     assert len(first) >= 24
-    given = settings_from_args(build_parser().parse_args(["serve", "--token", "s3cret-token"]))
-    assert given.pilot_token() == "s3cret-token"
+    assert _serve_token("--token-file", str(kept)) == first  # the next start: the same
+    assert kept.read_text().strip() == first
+    assert kept.stat().st_mode & 0o777 == 0o600
+    assert kept.parent.stat().st_mode & 0o777 == 0o700
+    assert _serve_token("--token-file", str(tmp_path / "other")) != first  # a new file: random
+    given = _serve_token("--token-file", str(kept), "--token", "s3cret-token")
+    assert given == "s3cret-token"
+    assert kept.read_text().strip() == first  # a given token is not written
+
+
+def test_a_token_file_others_can_read_is_made_0600_and_kept(tmp_path: Path) -> None:
+    kept = tmp_path / "token"
+    kept.write_text("an-older-token-1234\n")
+    kept.chmod(0o644)
+    assert _serve_token("--token-file", str(kept)) == "an-older-token-1234"
+    assert kept.stat().st_mode & 0o777 == 0o600
+
+
+def test_the_token_file_is_in_the_xdg_state_directory(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("XDG_STATE_HOME", str(tmp_path / "state"))
+    token = _serve_token()
+    assert (tmp_path / "state" / "skyhelm" / "token").read_text().strip() == token
+    monkeypatch.setenv("SKYHELM_TOKEN_FILE", str(tmp_path / "from-env"))
+    assert _serve_token() == (tmp_path / "from-env").read_text().strip() != token
+
+
+def test_the_suite_keeps_nothing_in_the_real_home() -> None:
+    """tests/conftest.py points the token file and the metadata cache at the run's own
+    directory (and `skyhelm serve` children inherit it)."""
+    home = Path.home().resolve()
+    for name in ("XDG_STATE_HOME", "XDG_CONFIG_HOME", "SKYHELM_CACHE_DIR"):
+        assert not Path(os.environ[name]).resolve().is_relative_to(home), name
+
+
+def _free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port: int = probe.getsockname()[1]
+        return port
+
+
+def _printed_url(args: list[str], env: dict[str, str], log: Path) -> str:
+    """Start `skyhelm serve`, take the URL it prints, stop it with Ctrl-C."""
+    with log.open("a") as stderr:
+        server = subprocess.Popen(
+            [str(SKYHELM), "serve", *args], stdout=subprocess.PIPE, stderr=stderr, text=True,
+            env=env,
+        )  # fmt: skip
+        try:
+            assert server.stdout is not None
+            line = server.stdout.readline()
+            assert line.startswith(READY_PREFIX), (line, log.read_text()[-2000:])
+            server.send_signal(signal.SIGINT)
+            assert server.wait(timeout=30) == 0
+            return line.removeprefix(READY_PREFIX).strip()
+        finally:
+            if server.poll() is None:
+                server.kill()
+                server.wait()
+
+
+def test_two_starts_print_the_same_url(tmp_path: Path) -> None:
+    env = {**os.environ, "XDG_STATE_HOME": str(tmp_path / "state")}
+    env.pop("SKYHELM_TOKEN_FILE", None)
+    args = ["--port", str(_free_port()), "--no-scene", "--no-tlog"]
+    log = tmp_path / "stderr.log"
+    first = _printed_url(args, env, log)
+    second = _printed_url(args, env, log)
+    assert first == second
+    token = (tmp_path / "state" / "skyhelm" / "token").read_text().strip()
+    assert first.endswith(f"/?token={token}")
+    assert token not in log.read_text(), "the token must never be logged"
+    given = _printed_url([*args, "--token", "s3cret-token"], env, log)
+    assert given.endswith("/?token=s3cret-token")
 
 
 def test_log_filter_redacts_tokens_in_urls() -> None:

@@ -157,3 +157,26 @@ def test_the_lease_figures_in_the_readme_are_the_defaults() -> None:
     assert f"The control lease lasts {ttl_s:g} s" in text
     assert f"within {low_s:g}..{high_s:g} s" in text
     assert f"`deadman_timeout_s` ({deadman_s:g} s" in text
+
+
+def test_the_readme_and_api_md_have_one_curl_session_that_flies_from_where_it_starts() -> None:
+    readme, api = (
+        next(block for block in _blocks(doc) if "URL='" in block)
+        for doc in (README, ROOT / "docs" / "api.md")
+    )
+    assert readme == api
+    # the leg is measured from where it starts, not from position_ned's origin
+    assert re.search(r"^N0=\$\(state .*north_m", readme, re.M)
+    assert "north_m'] > $N0 + 10" in readme
+    assert '"north_m": 0, "east_m": 0, "down_m": -5' not in readme  # no flight to the origin
+
+
+def test_position_ned_says_what_it_is_measured_from() -> None:
+    from skyhelm_wire.state import VehicleStateOut
+
+    described = VehicleStateOut.model_fields["position_ned"].description or ""
+    assert "estimator's local origin" in described
+    assert "not of home or of where a flight started" in described
+    assert "**`position_ned` is measured from the estimator's local origin**" in (
+        ROOT / "docs" / "api.md"
+    ).read_text()

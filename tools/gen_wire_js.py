@@ -19,7 +19,7 @@ from typing import Any
 from pydantic import BaseModel, TypeAdapter
 from pydantic.json_schema import models_json_schema
 
-from skyhelm_wire import commands, common, control, messages, setpoints, signing, state
+from skyhelm_wire import commands, common, control, messages, params, setpoints, signing, state
 from tools.generated import write_or_check
 
 OUT = Path(__file__).resolve().parent.parent / "web" / "wire.d.js"
@@ -37,6 +37,9 @@ MODELS: tuple[type[BaseModel], ...] = (
     common.HealthOut,
     signing.SigningStatusOut,
     setpoints.SentSetpointOut,
+    params.ParamsOut,
+    params.ParamOut,
+    params.ParamMetadataOut,
     *setpoints.SETPOINT_BODIES.values(),
     *typing.get_args(typing.get_args(messages.TelemetryMessage)[0]),
     *typing.get_args(messages.ControlMessage),

@@ -20,16 +20,14 @@ import { wireLayout } from "./layout.js";
 import { VehicleMap } from "./map.js";
 import { modeMenu, modesFor } from "./modes.js";
 import { SETPOINT_TYPES } from "./offboard.js";
-import { freshness, page, plots, vehiclePath } from "./page.js";
+import { freshness, page, plots } from "./page.js";
+import { ParamEditor } from "./params.js";
 import { readiness } from "./readiness.js";
 import { instruments, render } from "./render.js";
 import { watchSceneNotices } from "./scene-notice.js";
 import { $, banner, log, nowS, num, setText } from "./ui.js";
 
-const OFFBOARD_PARAMS = [
-  "COM_OF_LOSS_T", "COM_OBL_RC_ACT", "COM_RC_IN_MODE", "MIS_TAKEOFF_ALT", "RTL_RETURN_ALT",
-  "RTL_DESCEND_ALT", "RTL_LAND_DELAY",
-];
+const params = new ParamEditor($("params-editor"));
 const map = new VehicleMap($("map"));
 const alerts = new Alerts($("alerts"), $("alerts-mute"));
 const IN_AIR = new Set(["IN_AIR", "TAKEOFF", "LANDING"]);
@@ -273,40 +271,8 @@ function showScene(on) {
 
 // ---- parameters ---------------------------------------------------------------------------
 
-async function loadParams() {
-  const table = $("params");
-  if (page.vehicleId === null || page.rejected) return;
-  let values = {};
-  try {
-    values = (await request("GET", vehiclePath(`/params?names=${OFFBOARD_PARAMS.join(",")}`))).params || {};
-  } catch (err) {
-    log("WARNING", `parameters: ${err.message}`);
-  }
-  table.replaceChildren(...OFFBOARD_PARAMS.map((name) => {
-    const row = document.createElement("tr");
-    const value = values[name];
-    row.innerHTML = `<td>${name}</td><td class="val" id="param-${name}">${value ?? "–"}</td>`
-      + `<td><input class="ctl" id="param-input-${name}" type="number" step="any"></td>`
-      + `<td><button class="ctl mini" id="param-set-${name}">Set</button></td>`;
-    row.querySelector("input").value = value ?? "";
-    row.querySelector("button").addEventListener("click", () => setParam(name));
-    return row;
-  }));
-  updateControls();
-}
-
-async function setParam(name) {
-  const raw = $(`param-input-${name}`).value;
-  const value = Number(raw);
-  if (raw === "" || !Number.isFinite(value)) return;
-  try {
-    const answer = await request("PUT", vehiclePath(`/params/${name}`), { value },
-      { "X-Lease-Id": page.control?.leaseId || "" });
-    $(`param-${name}`).textContent = answer.value;
-    showResult(`${name}`, { ok: true, body: { result: `= ${answer.value}` } });
-  } catch (err) {
-    showResult(`${name}`, { ok: false, status: err.status, body: err.body });
-  }
+function loadParams() {
+  params.load();
 }
 
 // ---- wiring -------------------------------------------------------------------------------

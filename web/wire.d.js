@@ -303,6 +303,54 @@
  */
 
 /**
+ * A named value (``values``: the value) or a bit of a bitmask (``bitmask``: its index).
+ * @typedef {Object} ParamChoiceOut
+ * @property {number} value
+ * @property {string} description
+ */
+
+/**
+ * One parameter as the vehicle's metadata describes it; empty or null where it says
+ * nothing. ``min``, ``max``, ``default`` and ``increment`` are in ``units``.
+ * @typedef {Object} ParamInfoOut
+ * @property {string} name
+ * @property {string} type PX4's type name: Float or Int32
+ * @property {string} group e.g. "Multicopter Position Control"
+ * @property {string} category Standard or Developer
+ * @property {string} short_desc
+ * @property {string} long_desc
+ * @property {string} units e.g. "m/s"; empty for none
+ * @property {number|null} min
+ * @property {number|null} max
+ * @property {number|null} default the firmware's default
+ * @property {number|null} decimal_places
+ * @property {number|null} increment
+ * @property {boolean} reboot_required a new value takes effect after a reboot
+ * @property {Array<ParamChoiceOut>} values named values, for an enumeration
+ * @property {Array<ParamChoiceOut>} bitmask named bits (value = bit index)
+ */
+
+/**
+ * Every parameter the vehicle's metadata describes, by name. A vehicle that serves no
+ * metadata answers ``available`` false with the reason in ``error``.
+ * @typedef {Object} ParamMetadataOut
+ * @property {boolean} available
+ * @property {string|null} [error]
+ * @property {Object<string, ParamInfoOut>} parameters
+ */
+
+/**
+ * @typedef {Object} ParamOut
+ * @property {string} name
+ * @property {number|null} value the value the vehicle echoed
+ */
+
+/**
+ * @typedef {Object} ParamsOut
+ * @property {Object<string, number|null>} params
+ */
+
+/**
  * A global position; the altitude is AMSL, above home or above terrain.
  * @typedef {Object} PositionGlobalBody
  * @property {"position_global"} type
@@ -438,7 +486,7 @@
  * @property {string} system_status
  * @property {"UNDEFINED"|"ON_GROUND"|"IN_AIR"|"TAKEOFF"|"LANDING"} landed_state
  * @property {"UNDEFINED"|"MC"|"FW"|"TRANSITION_TO_FW"|"TRANSITION_TO_MC"} vtol_state
- * @property {PositionNedOut|null} position_ned
+ * @property {PositionNedOut|null} position_ned metres north, east and down of the estimator's local origin (PX4's EKF origin, the state's `origin`: set where the estimator first had a position, normally where the vehicle was switched on, or by POST /origin), not of home or of where a flight started: a script that flies a leg reads it at the start and compares with that
  * @property {VelocityNedOut|null} velocity_ned
  * @property {GlobalOut|null} global
  * @property {AttitudeOut|null} attitude
@@ -544,7 +592,7 @@
  * @property {string} system_status
  * @property {"UNDEFINED"|"ON_GROUND"|"IN_AIR"|"TAKEOFF"|"LANDING"} landed_state
  * @property {"UNDEFINED"|"MC"|"FW"|"TRANSITION_TO_FW"|"TRANSITION_TO_MC"} vtol_state
- * @property {PositionNedOut|null} position_ned
+ * @property {PositionNedOut|null} position_ned metres north, east and down of the estimator's local origin (PX4's EKF origin, the state's `origin`: set where the estimator first had a position, normally where the vehicle was switched on, or by POST /origin), not of home or of where a flight started: a script that flies a leg reads it at the start and compares with that
  * @property {VelocityNedOut|null} velocity_ned
  * @property {GlobalOut|null} global
  * @property {AttitudeOut|null} attitude

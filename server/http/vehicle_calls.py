@@ -161,6 +161,10 @@ async def _get_params(args: CallArgs) -> Reply:
     return model_reply(await vehicle_ops.get_params(args.vehicle, args.query["names"]))
 
 
+async def _get_param_metadata(args: CallArgs) -> Reply:
+    return model_reply(await vehicle_ops.get_param_metadata(args.vehicle))
+
+
 async def _get_param(args: CallArgs) -> Reply:
     return model_reply(await vehicle_ops.get_param(args.vehicle, args.params["name"]))
 
@@ -242,6 +246,7 @@ CALLS: tuple[VehicleCall, ...] = (
         "GET", "params", Access.CONNECTED, _get_params,
         query=(Param("names", TypeAdapter(str | None)),),
     ),
+    VehicleCall("GET", "params/metadata", Access.CONNECTED, _get_param_metadata),
     VehicleCall("GET", "params/{name}", Access.CONNECTED, _get_param, params=(_PARAM_NAME,)),
     VehicleCall(
         "PUT", "params/{name}", Access.CONTROL, _set_param, _body(ParamValueBody), True,

@@ -12,9 +12,18 @@ from server.control.publishers import StatePublishers
 from server.control.views import finite, stream_dict
 from server.http.errors import ApiError
 from server.http.operations import sent_out
-from server.http.schemas import ParamOut, ParamsOut, ParamValueBody, SentSetpointOut, SetpointBody
+from server.http.schemas import (
+    ParamChoiceOut,
+    ParamInfoOut,
+    ParamMetadataOut,
+    ParamOut,
+    ParamsOut,
+    ParamValueBody,
+    SentSetpointOut,
+    SetpointBody,
+)
 from server.http.schemas.sticks import SticksBody, SticksOut
-from server.link import Sticks, Vehicle
+from server.link import MetadataError, ParamInfo, Sticks, Vehicle
 from server.link.plugins.manual_control import MANUAL_CONTROL_RATE_HZ
 from skyhelm_wire.state import StreamOut
 
@@ -90,4 +99,44 @@ async def get_param(vehicle: Vehicle, name: str) -> ParamOut:
 
 
 async def set_param(vehicle: Vehicle, name: str, body: ParamValueBody) -> ParamOut:
+    """Set it, held to the range of the vehicle's metadata unless the body says ``force``
+    (a parameter the metadata does not describe, or a vehicle serving none, is not held)."""
+    if not body.force:
+        check_param_range(await _param_info(vehicle, name), body.value)
     return ParamOut(name=name, value=finite(await vehicle.set_param(name, body.value)))
+
+
+def check_param_range(info: ParamInfo | None, value: float | int) -> None:
+    """422 naming the field, the range and the metadata's words when value is outside it."""
+    why = None if info is None else info.out_of_range(value)
+    if info is None or why is None:
+        return
+    raise ApiError(
+        422, f"{why}; send force: true to set it anyway", field="value",
+        minimum=info.min, maximum=info.max, units=info.units or None,
+        description=info.short_desc or None,
+    )  # fmt: skip
+
+
+async def _param_info(vehicle: Vehicle, name: str) -> ParamInfo | None:
+    try:
+        return (await vehicle.get_param_metadata()).get(name)
+    except MetadataError:
+        return None
+
+
+async def get_param_metadata(vehicle: Vehicle) -> ParamMetadataOut:
+    try:
+        described = await vehicle.get_param_metadata()
+    except MetadataError as e:
+        return ParamMetadataOut(available=False, error=str(e), parameters={})
+    return ParamMetadataOut(
+        available=True, parameters={name: _info_out(info) for name, info in described.items()}
+    )
+
+
+def _info_out(info: ParamInfo) -> ParamInfoOut:
+    fields = asdict(info)
+    fields["values"] = [ParamChoiceOut(**asdict(c)) for c in info.values]
+    fields["bitmask"] = [ParamChoiceOut(**asdict(c)) for c in info.bitmask]
+    return ParamInfoOut(**fields)

@@ -29,7 +29,9 @@ from server.link.core.state import (
     VelocityNedState,
 )
 from server.link.link import Link
+from server.link.plugins.component_metadata import MetadataError
 from server.link.plugins.manual_control import Sticks
+from server.link.plugins.param_metadata import ParamInfo
 from server.link.plugins.params import ParamError
 from server.link.vehicle import Vehicle
 
@@ -47,8 +49,10 @@ __all__ = [
     "Link",
     "LinkQuality",
     "LinkStats",
+    "MetadataError",
     "OriginState",
     "ParamError",
+    "ParamInfo",
     "PositionNedState",
     "SetpointRejected",
     "StateSubscription",

@@ -8,7 +8,8 @@ the ``Sender`` it was given (the Link). Like MAVSDK's plugins:
   (``commands``), events and state notifications (``server.link.core.vehicle_core``)
 - ``action``: arm, take off, land, return, hold, modes, reposition, VTOL, home and origin
 - ``offboard``: setpoints, their envelope and stream, OFFBOARD mode
-- ``params``: parameters (``server.link.plugins.params``)
+- ``params``: parameters (``server.link.plugins.params``); ``param_metadata``: what each
+  one is, from the component metadata the vehicle serves
 - ``telemetry``: what the vehicle reported; ``telemetry_requests``: asking for it
 - ``px4_events``: PX4's EVENTs decoded with the metadata it serves
   (``server.link.plugins.px4_events``)
@@ -36,6 +37,7 @@ from server.link.plugins.manual_control import ManualControl
 from server.link.plugins.mavlink_values import enum_name
 from server.link.plugins.offboard import Offboard
 from server.link.plugins.outage import OutageReport
+from server.link.plugins.param_metadata import ParamMetadata
 from server.link.plugins.params import ParamClient
 from server.link.plugins.px4_events import Px4Events
 from server.link.plugins.reboot import RebootWatch
@@ -82,6 +84,7 @@ class Vehicle(VehicleOperations):
         self.manual_control = ManualControl(core, self.offboard)
         self.telemetry_requests = TelemetryRequests(core, self.telemetry, telemetry_rates_hz)
         self.px4_events = Px4Events(core, self.telemetry)
+        self.param_metadata = ParamMetadata(self.px4_events.metadata, core.now)
         self.outage = OutageReport(core, self.telemetry)
 
     @property
@@ -114,6 +117,7 @@ class Vehicle(VehicleOperations):
         self.telemetry.forget()
         self.telemetry_requests.start()
         self.px4_events.reload()
+        self.param_metadata.forget()
         if self._reread is not None:
             self._reread.cancel()
         self._reread = asyncio.get_running_loop().create_task(

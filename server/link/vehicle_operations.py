@@ -24,6 +24,7 @@ from server.link.core.vehicle_core import VehicleCore
 from server.link.plugins.action import Action
 from server.link.plugins.manual_control import ManualControl, Sticks
 from server.link.plugins.offboard import Offboard
+from server.link.plugins.param_metadata import ParamInfo, ParamMetadata
 from server.link.plugins.params import ParamClient
 from server.link.plugins.telemetry import Telemetry
 
@@ -67,6 +68,7 @@ class VehicleOperations:
     offboard: Offboard
     manual_control: ManualControl
     params: ParamClient
+    param_metadata: ParamMetadata
     telemetry: Telemetry
 
     # what the core reports, read here
@@ -277,6 +279,11 @@ class VehicleOperations:
         if names is None:
             return await self.params.get_all()
         return await self.params.get_many(names)
+
+    async def get_param_metadata(self) -> dict[str, ParamInfo]:
+        """What each parameter is (group, words, units, range, default), as the vehicle's
+        component metadata says (``ParamMetadata.get``); MetadataError when it offers none."""
+        return await self.param_metadata.get()
 
     @property
     def home(self) -> HomeState | None:

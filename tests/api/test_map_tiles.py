@@ -5,16 +5,23 @@ points the map at it. The archives are made here from generated tiles; no networ
 from __future__ import annotations
 
 import contextlib
-from collections.abc import AsyncIterator
+import http.server
+import io
+import socket
+import subprocess
+import sys
+import threading
+from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
 
 import httpx
 import pytest
 
+from server.http.tile_archive import open_tile_archive
+from server.map_tiles import ArchiveInfo, Progress, Tile, fetch_tiles, tiles_in, write_archive
 from server.settings import SettingsError
 from tests.api.conftest import OBSERVER, Api, api_for, auth
-from tests.map_tiles import make_archive
-from tools.make_tiles import ArchiveInfo, Tile, fetch_tiles, tiles_in, write_archive
+from tests.map_tiles import make_archive, solid_png, tile_colour
 
 NO_VEHICLE = ["udpin:127.0.0.1:0"]
 
@@ -107,9 +114,6 @@ def test_a_file_that_is_no_archive_is_refused_at_start(tmp_path: Path) -> None:
 
 def test_make_tiles_fetches_a_box_into_an_archive_the_server_reads(tmp_path: Path) -> None:
     """The online tool, against a tile server this test plays (httpx's mock transport)."""
-    from server.http.tile_archive import open_tile_archive
-    from tests.map_tiles import solid_png, tile_colour
-
     asked: list[str] = []
 
     def tile_server(request: httpx.Request) -> httpx.Response:
@@ -135,3 +139,100 @@ def test_make_tiles_fetches_a_box_into_an_archive_the_server_reads(tmp_path: Pat
             assert archive.info.max_zoom == 16
         finally:
             archive.close()
+
+
+# -- `skyhelm tiles`: the command, run as a user runs it (any directory, no network) ----------
+
+SKYHELM = Path(sys.executable).with_name("skyhelm")
+SMALL_BOX = "8.544,47.397,8.547,47.399"
+
+
+def _closed_port() -> int:
+    """A loopback port nobody listens on (bound, then let go)."""
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port: int = probe.getsockname()[1]
+        return port
+
+
+def _tiles_command(cwd: Path, url: str, *args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [str(SKYHELM), "tiles", "--url", url, "--bbox", SMALL_BOX, "--pause", "0", *args],
+        cwd=cwd, capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+
+
+def test_tiles_without_network_is_one_clear_line_and_no_traceback(tmp_path: Path) -> None:
+    url = f"http://127.0.0.1:{_closed_port()}/{{z}}/{{x}}/{{y}}.png"
+    done = _tiles_command(tmp_path, url, "--zoom", "16", "--out", "field.pmtiles")
+    assert done.returncode == 1, done.stderr
+    assert "Traceback" not in done.stderr
+    last = done.stderr.strip().splitlines()[-1]
+    assert last.startswith("skyhelm tiles: cannot reach http://127.0.0.1:"), done.stderr
+    assert "no network?" in last
+    assert not (tmp_path / "field.pmtiles").exists()
+
+
+class _TileHandler(http.server.BaseHTTPRequestHandler):
+    def do_GET(self) -> None:
+        z, x, y = (int(p) for p in self.path.removesuffix(".png").split("/")[-3:])
+        body = solid_png(tile_colour(z, x, y), size=8)
+        self.send_response(200)
+        self.send_header("Content-Type", "image/png")
+        self.send_header("Content-Length", str(len(body)))
+        self.end_headers()
+        self.wfile.write(body)
+
+    def log_message(self, format: str, *args: object) -> None:
+        pass
+
+
+@contextlib.contextmanager
+def _tile_server() -> Iterator[str]:
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), _TileHandler)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    try:
+        yield f"http://127.0.0.1:{server.server_address[1]}/{{z}}/{{x}}/{{y}}.png"
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
+def test_tiles_from_any_directory_shows_progress_and_writes_the_archive(tmp_path: Path) -> None:
+    coords = tiles_in((8.544, 47.397, 8.547, 47.399), range(16, 19))
+    with _tile_server() as url:
+        done = _tiles_command(tmp_path, url, "--zoom", "16-18", "--out", "area.mbtiles")
+    assert done.returncode == 0, done.stderr
+    lines = done.stderr.splitlines()
+    assert lines[0].startswith(f"fetching {len(coords)} tiles")
+    bars = [line for line in lines if line.startswith("[")]
+    # not a terminal: a line at each tenth, the last one full
+    assert 2 <= len(bars) <= 11
+    full = "#" * Progress.width
+    assert bars[-1].startswith(f"[{full}] {len(coords)}/{len(coords)} tiles 100%")
+    assert lines[-1].startswith("area.mbtiles: ")
+    archive = open_tile_archive(tmp_path / "area.mbtiles")  # written where it was run
+    try:
+        z, x, y = coords[0]
+        assert archive.tile(z, x, y) == solid_png(tile_colour(z, x, y), size=8)
+    finally:
+        archive.close()
+
+
+class _Terminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def test_progress_on_a_terminal_is_one_bar_redrawn_in_place() -> None:
+    out = _Terminal()
+    progress = Progress(4, out, clock=lambda: 0.0)
+    for _ in range(4):
+        progress.advance()
+    progress.end_line()
+    text = out.getvalue()
+    assert text.count("\r") == 4
+    assert text.count("\n") == 1
+    assert text.rstrip("\n").split("\r")[-1] == "[" + "#" * Progress.width + "] 4/4 tiles 100% 0 s"
+    assert "2/4 tiles  50%" in text

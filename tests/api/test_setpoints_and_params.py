@@ -213,6 +213,56 @@ async def test_params_round_trip(quad_api: Api) -> None:
     assert isinstance(integer.json()["value"], int)
 
 
+async def test_param_metadata_describes_each_parameter_as_the_vehicle_serves_it(
+    quad_api: Api,
+) -> None:
+    answer = await quad_api.client.get("/api/v1/vehicles/1/params/metadata")
+    assert answer.status_code == 200, answer.text
+    body = answer.json()
+    assert body["available"] is True
+    velocity = body["parameters"]["MPC_XY_VEL_MAX"]
+    assert (velocity["min"], velocity["max"], velocity["units"]) == (0.0, 20.0, "m/s")
+    assert velocity["default"] == 12.0
+    assert velocity["short_desc"] == "Maximum horizontal velocity"
+    assert velocity["group"] == "Multicopter Position Control"
+    loss_action = body["parameters"]["COM_OBL_RC_ACT"]
+    assert {"value": 4, "description": "Land mode"} in loss_action["values"]
+    # every parameter the vehicle has is described, but the sim's own (PX4 has no SIH_F_T_MAX)
+    values = (await quad_api.client.get("/api/v1/vehicles/1/params")).json()["params"]
+    assert len(values) > 100
+    assert set(values) - set(body["parameters"]) <= {"SIH_F_T_MAX"}
+
+
+async def test_a_value_outside_the_metadata_range_is_422_with_the_range_and_its_words(
+    quad_api: Api,
+) -> None:
+    await quad_api.take_control()
+    url = "/api/v1/vehicles/1/params/MPC_XY_VEL_MAX"
+    refused = await quad_api.client.put(url, json={"value": 1000}, headers=quad_api.lease_headers)
+    assert refused.status_code == 422, refused.text
+    detail = refused.json()["detail"]
+    assert detail["field"] == "value"
+    assert (detail["minimum"], detail["maximum"], detail["units"]) == (0.0, 20.0, "m/s")
+    assert "1000 is outside 0 … 20 m/s (Maximum horizontal velocity)" in detail["reason"]
+    assert (await quad_api.client.get(url)).json()["value"] == 12.0  # nothing was sent
+
+
+async def test_force_sets_a_value_outside_the_range_and_the_echo_is_the_answer(
+    quad_api: Api,
+) -> None:
+    await quad_api.take_control()
+    url = "/api/v1/vehicles/1/params/MPC_XY_VEL_MAX"
+    headers = quad_api.lease_headers
+    try:
+        inside = await quad_api.client.put(url, json={"value": 8.5}, headers=headers)
+        assert (inside.status_code, inside.json()["value"]) == (200, 8.5)
+        forced = await quad_api.client.put(url, json={"value": 25, "force": True}, headers=headers)
+        assert forced.status_code == 200, forced.text
+        assert forced.json() == {"name": "MPC_XY_VEL_MAX", "value": 25.0}
+    finally:
+        await quad_api.client.put(url, json={"value": 12.0}, headers=headers)
+
+
 async def test_a_parameter_name_outside_px4_ids_is_422_naming_the_field(quad_api: Api) -> None:
     for names in ("MIS_TAKEOFF_ALT,\u00a0\uf9b7", "COM)", "A B"):
         answer = await quad_api.client.get("/api/v1/vehicles/1/params", params={"names": names})

@@ -195,18 +195,6 @@ def test_take_control_arm_and_take_off_by_clicking(
     )
 
 
-def test_parameter_panel_writes_and_shows_the_vehicles_echo(page: Any, api: httpx.Client) -> None:
-    take_control(page)
-    before = api.get("/vehicles/1/params/RTL_LAND_DELAY").json()["value"]
-    new = 1 if before != 1 else 2
-    page.fill("#param-input-RTL_LAND_DELAY", str(new))
-    click_and_wait_result(page, "#param-set-RTL_LAND_DELAY", expect=f"= {new}")
-    assert page.text_content("#param-RTL_LAND_DELAY") == str(new)
-    assert api.get("/vehicles/1/params/RTL_LAND_DELAY").json()["value"] == new
-    page.fill("#param-input-RTL_LAND_DELAY", f"{before:g}")
-    click_and_wait_result(page, "#param-set-RTL_LAND_DELAY", expect=f"= {before:g}")
-
-
 def test_refused_command_shows_the_vehicles_reason(flying: None, page: Any) -> None:
     text = click_and_wait_result(page, "#btn-disarm", expect="Disarm", confirm=True)
     assert "ACCEPTED" not in text

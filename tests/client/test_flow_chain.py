@@ -1,7 +1,8 @@
 """The documented flows one after another against one `skyhelm serve` (default control
-settings, the simulated quad at 8x), none needing `force`: the README's curl session twice,
-the examples killed half-way (Ctrl-C, then SIGKILL) and then flown to the end, the curl
-session of docs/api.md last. The whole chain, three README sessions and the page included,
+settings, the simulated quad at 8x), none needing `force`: a flight that lands 10.5 m north of
+the estimator's origin, then the README's curl session twice (each flies its leg from where
+it starts), the examples killed half-way (Ctrl-C, then SIGKILL) and then flown to the end,
+the curl session of docs/api.md last. The whole chain, three README sessions and the page included,
 at real speed: `make test-chain` (tests/browser/test_flow_chain_full.py)."""
 
 from __future__ import annotations
@@ -21,7 +22,8 @@ pytestmark = pytest.mark.skipif(shutil.which("curl") is None, reason="needs curl
 def test_the_documented_flows_fly_one_after_another(served: Served, tmp_path: Path) -> None:
     chain = Chain(served.base_url, served.pilot_token, tmp_path)
 
-    chain.curl_session(README)
+    chain.flight_ending_away()  # position_ned then reads 10.5 m north before the session
+    chain.curl_session(README)  # which flies its leg from there
     chain.curl_session(README)  # the first gave the lease back; arming from OFFBOARD works
     chain.example_killed_half_way("fly_square.py", signal.SIGINT)
     chain.example_killed_half_way("fly_square_async.py", signal.SIGKILL)
@@ -29,4 +31,4 @@ def test_the_documented_flows_fly_one_after_another(served: Served, tmp_path: Pa
     chain.example("fly_square_async.py")
     chain.curl_session(API_DOC)
 
-    assert chain.flows == 7
+    assert chain.flows == 8

@@ -65,7 +65,7 @@ def test_general_metadata_and_events_file_download_with_matching_crcs(harness: H
     assert uri == "mftp://etc/extras/component_general.json.xz"
     general_json = lzma.decompress(_download(harness, uri.removeprefix("mftp://"), burst=True))
     assert mavlink_crc32(general_json) == crc
-    (events_type,) = json.loads(general_json)["metadataTypes"]
+    params_type, events_type = json.loads(general_json)["metadataTypes"]
     assert events_type["type"] == 4  # COMP_METADATA_TYPE_EVENTS
     assert events_type["uri"] == "mftp://etc/extras/all_events.json.xz"
     path = events_type["uri"].removeprefix("mftp://")
@@ -75,6 +75,14 @@ def test_general_metadata_and_events_file_download_with_matching_crcs(harness: H
     assert px4["namespace"] == "px4"
     disarmed = px4["event_groups"]["default"]["events"][str(DISARMED_BY & 0xFFFFFF)]
     assert disarmed["message"] == "Disarmed by {1}"
+    assert params_type["type"] == 1  # COMP_METADATA_TYPE_PARAMETER
+    assert params_type["uri"] == "mftp://etc/extras/parameters.json.xz"
+    params_json = lzma.decompress(_download(harness, "etc/extras/parameters.json.xz", burst=True))
+    assert mavlink_crc32(params_json) == params_type["fileCrc"]
+    described = json.loads(params_json)["parameters"]
+    (velocity,) = [p for p in described if p["name"] == "MPC_XY_VEL_MAX"]
+    assert (velocity["min"], velocity["max"], velocity["units"]) == (0.0, 20.0, "m/s")
+    assert velocity["shortDesc"] == "Maximum horizontal velocity"
 
 
 def test_component_information_names_the_same_file(harness: Harness) -> None:
@@ -118,6 +126,6 @@ def test_list_directory(harness: Harness) -> None:
     (listing,) = _request(harness, ftp.CMD_LIST_DIRECTORY, data=b"etc/extras")
     entries = listing.data[:listing.size].split(b"\0")
     names = [e.split(b"\t")[0] for e in entries if e]
-    assert names == [b"Fall_events.json.xz", b"Fcomponent_general.json.xz"]
-    (end,) = _request(harness, ftp.CMD_LIST_DIRECTORY, seq=2, offset=2, data=b"etc/extras")
+    assert names == [b"Fall_events.json.xz", b"Fcomponent_general.json.xz", b"Fparameters.json.xz"]
+    (end,) = _request(harness, ftp.CMD_LIST_DIRECTORY, seq=2, offset=3, data=b"etc/extras")
     assert end.data[0] == ftp.ERR_EOF

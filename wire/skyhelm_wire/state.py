@@ -231,7 +231,12 @@ class VehicleStateOut(_Out):
     system_status: str
     landed_state: Literal["UNDEFINED", "ON_GROUND", "IN_AIR", "TAKEOFF", "LANDING"]
     vtol_state: Literal["UNDEFINED", "MC", "FW", "TRANSITION_TO_FW", "TRANSITION_TO_MC"]
-    position_ned: PositionNedOut | None
+    position_ned: PositionNedOut | None = Field(
+        description="metres north, east and down of the estimator's local origin (PX4's EKF "
+        "origin, the state's `origin`: set where the estimator first had a position, normally "
+        "where the vehicle was switched on, or by POST /origin), not of home or of where a "
+        "flight started: a script that flies a leg reads it at the start and compares with that"
+    )
     velocity_ned: VelocityNedOut | None
     global_: GlobalOut | None = Field(alias="global")
     attitude: AttitudeOut | None

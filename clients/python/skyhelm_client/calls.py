@@ -382,9 +382,9 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
     def param(self, name: str) -> _Value:
         return self._value(Call("GET", self._vehicle(f"/params/{name}"), pick="value"))
 
-    def set_param(self, name: str, value: float) -> _Value:
-        """Set a parameter; answers the value the vehicle echoed."""
-        call = Call(
-            "PUT", self._vehicle(f"/params/{name}"), {"value": value}, control=True, pick="value"
-        )
+    def set_param(self, name: str, value: float, *, force: bool = False) -> _Value:
+        """Set a parameter; answers the value the vehicle echoed. A value outside the range
+        of the vehicle's metadata is refused (422) unless ``force``."""
+        body = {"value": value, "force": True} if force else {"value": value}
+        call = Call("PUT", self._vehicle(f"/params/{name}"), body, control=True, pick="value")
         return self._value(call)

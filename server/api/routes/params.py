@@ -9,7 +9,7 @@ from fastapi import APIRouter, Path, Query
 from server.http import vehicle_ops
 from server.http.deps import ConnectedVehicle, ControlledVehicle
 from server.http.errors import CONTROL_RESPONSES, READ_RESPONSES, Responses
-from server.http.schemas import ErrorOut, ParamOut, ParamsOut, ParamValueBody
+from server.http.schemas import ErrorOut, ParamMetadataOut, ParamOut, ParamsOut, ParamValueBody
 from server.http.vehicle_ops import PARAM_NAME_PATTERN
 
 router = APIRouter(prefix="/vehicles/{vehicle_id}/params", tags=["params"])
@@ -33,6 +33,13 @@ async def get_params(
     return await vehicle_ops.get_params(vehicle, names)
 
 
+@router.get("/metadata", response_model=ParamMetadataOut, responses=READ_RESPONSES)
+async def get_param_metadata(vehicle: ConnectedVehicle) -> ParamMetadataOut:
+    """What each parameter is (group, descriptions, units, range, default), from the
+    component metadata the vehicle serves (PX4's parameters.json, read once over MAVLink FTP)."""
+    return await vehicle_ops.get_param_metadata(vehicle)
+
+
 @router.get("/{name}", response_model=ParamOut, responses=_READ)
 async def get_param(vehicle: ConnectedVehicle, name: ParamName) -> ParamOut:
     return await vehicle_ops.get_param(vehicle, name)
@@ -42,4 +49,7 @@ async def get_param(vehicle: ConnectedVehicle, name: ParamName) -> ParamOut:
     "/{name}", response_model=ParamOut, responses={**CONTROL_RESPONSES, **_NO_ANSWER, **_REFUSED}
 )
 async def set_param(vehicle: ControlledVehicle, name: ParamName, body: ParamValueBody) -> ParamOut:
+    """Set it and check the vehicle's echo. A value outside the range of the vehicle's
+    metadata is 422 (field ``value``, ``minimum``, ``maximum``, ``units``, ``description``)
+    unless the body says ``"force": true``."""
     return await vehicle_ops.set_param(vehicle, name, body)

@@ -15,7 +15,14 @@ from server.http.schemas.commands import (
     TakeoffBody,
     VtolTransitionBody,
 )
-from server.http.schemas.params import ParamOut, ParamsOut, ParamValueBody
+from server.http.schemas.params import (
+    ParamChoiceOut,
+    ParamInfoOut,
+    ParamMetadataOut,
+    ParamOut,
+    ParamsOut,
+    ParamValueBody,
+)
 from skyhelm_wire.commands import CommandResultName, CommandResultOut
 from skyhelm_wire.common import (
     AltM,
@@ -82,6 +89,9 @@ __all__ = [
     "OffboardStopBody",
     "OriginBody",
     "OriginOut",
+    "ParamChoiceOut",
+    "ParamInfoOut",
+    "ParamMetadataOut",
     "ParamOut",
     "ParamValueBody",
     "ParamsOut",

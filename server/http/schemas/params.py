@@ -1,24 +1,21 @@
-"""Vehicle parameters: the value to set and the answers."""
+"""Vehicle parameters: the wire package's models, re-exported for the routes."""
 
 from __future__ import annotations
 
-from typing import Annotated
+from skyhelm_wire.params import (
+    ParamChoiceOut,
+    ParamInfoOut,
+    ParamMetadataOut,
+    ParamOut,
+    ParamsOut,
+    ParamValueBody,
+)
 
-from pydantic import BaseModel, Field
-
-from skyhelm_wire.common import StrictBody
-
-
-class ParamValueBody(StrictBody):
-    value: Annotated[float, Field(ge=-3.4e38, le=3.4e38)] | int = Field(
-        description="an integer for INT32 parameters, a number for REAL32"
-    )
-
-
-class ParamsOut(BaseModel):
-    params: dict[str, float | int | None]
-
-
-class ParamOut(BaseModel):
-    name: str
-    value: float | int | None
+__all__ = [
+    "ParamChoiceOut",
+    "ParamInfoOut",
+    "ParamMetadataOut",
+    "ParamOut",
+    "ParamValueBody",
+    "ParamsOut",
+]

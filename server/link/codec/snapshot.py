@@ -235,6 +235,10 @@ class VehicleState:
     system_status: str
     landed_state: Literal["UNDEFINED", "ON_GROUND", "IN_AIR", "TAKEOFF", "LANDING"]
     vtol_state: Literal["UNDEFINED", "MC", "FW", "TRANSITION_TO_FW", "TRANSITION_TO_MC"]
+    # metres north, east and down of the estimator's local origin (PX4's EKF origin, the state's
+    # `origin`: set where the estimator first had a position, normally where the vehicle was
+    # switched on, or by POST /origin), not of home or of where a flight started: a script that
+    # flies a leg reads it at the start and compares with that
     position_ned: PositionNedState | None
     velocity_ned: VelocityNedState | None
     global_position: GlobalState | None

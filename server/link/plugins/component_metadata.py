@@ -7,8 +7,9 @@ metadata type's uri and fileCrc. Files ending in .xz are xz-compressed. The CRC 
 CRC32 (PX4's generate_crc.py): PX4 v1.16 computes COMPONENT_METADATA's over the general
 JSON before compression, and the listed files' over the .xz as stored.
 
-A downloaded events file is cached per firmware (AUTOPILOT_VERSION's flight_sw_version) and
-general-metadata CRC, so a reconnect costs two small requests instead of a download.
+A downloaded events or parameters file is cached per firmware (AUTOPILOT_VERSION's
+flight_sw_version) and general-metadata CRC, so a reconnect costs two small requests instead
+of a download.
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ from server.link.plugins.ftp import FtpClient, FtpError
 
 log = logging.getLogger(__name__)
 
+COMP_METADATA_TYPE_PARAMETER = 1
 COMP_METADATA_TYPE_EVENTS = 4
 MAV_CMD_REQUEST_MESSAGE = 512
 _MFTP = "mftp://"
@@ -59,6 +61,9 @@ def mavlink_crc32(data: bytes, crc: int = 0) -> int:
 
 
 def default_cache_dir() -> Path:
+    """$SKYHELM_CACHE_DIR, else $XDG_CACHE_HOME/skyhelm (~/.cache/skyhelm)."""
+    if chosen := os.environ.get("SKYHELM_CACHE_DIR"):
+        return Path(chosen)
     base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
     return Path(base) / "skyhelm"
 
@@ -79,7 +84,7 @@ class MetadataError(Exception):
 
 
 class ComponentMetadata:
-    """Finds, downloads, checks and caches a vehicle's events metadata."""
+    """Finds, downloads, checks and caches a vehicle's events and parameters metadata."""
 
     answer_timeout_s = 1.0
 
@@ -105,6 +110,16 @@ class ComponentMetadata:
 
     async def events(self) -> dict[str, Any]:
         """The vehicle's events definitions (PX4's events JSON), from cache or the vehicle."""
+        return await self._metadata(COMP_METADATA_TYPE_EVENTS, "px4_events")
+
+    async def parameters(self) -> dict[str, Any]:
+        """The vehicle's parameter definitions (PX4's parameters.json: each parameter's
+        group, descriptions, units, range and default), from cache or the vehicle."""
+        return await self._metadata(COMP_METADATA_TYPE_PARAMETER, "px4_parameters")
+
+    async def _metadata(self, metadata_type: int, cache_name: str) -> dict[str, Any]:
+        """One metadata file the general metadata lists, cached per firmware and general
+        metadata CRC under cache_name."""
         await self._ask(
             mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION, lambda: self.flight_sw_version is not None
         )
@@ -117,26 +132,22 @@ class ComponentMetadata:
         if self._general is None:
             raise MetadataError("the vehicle offers no component metadata")
         uri, general_crc = self._general
-        cached = self._cache_file(general_crc)
+        cached = self._cache_file(cache_name, general_crc)
         if cached is not None and cached.exists():
             try:
                 loaded: dict[str, Any] = json.loads(cached.read_text())
                 return loaded
             except (OSError, ValueError):
-                log.warning("events metadata cache %s unreadable: fetching again", cached)
+                log.warning("%s metadata cache %s unreadable: fetching again", cache_name, cached)
         general = json.loads(await self._fetch(uri, general_crc))
         entry = next(
-            (
-                t
-                for t in general.get("metadataTypes", [])
-                if t.get("type") == COMP_METADATA_TYPE_EVENTS
-            ),
+            (t for t in general.get("metadataTypes", []) if t.get("type") == metadata_type),
             None,
         )
         if entry is None:
-            raise MetadataError("the general metadata lists no events file")
+            raise MetadataError(f"the general metadata lists no file of type {metadata_type}")
         text = await self._fetch(str(entry.get("uri", "")), int(entry.get("fileCrc", 0)))
-        events: dict[str, Any] = json.loads(text)
+        parsed: dict[str, Any] = json.loads(text)
         if cached is not None:
             try:
                 cached.parent.mkdir(parents=True, exist_ok=True)
@@ -146,14 +157,14 @@ class ComponentMetadata:
                 partial.write_bytes(text)
                 partial.replace(cached)
             except OSError:
-                log.warning("cannot cache events metadata in %s", cached.parent)
-        return events
+                log.warning("cannot cache %s metadata in %s", cache_name, cached.parent)
+        return parsed
 
-    def _cache_file(self, general_crc: int) -> Path | None:
+    def _cache_file(self, cache_name: str, general_crc: int) -> Path | None:
         if self.flight_sw_version is None or self.cache_dir is None:
             return None
         name = f"{self.flight_sw_version:08x}_{general_crc:08x}.json"
-        return self.cache_dir / "px4_events" / name
+        return self.cache_dir / cache_name / name
 
     async def _ask(self, msg_id: int, answered: Callable[[], bool]) -> bool:
         requests = self._core.requests

@@ -1,14 +1,16 @@
-"""Make an offline map archive for a flying area while online: fetch the raster tiles of a
-box over a range of zoom levels from an XYZ tile server and write them into one PMTiles or
-MBTiles file, which `skyhelm serve --map-tiles FILE` then serves with no network::
+"""`skyhelm tiles`: make an offline map archive for a flying area while online: fetch the
+raster tiles of a box over a range of zoom levels from an XYZ tile server and write them into
+one PMTiles or MBTiles file, which `skyhelm serve --map-tiles FILE` then serves with no
+network (copy the file to the laptop that flies)::
 
-    python -m tools.make_tiles --url 'https://tiles.example.com/{z}/{x}/{y}.png' \\
+    skyhelm tiles --url 'https://tiles.example.com/{z}/{x}/{y}.png' \\
         --bbox 8.535,47.392,8.556,47.403 --zoom 14-19 --attribution '© Example' \\
         --out field.pmtiles            # or field.mbtiles
 
 Use a tile server whose terms allow downloading for offline use (your own, or a provider
-that permits it): the public OpenStreetMap tile servers forbid bulk downloads. The tool asks
-one tile at a time, says who it is (--user-agent) and refuses more than --max-tiles.
+that permits it): the public OpenStreetMap tile servers forbid bulk downloads. The command
+asks one tile at a time, says who it is (--user-agent), refuses more than --max-tiles, shows
+its progress on stderr and, when the server cannot be reached, says so in one line (exit 1).
 """
 
 from __future__ import annotations
@@ -18,9 +20,10 @@ import math
 import sqlite3
 import sys
 import time
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TextIO
 
 import httpx
 from pmtiles.tile import Compression, TileType, zxy_to_tileid
@@ -103,10 +106,10 @@ def _write_pmtiles(path: Path, tiles: Sequence[Tile], tile_format: str, info: Ar
     metadata = {"name": info.name, "attribution": info.attribution, "format": tile_format}
     ordered = sorted(tiles, key=lambda t: zxy_to_tileid(t[0], t[1], t[2]))
     with path.open("wb") as f:
-        writer = Writer(f)
+        writer = Writer(f)  # type: ignore[no-untyped-call]
         for z, x, y, data in ordered:
-            writer.write_tile(zxy_to_tileid(z, x, y), data)
-        writer.finalize(header, metadata)
+            writer.write_tile(zxy_to_tileid(z, x, y), data)  # type: ignore[no-untyped-call]
+        writer.finalize(header, metadata)  # type: ignore[no-untyped-call]
 
 
 def _write_mbtiles(path: Path, tiles: Sequence[Tile], tile_format: str, info: ArchiveInfo) -> None:
@@ -135,18 +138,67 @@ def _write_mbtiles(path: Path, tiles: Sequence[Tile], tile_format: str, info: Ar
 
 
 def fetch_tiles(
-    client: httpx.Client, url: str, coords: Sequence[tuple[int, int, int]], pause_s: float = 0.0
+    client: httpx.Client,
+    url: str,
+    coords: Sequence[tuple[int, int, int]],
+    pause_s: float = 0.0,
+    asked: Callable[[], None] | None = None,
 ) -> Iterator[Tile]:
     """Each tile from the XYZ server ({z}/{x}/{y}, {s} as "a"); a 404 is a tile the
-    server lacks and is skipped, any other failure stops."""
+    server lacks and is skipped, any other failure stops. ``asked`` is called after each
+    answer (the progress)."""
     for z, x, y in coords:
         answer = client.get(url.replace("{s}", "a").format(z=z, x=x, y=y))
+        if asked is not None:
+            asked()
         if answer.status_code == httpx.codes.NOT_FOUND:
             continue
         answer.raise_for_status()
         yield z, x, y, answer.content
         if pause_s:
             time.sleep(pause_s)
+
+
+class Progress:
+    """How far the fetch is: one bar redrawn in place on a terminal; on a pipe or a file
+    (a log), a line at each tenth, so the log stays short."""
+
+    width = 30
+
+    def __init__(
+        self, total: int, out: TextIO, clock: Callable[[], float] = time.monotonic
+    ) -> None:
+        self.total = max(total, 1)
+        self.done = 0
+        self.out = out
+        self.terminal = out.isatty()
+        self._clock = clock
+        self._start_s = clock()
+        self._tenth = -1
+        self._open = False  # a bar drawn without its newline
+
+    def line(self) -> str:
+        filled = self.done * self.width // self.total
+        percent = self.done * 100 // self.total
+        elapsed_s = self._clock() - self._start_s
+        bar = "#" * filled + "." * (self.width - filled)
+        return f"[{bar}] {self.done}/{self.total} tiles {percent:3d}% {elapsed_s:.0f} s"
+
+    def advance(self) -> None:
+        self.done += 1
+        if self.terminal:
+            self.out.write("\r" + self.line())
+            self._open = True
+        elif (tenth := self.done * 10 // self.total) != self._tenth:
+            self._tenth = tenth
+            self.out.write(self.line() + "\n")
+        self.out.flush()
+
+    def end_line(self) -> None:
+        """Ends the bar's line, so what is written next starts on its own."""
+        if self._open:
+            self.out.write("\n")
+            self._open = False
 
 
 def _bbox(text: str) -> Bounds:
@@ -167,12 +219,8 @@ def _zooms(text: str) -> range:
     return range(first, last + 1)
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(
-        prog="python -m tools.make_tiles",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of `skyhelm tiles`."""
     parser.add_argument("--url", required=True, help="XYZ tile template: {z}/{x}/{y}")
     parser.add_argument("--bbox", type=_bbox, required=True, help="west,south,east,north")
     parser.add_argument("--zoom", type=_zooms, required=True, help="e.g. 14-19")
@@ -181,20 +229,63 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--max-tiles", type=int, default=DEFAULT_MAX_TILES)
     parser.add_argument("--pause", type=float, default=0.05, help="seconds between tiles")
     parser.add_argument("--user-agent", default=USER_AGENT)
-    args = parser.parse_args(argv)
+
+
+def _fetch_failure(exc: httpx.HTTPError) -> str:
+    """One line for a fetch that failed: where, and what to do."""
+    try:
+        where = str(exc.request.url.copy_with(query=None))
+    except RuntimeError:  # no request attached
+        where = "the tile server"
+    if isinstance(exc, httpx.HTTPStatusError):
+        return f"{where} answered HTTP {exc.response.status_code}: check --url"
+    reason = str(exc) or type(exc).__name__
+    return (
+        f"cannot reach {where} ({reason}): no network? Make the archive on a machine that is "
+        "online and copy it over (README, Offline map)"
+    )
+
+
+def run(args: argparse.Namespace, err: TextIO | None = None) -> int:
+    """`skyhelm tiles`: 0 with the archive written; 1 with one line saying why not."""
+    err = err or sys.stderr
     coords = tiles_in(args.bbox, args.zoom)
     if len(coords) > args.max_tiles:
-        print(f"{len(coords)} tiles is more than --max-tiles {args.max_tiles}: a smaller box "
-              "or fewer zoom levels", file=sys.stderr)  # fmt: skip
+        print(f"skyhelm tiles: {len(coords)} tiles is more than --max-tiles {args.max_tiles}: "
+              "a smaller box or fewer zoom levels", file=err)  # fmt: skip
         return 2
-    print(f"fetching {len(coords)} tiles …", file=sys.stderr)
+    print(f"fetching {len(coords)} tiles from {args.url}", file=err)
+    progress = Progress(len(coords), err)
     headers = {"User-Agent": args.user_agent}
-    with httpx.Client(headers=headers, timeout=30.0, follow_redirects=True) as client:
-        tiles = list(fetch_tiles(client, args.url, coords, args.pause))
-    write_archive(args.out, tiles, ArchiveInfo(args.bbox, args.attribution))
-    print(f"{args.out}: {len(tiles)} tiles, zoom {args.zoom.start}-{args.zoom.stop - 1}",
-          file=sys.stderr)  # fmt: skip
+    try:
+        with httpx.Client(headers=headers, timeout=30.0, follow_redirects=True) as client:
+            tiles = list(fetch_tiles(client, args.url, coords, args.pause, progress.advance))
+        write_archive(args.out, tiles, ArchiveInfo(args.bbox, args.attribution))
+    except httpx.HTTPError as exc:
+        progress.end_line()
+        print(f"skyhelm tiles: {_fetch_failure(exc)}", file=err)
+        return 1
+    except (OSError, ValueError) as exc:
+        progress.end_line()
+        print(f"skyhelm tiles: cannot write {args.out}: {exc}", file=err)
+        return 1
+    except KeyboardInterrupt:
+        progress.end_line()
+        print("skyhelm tiles: interrupted, nothing written", file=err)
+        return 130
+    progress.end_line()
+    print(f"{args.out}: {len(tiles)} tiles, zoom {args.zoom.start}-{args.zoom.stop - 1}; "
+          f"serve it with: skyhelm serve --map-tiles {args.out}", file=err)  # fmt: skip
     return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="skyhelm tiles", description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )  # fmt: skip
+    add_arguments(parser)
+    return run(parser.parse_args(argv))
 
 
 if __name__ == "__main__":
