@@ -41,8 +41,14 @@ _MODE_NAMES = {nav_state: name for name, nav_state in NAV_STATES.items()}
 # (DESCEND reports as LAND). PX4 checks it for the mode flown only, so its report's can_arm
 # keeps these modes' bits while another mode is flown, though it would refuse to arm in them.
 MODES_PREVENTING_ARMING = frozenset({"RTL", "LAND", "PRECLAND", "FOLLOW_TARGET", "POSCTL_ORBIT"})
-# PX4's words for it (check_modes_not_suitable_for_arming)
+# with TERMINATION, which PX4 never leaves: the modes its check names
+_NOT_SUITABLE_MODES = tuple(
+    sorted(MODES_PREVENTING_ARMING | {"TERMINATION"}, key=lambda m: NAV_STATES[m])
+)
+# PX4's words for it, and its log level: v1.16 SITL reports it as an INFO that names every
+# one of those modes, and only while one of them is flown
 NOT_SUITABLE_FOR_ARMING = "Mode not suitable for arming"
+_NOT_SUITABLE_LEVEL = "INFO"
 
 
 def log_level_name(level: int) -> str:
@@ -154,19 +160,18 @@ def readiness(
     nav_state = NAV_STATES.get(mode)
     ready = ready_to_arm if nav_state is None else bool(report.can_arm >> nav_state & 1)
     # PX4 would refuse these whatever its report's bits say (it checks the flown mode only)
-    can_arm = tuple(m for m in mode_names(report.can_arm) if m not in MODES_PREVENTING_ARMING)
+    can_arm = tuple(m for m in mode_names(report.can_arm) if m not in _NOT_SUITABLE_MODES)
     switch_helps = arm_switches_to is not None and arm_switches_to in can_arm
     # the errors first: they are what keeps the vehicle on the ground
     ordered = sorted(report.checks, key=lambda c: c.log_level)
     others = [c.shown() for c in ordered if nav_state is None or not c.concerns(nav_state)]
     told = {m for c in report.checks if c.text == NOT_SUITABLE_FOR_ARMING
             for m in mode_names(c.mode_groups)}  # fmt: skip
-    refused = tuple(
-        m for m in sorted(MODES_PREVENTING_ARMING, key=NAV_STATES.__getitem__)
-        if m != mode and m not in told
-    )
-    if refused:
-        others.append(ArmingCheck(NOT_SUITABLE_FOR_ARMING, "ERROR", refused, None, "arming_check"))
+    refused = tuple(m for m in _NOT_SUITABLE_MODES if m not in told)
+    if refused:  # as PX4 would say it once in one of them
+        others.append(
+            ArmingCheck(NOT_SUITABLE_FOR_ARMING, _NOT_SUITABLE_LEVEL, refused, None, "arming_check")
+        )
     return ArmingChecksState(
         ready,
         mode,
