@@ -5,8 +5,8 @@
 import { Alerts, alertLog } from "./alerts.js";
 import { TelemetrySocket, onTokenRejected, reconnectDelayMs, request, token } from "./api.js";
 import {
-  brake, confirmThen, goByOffset, goTo, keyboard, panel, runCommand, showResult, showSetpointType,
-  startOffboard,
+  brake, confirmThen, followAgain, goByOffset, goTo, keyboard, runCommand, showResult,
+  showSetpointType, startOffboard,
 } from "./control.js";
 import {
   answerPrompt, clientLabel, clientName, inControl, onControlEvent, releaseControl, renderHolder,
@@ -356,7 +356,7 @@ function wire() {
     runCommand(`Mode ${mode}`, "mode", { mode }, e.target);
   });
   $("sp-type").addEventListener("change", (e) => showSetpointType(e.target.value));
-  $("sp-from-here").addEventListener("click", () => showSetpointType(panel.type));
+  $("sp-from-here").addEventListener("click", followAgain);
   $("btn-offboard-start").addEventListener("click", (e) => startOffboard(e.target));
   $("btn-brake").addEventListener("click", (e) => brake(e.target));
   $("btn-offboard-stop").addEventListener("click", (e) => runCommand("Stop offboard", "offboard_stop", { then_mode: "HOLD" }, e.target));

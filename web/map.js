@@ -5,7 +5,7 @@
 // the server's map_tile_url (GET /config) it shows those tiles instead.
 
 import { TelemetrySocket, request } from "./api.js";
-import { runCommand } from "./control.js";
+import { altitudeAllowed, runCommand } from "./control.js";
 import { inControl } from "./handover.js";
 import { page } from "./page.js";
 import { $, num } from "./ui.js";
@@ -432,6 +432,10 @@ export class VehicleMap {
     box.querySelector("#map-goto-cancel").addEventListener("click", () => this.map.closePopup(popup));
     const fly = async () => {
       const altM = parseFloat(alt.value);
+      if (Number.isFinite(altM) && !(await altitudeAllowed("Go to the map point", altM))) {
+        note.textContent = "cancelled: the altitude was not confirmed";
+        return;
+      }
       go.disabled = true;
       note.textContent = "sent, waiting for the vehicle…";
       const answer = await runCommand("Go to the map point", "goto", {
