@@ -424,7 +424,8 @@ export class VehicleMap {
     const note = box.querySelector("#map-goto-note");
     const allowed = inControl() && page.vehicleId !== null;
     go.disabled = !allowed;
-    note.textContent = allowed ? "the server's goto intent, checked against the envelope" : "take control to fly there";
+    go.setAttribute("aria-describedby", "map-goto-note");
+    note.textContent = allowed ? "the server's goto intent, checked against the envelope" : "Take control first to fly there";
     this.pick.setLatLng(target).addTo(this.map);
     const popup = L.popup({ className: "map-goto-popup", minWidth: 220, autoPanPadding: [20, 20] })
       .setLatLng(latlng).setContent(box).openOn(this.map);
