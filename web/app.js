@@ -179,7 +179,7 @@ function showVehicles(vehicles) {
   select.replaceChildren(...vehicles.map((v) => {
     const option = document.createElement("option");
     option.value = v.id;
-    option.textContent = `${v.id} · ${shortType(v.type)}${v.connected ? "" : " lost"}`;
+    option.textContent = `${v.id} · ${shortType(v.type)}`;
     option.title = `vehicle ${v.id}: ${v.type}${v.connected ? "" : " (lost)"}`;
     return option;
   }));

@@ -277,12 +277,12 @@ export function renderHolder(lease = page.state?.lease) {
   $("release").classList.toggle("hidden", !mine);
 }
 
-/** "pilot · Chrome (headless) tab 7f3a" -> "Chrome tab 7f3a": the browser and the tab. */
+/** "pilot · Chrome (headless) tab 7f3a" -> "Chrome 7f3a": the browser and the tab's id. */
 export function shortHolder(holder) {
   if (!holder) return "nobody";
   const client = holder.split(" · ").pop();
   const tab = /^(\S+).*\btab (\w+)$/.exec(client);
-  return tab ? `${tab[1]} tab ${tab[2]}` : client;
+  return tab ? `${tab[1]} ${tab[2]}` : client;
 }
 
 // The state names the holder; since when, and over which session, the control resource says.
