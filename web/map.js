@@ -425,7 +425,7 @@ export class VehicleMap {
     const allowed = inControl() && page.vehicleId !== null;
     go.disabled = !allowed;
     go.setAttribute("aria-describedby", "map-goto-note");
-    note.textContent = allowed ? "the server's goto intent, checked against the envelope" : "Take control first to fly there";
+    note.textContent = allowed ? "the server's goto intent, checked against the envelope" : "take control to fly there";
     this.pick.setLatLng(target).addTo(this.map);
     const popup = L.popup({ className: "map-goto-popup", minWidth: 220, autoPanPadding: [20, 20] })
       .setLatLng(latlng).setContent(box).openOn(this.map);
