@@ -151,6 +151,15 @@ def test_no_label_is_cut_and_every_greyed_out_control_says_why(
         take_control(page)
         problems += [f"in control: {p}" for p in _problems(page, page_scrolls)]
         assert not page.get_attribute("#btn-arm", "title")
+        # the amber badge's two lines: disarmed in OFFBOARD with no stream, Arm goes by HOLD
+        page.select_option("#mode-select", "OFFBOARD")
+        click_and_wait_result(page, "#btn-set-mode")
+        page.wait_for_function(
+            "document.getElementById('ready-to-fly').classList.contains('warn')", timeout=20_000
+        )
+        problems += [f"amber badge: {p}" for p in _problems(page, page_scrolls)]
+        page.select_option("#mode-select", "HOLD")
+        click_and_wait_result(page, "#btn-set-mode")
         # the ready popover and the words of the page
         page.click("#ready-to-fly")
         problems += [f"ready popover: {p}" for p in _problems(page, page_scrolls)]
