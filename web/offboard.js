@@ -161,7 +161,7 @@ export function flownText(setpoint, homeDownM = 0) {
   return [PANEL_LABELS[shown.type] || shown.type, ...parts].join(" · ");
 }
 
-/** Panel values that hold the vehicle where it is (for "Here" and for switching types). */
+/** Panel values that hold the vehicle where it is (what the fields follow, and a new type's). */
 export function valuesFromState(type, state) {
   const values = {};
   for (const field of SETPOINT_TYPES[type] || []) values[field.key] = field.value;
