@@ -199,7 +199,10 @@ export function nearAnEnd(field, [min, max], value) {
 // The fields that follow the vehicle (where it is, or the setpoint it flies) until the pilot
 // edits them.
 const FOLLOWED = new Set(["north_m", "east_m", "alt_m", "yaw_deg"]);
-const fmtSigned = (x) => (Math.abs(x) < 0.05 ? "0" : `${x > 0 ? "+" : "−"}${Math.round(Math.abs(x) * 10) / 10}`);
+// a move this small reads 0: the fields follow the vehicle to 0.1 m, and it wobbles a little
+const MOVE_DEAD_BAND_M = 0.3;
+const fmtSigned = (x, dead = MOVE_DEAD_BAND_M) => (Math.abs(x) < dead ? "0"
+  : `${x > 0 ? "+" : "−"}${Math.round(Math.abs(x) * 10) / 10}`);
 
 /** The move a position panel's values ask for, from where the vehicle is now: "north +10 m,
  * east 0 m, up 0 m" (and the yaw when it turns), or "" when it cannot be told. */
@@ -214,7 +217,7 @@ export function moveText(type, values, state) {
   const yaw = state.attitude?.yaw_deg;
   if (Number.isFinite(yaw) && Number.isFinite(values.yaw_deg)) {
     const turn = ((values.yaw_deg - yaw + 540) % 360) - 180;
-    if (Math.abs(turn) >= 1) parts.push(`yaw ${fmtSigned(turn)}°`);
+    if (Math.abs(turn) >= 1) parts.push(`yaw ${fmtSigned(turn, 0.5)}°`);
   }
   return parts.join(", ");
 }

@@ -78,6 +78,7 @@ def test_the_form_follows_the_vehicle_so_a_leg_north_keeps_the_altitude(
 
     wait_for("at 10 m north", arrived, 40.0, every_s=0.05)
     assert vehicle_state(api)["mode"] == "OFFBOARD"
+    print(f"leg north from {north_now:.1f} m: altitude {lowest:.2f}..{highest:.2f} m")  # with -s
     assert lowest >= TAKEOFF_M - ALTITUDE_TOLERANCE_M, f"sank to {lowest:.2f} m"
     assert highest <= TAKEOFF_M + ALTITUDE_TOLERANCE_M, f"rose to {highest:.2f} m"
 
