@@ -5,8 +5,8 @@
 import { Alerts, alertLog } from "./alerts.js";
 import { TelemetrySocket, onTokenRejected, reconnectDelayMs, request, token } from "./api.js";
 import {
-  brake, confirmThen, goByOffset, goTo, keyboard, panel, runCommand, showResult, showSetpointType,
-  startOffboard,
+  brake, confirmThen, followAgain, goByOffset, goTo, keyboard, runCommand, showResult,
+  showSetpointType, startOffboard,
 } from "./control.js";
 import {
   answerPrompt, clientLabel, clientName, inControl, onControlEvent, releaseControl, renderHolder,
@@ -177,9 +177,11 @@ function showVehicles(vehicles) {
   select.replaceChildren(...vehicles.map((v) => {
     const option = document.createElement("option");
     option.value = v.id;
-    option.textContent = `${v.id} · ${v.type}${v.connected ? "" : " (lost)"}`;
+    option.textContent = `${v.id} · ${shortType(v.type)}`;
+    option.title = `vehicle ${v.id}: ${v.type}${v.connected ? "" : " (lost)"}`;
     return option;
   }));
+  select.title = select.selectedOptions[0]?.title || "";
   if (page.fleetVehicle) { // another edge's vehicle is shown: the local list stays a list
     select.value = "";
     return;
@@ -192,8 +194,22 @@ function showVehicles(vehicles) {
     return;
   }
   select.value = chosen.id;
+  select.title = select.selectedOptions[0]?.title || "";
   page.vehicleType = chosen.type;
   if (!keep) selectVehicle(chosen.id);
+}
+
+// The vehicle menu's short names (the whole MAV_TYPE in its tooltip), so "1 · quad" fits the
+// top bar's slot at 1024 px.
+const SHORT_TYPES = {
+  QUADROTOR: "quad", HEXAROTOR: "hexa", OCTOROTOR: "octo", TRICOPTER: "tri", HELICOPTER: "heli",
+  FIXED_WING: "plane", GROUND_ROVER: "rover", SURFACE_BOAT: "boat", SUBMARINE: "sub",
+};
+
+function shortType(type) {
+  const name = String(type || "").toUpperCase();
+  if (name.startsWith("VTOL")) return "VTOL";
+  return SHORT_TYPES[name] || name.toLowerCase().slice(0, 8);
 }
 
 function watchTelemetry(vehicleId) {
@@ -278,13 +294,18 @@ function loadParams() {
 // ---- wiring -------------------------------------------------------------------------------
 
 function wire() {
-  $("vehicle-select").addEventListener("change", (e) => selectVehicle(e.target.value));
+  $("vehicle-select").addEventListener("change", (e) => {
+    e.target.title = e.target.selectedOptions[0]?.title || "";
+    selectVehicle(e.target.value);
+  });
   $("take-control").addEventListener("click", takeControlClicked);
   confirmThen($("force-control"), () => takeControl("force"));
   $("release").addEventListener("click", releaseControl);
   $("grant-control").addEventListener("click", () => answerPrompt(true));
   $("deny-control").addEventListener("click", () => answerPrompt(false));
   $("client-label").value = clientLabel();
+  sizeLabelInput();
+  $("client-label").addEventListener("input", sizeLabelInput);
   setText("tab-id", `tab ${tabId()}`);
   $("client-label").title = `this tab is "${clientName()}" to the others`;
   $("client-label").addEventListener("change", (e) => setClientLabel(e.target.value));
@@ -322,7 +343,7 @@ function wire() {
     runCommand(`Mode ${mode}`, "mode", { mode }, e.target);
   });
   $("sp-type").addEventListener("change", (e) => showSetpointType(e.target.value));
-  $("sp-from-here").addEventListener("click", () => showSetpointType(panel.type));
+  $("sp-from-here").addEventListener("click", followAgain);
   $("btn-offboard-start").addEventListener("click", (e) => startOffboard(e.target));
   $("btn-brake").addEventListener("click", (e) => brake(e.target));
   $("btn-offboard-stop").addEventListener("click", (e) => runCommand("Stop offboard", "offboard_stop", { then_mode: "HOLD" }, e.target));
@@ -341,6 +362,19 @@ function wire() {
   $("params-refresh").addEventListener("click", loadParams);
   $("scene-enable").addEventListener("change", (e) => showScene(e.target.checked));
   window.addEventListener("pagehide", () => page.control?.close());
+}
+
+/** This tab's name box as wide as the name (so "Chrome (headless)" is never cut). */
+function sizeLabelInput() {
+  const input = $("client-label");
+  const cs = getComputedStyle(input);
+  sizeLabelInput.context ??= document.createElement("canvas").getContext("2d");
+  const context = sizeLabelInput.context;
+  context.font = cs.font;
+  const edges = ["paddingLeft", "paddingRight", "borderLeftWidth", "borderRightWidth"]
+    .reduce((sum, key) => sum + (parseFloat(cs[key]) || 0), 0);
+  const text = Math.ceil(context.measureText(input.value || "tab").width);
+  input.style.width = `${Math.min(220, Math.max(48, text + edges + 3))}px`;
 }
 
 function drawLoop() {

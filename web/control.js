@@ -2,9 +2,13 @@
 // intents the server flies (keyboard velocity, brake, go by an offset, go to a point). The
 // page decides nothing about how they are flown: it sends them and shows the answers.
 
+import { AltitudeGuard, altitudeAboveHomeM } from "./altitude-guard.js";
 import { describeError } from "./api.js";
+import { confirmAction } from "./confirm.js";
 import { inControl, onControl } from "./handover.js";
-import { KeyboardPilot, SetpointPanel, panelForSetpoint, panelMessage, valuesFromState } from "./offboard.js";
+import {
+  KeyboardPilot, SetpointPanel, moveText, panelForSetpoint, panelMessage, valuesFromState,
+} from "./offboard.js";
 import { page } from "./page.js";
 import { $, log, num, setText } from "./ui.js";
 
@@ -72,10 +76,17 @@ export function confirmThen(button, action) {
 
 // ---- offboard panel -----------------------------------------------------------------------
 
-export const panel = new SetpointPanel($("sp-fields"), () => scheduleSetpoint());
+export const panel = new SetpointPanel($("sp-fields"), () => {
+  scheduleSetpoint();
+  showMove(page.state);
+}, () => askHeld());
+// every target that changes an airborne vehicle's altitude much is asked about once
+export const altitudeGuard = new AltitudeGuard(confirmAction);
 let sendTimer = null;
 let lastSentAt = 0;
 let lastSetpointError = "";
+// the panel's values wait for the pilot's answer to the altitude question before being sent
+let held = false;
 
 const homeDownM = () => page.state?.home?.down_m ?? 0;
 
@@ -83,8 +94,35 @@ export function currentMessage() {
   return panelMessage(panel.type, panel.values, homeDownM());
 }
 
+/** The altitude above home the panel asks for (position panel only), or NaN. */
+function panelAltitudeM() {
+  return panel.type === "position" ? panel.values.alt_m : NaN;
+}
+
+/** An edit is done: a held altitude is asked about now; confirmed, it is sent, otherwise
+ * the altitude follows the vehicle again. */
+async function askHeld() {
+  if (!held || !inControl()) return;
+  const ok = await altitudeGuard.allows(page.state, panelAltitudeM());
+  if (!held) return;
+  held = false;
+  if (!ok) {
+    panel.followAgain(["alt_m"]);
+    followFlown(page.state);
+    log("NOTICE", "altitude change cancelled: the altitude follows the vehicle again");
+  }
+  scheduleSetpoint();
+}
+
 function scheduleSetpoint() {
   if (!inControl()) return;
+  const question = altitudeGuard.question(page.state, panelAltitudeM());
+  if (question) {
+    if (!held) showLine(`${question.title} — asked when you leave the field or let go of the slider`, "pending");
+    held = true;
+    return;
+  }
+  held = false;
   const wait = SETPOINT_SEND_INTERVAL_MS - (performance.now() - lastSentAt);
   if (wait <= 0) sendPanel();
   else if (!sendTimer) sendTimer = setTimeout(() => { sendTimer = null; sendPanel(); }, wait);
@@ -116,7 +154,16 @@ function showRefusal(answer, what) {
 
 export function showSetpointType(type) {
   $("sp-type").value = type;
+  held = false;
   panel.show(type, valuesFromState(type, page.state));
+  followFlown(page.state);
+}
+
+/** The fields follow the vehicle again, all of them (the Follow button). */
+export function followAgain() {
+  held = false;
+  panel.followAgain();
+  followFlown(page.state);
 }
 
 /** Shows a setpoint the vehicle flies (the lease's, or an answer's) in the panel. */
@@ -132,14 +179,36 @@ function showFlown(setpoint) {
   return true;
 }
 
-/** While observing, the panel shows the setpoint the vehicle flies (from the state), not the
- * form's defaults; the pilot's own panel is left to the pilot. */
+/** The panel follows the vehicle: while observing, the setpoint it flies (from the state),
+ * not the form's defaults; in control, the fields the pilot has not edited follow the
+ * setpoint flown when it is of the panel's kind, else where the vehicle is. The line under
+ * it says the move the panel asks for, from where the vehicle is now. */
 export function followFlown(state) {
-  if (!inControl() && state.stream?.active) showFlown(state.setpoint);
+  if (!state) return;
+  const streaming = state.stream?.active;
+  if (!inControl() && streaming && showFlown(state.setpoint)) {
+    showMove(state);
+    return;
+  }
+  const flown = streaming ? panelForSetpoint(state.setpoint, homeDownM()) : null;
+  panel.follow(flown && flown.type === panel.type ? flown.values : valuesFromState(panel.type, state));
+  showMove(state);
+}
+
+function showMove(state) {
+  const text = moveText(panel.type, panel.values, state);
+  setText("sp-move-text", text || "–");
+  const edited = panel.anyEdited();
+  setText("sp-follow", edited ? "edited" : "following the vehicle", edited ? "warn" : "");
 }
 
 /** Starts OFFBOARD with the panel's setpoint (an intent panel sends its intent first). */
 export async function startOffboard(button) {
+  if (!(await altitudeGuard.allows(page.state, panelAltitudeM()))) {
+    showLine("Start offboard: cancelled", "bad");
+    return;
+  }
+  held = false;
   const message = currentMessage();
   if (message.intent) {
     const answer = await sendPanel(message);
@@ -174,6 +243,8 @@ onControl({
   gained: (lease) => {
     clearTimeout(sendTimer);
     sendTimer = null;
+    held = false;
+    altitudeGuard.forget();
     const flying = lease.setpoint ?? (page.state?.stream?.active ? page.state.setpoint : null);
     if (!showFlown(flying)) panel.show(panel.type, valuesFromState(panel.type, page.state));
   },
@@ -192,13 +263,25 @@ function repositionAltitude() {
   return Number.isFinite(alt) ? alt : null;
 }
 
-export function goTo(latDeg, lonDeg, label, button) {
-  return runCommand(label, "goto", { lat_deg: latDeg, lon_deg: lonDeg, alt_rel_m: repositionAltitude() }, button);
+/** Asks first when a target altitude above home needs it (altitude-guard.js); false when
+ * the pilot did not confirm. */
+export async function altitudeAllowed(label, targetM) {
+  const ok = await altitudeGuard.allows(page.state, targetM);
+  if (!ok) showLine(`${label}: cancelled`, "bad");
+  return ok;
 }
 
-export function goByOffset(button) {
+export async function goTo(latDeg, lonDeg, label, button) {
+  const alt = repositionAltitude();
+  if (alt !== null && !(await altitudeAllowed(label, alt))) return null;
+  return runCommand(label, "goto", { lat_deg: latDeg, lon_deg: lonDeg, alt_rel_m: alt }, button);
+}
+
+export async function goByOffset(button) {
   const north = parseFloat($("repo-north").value) || 0;
   const east = parseFloat($("repo-east").value) || 0;
   const up = parseFloat($("repo-up").value) || 0;
-  return runCommand(`Go ${north} m N ${east} m E ${up} m up`, "offset", { north_m: north, east_m: east, up_m: up }, button);
+  const label = `Go ${north} m N ${east} m E ${up} m up`;
+  if (!(await altitudeAllowed(label, altitudeAboveHomeM(page.state) + up))) return null;
+  return runCommand(label, "offset", { north_m: north, east_m: east, up_m: up }, button);
 }

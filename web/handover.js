@@ -154,6 +154,7 @@ function closed(session, info) {
 /** Telemetry from the current vehicle: the pilot who wanted control and was told the
  * vehicle was not there takes it now. */
 export function vehicleHeard() {
+  explainDisabled();
   if (retakeWhenHeard && page.wantControl && !page.control && page.connected) {
     retakeAttempt = 0;
     takeControl("take");
@@ -250,18 +251,38 @@ export function renderHolder(lease = page.state?.lease) {
     if (holder && !Number.isFinite(lease?.since_s)) readHolderSince(holder);
   }
   const name = mine ? `you (${page.control.holder || holder || clientName()})` : holder || "nobody";
-  setText("holder", name, mine ? "mine" : holder ? "other" : "");
-  const since = holder || mine ? `since ${new Date(shownHolder.since).toTimeString().slice(0, 8)}` : "";
+  // the slot shows a short name ("you", "Firefox tab 01ab"); its tooltip the whole one
+  setText("holder", mine ? "you" : shortHolder(holder), mine ? "mine" : holder ? "other" : "");
+  if ($("holder").title !== name) $("holder").title = name;
+  const time = new Date(shownHolder.since).toTimeString();
+  const since = holder || mine ? `since ${time.slice(0, 8)}` : "";
   const session = lease?.session || shownHolder.session;
-  setText("holder-since", `${since}${holder && session ? ` · ${session}` : ""}`);
+  setText("holder-since", holder || mine ? `· ${time.slice(0, 5)}` : "");
+  const whole = `${since}${holder && session ? ` · ${session}` : ""}`;
+  $("holder-since").title = whole;
+  $("holder").parentElement.title = `who controls the vehicle: ${name}${whole ? ` ${whole}` : ""}`;
   const otherHolds = Boolean(holder) && !mine;
   const asking = page.control && !page.control.open;
   $("take-control").classList.toggle("hidden", mine || page.readOnly);
   $("take-control").disabled = Boolean(asking) || !page.connected;
   setText("take-control", otherHolds ? "Ask for control" : "Take control");
+  const takeTitle = !page.connected ? "the server is not connected"
+    : asking ? `${otherHolds ? "asking the holder" : "taking control"}: waiting for the answer`
+      : otherHolds ? "ask the holder to hand control over" : "take control of the vehicle (the control lease)";
+  if ($("take-control").title !== takeTitle) $("take-control").title = takeTitle;
   $("force-control").classList.toggle("hidden", !otherHolds || page.readOnly);
   $("force-control").disabled = !page.connected;
+  $("force-control").title = page.connected
+    ? "take control at once, without asking the holder" : "the server is not connected";
   $("release").classList.toggle("hidden", !mine);
+}
+
+/** "pilot · Chrome (headless) tab 7f3a" -> "Chrome 7f3a": the browser and the tab's id. */
+export function shortHolder(holder) {
+  if (!holder) return "nobody";
+  const client = holder.split(" · ").pop();
+  const tab = /^(\S+).*\btab (\w+)$/.exec(client);
+  return tab ? `${tab[1]} ${tab[2]}` : client;
 }
 
 // The state names the holder; since when, and over which session, the control resource says.
@@ -277,10 +298,36 @@ async function readHolderSince(holder) {
   }
 }
 
+/** Why the flying controls are greyed out now, in a pilot's words ("" when they are not). */
+export function whyNotPilot() {
+  if (inControl() && page.connected) return "";
+  if (page.rejected) return "this link's token was rejected";
+  if (page.readOnly) return "a replay of a recording: observe only";
+  if (!page.connected) return "the server is not connected";
+  if (page.control && !page.control.open) return "taking control: waiting for the server's answer";
+  if (page.vehicleId === null || !page.state) return "vehicle not heard yet";
+  return "Take control first";
+}
+
+let shownReason = null;
+
+/** Every greyed-out control says why in its tooltip (its own tooltip after the reason). */
+export function explainDisabled(force = false) {
+  const reason = whyNotPilot();
+  if (reason === shownReason && !force) return;
+  shownReason = reason;
+  for (const el of document.querySelectorAll(".ctl")) {
+    if (el.dataset.title === undefined) el.dataset.title = el.title || "";
+    const own = el.dataset.title;
+    el.title = el.disabled && reason ? (own ? `${reason} — ${own}` : reason) : own;
+  }
+}
+
 export function updateControls() {
   const pilot = inControl() && page.connected;
   document.body.classList.toggle("observing", !pilot);
   for (const el of document.querySelectorAll(".ctl")) el.disabled = !pilot;
+  explainDisabled(true);
   renderHolder();
   hooks.onChange(pilot);
 }

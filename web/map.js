@@ -5,7 +5,7 @@
 // the server's map_tile_url (GET /config) it shows those tiles instead.
 
 import { TelemetrySocket, request } from "./api.js";
-import { runCommand } from "./control.js";
+import { altitudeAllowed, runCommand } from "./control.js";
 import { inControl } from "./handover.js";
 import { page } from "./page.js";
 import { $, num } from "./ui.js";
@@ -424,6 +424,7 @@ export class VehicleMap {
     const note = box.querySelector("#map-goto-note");
     const allowed = inControl() && page.vehicleId !== null;
     go.disabled = !allowed;
+    go.setAttribute("aria-describedby", "map-goto-note");
     note.textContent = allowed ? "the server's goto intent, checked against the envelope" : "take control to fly there";
     this.pick.setLatLng(target).addTo(this.map);
     const popup = L.popup({ className: "map-goto-popup", minWidth: 220, autoPanPadding: [20, 20] })
@@ -432,6 +433,10 @@ export class VehicleMap {
     box.querySelector("#map-goto-cancel").addEventListener("click", () => this.map.closePopup(popup));
     const fly = async () => {
       const altM = parseFloat(alt.value);
+      if (Number.isFinite(altM) && !(await altitudeAllowed("Go to the map point", altM))) {
+        note.textContent = "cancelled: the altitude was not confirmed";
+        return;
+      }
       go.disabled = true;
       note.textContent = "sent, waiting for the vehicle…";
       const answer = await runCommand("Go to the map point", "goto", {

@@ -13,6 +13,7 @@ const FIXED_WING = [
 ];
 const VTOL = [...MULTICOPTER, "VTOL_TAKEOFF"];
 const ROVER = ["MANUAL", "STABILIZED", "ACRO", "POSCTL", "OFFBOARD", "HOLD", "RTL", "MISSION"];
+const MISSION_NOTE = "needs a mission uploaded by another tool (SkyHelm plans none)";
 // How long the menu leaves the pilot's choice alone before following the vehicle again.
 const CHOOSING_MS = 8000;
 
@@ -58,11 +59,19 @@ export class ModeMenu {
   follow(vehicleType, mode) {
     if (vehicleType !== this.type) {
       this.type = vehicleType;
-      this.select.replaceChildren(...modesFor(vehicleType, this.apiModes).map((m) => {
-        const option = document.createElement("option");
-        option.value = option.textContent = m;
-        return option;
-      }));
+      const option = (m) => {
+        const el = document.createElement("option");
+        el.value = el.textContent = m;
+        return el;
+      };
+      const modes = modesFor(vehicleType, this.apiModes);
+      // MISSION flies a mission uploaded by another tool: said so where it is offered
+      const mission = modes.filter((m) => m === "MISSION");
+      const group = document.createElement("optgroup");
+      group.label = MISSION_NOTE;
+      group.append(...mission.map(option));
+      this.select.replaceChildren(...modes.filter((m) => m !== "MISSION").map(option),
+        ...(mission.length ? [group] : []));
       this.choseAt = -Infinity;
     }
     const choosing = document.activeElement === this.select || performance.now() - this.choseAt < CHOOSING_MS;

@@ -161,7 +161,7 @@ export function flownText(setpoint, homeDownM = 0) {
   return [PANEL_LABELS[shown.type] || shown.type, ...parts].join(" · ");
 }
 
-/** Panel values that hold the vehicle where it is (for "Here" and for switching types). */
+/** Panel values that hold the vehicle where it is (what the fields follow, and a new type's). */
 export function valuesFromState(type, state) {
   const values = {};
   for (const field of SETPOINT_TYPES[type] || []) values[field.key] = field.value;
@@ -196,15 +196,47 @@ export function nearAnEnd(field, [min, max], value) {
   return (value < min + edge && min > field.min) || (value > max - edge && max < field.max);
 }
 
-/** Builds the fields of the current type; calls onChange(values) as sliders move. */
+// The fields that follow the vehicle (where it is, or the setpoint it flies) until the pilot
+// edits them.
+const FOLLOWED = new Set(["north_m", "east_m", "alt_m", "yaw_deg"]);
+// a move this small reads 0: the fields follow the vehicle to 0.1 m, and it wobbles a little
+const MOVE_DEAD_BAND_M = 0.3;
+const fmtSigned = (x, dead = MOVE_DEAD_BAND_M) => (Math.abs(x) < dead ? "0"
+  : `${x > 0 ? "+" : "−"}${Math.round(Math.abs(x) * 10) / 10}`);
+
+/** The move a position panel's values ask for, from where the vehicle is now: "north +10 m,
+ * east 0 m, up 0 m" (and the yaw when it turns), or "" when it cannot be told. */
+export function moveText(type, values, state) {
+  if (type !== "position" || !state?.position_ned) return "";
+  const p = state.position_ned;
+  const homeDown = state.home ? state.home.down_m : NaN;
+  const parts = [
+    `north ${fmtSigned(values.north_m - p.north_m)} m`, `east ${fmtSigned(values.east_m - p.east_m)} m`,
+  ];
+  if (Number.isFinite(homeDown)) parts.push(`up ${fmtSigned(values.alt_m - (homeDown - p.down_m))} m`);
+  const yaw = state.attitude?.yaw_deg;
+  if (Number.isFinite(yaw) && Number.isFinite(values.yaw_deg)) {
+    const turn = ((values.yaw_deg - yaw + 540) % 360) - 180;
+    if (Math.abs(turn) >= 1) parts.push(`yaw ${fmtSigned(turn, 0.5)}°`);
+  }
+  return parts.join(", ");
+}
+
+/** Builds the fields of the current type; calls onChange(values) as sliders move, and
+ * onCommit() when an edit is done (a number's Enter or leaving it, a slider let go). The
+ * fields of FOLLOWED follow the vehicle (follow()) until the pilot edits one: each says
+ * "following" or "edited", and followAgain() takes the edits back. */
 export class SetpointPanel {
-  constructor(container, onChange) {
+  constructor(container, onChange, onCommit = () => {}) {
     this.container = container;
     this.onChange = onChange;
+    this.onCommit = onCommit;
     this.type = "position";
     this.values = {};
     this.inputs = {};
     this.fields = {};
+    this.tags = {};
+    this.edited = new Set();
     this.loaded = false;
     this.loading = null;
     this.load();
@@ -228,6 +260,8 @@ export class SetpointPanel {
     this.values = { ...values };
     this.inputs = {};
     this.fields = {};
+    this.tags = {};
+    this.edited.clear();
     this.container.replaceChildren();
     if (!this.loaded) {
       this.load();
@@ -239,6 +273,13 @@ export class SetpointPanel {
       row.className = "sp-field";
       const label = document.createElement("label");
       label.textContent = field.label;
+      if (FOLLOWED.has(field.key)) {
+        const tag = document.createElement("small");
+        tag.className = "sp-tag";
+        tag.id = `sp-${field.key}-tag`;
+        label.append(" ", tag);
+        this.tags[field.key] = tag;
+      }
       const slider = this.input(
         "range", field, `sp-${field.key}-slider`, sliderRange(field, this.values[field.key]),
       );
@@ -253,21 +294,63 @@ export class SetpointPanel {
         if (!Number.isFinite(value)) return;
         other.value = value;
         this.values[field.key] = value;
+        this.markEdited(field.key, true);
         this.onChange(this.values);
       };
       // Re-centred once a drag ends (moving the range under a held thumb would make it jump),
       // or at once for a typed value.
       slider.addEventListener("input", () => sync(slider, number));
-      slider.addEventListener("change", () => this.recentre(field, false));
+      slider.addEventListener("change", () => {
+        this.recentre(field, false);
+        this.onCommit(field.key);
+      });
       number.addEventListener("input", () => {
         this.recentre(field, false);
         sync(number, slider);
       });
+      number.addEventListener("change", () => this.onCommit(field.key));
       this.fields[field.key] = field;
       this.inputs[field.key] = [slider, number];
       row.append(label, slider, number, unit);
       this.container.append(row);
+      this.markEdited(field.key, false);
     }
+  }
+
+  /** A field edited by the pilot (it stops following the vehicle), or following again. */
+  markEdited(key, edited) {
+    if (edited) this.edited.add(key);
+    else this.edited.delete(key);
+    const tag = this.tags[key];
+    if (!tag) return;
+    const text = edited ? "edited" : "following";
+    if (tag.textContent !== text) {
+      tag.textContent = text;
+      tag.classList.toggle("edited", edited);
+      tag.title = edited
+        ? "you set this value: it no longer follows the vehicle (Follow takes it back)"
+        : "follows the vehicle (where it is, or the setpoint it flies) until you edit it";
+    }
+  }
+
+  /** Whether any followed field was edited. */
+  anyEdited() {
+    return [...this.edited].some((key) => FOLLOWED.has(key));
+  }
+
+  /** The values of the vehicle for the fields the pilot has not edited. */
+  follow(values) {
+    const changed = {};
+    for (const [key, value] of Object.entries(values)) {
+      if (this.edited.has(key) || !(key in this.inputs) || !Number.isFinite(value)) continue;
+      if (Math.abs((this.values[key] ?? NaN) - value) >= 0.05 || !Number.isFinite(this.values[key])) changed[key] = value;
+    }
+    if (Object.keys(changed).length) this.set(changed);
+  }
+
+  /** Every field (or those of `keys`) follows the vehicle again. */
+  followAgain(keys = [...this.edited]) {
+    for (const key of keys) this.markEdited(key, false);
   }
 
   input(kind, field, id, range) {
@@ -304,12 +387,14 @@ export class SetpointPanel {
     slider.value = value;
   }
 
-  /** Takes values from the vehicle or the setpoint it flies; the windows centre on them. */
+  /** Takes values from the vehicle or the setpoint it flies (the fields follow it again);
+   * the windows centre on them. */
   set(values) {
     Object.assign(this.values, values);
     for (const [key, value] of Object.entries(values)) {
       const [slider, number] = this.inputs[key] || [];
       if (!slider) continue;
+      this.markEdited(key, false);
       number.value = value;
       this.recentre(this.fields[key], true);
       slider.value = value;

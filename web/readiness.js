@@ -7,12 +7,31 @@ import { $ } from "./ui.js";
 
 const SEVERITY_CLASS = { EMERGENCY: "bad", ALERT: "bad", CRITICAL: "bad", ERROR: "bad", WARNING: "warn" };
 
-/** The element's text and badge class for a state. */
+const MODE_WORDS = { HOLD: "Hold" };
+const modeWord = (mode) => MODE_WORDS[mode] || mode;
+
+/** The element's text, its second line (short, and whole for wide screens) and its badge
+ * class for a state, from the server's verdict: "ready" (arm, takeoff and an offboard start
+ * would be taken), "arm_switches_mode" (only the flown mode's own checks fail: SkyHelm's Arm
+ * switches to a mode PX4 arms in first), "not_ready" (PX4's reasons, or no home or position
+ * yet). */
 export function readinessLabel(state) {
   const checks = state?.arming_checks;
-  if (state?.armed) return ["Armed", ""];
-  if (!checks || checks.ready === null || checks.ready === undefined) return ["Ready ?", ""];
-  return checks.ready ? ["Ready to fly", "ok"] : ["Not ready", "bad"];
+  if (state?.armed) return ["Armed", "", ""];
+  const verdict = checks?.verdict ?? (checks?.ready === true ? "ready" : checks?.ready === false ? "not_ready" : null);
+  if (!verdict) return ["Ready ?", "", ""];
+  if (verdict === "ready") return ["Ready to fly", "", "ok"];
+  if (verdict === "arm_switches_mode") {
+    const to = modeWord(checks.arm_switches_to || "HOLD");
+    return ["Ready", [`Arm → ${to} first`, `Arm switches to ${to} first`], "warn"];
+  }
+  return ["Not ready", "", "bad"];
+}
+
+/** The badge's words for a reader and a tooltip: "Ready — Arm switches to Hold first". */
+export function readinessWords(state) {
+  const [text, sub] = readinessLabel(state);
+  return sub ? `${text} — ${sub[1]}` : text;
 }
 
 /** The checks of a report that concern `mode` (the flown mode's are `reasons`). */
@@ -35,6 +54,13 @@ function item(check, withModes) {
   small.textContent = detail.join(" · ");
   li.append(small);
   return li;
+}
+
+function hint(text) {
+  const p = document.createElement("p");
+  p.className = "hint";
+  p.textContent = text;
+  return p;
 }
 
 function section(title, checks, withModes, empty) {
@@ -71,15 +97,36 @@ export class Readiness {
 
   show(state) {
     this.state = state;
-    const [text, cls] = readinessLabel(state);
-    if (this.button.textContent !== text) this.button.textContent = text;
-    this.button.classList.remove("ok", "bad");
+    const [text, sub, cls] = readinessLabel(state);
+    const words = readinessWords(state);
+    if (this.button.dataset.words !== words) {
+      this.button.dataset.words = words;
+      if (sub) {
+        const main = document.createElement("span");
+        main.className = "ready-main";
+        main.textContent = text;
+        const short = document.createElement("small");
+        short.className = "ready-sub short";
+        short.textContent = sub[0];
+        const long = document.createElement("small");
+        long.className = "ready-sub long";
+        long.textContent = sub[1];
+        this.button.replaceChildren(main, short, long);
+      } else {
+        this.button.textContent = text;
+      }
+    }
+    this.button.classList.remove("ok", "bad", "warn");
     if (cls) this.button.classList.add(cls);
     const checks = state.arming_checks;
     const count = checks ? checks.reasons.filter((c) => SEVERITY_CLASS[c.severity] === "bad").length : 0;
-    this.button.title = checks?.ready === false && count
-      ? `${count} failing check${count > 1 ? "s" : ""} in ${checks.mode}: click for PX4's reasons`
-      : "PX4's arming checks: click for details";
+    const waiting = checks?.waiting_for?.length ? ` · waiting for ${checks.waiting_for.join(" and ")}` : "";
+    this.button.title = checks?.verdict === "arm_switches_mode"
+      ? `${words}: PX4 will not arm in ${checks.mode}, it would in ${checks.arm_switches_to} — click for PX4's reasons`
+      : checks?.ready === false && count
+        ? `${count} failing check${count > 1 ? "s" : ""} in ${checks.mode}${waiting}: click for PX4's reasons`
+        : waiting ? `Not ready${waiting}: click for details` : "PX4's arming checks: click for details";
+    this.button.setAttribute("aria-label", words);
     if (!this.popover.classList.contains("hidden")) this.renderPopover();
   }
 
@@ -100,6 +147,12 @@ export class Readiness {
     } else {
       const verdict = checks.ready === null ? "not told" : checks.ready ? "can arm" : "cannot arm";
       parts.push(section(`In ${checks.mode} (flown): ${verdict}`, checks.reasons, false, "No check fails."));
+      if (checks.verdict === "arm_switches_mode") {
+        parts.push(hint(`SkyHelm's Arm (and Takeoff) switch to ${checks.arm_switches_to} first, where PX4 would arm.`));
+      }
+      if (checks.waiting_for?.length) {
+        parts.push(hint(`Not ready to fly until the vehicle reports its ${checks.waiting_for.join(" and ")}: takeoff and offboard need them.`));
+      }
       const picked = this.modeSelect.value;
       if (picked && picked !== checks.mode && checks.source === "events") {
         const can = checks.can_arm_modes.includes(picked) ? "can arm" : "cannot arm";

@@ -14,7 +14,7 @@ const LOOK_EVERY_MS = 500;
 const LOOK_FOR_MS = 60000;
 // viser's titles (viser/client/src/BrowserWarning.tsx) and what the bar says instead
 const NOTICES = [
-  { title: /software webgl/i, text: "3D: software rendering (no GPU), costs CPU" },
+  { title: /software webgl/i, text: "3D: no GPU, costs CPU" },
   { title: /webgl unavailable/i, text: "3D: WebGL unavailable" },
 ];
 

@@ -30,6 +30,9 @@
  * @property {Array<string>} can_arm_modes the modes PX4 would arm in now
  * @property {Array<ArmingCheckOut>} reasons the failing checks (and warnings) that concern `mode`, errors first
  * @property {Array<ArmingCheckOut>} other_reasons the checks that concern only other modes
+ * @property {"ready"|"arm_switches_mode"|"not_ready"|null} [verdict] ready: arm, takeoff and an offboard start would be taken; arm_switches_mode: PX4 refuses `mode` for its own checks only and SkyHelm's arm switches to `arm_switches_to` first, where PX4 would arm; not_ready: see `reasons` and `waiting_for` (null: not told yet)
+ * @property {string|null} [arm_switches_to] the mode SkyHelm's arm switches to before arming (null: arms in `mode`)
+ * @property {Array<string>} [waiting_for] what a takeoff or an offboard start still needs (home position, position estimate)
  */
 
 /**

@@ -33,6 +33,7 @@ from server.link.core.requests import Requester
 from server.link.core.state import VehicleState
 from server.link.core.vehicle_core import Sender, VehicleCore
 from server.link.plugins.action import Action
+from server.link.plugins.arming_modes import mode_to_arm_in
 from server.link.plugins.manual_control import ManualControl
 from server.link.plugins.mavlink_values import enum_name
 from server.link.plugins.offboard import Offboard
@@ -143,6 +144,16 @@ class Vehicle(VehicleOperations):
         from the ages and the stream figures, which move with the clock)."""
         return self.core.hub.version
 
+    def _waiting_for(self) -> tuple[str, ...]:
+        """What a takeoff (home) and an offboard start (a position) still need."""
+        t = self.telemetry
+        missing = []
+        if t.home is None:
+            missing.append("home position")
+        if t.position_ned is None or t.global_position is None:
+            missing.append("position estimate")
+        return tuple(missing)
+
     def snapshot(self) -> VehicleState:
         core, t = self.core, self.telemetry
         setpoint = self.offboard.setpoint
@@ -165,5 +176,7 @@ class Vehicle(VehicleOperations):
             arming_checks=readiness(
                 self.px4_events.checks.report, reported["mode"], t.ready_to_arm,
                 t.sensors_unhealthy,
+                arm_switches_to=mode_to_arm_in(reported["mode"], self.offboard.streamer.active),
+                waiting_for=self._waiting_for(),
             ),
         )

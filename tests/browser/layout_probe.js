@@ -52,6 +52,46 @@
     }
     if (el.tagName === "BUTTON" && el.scrollWidth > el.clientWidth + EPS) problems.push(`${name(el)} label cut`);
   }
+  // a label cut: text in a box that hides what overflows it (…), wider than the box; a
+  // select by its shown option, an input by its value
+  const measure = document.createElement("span");
+  measure.style.cssText = "position:absolute;visibility:hidden;white-space:pre;left:-9999px;top:0";
+  document.body.append(measure);
+  const textWidth = (text, cs) => {
+    measure.style.font = cs.font;
+    measure.style.letterSpacing = cs.letterSpacing;
+    measure.style.textTransform = cs.textTransform;
+    measure.textContent = text;
+    return measure.getBoundingClientRect().width;
+  };
+  const ownText = (el) => [...el.childNodes].some((n) => n.nodeType === Node.TEXT_NODE && n.textContent.trim());
+  for (const el of document.querySelectorAll("#topbar *, #layout *, #alerts *, .overlay *")) {
+    if (!shown(el) || el.closest("#log, .leaflet-pane, .leaflet-control-attribution, iframe")) continue;
+    const cs = getComputedStyle(el);
+    let cut = false;
+    let text = el.textContent.trim();
+    if (el.tagName === "SELECT") {
+      const option = el.options[el.selectedIndex];
+      text = option ? option.textContent : "";
+      const room = el.clientWidth - parseFloat(cs.paddingLeft) - parseFloat(cs.paddingRight) - 18;
+      cut = Boolean(text) && textWidth(text, cs) > room + EPS;
+    } else if (el.tagName === "INPUT" && /^(text|number|search|)$/.test(el.type)) {
+      text = el.value;
+      cut = el.scrollWidth > el.clientWidth + EPS;
+    } else if (ownText(el) && (/(hidden|clip)/.test(cs.overflowX) || cs.textOverflow === "ellipsis")) {
+      cut = el.scrollWidth > el.clientWidth + EPS;
+    }
+    if (cut) problems.push(`${name(el)} label cut: "${text.slice(0, 40)}"`);
+  }
+  measure.remove();
+  // a disabled control says why: its tooltip, or the line it is described by
+  for (const el of document.querySelectorAll("button, input, select, textarea")) {
+    if (!el.disabled || !shown(el)) continue;
+    const line = (el.getAttribute("aria-describedby") || "").split(/\s+/)
+      .map((id) => document.getElementById(id)).filter((d) => d && shown(d))
+      .map((d) => d.textContent.trim()).join(" ");
+    if (!(el.title || "").trim() && !line) problems.push(`${name(el)} disabled without a reason`);
+  }
   const controls = [...document.querySelectorAll(CONTROLS)].filter(shown);
   for (let i = 0; i < controls.length; i++) {
     for (let j = i + 1; j < controls.length; j++) {

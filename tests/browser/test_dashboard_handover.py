@@ -32,12 +32,13 @@ window.WebSocket = class extends NativeWebSocket {
 
 
 def _holder(tab: Any) -> str:
-    return str(tab.text_content("#holder") or "")
+    """Who controls, whole (the slot shows a short name, its tooltip the whole one)."""
+    return str(tab.get_attribute("#holder", "title") or "")
 
 
 def _wait_holder(tab: Any, starts: str) -> None:
     tab.wait_for_function(
-        "([s]) => document.getElementById('holder').textContent.startsWith(s)",
+        "([s]) => document.getElementById('holder').title.startsWith(s)",
         arg=[starts],
         timeout=15_000,
     )
@@ -69,7 +70,7 @@ def test_pilot_flies_then_a_second_tab_asks_and_the_first_grants(
     page: Any, second_page: Any, api: httpx.Client
 ) -> None:
     first_name = _first_tab_in_control(page, second_page, api)
-    assert "since" in (second_page.text_content("#holder-since") or "")
+    assert "since" in (second_page.get_attribute("#holder-since", "title") or "")
     flows.arm_and_take_off(page, api, 5.0)
     flows.start_offboard_here(page, api)
 

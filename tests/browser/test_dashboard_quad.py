@@ -95,7 +95,8 @@ def test_page_shows_the_vehicle_and_observes_until_control_is_taken(
     page.wait_for_function(
         "document.getElementById('armed').textContent === 'DISARMED'", timeout=10_000
     )
-    assert "QUADROTOR" in (page.text_content("#vehicle-select") or "")
+    assert "1 · quad" in (page.text_content("#vehicle-select") or "")
+    assert "QUADROTOR" in (page.get_attribute("#vehicle-select", "title") or "")
     # the link badge: loss from the vehicle (its sequence numbers) and to it (its own report)
     page.wait_for_function(
         "/^↓\\d+% ↑(\\d+%|\\?)$/.test(document.getElementById('link-loss').textContent)",

@@ -136,6 +136,46 @@ def test_a_vtol_in_fixed_wing_flight_keeps_the_layout(chromium: Any, vtol_serve:
     assert not walk.moved(), "\n".join(walk.moved())
 
 
+@pytest.mark.parametrize("size", [(1024, 768), (1280, 800), (1920, 1080)], ids=str)
+def test_no_label_is_cut_and_every_greyed_out_control_says_why(
+    chromium: Any, serve: Serve, api: httpx.Client, size: tuple[int, int]
+) -> None:
+    settle(api, flying=False)
+    page = _open(chromium, serve.url, size, "light")
+    try:
+        page_scrolls = size[0] <= 1180  # two columns: the page scrolls as a whole
+        problems = [f"observer: {p}" for p in _problems(page, page_scrolls)]
+        # an observer's flying controls are greyed out, each saying what to do
+        assert page.get_attribute("#btn-arm", "title") == "Take control first"
+        assert page.is_disabled("#btn-takeoff")
+        take_control(page)
+        problems += [f"in control: {p}" for p in _problems(page, page_scrolls)]
+        assert not page.get_attribute("#btn-arm", "title")
+        # the amber badge's two lines: disarmed in OFFBOARD with no stream, Arm goes by HOLD
+        page.select_option("#mode-select", "OFFBOARD")
+        click_and_wait_result(page, "#btn-set-mode")
+        page.wait_for_function(
+            "document.getElementById('ready-to-fly').classList.contains('warn')", timeout=20_000
+        )
+        problems += [f"amber badge: {p}" for p in _problems(page, page_scrolls)]
+        page.select_option("#mode-select", "HOLD")
+        click_and_wait_result(page, "#btn-set-mode")
+        # the ready popover and the words of the page
+        page.click("#ready-to-fly")
+        problems += [f"ready popover: {p}" for p in _problems(page, page_scrolls)]
+        page.keyboard.press("Escape")
+        page.click("#shortcuts-open")
+        words = page.text_content("#shortcuts") or ""
+        for word in ("lease", "Deadman", "Envelope", "Intent", "Wanted"):
+            assert word in words, word
+        # (the list covers the page, as a dialog does: only its own words are looked at)
+        problems += [f"words: {p}" for p in _problems(page, page_scrolls) if "label cut" in p]
+        page.keyboard.press("Escape")
+        assert not problems, "\n".join(problems)
+    finally:
+        page.context.close()
+
+
 @pytest.mark.parametrize("size", [(1024, 768), (768, 1024)], ids=["landscape", "portrait"])
 def test_on_a_tablet_the_page_scrolls_and_nothing_is_cut_or_overlaps(
     chromium: Any, serve: Any, size: tuple[int, int]

@@ -8,7 +8,8 @@ from typing import Any
 
 import httpx
 
-from .flows import click_and_wait_result, settle_vehicle, take_control
+from .flows import click_and_wait_result, settle_vehicle, start_offboard_here, take_control
+from .harness import vehicle_state, wait_for
 
 SERVE_ARGS = ["--sim-speed", "3"]
 READY = "#ready-to-fly"
@@ -40,8 +41,12 @@ def test_ready_then_not_ready_with_px4s_reason_for_the_mode_flown(
     ready_box = _box(page)
     take_control(page)
 
-    _set_mode(page, "OFFBOARD")  # disarmed, no setpoint stream: PX4 would refuse to arm
-    _shows(page, "Not ready")
+    # disarmed, no setpoint stream: PX4 would refuse to arm in OFFBOARD, for that mode's own
+    # check only, and SkyHelm's Arm switches to HOLD first: amber, not red
+    _set_mode(page, "OFFBOARD")
+    page.wait_for_function(
+        "document.getElementById('ready-to-fly').classList.contains('warn')", timeout=20_000
+    )
     assert _box(page) == ready_box
     page.click(READY)
     popover = page.locator("#ready-popover")
@@ -60,6 +65,63 @@ def test_ready_then_not_ready_with_px4s_reason_for_the_mode_flown(
     page.keyboard.press("Escape")
     popover.wait_for(state="hidden", timeout=5_000)
 
+    # MISSION without a mission: PX4 refuses, and Arm arms in the mode flown: red
+    _set_mode(page, "MISSION")
+    _shows(page, "Not ready")
+    assert "bad" in (page.get_attribute(READY, "class") or "")
+    assert _box(page) == ready_box
+
     _set_mode(page, "HOLD")
     _shows(page, "Ready to fly")
     assert _box(page) == ready_box
+
+
+def test_after_a_landing_amber_arm_switches_to_hold_first_and_arming_works(
+    page: Any, api: httpx.Client
+) -> None:
+    settle_vehicle(api, flying=True)
+    take_control(page)
+    start_offboard_here(page, api)
+    click_and_wait_result(page, "#btn-land")
+    wait_for(
+        "landed and disarmed",
+        lambda: not (s := vehicle_state(api))["armed"] and s["landed_state"] == "ON_GROUND",
+        90.0,
+    )
+    # PX4 sits in LAND (or back in the pilot's OFFBOARD): it would not arm there, but
+    # SkyHelm's Arm switches to HOLD first, so the badge says what to do, in amber
+    page.wait_for_function(
+        "document.getElementById('ready-to-fly').classList.contains('warn')", timeout=20_000
+    )
+    assert (page.text_content(READY) or "").startswith("Ready")
+    label = page.get_attribute(READY, "aria-label") or ""
+    assert label == "Ready — Arm switches to Hold first", label
+    assert "Arm → Hold first" in (page.text_content(READY) or "")
+    assert vehicle_state(api)["mode"] in ("LAND", "OFFBOARD")
+    page.click(READY)
+    popover = page.locator("#ready-popover")
+    popover.wait_for(state="visible", timeout=5_000)
+    assert "Arm (and Takeoff) switch to HOLD first" in (popover.text_content() or "")
+    page.keyboard.press("Escape")
+
+    click_and_wait_result(page, "#btn-arm", confirm=True)
+    state = wait_for("armed", lambda: (s := vehicle_state(api))["armed"] and s, 10.0)
+    assert state["mode"] == "HOLD"
+    _shows(page, "Armed")
+    click_and_wait_result(page, "#btn-disarm", confirm=True)
+
+
+def test_picked_modes_px4_will_not_arm_in_say_so(page: Any, api: httpx.Client) -> None:
+    settle_vehicle(api, flying=False)
+    _shows(page, "Ready to fly")
+    take_control(page)
+    page.click(READY)
+    for mode in ("LAND", "RTL"):
+        page.select_option("#mode-select", mode)
+        page.wait_for_function(
+            "(mode) => document.getElementById('ready-popover').textContent"
+            ".includes(`In ${mode} (picked): cannot arm`)",
+            arg=mode, timeout=5_000,
+        )  # fmt: skip
+        assert "Mode not suitable for arming" in (page.text_content("#ready-popover") or "")
+    page.keyboard.press("Escape")

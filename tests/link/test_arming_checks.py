@@ -7,6 +7,7 @@ from pathlib import Path
 
 from pymavlink.dialects.v20 import development as mavlink
 
+from server.link.codec.arming_checks import NAV_STATES, CheckReport, ReportedCheck, readiness
 from server.link.core.state import ArmingChecksState
 from tests.link.conftest import ScriptedSession
 from tests.link.test_px4_events import (
@@ -30,6 +31,9 @@ POSCTL, HOLD, OFFBOARD = 0x30000, 0x3040000, 0x60000
 NO_POSITION = "Navigation error: No valid global position estimate"
 NO_SIGNAL = "No offboard signal"
 NO_LINK = "No connection to the ground control station"
+NOT_SUITABLE = "Mode not suitable for arming"
+# as PX4 v1.16 SITL names them in that check (by nav_state), at INFO
+PREVENTING = ("RTL", "TERMINATION", "LAND", "FOLLOW_TARGET", "PRECLAND", "POSCTL_ORBIT")
 
 
 def _checks(scripted: ScriptedSession) -> ArmingChecksState:
@@ -59,8 +63,9 @@ async def test_not_ready_with_px4s_reasons_then_ready_once_the_report_clears(
     assert checks.reasons[0].component == "Global position estimate"
     assert "HOLD" in checks.reasons[0].modes
     assert "OFFBOARD" in checks.reasons[0].modes
+    # and, in PX4's words, the modes it refuses to arm in whatever its report's bits say
     assert [(c.text, c.modes, c.component) for c in checks.other_reasons] == [
-        (NO_SIGNAL, ("OFFBOARD",), "System")]  # fmt: skip
+        (NO_SIGNAL, ("OFFBOARD",), "System"), (NOT_SUITABLE, PREVENTING, None)]  # fmt: skip
 
     # the position came: every mode but OFFBOARD can arm
     px4.report(ALL_MODE_GROUPS & ~OFFBOARD_MODE_GROUP, [
@@ -104,3 +109,60 @@ async def test_without_events_the_pre_arm_bit_and_unhealthy_sensors_of_sys_statu
     scripted.peer.send(_sys_status(gps | prearm, gps | prearm))
     await wait_for(lambda: _checks(scripted).ready is True, 2.0, "ready")
     assert _checks(scripted).reasons == ()
+
+
+# -- the verdict: ready, ready once Arm has switched mode, not ready -----------------------
+
+_EVERY_MODE = sum(1 << n for n in NAV_STATES.values())
+_LOG_ERROR = 3
+
+
+def _report(can_arm_except: tuple[str, ...], *failing: tuple[str, str]) -> CheckReport:
+    """PX4's report: every mode can arm but ``can_arm_except``; ``failing`` (text, mode)."""
+    can_arm = _EVERY_MODE & ~sum(1 << NAV_STATES[m] for m in can_arm_except)
+    checks = tuple(ReportedCheck(text, _LOG_ERROR, 1 << NAV_STATES[mode], None, "arming_check")
+                   for text, mode in failing)  # fmt: skip
+    return CheckReport(can_arm, can_arm, checks)
+
+
+def test_ready_only_with_home_and_a_position() -> None:
+    report = _report(("OFFBOARD",), (NO_SIGNAL, "OFFBOARD"))
+    assert readiness(report, "HOLD", True, None).verdict == "ready"
+    waiting = readiness(report, "HOLD", True, None, waiting_for=("home position",))
+    assert (waiting.ready, waiting.verdict, waiting.waiting_for) == (
+        True, "not_ready", ("home position",))  # fmt: skip
+
+
+def test_after_a_landing_in_land_or_offboard_arm_switches_to_hold_first() -> None:
+    # PX4 after an RTL ended disarmed: in LAND, only the mode's own check fails
+    landed = readiness(
+        _report(("LAND", "OFFBOARD"), (NOT_SUITABLE, "LAND"), (NO_SIGNAL, "OFFBOARD")),
+        "LAND", False, None, arm_switches_to="HOLD",
+    )  # fmt: skip
+    assert (landed.ready, landed.verdict, landed.arm_switches_to) == (
+        False, "arm_switches_mode", "HOLD")  # fmt: skip
+    assert [c.text for c in landed.reasons] == [NOT_SUITABLE]
+    # PX4's own check for LAND is not told twice
+    assert [c.modes for c in landed.other_reasons if c.text == NOT_SUITABLE] == [
+        tuple(m for m in PREVENTING if m != "LAND")]  # fmt: skip
+    offboard = readiness(_report(("OFFBOARD",), (NO_SIGNAL, "OFFBOARD")), "OFFBOARD", False,
+                         None, arm_switches_to="HOLD")  # fmt: skip
+    assert offboard.verdict == "arm_switches_mode"
+
+
+def test_not_ready_when_hold_would_fail_too_or_arm_does_not_switch() -> None:
+    no_position = _report(tuple(NAV_STATES), ("No valid global position estimate", "HOLD"))
+    assert readiness(no_position, "LAND", False, None, arm_switches_to="HOLD").verdict == (
+        "not_ready")  # fmt: skip
+    mission = _report(("MISSION",), ("No valid mission", "MISSION"))
+    checks = readiness(mission, "MISSION", False, None, arm_switches_to=None)
+    assert (checks.verdict, checks.arm_switches_to) == ("not_ready", None)
+
+
+def test_modes_px4_refuses_to_arm_in_are_not_listed_as_able_to_arm() -> None:
+    # flying HOLD, PX4's report keeps LAND's and RTL's bits: it checks the flown mode only
+    checks = readiness(_report(()), "HOLD", True, None)
+    assert not set(PREVENTING) & set(checks.can_arm_modes)
+    assert {"HOLD", "POSCTL", "MISSION", "OFFBOARD"} <= set(checks.can_arm_modes)
+    refused = [c for c in checks.other_reasons if c.text == NOT_SUITABLE]
+    assert [(c.modes, c.severity) for c in refused] == [(PREVENTING, "INFO")]

@@ -197,6 +197,21 @@ class ArmingChecksOut(_Out):
     other_reasons: list[ArmingCheckOut] = Field(
         description="the checks that concern only other modes"
     )
+    verdict: Literal["ready", "arm_switches_mode", "not_ready"] | None = Field(
+        None,
+        description="ready: arm, takeoff and an offboard start would be taken; "
+        "arm_switches_mode: PX4 refuses `mode` for its own checks only and SkyHelm's arm "
+        "switches to `arm_switches_to` first, where PX4 would arm; not_ready: see `reasons` "
+        "and `waiting_for` (null: not told yet)",
+    )
+    arm_switches_to: str | None = Field(
+        None, description="the mode SkyHelm's arm switches to before arming (null: arms in `mode`)"
+    )
+    waiting_for: list[str] = Field(
+        default_factory=list,
+        description="what a takeoff or an offboard start still needs "
+        "(home position, position estimate)",
+    )
 
 
 class VehicleSummaryOut(_Out):

@@ -14,6 +14,7 @@ complete one stands.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 from pymavlink.dialects.v20 import development as mavlink
 
@@ -36,6 +37,18 @@ NAV_STATES = {
     "FOLLOW_TARGET": 19, "PRECLAND": 20, "POSCTL_ORBIT": 21, "VTOL_TAKEOFF": 22,
 }  # fmt: skip
 _MODE_NAMES = {nav_state: name for name, nav_state in NAV_STATES.items()}
+# mode_requirements.cpp: mode_req_prevent_arming, by the names PX4 reports them under
+# (DESCEND reports as LAND). PX4 checks it for the mode flown only, so its report's can_arm
+# keeps these modes' bits while another mode is flown, though it would refuse to arm in them.
+MODES_PREVENTING_ARMING = frozenset({"RTL", "LAND", "PRECLAND", "FOLLOW_TARGET", "POSCTL_ORBIT"})
+# with TERMINATION, which PX4 never leaves: the modes its check names
+_NOT_SUITABLE_MODES = tuple(
+    sorted(MODES_PREVENTING_ARMING | {"TERMINATION"}, key=lambda m: NAV_STATES[m])
+)
+# PX4's words for it, and its log level: v1.16 SITL reports it as an INFO that names every
+# one of those modes, and only while one of them is flown
+NOT_SUITABLE_FOR_ARMING = "Mode not suitable for arming"
+_NOT_SUITABLE_LEVEL = "INFO"
 
 
 def log_level_name(level: int) -> str:
@@ -124,27 +137,64 @@ def readiness(
     mode: str,
     ready_to_arm: bool | None,
     sensors_unhealthy: tuple[str, ...] | None,
+    *,
+    arm_switches_to: str | None = None,
+    waiting_for: tuple[str, ...] = (),
 ) -> ArmingChecksState:
     """Ready to arm in the mode flown, and why not: from PX4's check report when there is
-    one, else from SYS_STATUS (its pre-arm bit, and the sensors it reports unhealthy)."""
+    one, else from SYS_STATUS (its pre-arm bit, and the sensors it reports unhealthy).
+
+    ``arm_switches_to`` is the mode the server's arm switches to first from ``mode`` (None:
+    it arms in ``mode``); ``waiting_for`` what a takeoff or an offboard start still needs.
+    Both make the verdict: "ready" only when PX4 would arm and nothing is awaited;
+    "arm_switches_mode" when PX4 refuses ``mode`` but would arm in the mode switched to."""
     if report is None:
         reasons = tuple(
             ArmingCheck(f"{_sensor_label(name)}: not healthy", "ERROR", (), None, "health")
             for name in sensors_unhealthy or ()
         )
-        return ArmingChecksState(ready_to_arm, mode, "sys_status", (), reasons, ())
+        verdict = _verdict(ready_to_arm, False, waiting_for)
+        return ArmingChecksState(
+            ready_to_arm, mode, "sys_status", (), reasons, (), verdict, None, waiting_for
+        )
     nav_state = NAV_STATES.get(mode)
     ready = ready_to_arm if nav_state is None else bool(report.can_arm >> nav_state & 1)
+    # PX4 would refuse these whatever its report's bits say (it checks the flown mode only)
+    can_arm = tuple(m for m in mode_names(report.can_arm) if m not in _NOT_SUITABLE_MODES)
+    switch_helps = arm_switches_to is not None and arm_switches_to in can_arm
     # the errors first: they are what keeps the vehicle on the ground
     ordered = sorted(report.checks, key=lambda c: c.log_level)
+    others = [c.shown() for c in ordered if nav_state is None or not c.concerns(nav_state)]
+    told = {m for c in report.checks if c.text == NOT_SUITABLE_FOR_ARMING
+            for m in mode_names(c.mode_groups)}  # fmt: skip
+    refused = tuple(m for m in _NOT_SUITABLE_MODES if m not in told)
+    if refused:  # as PX4 would say it once in one of them
+        others.append(
+            ArmingCheck(NOT_SUITABLE_FOR_ARMING, _NOT_SUITABLE_LEVEL, refused, None, "arming_check")
+        )
     return ArmingChecksState(
         ready,
         mode,
         "events",
-        mode_names(report.can_arm),
+        can_arm,
         tuple(c.shown() for c in ordered if nav_state is not None and c.concerns(nav_state)),
-        tuple(c.shown() for c in ordered if nav_state is None or not c.concerns(nav_state)),
+        tuple(others),
+        _verdict(ready, switch_helps, waiting_for),
+        arm_switches_to if not ready and switch_helps else None,
+        waiting_for,
     )
+
+
+def _verdict(
+    ready: bool | None, switch_helps: bool, waiting_for: tuple[str, ...]
+) -> Literal["ready", "arm_switches_mode", "not_ready"] | None:
+    if ready is None:
+        return None
+    if waiting_for:
+        return "not_ready"
+    if ready:
+        return "ready"
+    return "arm_switches_mode" if switch_helps else "not_ready"
 
 
 def _sensor_label(name: str) -> str:

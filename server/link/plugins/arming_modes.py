@@ -13,10 +13,13 @@ vehicle's own answer and is passed on unchanged.
 
 from __future__ import annotations
 
-# mode_requirements.cpp: mode_req_prevent_arming, by the names PX4 reports them under
-# (DESCEND reports as LAND). TERMINATION prevents arming too, but PX4 never leaves it
-# (UserModeIntention::change), so no mode switch could help.
-MODES_PREVENTING_ARMING = frozenset({"RTL", "LAND", "PRECLAND", "FOLLOW_TARGET", "POSCTL_ORBIT"})
+from server.link.codec.arming_checks import MODES_PREVENTING_ARMING
+
+# mode_requirements.cpp: mode_req_prevent_arming (codec/arming_checks.py). TERMINATION
+# prevents arming too, but PX4 never leaves it (UserModeIntention::change), so no mode
+# switch could help.
+__all__ = ["ARMING_MODE", "MODES_PREVENTING_ARMING", "mode_to_arm_in"]
+
 # the mode a PX4 vehicle starts in, and arms in with a global position and nothing else
 ARMING_MODE = "HOLD"
 
