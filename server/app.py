@@ -98,7 +98,7 @@ def create_app(settings: Settings, *, freeze_gc_at_start: bool = False) -> FastA
     def tell_vehicles(data: dict[str, Any]) -> None:
         """A supervised process's fault or recovery, as a ``process`` event of every vehicle."""
         for vehicle in registry.all():
-            vehicle.core.publish_event("process", data)
+            vehicle.publish_event("process", data)
 
     if foxglove is not None:
         foxglove.on_change.append(tell_vehicles)

@@ -148,14 +148,13 @@ class ArmingChecksState:
     reasons: tuple[ArmingCheck, ...]
     # the checks that concern only other modes
     other_reasons: tuple[ArmingCheck, ...]
-    # what the pilot can do now: "ready" (arm, take off and start offboard would be taken),
-    # "arm_switches_mode" (only the flown mode's own checks fail, and SkyHelm's arm switches
-    # to `arm_switches_to` first, where PX4 would arm), "not_ready"; None: not told yet
+    # ready: arm, takeoff and an offboard start would be taken; arm_switches_mode: PX4 refuses
+    # `mode` for its own checks only and SkyHelm's arm switches to `arm_switches_to` first, where
+    # PX4 would arm; not_ready: see `reasons` and `waiting_for` (null: not told yet)
     verdict: Literal["ready", "arm_switches_mode", "not_ready"] | None = None
-    # the mode SkyHelm's arm switches to before arming (None: it arms in `mode`)
+    # the mode SkyHelm's arm switches to before arming (null: arms in `mode`)
     arm_switches_to: str | None = None
-    # what the server still waits for before a takeoff or an offboard start would be taken
-    # ("home position", "position estimate")
+    # what a takeoff or an offboard start still needs (home position, position estimate)
     waiting_for: tuple[str, ...] = ()
 
 
