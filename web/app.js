@@ -14,6 +14,7 @@ import {
   vehicleHeard,
 } from "./handover.js";
 import { confirmAction, wireConfirm } from "./confirm.js";
+import { Painter, draws } from "./draw.js";
 import { FleetView } from "./fleet.js";
 import { deadmanText } from "./format.js";
 import { wireLayout } from "./layout.js";
@@ -22,9 +23,9 @@ import { modeMenu, modesFor } from "./modes.js";
 import { SETPOINT_TYPES } from "./offboard.js";
 import { freshness, page, plots, vehiclePath } from "./page.js";
 import { readiness } from "./readiness.js";
-import { instruments, render } from "./render.js";
+import { accept, instruments, render } from "./render.js";
 import { watchSceneNotices } from "./scene-notice.js";
-import { $, banner, log, nowS, num, setText } from "./ui.js";
+import { $, banner, log, num, setText } from "./ui.js";
 
 const OFFBOARD_PARAMS = [
   "COM_OF_LOSS_T", "COM_OBL_RC_ACT", "COM_RC_IN_MODE", "MIS_TAKEOFF_ALT", "RTL_RETURN_ALT",
@@ -54,10 +55,20 @@ function onTelemetry(message) {
   }
 }
 
+// A state is kept and its alerts raised as it comes; drawn in the next frame, at most ten
+// times a second, never while the page is hidden (then at once when it shows again).
+const stateDraw = new Painter("state", () => drawState(page.state));
+
 function showState(message) {
+  accept(message);
+  alerts.fromState(message);
+  stateDraw.request();
+}
+
+function drawState(message) {
+  if (!message) return;
   render(message);
   readiness.show(message);
-  alerts.fromState(message);
   renderHolder(message.lease);
   modeMenu.follow(message.vehicle_type || page.vehicleType, message.mode);
 }
@@ -263,12 +274,15 @@ function sceneUrl() {
   return "/scene/?darkMode"; // the session cookie carries the token (api.js)
 }
 
-// The 3D scene renders continuously; switching it off frees the CPU on weak machines.
+// The 3D scene costs CPU without a GPU; switching it off frees it on weak machines. A server
+// without the scene (--no-scene, GET /config says so) is never asked for it.
 function showScene(on) {
-  if (page.rejected) return;
-  $("scene").src = on ? sceneUrl() : "about:blank";
-  $("scene").classList.toggle("hidden", !on);
-  $("scene-off").classList.toggle("hidden", on);
+  if (page.rejected || page.sceneServed === undefined) return; // not known yet: nothing asked
+  const shown = on && page.sceneServed;
+  $("scene").src = shown ? sceneUrl() : "about:blank";
+  $("scene").classList.toggle("hidden", !shown);
+  $("scene-off").classList.toggle("hidden", shown);
+  if (!page.sceneServed) $("scene-off").textContent = "no 3D scene on this server";
 }
 
 // ---- parameters ---------------------------------------------------------------------------
@@ -377,11 +391,6 @@ function wire() {
   window.addEventListener("pagehide", () => page.control?.close());
 }
 
-function drawLoop() {
-  const t = nowS();
-  plots.draw(t);
-  setTimeout(() => requestAnimationFrame(drawLoop), 200);
-}
 
 async function main() {
   onTokenRejected(tokenRejected);
@@ -396,13 +405,12 @@ async function main() {
   watchSceneNotices($("scene"));
   showSetpointType("position");
   updateControls();
-  showScene($("scene-enable").checked);
   await loadServerMode();
-  await map.loadConfig();
+  page.sceneServed = (await map.loadConfig())?.scene !== false;
+  showScene($("scene-enable").checked);
   await modeMenu.load();
   await fleet.start();
   await loadVehicles();
-  drawLoop();
   log("INFO", "dashboard ready");
 }
 
@@ -411,5 +419,5 @@ main();
 // The page's state, for the browser console and the browser tests.
 window.skyhelm = {
   page, SETPOINT_TYPES, keyboard, modesFor, reconnectDelayMs, alerts, alertLog, plots, freshness,
-  map, fleet,
+  map, fleet, draws,
 };

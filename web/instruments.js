@@ -7,6 +7,7 @@
 // came, so ages keep growing while nothing arrives (a paused vehicle, a lost server), and a
 // value past its message's limit greys out and shows its age.
 
+import { pageHidden, setAttr, setStyle } from "./draw.js";
 import { UNKNOWN, age, duration, heading, num, signed, withUnit, words } from "./format.js";
 
 const SVG = "http://www.w3.org/2000/svg";
@@ -34,6 +35,13 @@ const STALE_AFTER_S = {
 const STALE_DEFAULT_S = 2;
 const AGE_TICK_MS = 250;
 
+/** The age an element carries: to the tenth of a second once stale (it shows then), to the
+ * second while fresh (in its tooltip only), so a fresh value is not redrawn four times a
+ * second for an age nobody sees. */
+function shownAge(ageS, stale) {
+  return stale ? age(ageS) : `${Math.floor(Math.max(0, ageS))} s`;
+}
+
 /** How old each value of the last state is now, and whether it is stale. */
 export class Freshness {
   constructor() {
@@ -42,15 +50,16 @@ export class Freshness {
     this.watched = []; // [element, source key]
     this.linkLost = false;
     this.listeners = [];
-    this.timer = setInterval(() => this.refresh(), AGE_TICK_MS);
+    // ages grow between states; a hidden page shows none (refreshed when drawn again)
+    this.timer = setInterval(() => { if (!pageHidden()) this.refresh(); }, AGE_TICK_MS);
   }
 
+  /** A state came: its message ages from now on (drawn by the next refresh()). */
   update(state) {
     this.ages = state.message_ages_s || {};
     // the server's verdict: nothing valid comes from the vehicle, whatever each age says yet
     this.linkLost = state.connected === false;
     this.receivedMs = performance.now();
-    this.refresh();
   }
 
   /** Seconds since anything at all came from the vehicle (its freshest message); null if
@@ -93,8 +102,8 @@ export class Freshness {
     for (const [element, key] of this.watched) {
       const known = this.ageOf(key);
       const stale = Boolean(known?.stale);
-      element.classList.toggle("stale", stale);
-      const text = known ? age(known.ageS) : "";
+      if (element.classList.contains("stale") !== stale) element.classList.toggle("stale", stale);
+      const text = known ? shownAge(known.ageS, stale) : "";
       if (element.dataset.age !== text) element.dataset.age = text;
       const title = known ? `${(SOURCES[key] || [key]).join(" / ")}: ${text} ago` : "not received yet";
       if (element.title !== title) element.title = title;
@@ -170,8 +179,11 @@ class AttitudeIndicator {
     }
     const roll = attitude.roll_deg;
     const pitch = Math.max(-90, Math.min(90, attitude.pitch_deg));
-    this.horizon.setAttribute("transform", `rotate(${-roll}) translate(0 ${pitch * PITCH_PX_PER_DEG})`);
-    this.rollPointer.setAttribute("transform", `rotate(${-roll})`);
+    // to a tenth of a degree: finer is under a pixel of the instrument
+    const r = Math.round(roll * 10) / 10;
+    const p = Math.round(pitch * PITCH_PX_PER_DEG * 10) / 10;
+    setAttr(this.horizon, "transform", `rotate(${-r}) translate(0 ${p})`);
+    setAttr(this.rollPointer, "transform", `rotate(${-r})`);
     setTextOf(this.readout, `R ${num(roll, 0)}°  P ${num(pitch, 0)}°`);
   }
 }
@@ -210,7 +222,7 @@ class HeadingTape {
       return;
     }
     const h = ((headingDeg % 360) + 360) % 360;
-    this.tape.setAttribute("transform", `translate(${-h * TAPE_PX_PER_DEG} 0)`);
+    setAttr(this.tape, "transform", `translate(${-Math.round(h * TAPE_PX_PER_DEG * 10) / 10} 0)`);
     setTextOf(this.readout, heading(h));
   }
 }
@@ -285,7 +297,9 @@ function put(node, content) {
 }
 
 function level(node, cls) {
-  for (const c of ["good", "warn", "bad"]) node.classList.toggle(c, c === cls);
+  for (const c of ["good", "warn", "bad"]) {
+    if (node.classList.contains(c) !== (c === cls)) node.classList.toggle(c, c === cls);
+  }
 }
 
 export class Instruments {
@@ -318,8 +332,8 @@ export class Instruments {
     this.battery.reset();
   }
 
+  /** Draws a state (its ages were taken by freshness.update() when it came). */
   show(state) {
-    this.freshness.update(state);
     this.adi.show(state.attitude);
     this.tape.show(finite(state.heading_deg) ? state.heading_deg : state.attitude?.yaw_deg);
     const g = state.global;
@@ -346,9 +360,10 @@ export class Instruments {
     if (b) parts.push(`${withUnit(b.voltage_v, "V", 2)} · ${withUnit(b.current_a, "A")}`);
     if (t) parts.push(`${duration(t.seconds)} left${t.how === "vehicle" ? "" : " (est.)"}`);
     put(this.batt.sub, parts.join(" · "));
-    this.batt.box.dataset.timeLeftS = t ? String(Math.round(t.seconds)) : "";
+    const left = t ? String(Math.round(t.seconds)) : "";
+    if (this.batt.box.dataset.timeLeftS !== left) this.batt.box.dataset.timeLeftS = left;
     level(this.batt.box, !finite(pct) ? "" : pct <= 15 ? "bad" : pct <= 30 ? "warn" : "good");
-    this.battBar.firstChild.style.width = `${finite(pct) ? Math.max(0, Math.min(100, pct)) : 0}%`;
+    setStyle(this.battBar.firstChild, "width", `${finite(pct) ? Math.max(0, Math.min(100, pct)) : 0}%`);
   }
 
   showGps(gps) {
@@ -384,7 +399,7 @@ export class Instruments {
   showVtol(state) {
     const vs = state.vtol_state;
     const isVtol = /VTOL/.test(state.vehicle_type || "") || (vs && vs !== "UNDEFINED");
-    this.vtol.box.classList.toggle("hidden", !isVtol);
+    if (this.vtol.box.classList.contains("hidden") === isVtol) this.vtol.box.classList.toggle("hidden", !isVtol);
     if (!isVtol) return;
     const names = { MC: "Multicopter", FW: "Fixed wing", TRANSITION_TO_FW: "→ Fixed wing", TRANSITION_TO_MC: "→ Multicopter" };
     put(this.vtol.big, names[vs] || UNKNOWN);

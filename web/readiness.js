@@ -73,13 +73,13 @@ export class Readiness {
     this.state = state;
     const [text, cls] = readinessLabel(state);
     if (this.button.textContent !== text) this.button.textContent = text;
-    this.button.classList.remove("ok", "bad");
-    if (cls) this.button.classList.add(cls);
+    for (const c of ["ok", "bad"]) this.button.classList.toggle(c, c === cls); // unchanged: no DOM write
     const checks = state.arming_checks;
     const count = checks ? checks.reasons.filter((c) => SEVERITY_CLASS[c.severity] === "bad").length : 0;
-    this.button.title = checks?.ready === false && count
+    const title = checks?.ready === false && count
       ? `${count} failing check${count > 1 ? "s" : ""} in ${checks.mode}: click for PX4's reasons`
       : "PX4's arming checks: click for details";
+    if (this.button.title !== title) this.button.title = title;
     if (!this.popover.classList.contains("hidden")) this.renderPopover();
   }
 

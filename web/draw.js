@@ -1,0 +1,100 @@
+// Drawing at the pace a person can see: a part of the page (the state's numbers, the plots,
+// the map) asks to be drawn when what it shows changed; it is drawn in the next animation
+// frame, at most every `minGapMs`, never while the page is hidden (document.visibilityState)
+// or the part itself is hidden, and at once when it shows again. All the parts due in a
+// frame share one requestAnimationFrame; with nothing asked, none is requested at all. A
+// page the browser keeps visible but gives few frames (a window behind another: headless
+// Chromium's second page gets about one a second) is drawn by a timer FRAME_LATE_MS later.
+//
+// window.skyhelm.draws counts the draws of each part (for the browser tests and the console).
+
+export const draws = {};
+const painters = [];
+const due = new Set();
+const FRAME_LATE_MS = 50;
+let frame = null;
+let late = null;
+
+export const pageHidden = () => document.visibilityState === "hidden";
+
+function drawDue() {
+  cancelAnimationFrame(frame);
+  clearTimeout(late);
+  frame = null;
+  late = null;
+  const now = performance.now();
+  for (const painter of [...due]) {
+    due.delete(painter);
+    painter.run(now);
+  }
+}
+
+export class Painter {
+  /** `draw()` draws the part; `shown()` says whether the part can be seen now. */
+  constructor(name, draw, { minGapMs = 100, shown = () => true } = {}) {
+    this.name = name;
+    this.draw = draw;
+    this.minGapMs = minGapMs;
+    this.shown = shown;
+    this.dirty = false;
+    this.lastMs = -Infinity;
+    this.timer = null;
+    draws[name] = 0;
+    painters.push(this);
+  }
+
+  /** What this part shows changed: draw it soon. */
+  request() {
+    this.dirty = true;
+    this.plan();
+  }
+
+  plan() {
+    if (!this.dirty || this.timer !== null || due.has(this)) return;
+    if (pageHidden() || !this.shown()) return; // drawn when shown again (wake())
+    const waitMs = this.lastMs + this.minGapMs - performance.now();
+    if (waitMs > 0) {
+      this.timer = setTimeout(() => { this.timer = null; this.plan(); }, waitMs);
+      return;
+    }
+    due.add(this);
+    if (frame === null) {
+      frame = requestAnimationFrame(drawDue);
+      late = setTimeout(drawDue, FRAME_LATE_MS);
+    }
+  }
+
+  run(now) {
+    if (!this.dirty || pageHidden() || !this.shown()) return;
+    this.dirty = false;
+    this.lastMs = now;
+    draws[this.name] += 1;
+    try { this.draw(); } catch (err) { console.error(err); }
+  }
+
+  /** Shown again (the page or the part): what changed meanwhile is drawn at once. */
+  wake() {
+    if (!this.dirty) return;
+    this.lastMs = -Infinity;
+    clearTimeout(this.timer);
+    this.timer = null;
+    this.plan();
+  }
+}
+
+/** Every part shown again: those that changed while hidden catch up in the next frame. */
+export function wakeAll() {
+  for (const painter of painters) painter.wake();
+}
+
+document.addEventListener("visibilitychange", () => { if (!pageHidden()) wakeAll(); });
+
+/** Sets an attribute only when its value changes (every set is a DOM mutation). */
+export function setAttr(el, name, value) {
+  if (el && el.getAttribute(name) !== value) el.setAttribute(name, value);
+}
+
+/** Sets one inline style property only when it changes. */
+export function setStyle(el, property, value) {
+  if (el && el.style[property] !== value) el.style[property] = value;
+}
