@@ -1,5 +1,6 @@
 """What the page needs to know of the server's settings: the 2D map's tiles, whether it is a
-fleet server and whether it serves the 3D scene. Behind the token, since a tile URL may carry the tile provider's key."""
+fleet server and whether it serves the 3D scene. Behind the token, since a tile URL may carry
+the tile provider's key."""
 
 from __future__ import annotations
 
