@@ -35,11 +35,12 @@ const STALE_AFTER_S = {
 const STALE_DEFAULT_S = 2;
 const AGE_TICK_MS = 250;
 
-/** The age an element carries: to the tenth of a second once stale (it shows then), to the
- * second while fresh (in its tooltip only), so a fresh value is not redrawn four times a
- * second for an age nobody sees. */
+/** The age an element carries: once stale, to the tenth of a second (it shows then); while
+ * fresh, only that it is, so a fresh value is not redrawn four times a second for an age
+ * nobody sees. */
+const FRESH = "fresh";
 function shownAge(ageS, stale) {
-  return stale ? age(ageS) : `${Math.floor(Math.max(0, ageS))} s`;
+  return stale ? age(ageS) : FRESH;
 }
 
 /** How old each value of the last state is now, and whether it is stale. */
@@ -86,10 +87,11 @@ export class Freshness {
     return { ageS: best + elapsedS, stale: (this.linkLost && limit !== Infinity) || best + elapsedS > limit };
   }
 
-  /** Grey out `element` (and show its age) whenever the value `key` is stale. */
-  watch(element, key) {
+  /** Grey out `element` (and show its age) whenever the value `key` is stale; its tooltip
+   * says the age too unless `ownTitle` (another part of the page writes that tooltip). */
+  watch(element, key, { ownTitle = false } = {}) {
     element.dataset.src = key;
-    this.watched.push([element, key]);
+    this.watched.push([element, key, ownTitle]);
   }
 
   /** `listener()` runs at every refresh: at each state and as ages grow between states. */
@@ -99,13 +101,15 @@ export class Freshness {
 
   refresh() {
     for (const listener of this.listeners) listener();
-    for (const [element, key] of this.watched) {
+    for (const [element, key, ownTitle] of this.watched) {
       const known = this.ageOf(key);
       const stale = Boolean(known?.stale);
       if (element.classList.contains("stale") !== stale) element.classList.toggle("stale", stale);
       const text = known ? shownAge(known.ageS, stale) : "";
       if (element.dataset.age !== text) element.dataset.age = text;
-      const title = known ? `${(SOURCES[key] || [key]).join(" / ")}: ${text} ago` : "not received yet";
+      if (ownTitle) continue;
+      const when = text === FRESH ? FRESH : `${text} ago`;
+      const title = known ? `${(SOURCES[key] || [key]).join(" / ")}: ${when}` : "not received yet";
       if (element.title !== title) element.title = title;
     }
   }

@@ -174,8 +174,10 @@ class VehicleLayer {
     const moved = !last || offsetDistanceM(last, here) >= TRAIL_MIN_STEP_M;
     if (moved) this.trail.push([here[0], here[1], nowS]);
     while (this.trail.length && nowS - this.trail[0][2] > TRAIL_S) this.trail.shift();
-    if (moved || this.trail.length < 2) {
+    const dropped = this.trail.length !== this.trailDrawn;
+    if (moved || dropped) {
       this.trailLine.setLatLngs(this.trail.map(([lat, lon]) => [lat, lon]));
+      this.trailDrawn = this.trail.length;
     }
     this.show(this.trailLine, this.trail.length > 1);
   }

@@ -18,7 +18,7 @@ for (const [id, source] of Object.entries({
   "t-home": "home", "t-motors": "motors", mode: "mode", armed: "mode", landed: "landed",
   "vtol-state": "landed", "user-mode": "mode", // Wanted: CURRENT_MODE.intended_custom_mode
   "ready-to-fly": "SYS_STATUS",
-})) freshness.watch($(id), source);
+})) freshness.watch($(id), source, { ownTitle: id === "mode" || id === "ready-to-fly" });
 freshness.onRefresh(renderLink);
 
 // Above this age of its freshest message the vehicle is late (amber), before the server's
@@ -48,8 +48,11 @@ function renderLink() {
   }
   setText("link-health", text, cls);
   const warnings = quality?.warnings?.length ? `; ${quality.warnings.join("; ")}` : "";
-  setAttr($("link-slot"), "title", `the server's link to vehicle ${state.vehicle ?? ""}: its freshest message ${age(silentS)} old`
-    + ` (heartbeat ${age(state.last_heartbeat_age_s)}), frames lost from it ${pct(quality?.loss_in_pct)}`
+  // the ages in the tooltip as in the box: under a second is on time
+  const heartbeatS = state.last_heartbeat_age_s;
+  const heartbeat = Number.isFinite(heartbeatS) && heartbeatS <= LINK_LATE_S ? `< ${num(LINK_LATE_S, 0)} s` : age(heartbeatS);
+  setAttr($("link-slot"), "title", `the server's link to vehicle ${state.vehicle ?? ""}: its freshest message ${text.replace(/^LOST · |^\? · /, "")} old`
+    + ` (heartbeat ${heartbeat}), frames lost from it ${pct(quality?.loss_in_pct)}`
     + ` and to it ${pct(quality?.loss_out_pct)}${warnings}`
     + (page.connected ? "" : "; this page has lost the server, so the link's state is not known"));
 }
