@@ -14,7 +14,7 @@ import {
   vehicleHeard,
 } from "./handover.js";
 import { confirmAction, wireConfirm } from "./confirm.js";
-import { Painter, draws } from "./draw.js";
+import { Painter, drawTimes, draws } from "./draw.js";
 import { FleetView } from "./fleet.js";
 import { deadmanText } from "./format.js";
 import { wireLayout } from "./layout.js";
@@ -55,9 +55,10 @@ function onTelemetry(message) {
   }
 }
 
-// A state is kept and its alerts raised as it comes; drawn in the next frame, at most ten
-// times a second, never while the page is hidden (then at once when it shows again).
-const stateDraw = new Painter("state", () => drawState(page.state));
+// A state is kept and its alerts raised as it comes; drawn in the next frame (as often as the
+// socket brings states, 10 Hz; never twice within 80 ms, so a burst is drawn within 100 ms of
+// its last state), never while the page is hidden (then at once when it shows again).
+const stateDraw = new Painter("state", () => drawState(page.state), { minGapMs: 80 });
 
 function showState(message) {
   accept(message);
@@ -419,5 +420,5 @@ main();
 // The page's state, for the browser console and the browser tests.
 window.skyhelm = {
   page, SETPOINT_TYPES, keyboard, modesFor, reconnectDelayMs, alerts, alertLog, plots, freshness,
-  map, fleet, draws,
+  map, fleet, draws, drawTimes,
 };

@@ -1,14 +1,19 @@
 // Drawing at the pace a person can see: a part of the page (the state's numbers, the plots,
 // the map) asks to be drawn when what it shows changed; it is drawn in the next animation
-// frame, at most every `minGapMs`, never while the page is hidden (document.visibilityState)
-// or the part itself is hidden, and at once when it shows again. All the parts due in a
+// frame, never twice within `minGapMs` (a change that comes sooner is drawn when that time is
+// up, by the timer itself: it waited already), never while the page is hidden
+// (document.visibilityState) or the part itself is hidden, and at once when it shows again. All the parts due in a
 // frame share one requestAnimationFrame; with nothing asked, none is requested at all. A
 // page the browser keeps visible but gives few frames (a window behind another: headless
 // Chromium's second page gets about one a second) is drawn by a timer FRAME_LATE_MS later.
 //
-// window.skyhelm.draws counts the draws of each part (for the browser tests and the console).
+// window.skyhelm.draws counts the draws of each part and window.skyhelm.drawTimes keeps
+// when (performance.now(), the last DRAW_TIMES_KEPT) it drew, for the browser tests and the
+// console.
 
 export const draws = {};
+export const drawTimes = {};
+const DRAW_TIMES_KEPT = 100;
 const painters = [];
 const due = new Set();
 const FRAME_LATE_MS = 50;
@@ -40,6 +45,7 @@ export class Painter {
     this.lastMs = -Infinity;
     this.timer = null;
     draws[name] = 0;
+    drawTimes[name] = [];
     painters.push(this);
   }
 
@@ -54,7 +60,7 @@ export class Painter {
     if (pageHidden() || !this.shown()) return; // drawn when shown again (wake())
     const waitMs = this.lastMs + this.minGapMs - performance.now();
     if (waitMs > 0) {
-      this.timer = setTimeout(() => { this.timer = null; this.plan(); }, waitMs);
+      this.timer = setTimeout(() => { this.timer = null; this.run(performance.now()); }, waitMs);
       return;
     }
     due.add(this);
@@ -69,6 +75,9 @@ export class Painter {
     this.dirty = false;
     this.lastMs = now;
     draws[this.name] += 1;
+    const times = drawTimes[this.name];
+    times.push(now);
+    if (times.length > DRAW_TIMES_KEPT) times.shift();
     try { this.draw(); } catch (err) { console.error(err); }
   }
 
