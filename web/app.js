@@ -188,12 +188,16 @@ function showVehicles(vehicles) {
   map.showVehicles(vehicles);
   const select = $("vehicle-select");
   const previous = page.vehicleId;
-  select.replaceChildren(...vehicles.map((v) => {
-    const option = document.createElement("option");
-    option.value = v.id;
-    option.textContent = `${v.id} · ${v.type}${v.connected ? "" : " (lost)"}`;
-    return option;
-  }));
+  const listed = vehicles.map((v) => `${v.id} · ${v.type}${v.connected ? "" : " (lost)"}`);
+  if (select.dataset.listed !== listed.join("\n")) { // the same list: nothing to redraw
+    select.dataset.listed = listed.join("\n");
+    select.replaceChildren(...vehicles.map((v, i) => {
+      const option = document.createElement("option");
+      option.value = v.id;
+      option.textContent = listed[i];
+      return option;
+    }));
+  }
   if (page.fleetVehicle) { // another edge's vehicle is shown: the local list stays a list
     select.value = "";
     return;

@@ -2,10 +2,11 @@
 // the map) asks to be drawn when what it shows changed; it is drawn in the next animation
 // frame, never twice within `minGapMs` (a change that comes sooner is drawn when that time is
 // up, by the timer itself: it waited already), never while the page is hidden
-// (document.visibilityState) or the part itself is hidden, and at once when it shows again. All the parts due in a
-// frame share one requestAnimationFrame; with nothing asked, none is requested at all. A
-// page the browser keeps visible but gives few frames (a window behind another: headless
-// Chromium's second page gets about one a second) is drawn by a timer FRAME_LATE_MS later.
+// (document.visibilityState) or the part itself is hidden, and at once when it shows again.
+// The parts due together are drawn in one task, by a timer: no requestAnimationFrame at all
+// (each one asks the browser for a frame, which costs even when nothing changed, and a
+// window the browser gives few frames, headless Chromium's second page, would lag); what a
+// draw changes is painted in the browser's next frame.
 //
 // window.skyhelm.draws counts the draws of each part and window.skyhelm.drawTimes keeps
 // when (performance.now(), the last DRAW_TIMES_KEPT) it drew, for the browser tests and the
@@ -16,17 +17,12 @@ export const drawTimes = {};
 const DRAW_TIMES_KEPT = 100;
 const painters = [];
 const due = new Set();
-const FRAME_LATE_MS = 50;
-let frame = null;
-let late = null;
+let task = null;
 
 export const pageHidden = () => document.visibilityState === "hidden";
 
 function drawDue() {
-  cancelAnimationFrame(frame);
-  clearTimeout(late);
-  frame = null;
-  late = null;
+  task = null;
   const now = performance.now();
   for (const painter of [...due]) {
     due.delete(painter);
@@ -64,10 +60,7 @@ export class Painter {
       return;
     }
     due.add(this);
-    if (frame === null) {
-      frame = requestAnimationFrame(drawDue);
-      late = setTimeout(drawDue, FRAME_LATE_MS);
-    }
+    if (task === null) task = setTimeout(drawDue, 0);
   }
 
   run(now) {

@@ -121,6 +121,14 @@ class VehicleLayer {
 
   update(state, selected, nowS) {
     const here = vehicleLatLon(state);
+    const heading = Number.isFinite(state.heading_deg) ? state.heading_deg : state.attitude?.yaw_deg;
+    // what the layer shows from this state: the same as drawn (and no trail point to age
+    // out) is nothing to do
+    const shown = JSON.stringify([here, Math.round(heading), category(state), selected,
+      state.connected, homeLatLon(state), aimOf(state), nedOrigin(state)]);
+    const trailAged = this.trail.length > 0 && nowS - this.trail[0][2] > TRAIL_S;
+    if (shown === this.drawnAs && !trailAged) return;
+    this.drawnAs = shown;
     this.latLon = here;
     this.show(this.marker, Boolean(here));
     if (here) {
@@ -128,7 +136,6 @@ class VehicleLayer {
       this.markerAt = here;
       const el = this.marker.getElement();
       if (el) {
-        const heading = Number.isFinite(state.heading_deg) ? state.heading_deg : state.attitude?.yaw_deg;
         // to the degree: finer does not show on a 28 px arrow
         setStyle(el.querySelector("svg"), "transform", `rotate(${Math.round(this.turnTo(heading))}deg)`);
         setAttr(el, "data-category", category(state));

@@ -19,11 +19,13 @@ PAGE_TIMEOUT_MS = 20_000
 # A window over which a landed vehicle's page is watched (about 20 states come in it).
 QUIET_WINDOW_S = 2.0
 DRAWN_WITHIN_MS = 100.0
+HIDDEN_RATE_HZ = 1  # web/api.js
 
 # Every state message for the selected vehicle, with its arrival time at the socket (this
 # listener is the socket's first: it runs before the page's own handler).
 STATE_ARRIVALS = """
 window.__arrivals = [];
+window.__linkQualities = [];
 const PageSocket = window.WebSocket;
 window.WebSocket = class extends PageSocket {
   constructor(url, ...rest) {
@@ -34,6 +36,7 @@ window.WebSocket = class extends PageSocket {
       const message = JSON.parse(event.data);
       if (message.type === "state" && message.vehicle === window.skyhelm?.page.vehicleId) {
         window.__arrivals.push(arrived);
+        window.__linkQualities.push(JSON.stringify(message.link_quality));
       }
     });
   }
@@ -92,6 +95,11 @@ def test_a_landed_vehicle_whose_state_does_not_change_writes_nothing_to_the_page
         time.sleep(QUIET_WINDOW_S)  # the window watched, not a wait for a condition
         mutations: list[str] = page.evaluate("window.__mutations")
         assert _arrivals(page) - came >= 5, "states kept coming over the window"
+        # the link's measured frame loss is the one thing that may change on its own (a
+        # frame lost on a busy machine): only then may the LINK box change
+        qualities = set(page.evaluate(f"window.__linkQualities.slice({came - 1})"))
+        if len(qualities) > 1:
+            mutations = [m for m in mutations if not m.startswith(("link-loss ", "link-slot "))]
         assert mutations == [], mutations
     finally:
         page.close()
@@ -129,7 +137,8 @@ def test_a_hidden_page_draws_nothing_and_catches_up_at_once_when_shown(
         draws: dict[str, int] = page.evaluate("({...window.skyhelm.draws})")
         came = _arrivals(page)
         time.sleep(QUIET_WINDOW_S)  # the window watched while hidden
-        assert _arrivals(page) - came >= 5, "states kept coming while hidden"
+        # a hidden page asks for a state a second (and both sockets speak at the switch)
+        assert 1 <= _arrivals(page) - came <= QUIET_WINDOW_S * HIDDEN_RATE_HZ + 2
         assert page.evaluate("({...window.skyhelm.draws})") == draws
         assert page.evaluate("window.__mutations") == []
         # shown again: the newest state is drawn at once, before the next one comes
@@ -141,5 +150,8 @@ def test_a_hidden_page_draws_nothing_and_catches_up_at_once_when_shown(
         )
         first = min(t for t in page.evaluate("window.skyhelm.drawTimes.state") if t >= shown_at)
         assert first - shown_at <= DRAWN_WITHIN_MS
+        # and states come at the full rate again
+        came = _arrivals(page)
+        page.wait_for_function(f"window.__arrivals.length >= {came + 8}", timeout=PAGE_TIMEOUT_MS)
     finally:
         page.close()
