@@ -213,6 +213,9 @@ def scenario(name: str, seconds: float) -> dict[str, Any]:
             with browser_page(serve.url, scene) as page:
                 if name.startswith("background"):
                     page.evaluate(HIDE_PAGE)
+                if scene:  # software WebGL takes seconds to start viser's client: not counted
+                    page.frame_locator("#scene").locator("canvas").first.wait_for(
+                        timeout=60_000)
                 time.sleep(3.0)  # the page's start-up (scripts, first states, scene) settles
                 if pilot is not None:
                     wait_for("still hovering",
