@@ -124,8 +124,12 @@ class VehicleLayer {
     const heading = Number.isFinite(state.heading_deg) ? state.heading_deg : state.attitude?.yaw_deg;
     // what the layer shows from this state: the same as drawn (and no trail point to age
     // out) is nothing to do
-    const shown = JSON.stringify([here, Math.round(heading), category(state), selected,
-      state.connected, homeLatLon(state), aimOf(state), nedOrigin(state)]);
+    const px = (point) => (point ? this.map.latLngToLayerPoint(point).round() : null);
+    const aimed = aimOf(state);
+    // to the pixel: the map moves nothing by less (the trail keeps a point per pixel moved)
+    const shown = JSON.stringify([px(here), Math.round(heading), category(state), selected,
+      state.connected, px(homeLatLon(state)), aimed && [aimed.kind, Math.round(aimed.north_m * 10),
+        Math.round(aimed.east_m * 10)], nedOrigin(state), this.map.getZoom()]);
     const trailAged = this.trail.length > 0 && nowS - this.trail[0][2] > TRAIL_S;
     if (shown === this.drawnAs && !trailAged) return;
     this.drawnAs = shown;
