@@ -55,9 +55,9 @@ function onTelemetry(message) {
   }
 }
 
-// A state is kept and its alerts raised as it comes; drawn in the next frame (as often as the
-// socket brings states, 10 Hz; never twice within 80 ms, so a burst is drawn within 100 ms of
-// its last state), never while the page is hidden (then at once when it shows again).
+// A state is kept and its alerts raised as it comes; drawn at once (as often as the socket
+// brings states, 10 Hz; never twice within 80 ms, so a burst is drawn within 100 ms of its
+// last state), never while the page is hidden (then at once when it shows again).
 const stateDraw = new Painter("state", () => drawState(page.state), { minGapMs: 80 });
 
 function showState(message) {
@@ -395,7 +395,6 @@ function wire() {
   $("scene-enable").addEventListener("change", (e) => showScene(e.target.checked));
   window.addEventListener("pagehide", () => page.control?.close());
 }
-
 
 async function main() {
   onTokenRejected(tokenRejected);

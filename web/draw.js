@@ -1,8 +1,8 @@
 // Drawing at the pace a person can see: a part of the page (the state's numbers, the plots,
-// the map) asks to be drawn when what it shows changed; it is drawn in the next animation
-// frame, never twice within `minGapMs` (a change that comes sooner is drawn when that time is
-// up, by the timer itself: it waited already), never while the page is hidden
-// (document.visibilityState) or the part itself is hidden, and at once when it shows again.
+// the map) asks to be drawn when what it shows changed; it is drawn at once, never twice
+// within `minGapMs` (a change that comes sooner is drawn when that time is up), never while
+// the page is hidden (document.visibilityState) or the part itself is hidden, and at once
+// when it shows again.
 // The parts due together are drawn in one task, by a timer: no requestAnimationFrame at all
 // (each one asks the browser for a frame, which costs even when nothing changed, and a
 // window the browser gives few frames, headless Chromium's second page, would lag); what a
