@@ -183,9 +183,10 @@ class AttitudeIndicator {
     }
     const roll = attitude.roll_deg;
     const pitch = Math.max(-90, Math.min(90, attitude.pitch_deg));
-    // to a tenth of a degree: finer is under a pixel of the instrument
-    const r = Math.round(roll * 10) / 10;
-    const p = Math.round(pitch * PITCH_PX_PER_DEG * 10) / 10;
+    // to half a degree of roll (under a pixel at the rim) and half a pixel of pitch: a
+    // hovering vehicle's jitter does not redraw the horizon ten times a second
+    const r = Math.round(roll * 2) / 2;
+    const p = Math.round(pitch * PITCH_PX_PER_DEG * 2) / 2;
     setAttr(this.horizon, "transform", `rotate(${-r}) translate(0 ${p})`);
     setAttr(this.rollPointer, "transform", `rotate(${-r})`);
     setTextOf(this.readout, `R ${num(roll, 0)}°  P ${num(pitch, 0)}°`);
@@ -226,7 +227,7 @@ class HeadingTape {
       return;
     }
     const h = ((headingDeg % 360) + 360) % 360;
-    setAttr(this.tape, "transform", `translate(${-Math.round(h * TAPE_PX_PER_DEG * 10) / 10} 0)`);
+    setAttr(this.tape, "transform", `translate(${-Math.round(h * TAPE_PX_PER_DEG * 2) / 2} 0)`);
     setTextOf(this.readout, heading(h));
   }
 }
