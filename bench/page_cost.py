@@ -9,12 +9,14 @@ Headless Chromium with software rendering (as on a laptop without a usable GPU),
 
 Run: .venv/bin/python -m bench.page_cost [--seconds 20] [--only landed,hovering]
      .venv/bin/python -m bench.page_cost --heap-minutes 30    # JS heap growth over 30 min
+     .venv/bin/python -m bench.page_cost --before earlier.json  # a change's figures beside
 Writes bench/results/page_cost.json.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 import time
@@ -25,6 +27,8 @@ from typing import Any
 
 import httpx
 
+from bench._markdown import table
+from bench._report import Section
 from bench._results import machine_info, write_results
 from bench._serve import cpu_seconds
 from tests.browser.flows import open_dashboard, settle_vehicle
@@ -209,6 +213,9 @@ def scenario(name: str, seconds: float) -> dict[str, Any]:
             with browser_page(serve.url, scene) as page:
                 if name.startswith("background"):
                     page.evaluate(HIDE_PAGE)
+                if scene:  # software WebGL takes seconds to start viser's client: not counted
+                    page.frame_locator("#scene").locator("canvas").first.wait_for(
+                        timeout=60_000)
                 time.sleep(3.0)  # the page's start-up (scripts, first states, scene) settles
                 if pilot is not None:
                     wait_for("still hovering",
@@ -225,6 +232,9 @@ def scenario(name: str, seconds: float) -> dict[str, Any]:
 
 SCENARIOS = ["landed", "landed_no3d", "hovering", "hovering_no3d", "square", "square_no3d",
              "four_vehicles", "four_vehicles_no3d", "background_no3d"]
+# The page's CPU (% of one core) it should stay under, by scenario.
+TARGET_PCT = {"landed": 6.0, "hovering": 16.0, "landed_no3d": 3.0, "hovering_no3d": 8.0,
+              "background_no3d": 1.0}
 
 
 def heap_growth(minutes: float) -> dict[str, Any]:
@@ -261,6 +271,9 @@ def main() -> int:
     parser.add_argument("--quick", action="store_true", help="landed and hovering, 8 s each")
     parser.add_argument("--heap-minutes", type=float, default=0.0,
                         help="also sample the JS heap of a page over this many minutes")
+    parser.add_argument("--before", type=Path, default=None,
+                        help="an earlier page_cost.json (another version of the page, measured "
+                             "just before): its figures are kept beside these as 'before'")
     args = parser.parse_args()
     if not CHROMIUM.exists():
         print("no /usr/bin/chromium: run `make chromium` as root", file=sys.stderr)
@@ -276,6 +289,8 @@ def main() -> int:
               f"{row['server_and_sim_cpu_pct']:5.1f} %, JS heap {row['js_heap_mb']} MB "
               f"({row['visibility']}, {row['window_s']} s)", flush=True)
     result: dict[str, Any] = {"scenarios": rows, "machine": machine_info()}
+    if args.before is not None:
+        result["before"] = json.loads(args.before.read_text())["scenarios"]
     if args.heap_minutes > 0:
         result["heap"] = heap_growth(args.heap_minutes)
         print(f"JS heap over {args.heap_minutes} min: {result['heap']['samples_min_mb']}; "
@@ -286,3 +301,40 @@ def main() -> int:
 
 if __name__ == "__main__":
     raise SystemExit(main())
+
+
+def report(result: dict[str, Any]) -> Section | None:
+    """The page's CPU and heap by scenario, against its targets (and the version before)."""
+    before = {row["scenario"]: row for row in result.get("before", [])}
+    headers = ["scenario", "page CPU % of one core", "target", "server + sim %", "JS heap MB",
+               "page says"]
+    if before:
+        headers[1:1] = ["before: page CPU %"]
+    rows = []
+    for row in result["scenarios"]:
+        name = row["scenario"]
+        cells: list[Any] = [f"`{name}`", row["page_cpu_pct"],
+                            f"≤ {TARGET_PCT[name]:g}" if name in TARGET_PCT else "",
+                            row["server_and_sim_cpu_pct"], row["js_heap_mb"], row["visibility"]]
+        if before:
+            cells[1:1] = [before[name]["page_cpu_pct"] if name in before else ""]
+        rows.append(cells)
+    window = result["scenarios"][0]["window_s"] if result["scenarios"] else 0
+    text = (
+        "CPU time of Chromium's whole process tree (headless, software rendering, 1280×800) "
+        f"over {window:.0f} s per scenario, each on its own server with one simulated quad "
+        "(`_no3d`: the 3D view off). `background_no3d` is the page told it is hidden (the "
+        "`visibilityState` property and the `visibilitychange` event, as a browser tells a "
+        "background tab: headless Chromium keeps every page visible, and a real browser also "
+        "throttles a background tab's timers). "
+        + ("'before' is the previous version of the page (and of the scene), measured just "
+           "before on the same machine. " if before else "")
+        + "With the 3D view on, viser redraws for 250 ms after every change it is sent and "
+        "once a second when idle (its client's constants): only a vehicle that moves by more "
+        "than a pixel of the view is sent.\n\n"
+        + table(headers, rows))
+    heap = result.get("heap")
+    if heap:
+        text += (f"\n\nJS heap over {heap['minutes']:g} min: last / at 5 min = "
+                 f"{heap['growth_after_5_min']}.")
+    return Section("What the page costs the machine it runs on", 76, text)

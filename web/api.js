@@ -122,6 +122,15 @@ export function socketUrl(path, params) {
   return `${scheme}//${location.host}${API}${path}?${query}`;
 }
 
+// A hidden page (a background tab) draws nothing: a state a second keeps its alerts (the link
+// lost, a failsafe, the battery) and its ages true; events come as they happen at any rate.
+export const HIDDEN_RATE_HZ = 1;
+
+/** The telemetry rate for this page now: `visibleHz`, or HIDDEN_RATE_HZ while hidden. */
+export function rateForPage(visibleHz) {
+  return document.visibilityState === "hidden" ? Math.min(visibleHz, HIDDEN_RATE_HZ) : visibleHz;
+}
+
 export const CLOSE_UNAUTHORIZED = 4401;
 export const CLOSE_NOT_FOUND = 4404;
 export const RECONNECT_FIRST_MS = 500;
@@ -145,7 +154,10 @@ export class TelemetrySocket {
     this.vehicleId = vehicleId;
     this.onMessage = onMessage;
     this.onStatus = onStatus;
-    this.rateHz = rateHz;
+    this.visibleRateHz = rateHz;
+    this.rateHz = rateForPage(rateHz);
+    this.followVisibility = () => this.setRate(rateForPage(this.visibleRateHz));
+    document.addEventListener("visibilitychange", this.followVisibility);
     this.closed = false;
     this.attempt = 0;
     this.retry = null;
@@ -166,7 +178,19 @@ export class TelemetrySocket {
     this.retry = setTimeout(() => this.open(), delayMs);
   }
 
-  connect() {
+  /** States at another rate from now on (a hidden page asks for fewer): a new socket at
+   * that rate, the old one closed once the new one speaks, so nothing is missed between
+   * (an event may come on both); the page is told of no reconnection. */
+  setRate(rateHz) {
+    if (rateHz === this.rateHz) return;
+    this.rateHz = rateHz;
+    if (this.closed || rejected || !this.ws || this.ws.readyState !== WebSocket.OPEN) return;
+    const old = this.ws;
+    old.onclose = null;
+    this.connect(() => old.close());
+  }
+
+  connect(whenHeard = null) {
     if (this.closed || rejected) return;
     const params = { rate_hz: this.rateHz };
     if (this.vehicleId !== null) params.vehicle = this.vehicleId;
@@ -174,7 +198,11 @@ export class TelemetrySocket {
     this.ws = ws;
     let heard = false;
     ws.onmessage = (event) => {
-      if (!heard) {
+      if (!heard && whenHeard) {
+        heard = true;
+        this.attempt = 0;
+        whenHeard();
+      } else if (!heard) {
         heard = true;
         this.attempt = 0;
         const again = this.everConnected;
@@ -184,6 +212,7 @@ export class TelemetrySocket {
       try { this.onMessage(JSON.parse(event.data)); } catch (err) { console.error(err); }
     };
     ws.onclose = (event) => {
+      if (!heard && whenHeard) whenHeard(); // the new one failed: the old one goes too
       if (this.closed) return;
       if (event.code === CLOSE_UNAUTHORIZED) {
         reject(event.reason || "the server rejected the token");
@@ -195,6 +224,7 @@ export class TelemetrySocket {
 
   close() {
     this.closed = true;
+    document.removeEventListener("visibilitychange", this.followVisibility);
     clearTimeout(this.retry);
     if (this.ws) this.ws.close();
   }

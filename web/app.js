@@ -14,6 +14,7 @@ import {
   vehicleHeard,
 } from "./handover.js";
 import { confirmAction, wireConfirm } from "./confirm.js";
+import { Painter, drawTimes, draws, setAttr } from "./draw.js";
 import { FleetView } from "./fleet.js";
 import { deadmanText } from "./format.js";
 import { wireLayout } from "./layout.js";
@@ -23,9 +24,9 @@ import { SETPOINT_TYPES } from "./offboard.js";
 import { freshness, page, plots } from "./page.js";
 import { ParamEditor } from "./params.js";
 import { readiness } from "./readiness.js";
-import { instruments, render } from "./render.js";
+import { accept, instruments, render } from "./render.js";
 import { watchSceneNotices } from "./scene-notice.js";
-import { $, banner, log, nowS, num, setText } from "./ui.js";
+import { $, banner, log, num, setText } from "./ui.js";
 
 const params = new ParamEditor($("params-editor"));
 const map = new VehicleMap($("map"));
@@ -52,10 +53,21 @@ function onTelemetry(message) {
   }
 }
 
+// A state is kept and its alerts raised as it comes; drawn at once (as often as the socket
+// brings states, 10 Hz; never twice within 80 ms, so a burst is drawn within 100 ms of its
+// last state), never while the page is hidden (then at once when it shows again).
+const stateDraw = new Painter("state", () => drawState(page.state), { minGapMs: 80 });
+
 function showState(message) {
+  accept(message);
+  alerts.fromState(message);
+  stateDraw.request();
+}
+
+function drawState(message) {
+  if (!message) return;
   render(message);
   readiness.show(message);
-  alerts.fromState(message);
   renderHolder(message.lease);
   modeMenu.follow(message.vehicle_type || page.vehicleType, message.mode);
 }
@@ -174,14 +186,20 @@ function showVehicles(vehicles) {
   map.showVehicles(vehicles);
   const select = $("vehicle-select");
   const previous = page.vehicleId;
-  select.replaceChildren(...vehicles.map((v) => {
-    const option = document.createElement("option");
-    option.value = v.id;
-    option.textContent = `${v.id} · ${shortType(v.type)}`;
-    option.title = `vehicle ${v.id}: ${v.type}${v.connected ? "" : " (lost)"}`;
-    return option;
-  }));
-  select.title = select.selectedOptions[0]?.title || "";
+  const listed = vehicles.map((v) => `${v.id} · ${shortType(v.type)}`);
+  const titles = vehicles.map((v) => `vehicle ${v.id}: ${v.type}${v.connected ? "" : " (lost)"}`);
+  const key = titles.join("\n");
+  if (select.dataset.listed !== key) { // the same list: nothing to redraw
+    select.dataset.listed = key;
+    select.replaceChildren(...vehicles.map((v, i) => {
+      const option = document.createElement("option");
+      option.value = v.id;
+      option.textContent = listed[i];
+      option.title = titles[i];
+      return option;
+    }));
+  }
+  setAttr(select, "title", select.selectedOptions[0]?.title || "");
   if (page.fleetVehicle) { // another edge's vehicle is shown: the local list stays a list
     select.value = "";
     return;
@@ -277,12 +295,15 @@ function sceneUrl() {
   return "/scene/?darkMode"; // the session cookie carries the token (api.js)
 }
 
-// The 3D scene renders continuously; switching it off frees the CPU on weak machines.
+// The 3D scene costs CPU without a GPU; switching it off frees it on weak machines. A server
+// without the scene (--no-scene, GET /config says so) is never asked for it.
 function showScene(on) {
-  if (page.rejected) return;
-  $("scene").src = on ? sceneUrl() : "about:blank";
-  $("scene").classList.toggle("hidden", !on);
-  $("scene-off").classList.toggle("hidden", on);
+  if (page.rejected || page.sceneServed === undefined) return; // not known yet: nothing asked
+  const shown = on && page.sceneServed;
+  $("scene").src = shown ? sceneUrl() : "about:blank";
+  $("scene").classList.toggle("hidden", !shown);
+  $("scene-off").classList.toggle("hidden", shown);
+  if (!page.sceneServed) $("scene-off").textContent = "no 3D scene on this server";
 }
 
 // ---- parameters ---------------------------------------------------------------------------
@@ -377,12 +398,6 @@ function sizeLabelInput() {
   input.style.width = `${Math.min(220, Math.max(48, text + edges + 3))}px`;
 }
 
-function drawLoop() {
-  const t = nowS();
-  plots.draw(t);
-  setTimeout(() => requestAnimationFrame(drawLoop), 200);
-}
-
 async function main() {
   onTokenRejected(tokenRejected);
   if (!token) {
@@ -396,13 +411,12 @@ async function main() {
   watchSceneNotices($("scene"));
   showSetpointType("position");
   updateControls();
-  showScene($("scene-enable").checked);
   await loadServerMode();
-  await map.loadConfig();
+  page.sceneServed = (await map.loadConfig())?.scene !== false;
+  showScene($("scene-enable").checked);
   await modeMenu.load();
   await fleet.start();
   await loadVehicles();
-  drawLoop();
   log("INFO", "dashboard ready");
 }
 
@@ -411,5 +425,5 @@ main();
 // The page's state, for the browser console and the browser tests.
 window.skyhelm = {
   page, SETPOINT_TYPES, keyboard, modesFor, reconnectDelayMs, alerts, alertLog, plots, freshness,
-  map, fleet,
+  map, fleet, draws, drawTimes,
 };

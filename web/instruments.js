@@ -7,6 +7,7 @@
 // came, so ages keep growing while nothing arrives (a paused vehicle, a lost server), and a
 // value past its message's limit greys out and shows its age.
 
+import { pageHidden, setAttr, setStyle } from "./draw.js";
 import { UNKNOWN, age, duration, heading, num, signed, withUnit, words } from "./format.js";
 
 const SVG = "http://www.w3.org/2000/svg";
@@ -34,6 +35,14 @@ const STALE_AFTER_S = {
 const STALE_DEFAULT_S = 2;
 const AGE_TICK_MS = 250;
 
+/** The age an element carries: once stale, to the tenth of a second (it shows then); while
+ * fresh, only that it is, so a fresh value is not redrawn four times a second for an age
+ * nobody sees. */
+const FRESH = "fresh";
+function shownAge(ageS, stale) {
+  return stale ? age(ageS) : FRESH;
+}
+
 /** How old each value of the last state is now, and whether it is stale. */
 export class Freshness {
   constructor() {
@@ -42,15 +51,16 @@ export class Freshness {
     this.watched = []; // [element, source key]
     this.linkLost = false;
     this.listeners = [];
-    this.timer = setInterval(() => this.refresh(), AGE_TICK_MS);
+    // ages grow between states; a hidden page shows none (refreshed when drawn again)
+    this.timer = setInterval(() => { if (!pageHidden()) this.refresh(); }, AGE_TICK_MS);
   }
 
+  /** A state came: its message ages from now on (drawn by the next refresh()). */
   update(state) {
     this.ages = state.message_ages_s || {};
     // the server's verdict: nothing valid comes from the vehicle, whatever each age says yet
     this.linkLost = state.connected === false;
     this.receivedMs = performance.now();
-    this.refresh();
   }
 
   /** Seconds since anything at all came from the vehicle (its freshest message); null if
@@ -77,10 +87,11 @@ export class Freshness {
     return { ageS: best + elapsedS, stale: (this.linkLost && limit !== Infinity) || best + elapsedS > limit };
   }
 
-  /** Grey out `element` (and show its age) whenever the value `key` is stale. */
-  watch(element, key) {
+  /** Grey out `element` (and show its age) whenever the value `key` is stale; its tooltip
+   * says the age too unless `ownTitle` (another part of the page writes that tooltip). */
+  watch(element, key, { ownTitle = false } = {}) {
     element.dataset.src = key;
-    this.watched.push([element, key]);
+    this.watched.push([element, key, ownTitle]);
   }
 
   /** `listener()` runs at every refresh: at each state and as ages grow between states. */
@@ -90,13 +101,15 @@ export class Freshness {
 
   refresh() {
     for (const listener of this.listeners) listener();
-    for (const [element, key] of this.watched) {
+    for (const [element, key, ownTitle] of this.watched) {
       const known = this.ageOf(key);
       const stale = Boolean(known?.stale);
-      element.classList.toggle("stale", stale);
-      const text = known ? age(known.ageS) : "";
+      if (element.classList.contains("stale") !== stale) element.classList.toggle("stale", stale);
+      const text = known ? shownAge(known.ageS, stale) : "";
       if (element.dataset.age !== text) element.dataset.age = text;
-      const title = known ? `${(SOURCES[key] || [key]).join(" / ")}: ${text} ago` : "not received yet";
+      if (ownTitle) continue;
+      const when = text === FRESH ? FRESH : `${text} ago`;
+      const title = known ? `${(SOURCES[key] || [key]).join(" / ")}: ${when}` : "not received yet";
       if (element.title !== title) element.title = title;
     }
   }
@@ -170,8 +183,12 @@ class AttitudeIndicator {
     }
     const roll = attitude.roll_deg;
     const pitch = Math.max(-90, Math.min(90, attitude.pitch_deg));
-    this.horizon.setAttribute("transform", `rotate(${-roll}) translate(0 ${pitch * PITCH_PX_PER_DEG})`);
-    this.rollPointer.setAttribute("transform", `rotate(${-roll})`);
+    // to half a degree of roll (under a pixel at the rim) and half a pixel of pitch: a
+    // hovering vehicle's jitter does not redraw the horizon ten times a second
+    const r = Math.round(roll * 2) / 2;
+    const p = Math.round(pitch * PITCH_PX_PER_DEG * 2) / 2;
+    setAttr(this.horizon, "transform", `rotate(${-r}) translate(0 ${p})`);
+    setAttr(this.rollPointer, "transform", `rotate(${-r})`);
     setTextOf(this.readout, `R ${num(roll, 0)}°  P ${num(pitch, 0)}°`);
   }
 }
@@ -210,7 +227,7 @@ class HeadingTape {
       return;
     }
     const h = ((headingDeg % 360) + 360) % 360;
-    this.tape.setAttribute("transform", `translate(${-h * TAPE_PX_PER_DEG} 0)`);
+    setAttr(this.tape, "transform", `translate(${-Math.round(h * TAPE_PX_PER_DEG * 2) / 2} 0)`);
     setTextOf(this.readout, heading(h));
   }
 }
@@ -285,7 +302,9 @@ function put(node, content) {
 }
 
 function level(node, cls) {
-  for (const c of ["good", "warn", "bad"]) node.classList.toggle(c, c === cls);
+  for (const c of ["good", "warn", "bad"]) {
+    if (node.classList.contains(c) !== (c === cls)) node.classList.toggle(c, c === cls);
+  }
 }
 
 export class Instruments {
@@ -318,8 +337,8 @@ export class Instruments {
     this.battery.reset();
   }
 
+  /** Draws a state (its ages were taken by freshness.update() when it came). */
   show(state) {
-    this.freshness.update(state);
     this.adi.show(state.attitude);
     this.tape.show(finite(state.heading_deg) ? state.heading_deg : state.attitude?.yaw_deg);
     const g = state.global;
@@ -346,9 +365,10 @@ export class Instruments {
     if (b) parts.push(`${withUnit(b.voltage_v, "V", 2)} · ${withUnit(b.current_a, "A")}`);
     if (t) parts.push(`${duration(t.seconds)} left${t.how === "vehicle" ? "" : " (est.)"}`);
     put(this.batt.sub, parts.join(" · "));
-    this.batt.box.dataset.timeLeftS = t ? String(Math.round(t.seconds)) : "";
+    const left = t ? String(Math.round(t.seconds)) : "";
+    if (this.batt.box.dataset.timeLeftS !== left) this.batt.box.dataset.timeLeftS = left;
     level(this.batt.box, !finite(pct) ? "" : pct <= 15 ? "bad" : pct <= 30 ? "warn" : "good");
-    this.battBar.firstChild.style.width = `${finite(pct) ? Math.max(0, Math.min(100, pct)) : 0}%`;
+    setStyle(this.battBar.firstChild, "width", `${finite(pct) ? Math.max(0, Math.min(100, pct)) : 0}%`);
   }
 
   showGps(gps) {
@@ -384,7 +404,7 @@ export class Instruments {
   showVtol(state) {
     const vs = state.vtol_state;
     const isVtol = /VTOL/.test(state.vehicle_type || "") || (vs && vs !== "UNDEFINED");
-    this.vtol.box.classList.toggle("hidden", !isVtol);
+    if (this.vtol.box.classList.contains("hidden") === isVtol) this.vtol.box.classList.toggle("hidden", !isVtol);
     if (!isVtol) return;
     const names = { MC: "Multicopter", FW: "Fixed wing", TRANSITION_TO_FW: "→ Fixed wing", TRANSITION_TO_MC: "→ Multicopter" };
     put(this.vtol.big, names[vs] || UNKNOWN);

@@ -6,6 +6,7 @@
 
 import { TelemetrySocket, request } from "./api.js";
 import { altitudeAllowed, runCommand } from "./control.js";
+import { Painter, setAttr, setStyle } from "./draw.js";
 import { inControl } from "./handover.js";
 import { page } from "./page.js";
 import { $, num } from "./ui.js";
@@ -41,6 +42,8 @@ export function offsetOf(ref, point) {
 }
 
 const finite = (...xs) => xs.every(Number.isFinite);
+/** Two [lat, lon] (or null) the same: a layer is moved only when its point changed. */
+const samePoint = (a, b) => a === b || Boolean(a && b && a[0] === b[0] && a[1] === b[1]);
 
 /** [lat, lon] of the vehicle's local NED origin: reported, or worked back from home. */
 function nedOrigin(state) {
@@ -118,24 +121,38 @@ class VehicleLayer {
 
   update(state, selected, nowS) {
     const here = vehicleLatLon(state);
+    const heading = Number.isFinite(state.heading_deg) ? state.heading_deg : state.attitude?.yaw_deg;
+    // what the layer shows from this state: the same as drawn (and no trail point to age
+    // out) is nothing to do
+    const px = (point) => (point ? this.map.latLngToLayerPoint(point).round() : null);
+    const aimed = aimOf(state);
+    // to the pixel: the map moves nothing by less (the trail keeps a point per pixel moved)
+    const shown = JSON.stringify([px(here), Math.round(heading), category(state), selected,
+      state.connected, px(homeLatLon(state)), aimed && [aimed.kind, Math.round(aimed.north_m * 10),
+        Math.round(aimed.east_m * 10)], nedOrigin(state), this.map.getZoom()]);
+    const trailAged = this.trail.length > 0 && nowS - this.trail[0][2] > TRAIL_S;
+    if (shown === this.drawnAs && !trailAged) return;
+    this.drawnAs = shown;
     this.latLon = here;
     this.show(this.marker, Boolean(here));
     if (here) {
-      this.marker.setLatLng(here);
+      if (!samePoint(here, this.markerAt)) this.marker.setLatLng(here);
+      this.markerAt = here;
       const el = this.marker.getElement();
       if (el) {
-        const heading = Number.isFinite(state.heading_deg) ? state.heading_deg : state.attitude?.yaw_deg;
-        el.querySelector("svg").style.transform = `rotate(${this.turnTo(heading)}deg)`;
-        el.dataset.category = category(state);
+        // to the degree: finer does not show on a 28 px arrow
+        setStyle(el.querySelector("svg"), "transform", `rotate(${Math.round(this.turnTo(heading))}deg)`);
+        setAttr(el, "data-category", category(state));
         el.classList.toggle("selected", selected);
         el.classList.toggle("stale", !state.connected);
-        el.dataset.headingDeg = num(heading, 0);
+        setAttr(el, "data-heading-deg", num(heading, 0));
       }
       this.addToTrail(here, nowS);
     }
     const home = homeLatLon(state);
     this.show(this.home, Boolean(home));
-    if (home) this.home.setLatLng(home);
+    if (home && !samePoint(home, this.homeAt)) this.home.setLatLng(home);
+    this.homeAt = home;
 
     const aim = aimOf(state);
     const origin = aim && nedOrigin(state);
@@ -143,10 +160,13 @@ class VehicleLayer {
     this.show(this.aim, Boolean(point));
     this.show(this.aimLine, Boolean(point && here));
     if (point) {
-      this.aim.setLatLng(point);
-      this.aim.getElement()?.setAttribute("data-kind", aim.kind);
-      if (here) this.aimLine.setLatLngs([here, point]);
+      if (!samePoint(point, this.aimLatLon)) this.aim.setLatLng(point);
+      setAttr(this.aim.getElement(), "data-kind", aim.kind);
+      if (here && !(samePoint(here, this.aimFrom) && samePoint(point, this.aimLatLon))) {
+        this.aimLine.setLatLngs([here, point]);
+      }
     }
+    this.aimFrom = here;
     this.aimLatLon = point;
     this.aimKind = aim?.kind ?? null;
   }
@@ -165,8 +185,10 @@ class VehicleLayer {
     const moved = !last || offsetDistanceM(last, here) >= TRAIL_MIN_STEP_M;
     if (moved) this.trail.push([here[0], here[1], nowS]);
     while (this.trail.length && nowS - this.trail[0][2] > TRAIL_S) this.trail.shift();
-    if (moved || this.trail.length < 2) {
+    const dropped = this.trail.length !== this.trailDrawn;
+    if (moved || dropped) {
       this.trailLine.setLatLngs(this.trail.map(([lat, lon]) => [lat, lon]));
+      this.trailDrawn = this.trail.length;
     }
     this.show(this.trailLine, this.trail.length > 1);
   }
@@ -290,21 +312,30 @@ export class VehicleMap {
     this.placed = false;
     this.others = null;
     this.pick = L.circleMarker([0, 0], { radius: 7, className: "map-pick", interactive: false });
+    // states are kept as they come and drawn at most ten times a second while the map shows
+    this.pending = new Map();
+    this.painter = new Painter("map", () => this.drawPending(), {
+      shown: () => this.container.checkVisibility?.() ?? true,
+    });
     this.setFollow(true);
     this.map.on("dragstart", () => this.setFollow(false));
     this.map.on("click", (e) => this.offerGoto(e.latlng));
-    new ResizeObserver(() => this.map.invalidateSize({ pan: false })).observe(container);
+    new ResizeObserver(() => {
+      this.map.invalidateSize({ pan: false });
+      this.painter.wake(); // shown again: what came meanwhile, at once
+    }).observe(container);
   }
 
-  /** Tiles when the server has a map_tile_url or a tile archive; the grid stays otherwise. */
+  /** Tiles when the server has a map_tile_url or a tile archive; the grid stays otherwise.
+   * Returns the server's page configuration (null when it gave none). */
   async loadConfig() {
     let config = null;
     try {
       config = await request("GET", "/config");
     } catch {
-      return; // an older server: the grid
+      return null; // an older server: the grid
     }
-    if (!config?.map_tile_url) return;
+    if (!config?.map_tile_url) return config;
     // an offline archive (map_tiles) says which zooms and area it holds: no asking past them
     const [west, south, east, north] = config.map_tile_bounds || [];
     this.tiles = L.tileLayer(config.map_tile_url, {
@@ -316,6 +347,7 @@ export class VehicleMap {
     this.container.classList.add("with-tiles");
     this.grid.remove();
     this.grid = null;
+    return config;
   }
 
   setFollow(on) {
@@ -332,6 +364,17 @@ export class VehicleMap {
   /** Every state message of the page's socket, and of the others' socket; a fleet
    * vehicle's (fleet.js) under its key "edge/id". */
   onState(state, id = state.vehicle ?? state.id) {
+    this.pending.set(id, state);
+    this.painter.request();
+  }
+
+  drawPending() {
+    const states = [...this.pending];
+    this.pending.clear();
+    for (const [id, state] of states) this.drawState(state, id);
+  }
+
+  drawState(state, id) {
     if (!this.knows(id)) return;
     let layer = this.layers.get(id);
     if (!layer) {

@@ -18,6 +18,7 @@ export const page = {
   vtol: { state: null, since: 0 },
   readOnly: false, // a replayed recording: nobody may take control
   rejected: false, // the server refused the token: the page stops asking
+  sceneServed: undefined, // GET /config said whether the server serves the 3D scene
   // a fleet server (--fleet): the selected vehicle may be another edge's, {key, edge, id};
   // then vehicleId is its key ("edge/id") and every call goes through the fleet's routes
   fleetVehicle: null,

@@ -1,11 +1,16 @@
 // Live plots with uPlot (vendored in vendor/uplot/, a global `uPlot`): any numeric telemetry
 // field over the last 60 s, picked from a menu per chart. The page keeps 60 s of every field
-// (at most 10 samples a second), so a newly picked field shows its past at once.
+// (at most 10 samples a second), so a newly picked field shows its past at once. The charts
+// are drawn at their own pace (twice a second) while samples come or the last ones scroll
+// out, not while the page or the plots are hidden, and not when the picture would not
+// change (a flat line across the whole window).
 
+import { Painter } from "./draw.js";
 import { num } from "./format.js";
 
 const WINDOW_S = 60;
 const SAMPLE_EVERY_S = 0.1;
+const DRAW_EVERY_MS = 500;
 const SKIP = new Set(["id", "vehicle", "sysid", "compid", "updated_s"]);
 const SKIP_PREFIX = ["statustext", "lease", "telemetry_refused"];
 const COLOURS = { value: "#5dade2", setpoint: "#f5b041" };
@@ -49,6 +54,7 @@ class Chart {
     this.area.id = `plot-${index}`;
     container.append(pick, this.area);
     this.uplot = null;
+    this.drawn = null; // what a flat line drawn over the whole window showed
     new ResizeObserver(() => this.fit()).observe(this.area);
   }
 
@@ -73,6 +79,7 @@ class Chart {
     };
     this.uplot?.destroy();
     this.uplot = new window.uPlot(options, [[], [], []], this.area);
+    this.drawn = null;
   }
 
   size() {
@@ -80,7 +87,10 @@ class Chart {
   }
 
   fit() {
-    if (this.uplot) this.uplot.setSize(this.size());
+    if (this.uplot) {
+      this.uplot.setSize(this.size());
+      this.drawn = null;
+    }
   }
 
   pick(field) {
@@ -107,6 +117,12 @@ class Chart {
       ys.push(fields[this.field] ?? null);
       sps.push(fields[spField] ?? null);
     }
+    // the same flat line over the whole window: the same picture as drawn, nothing to do
+    const full = xs.length > 0 && xs[0] <= -WINDOW_S + 2 * SAMPLE_EVERY_S;
+    const flat = full && ys.every((y) => y === ys[0]) && sps.every((y) => y === sps[0]);
+    const picture = flat ? `${ys[0]}|${sps[0]}` : null;
+    if (picture !== null && picture === this.drawn) return;
+    this.drawn = picture;
     this.uplot.setData([xs, ys, sps], false);
     this.uplot.setScale("x", { min: -WINDOW_S, max: 0 });
     this.uplot.redraw(false, true);
@@ -133,6 +149,9 @@ export class Plots {
     this.derived = derived;
     this.samples = []; // [time_s, {field: value}]
     this.known = new Set(Object.keys(derived));
+    this.painter = new Painter("plots", () => this.draw(performance.now() / 1000), {
+      minGapMs: DRAW_EVERY_MS, shown: () => container.checkVisibility?.() ?? true,
+    });
     this.charts = fields.map((field, i) => {
       const box = document.createElement("div");
       box.className = "plot";
@@ -165,10 +184,12 @@ export class Plots {
       }
     }
     if (added) this.fillMenus();
+    this.painter.request();
   }
 
   clear() {
     this.samples = [];
+    this.painter.request();
   }
 
   fillMenus() {
@@ -188,5 +209,8 @@ export class Plots {
 
   draw(nowS) {
     for (const chart of this.charts) chart.draw(nowS);
+    // no new sample: the last ones still scroll out of the window, at the same pace
+    const last = this.samples.at(-1);
+    if (last && nowS - last[0] > 2 * SAMPLE_EVERY_S && nowS - last[0] < WINDOW_S) this.painter.request();
   }
 }

@@ -116,17 +116,17 @@ export class Readiness {
         this.button.textContent = text;
       }
     }
-    this.button.classList.remove("ok", "bad", "warn");
-    if (cls) this.button.classList.add(cls);
+    for (const c of ["ok", "bad", "warn"]) this.button.classList.toggle(c, c === cls); // unchanged: no DOM write
     const checks = state.arming_checks;
     const count = checks ? checks.reasons.filter((c) => SEVERITY_CLASS[c.severity] === "bad").length : 0;
     const waiting = checks?.waiting_for?.length ? ` · waiting for ${checks.waiting_for.join(" and ")}` : "";
-    this.button.title = checks?.verdict === "arm_switches_mode"
+    const title = checks?.verdict === "arm_switches_mode"
       ? `${words}: PX4 will not arm in ${checks.mode}, it would in ${checks.arm_switches_to} — click for PX4's reasons`
       : checks?.ready === false && count
         ? `${count} failing check${count > 1 ? "s" : ""} in ${checks.mode}${waiting}: click for PX4's reasons`
         : waiting ? `Not ready${waiting}: click for details` : "PX4's arming checks: click for details";
-    this.button.setAttribute("aria-label", words);
+    if (this.button.title !== title) this.button.title = title;
+    if (this.button.getAttribute("aria-label") !== words) this.button.setAttribute("aria-label", words);
     if (!this.popover.classList.contains("hidden")) this.renderPopover();
   }
 

@@ -2,6 +2,7 @@
 // VTOL progress and the strip charts.
 
 import { followFlown } from "./control.js";
+import { setAttr, setStyle } from "./draw.js";
 import { age, millis } from "./format.js";
 import { Instruments } from "./instruments.js";
 import { flownText } from "./offboard.js";
@@ -17,7 +18,7 @@ for (const [id, source] of Object.entries({
   "t-home": "home", "t-motors": "motors", mode: "mode", armed: "mode", landed: "landed",
   "vtol-state": "landed", "user-mode": "mode", // Wanted: CURRENT_MODE.intended_custom_mode
   "ready-to-fly": "SYS_STATUS",
-})) freshness.watch($(id), source);
+})) freshness.watch($(id), source, { ownTitle: id === "mode" || id === "ready-to-fly" });
 freshness.onRefresh(renderLink);
 
 // Above this age of its freshest message the vehicle is late (amber), before the server's
@@ -34,8 +35,9 @@ function renderLink() {
   const quality = state.link_quality;
   const pct = (value) => (value === null || value === undefined ? "?" : `${num(value, 0)}%`);
   setText("link-loss", quality ? `↓${pct(quality.loss_in_pct)} ↑${pct(quality.loss_out_pct)}` : "");
-  let text = age(silentS);
   const late = silentS !== null && silentS > LINK_LATE_S;
+  // on time it says so; the age to the tenth once late (a live link's age flickers below 1 s)
+  let text = silentS !== null && !late ? `< ${num(LINK_LATE_S, 0)} s` : age(silentS);
   let cls = late || quality?.degraded ? "warn" : "ok";
   if (state.connected === false) {
     text = `LOST · ${age(silentS)}`;
@@ -46,10 +48,13 @@ function renderLink() {
   }
   setText("link-health", text, cls);
   const warnings = quality?.warnings?.length ? `; ${quality.warnings.join("; ")}` : "";
-  $("link-slot").title = `the server's link to vehicle ${state.vehicle ?? ""}: its freshest message ${age(silentS)} old`
-    + ` (heartbeat ${age(state.last_heartbeat_age_s)}), frames lost from it ${pct(quality?.loss_in_pct)}`
+  // the ages in the tooltip as in the box: under a second is on time
+  const heartbeatS = state.last_heartbeat_age_s;
+  const heartbeat = Number.isFinite(heartbeatS) && heartbeatS <= LINK_LATE_S ? `< ${num(LINK_LATE_S, 0)} s` : age(heartbeatS);
+  setAttr($("link-slot"), "title", `the server's link to vehicle ${state.vehicle ?? ""}: its freshest message ${text.replace(/^LOST · |^\? · /, "")} old`
+    + ` (heartbeat ${heartbeat}), frames lost from it ${pct(quality?.loss_in_pct)}`
     + ` and to it ${pct(quality?.loss_out_pct)}${warnings}`
-    + (page.connected ? "" : "; this page has lost the server, so the link's state is not known");
+    + (page.connected ? "" : "; this page has lost the server, so the link's state is not known"));
 }
 
 export function altitudeAboveHome(state) {
@@ -77,21 +82,31 @@ function setpointSpeed(state) {
   return null;
 }
 
+/** A state came: kept at once (the page's state, the message ages, the plots' samples, also
+ * while the page is hidden); drawn by render() at the pace a person can see. */
+export function accept(state) {
+  page.state = state;
+  if (state.vehicle_type) page.vehicleType = state.vehicle_type;
+  freshness.update(state);
+  plots.add(nowS(), state, {
+    alt_above_home_m: [altitudeAboveHome(state), setpointAltitude(state)],
+    ground_speed_m_s: [state.ground_speed_m_s, setpointSpeed(state)],
+  });
+}
+
 // The link badge: lost, or degraded (the warning before the verdict, its reasons on hover),
 // with the loss each way from state.link_quality (sequence numbers; "?" where unknown).
 export function render(state) {
-  page.state = state;
-  if (state.vehicle_type) page.vehicleType = state.vehicle_type;
   const failsafe = state.user_mode && state.user_mode !== state.mode && state.armed;
   setText("mode", state.mode || "–");
-  $("mode").title = state.mode || "";
-  $("mode").style.color = failsafe ? "var(--bad)" : state.mode === "OFFBOARD" ? "var(--offboard)" : "";
+  setAttr($("mode"), "title", state.mode || "");
+  setStyle($("mode"), "color", failsafe ? "var(--bad)" : state.mode === "OFFBOARD" ? "var(--offboard)" : "");
   setText("user-mode", state.user_mode || "–");
   setText("armed", state.armed ? "ARMED" : "DISARMED", state.armed ? "ok" : "");
   const landedCls = { IN_AIR: "info", TAKEOFF: "warn", LANDING: "warn" }[state.landed_state] || "";
   setText("landed", (state.landed_state || "–").replace("_", " "), landedCls);
-  const vtol = state.vtol_state && state.vtol_state !== "UNDEFINED";
-  $("vtol-state").classList.toggle("hidden", !vtol);
+  const vtol = Boolean(state.vtol_state && state.vtol_state !== "UNDEFINED");
+  toggle($("vtol-state"), "hidden", !vtol);
   if (vtol) setText("vtol-state", state.vtol_state.replaceAll("_", " "), state.vtol_state.startsWith("TRANSITION") ? "warn" : "info");
 
   renderSigning(state);
@@ -99,20 +114,21 @@ export function render(state) {
   renderStream(state.stream || {});
   renderVtol(state);
   instruments.show(state);
+  freshness.refresh();
   const streaming = Boolean(state.stream?.active && state.setpoint);
   setText("sp-flown-text", streaming ? flownText(state.setpoint, state.home?.down_m ?? 0) : "no setpoint streamed");
-  $("sp-flown").title = $("sp-flown").textContent;
+  setAttr($("sp-flown"), "title", $("sp-flown").textContent);
   followFlown(state);
-  plots.add(nowS(), state, {
-    alt_above_home_m: [altitudeAboveHome(state), setpointAltitude(state)],
-    ground_speed_m_s: [state.ground_speed_m_s, setpointSpeed(state)],
-  });
+}
+
+function toggle(el, cls, on) {
+  if (el.classList.contains(cls) !== on) el.classList.toggle(cls, on);
 }
 
 function renderTelemetry(state) {
   const b = state.battery;
   setText("t-battery", b ? `${num(b.voltage_v, 2)} V · ${num(b.current_a, 1)} A · ${num(b.remaining_pct, 0)}%` : "–");
-  if (b && Number.isFinite(b.remaining_pct)) $("t-battery").style.color = b.remaining_pct < 20 ? "var(--bad)" : b.remaining_pct < 40 ? "var(--warn)" : "";
+  if (b && Number.isFinite(b.remaining_pct)) setStyle($("t-battery"), "color", b.remaining_pct < 20 ? "var(--bad)" : b.remaining_pct < 40 ? "var(--warn)" : "");
   const g = state.gps;
   setText("t-gps", g ? `${g.fix_type} · ${g.satellites} sats · hdop ${num(g.hdop, 1)}` : "–");
   const p = state.position_ned;
@@ -134,26 +150,26 @@ function renderTelemetry(state) {
 
 function renderStream(s) {
   setText("stream-active", s.active ? "streaming" : "off");
-  $("stream-active").style.color = s.active ? "var(--ok)" : "var(--dim)";
+  setStyle($("stream-active"), "color", s.active ? "var(--ok)" : "var(--dim)");
   setText("stream-rate", s.rate_hz ? `${num(s.rate_hz, 1)} Hz` : "–");
   setText("stream-p99", Number.isFinite(s.interval_p99_ms) ? `${num(s.interval_p99_ms, 1)} ms` : "–");
   setText("stream-gap", Number.isFinite(s.max_gap_ms) ? `${num(s.max_gap_ms, 0)} ms` : "–");
   setText("stream-since", millis(s.since_last_ms));
   setText("stream-sent", `${s.sent ?? "–"}`);
-  $("stream-gap").style.color = s.max_gap_ms > 500 ? "var(--bad)" : s.max_gap_ms > 100 ? "var(--warn)" : "";
+  setStyle($("stream-gap"), "color", s.max_gap_ms > 500 ? "var(--bad)" : s.max_gap_ms > 100 ? "var(--warn)" : "");
   // who sends the frames (the sender process, or the thread after it failed), its restarts
   // and last fault (the stream went on; a "stream" event in the log told when)
   const restarts = s.sender_restarts ? `, ${s.sender_restarts} restart${s.sender_restarts > 1 ? "s" : ""}` : "";
   setText("stream-sender", s.sender ? `${s.sender}${restarts}` : "–");
-  $("stream-sender").title = s.sender_fault ? `last fault: ${s.sender_fault}` : "";
-  $("stream-sender").style.color = s.sender_fault && s.sender !== "process" ? "var(--warn)" : "";
+  setAttr($("stream-sender"), "title", s.sender_fault ? `last fault: ${s.sender_fault}` : "");
+  setStyle($("stream-sender"), "color", s.sender_fault && s.sender !== "process" ? "var(--warn)" : "");
 }
 
 const TRANSITION_GUESS_S = { TRANSITION_TO_FW: 3.5, TRANSITION_TO_MC: 1.5 };
 
 function renderVtol(state) {
   const isVtol = /VTOL/.test(page.vehicleType) || (state.vtol_state && state.vtol_state !== "UNDEFINED");
-  $("vtol-panel").classList.toggle("hidden", !isVtol);
+  toggle($("vtol-panel"), "hidden", !isVtol);
   if (!isVtol) return;
   const vs = state.vtol_state;
   if (vs !== page.vtol.state) page.vtol = { state: vs, since: nowS() };
@@ -168,6 +184,6 @@ function renderVtol(state) {
     pct = Math.max(5, 100 - (100 * elapsed) / TRANSITION_GUESS_S[vs]);
     text = `→ MC ${num(elapsed, 1)} s`;
   }
-  $("vtol-progress-bar").style.width = `${pct}%`;
+  setStyle($("vtol-progress-bar"), "width", `${pct}%`);
   setText("vtol-progress", text || "–");
 }

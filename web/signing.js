@@ -12,5 +12,6 @@ export function renderSigning(state) {
     setText("signing", "SIGNING: NO ANSWER", "bad");
   }
   const el = document.getElementById("signing");
-  if (el && s) el.title = `MAVLink 2 signing · rejected: ${s.rejected_bad_signature} bad signature, ${s.rejected_replay} replayed, ${s.rejected_unsigned} unsigned`;
+  const title = `MAVLink 2 signing · rejected: ${s?.rejected_bad_signature} bad signature, ${s?.rejected_replay} replayed, ${s?.rejected_unsigned} unsigned`;
+  if (el && s && el.title !== title) el.title = title;
 }

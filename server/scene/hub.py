@@ -7,6 +7,7 @@ import asyncio
 import contextlib
 import io
 import logging
+import math
 import threading
 import time
 from collections.abc import Callable
@@ -23,7 +24,7 @@ from .compass import CompassRose
 from .fleet_view import FleetPose, FleetScene, FleetVehicleView
 from .frames import Vec3, enu_to_geodetic, geodetic_offset_enu, ray_hits_plane_z
 from .proxy import SceneProxy
-from .vehicle_view import VehicleView
+from .vehicle_view import DEFAULT_PIXEL_M, VehicleView
 
 if TYPE_CHECKING:
     from server.link import VehicleState
@@ -41,6 +42,11 @@ _FLEET_PREFIX = "fleet "
 # fleet vehicles arrive at most at 10 Hz each (state/fast); the scene draws them in batches
 _FLEET_RATE_HZ = 10.0
 _CAMERA_OFFSET_ENU = np.array([-6.0, -6.0, 4.0])
+# The scene panel's title: viser's own says "Connected" (its socket to this server), which a
+# pilot reads as the vehicle. It says what the view shows instead, and which link is lost.
+SCENE_LABEL = "3D view"
+# Finer than this the model never moves, however close a camera is.
+_PIXEL_MIN_M = 0.002
 
 
 class StateWatch(Protocol):
@@ -95,6 +101,8 @@ class SceneHub:
         self.fleet = FleetScene()
         self._fleet_views: dict[str, FleetVehicleView] = {}
         self._fleet_task: asyncio.Task[None] | None = None
+        self._links_lost: dict[int, bool] = {}
+        self._label: str | None = None
         # Told of every click (in viser's thread), after it is stored.
         self.on_click: Callable[[SceneClickMessage], None] | None = None
 
@@ -154,6 +162,8 @@ class SceneHub:
         return {"seq": 0} if click is None else click.model_dump(exclude={"type"})
 
     def _set_up_scene(self, server: viser.ViserServer) -> None:
+        self._label = None
+        self._show_label(server)
         server.scene.set_up_direction("+z")
         server.scene.world_axes.visible = False
         server.initial_camera.position = tuple(_CAMERA_OFFSET_ENU)
@@ -271,6 +281,36 @@ class SceneHub:
             for state in states:
                 self._apply(server, state, now_s)
             self._follow_camera(server)
+            self._show_label(server)
+
+    def _show_label(self, server: viser.ViserServer) -> None:
+        """The panel's title: what the view shows, and any vehicle whose link is lost."""
+        lost = sorted(sysid for sysid, gone in self._links_lost.items() if gone)
+        label = SCENE_LABEL if not lost else (
+            f"{SCENE_LABEL} · link lost: vehicle {', '.join(str(s) for s in lost)}"
+        )
+        if label != self._label:
+            self._label = label
+            server.gui.set_panel_label(label)
+
+    @property
+    def panel_label(self) -> str | None:
+        """The scene panel's title as last sent (for the tests)."""
+        return self._label
+
+    def pixel_m(self, server: viser.ViserServer, point: Vec3) -> float:
+        """What one pixel spans at ``point`` in the closest view of any client (a
+        default before any client told its camera): finer changes do not show."""
+        best: float | None = None
+        for client in server.get_clients().values():
+            camera = client.camera
+            height = camera.image_height
+            if height <= 0:
+                continue
+            distance = float(np.linalg.norm(np.asarray(camera.position) - np.asarray(point)))
+            size = 2.0 * distance * math.tan(camera.fov / 2.0) / height
+            best = size if best is None else min(best, size)
+        return DEFAULT_PIXEL_M if best is None else max(best, _PIXEL_MIN_M)
 
     def _apply(self, server: viser.ViserServer, state: VehicleState, now_s: float) -> None:
         view = self._views.get(state.sysid)
@@ -280,7 +320,10 @@ class SceneHub:
             view = VehicleView(server.scene, state.sysid, state.mav_type)
             self._views[state.sysid] = view
             self._refresh_follow_options()
-        view.update(state, self._offset_enu(state), now_s)
+        self._links_lost[state.sysid] = state.connected is False
+        offset = self._offset_enu(state)
+        point = view.position_enu if view.position_enu is not None else offset
+        view.update(state, offset, now_s, self.pixel_m(server, point))
         self.updates_applied += 1
         if state.home is not None and state.sysid == min(self._views):
             self._place_grid(view, state)

@@ -71,8 +71,11 @@ class VehicleModel:
         """Rotor discs glow with their motor output; only changed shades are resent."""
         for i, rotor in enumerate(self.rotors):
             value = outputs[i] if i < len(outputs) else 0.0
-            shade = round(min(1.0, max(0.0, value)) * 20)
-            if i < len(self._rotor_shades) and self._rotor_shades[i] == shade:
+            level = min(1.0, max(0.0, value)) * 20
+            shade = round(level)
+            # a whole shade away from the one shown: an output hovering on a boundary does not
+            # flicker between two (each change is a redraw in every browser)
+            if i < len(self._rotor_shades) and abs(level - self._rotor_shades[i]) < 1.0:
                 continue
             while len(self._rotor_shades) <= i:
                 self._rotor_shades.append(-1)

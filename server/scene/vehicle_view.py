@@ -24,6 +24,11 @@ _SETPOINT_COLOUR: Rgb = (241, 196, 15)
 _TARGET_COLOUR: Rgb = (230, 126, 34)
 _HOME_COLOUR: Rgb = (236, 240, 241)
 _RTL_COLOUR: Rgb = (231, 76, 60)
+# What one pixel of the view spans when no client told its camera yet.
+DEFAULT_PIXEL_M = 0.01
+# How far the model's farthest point (a rotor tip, a wing tip) is from its centre: an
+# attitude change that moves it less than a pixel does not show.
+_MODEL_REACH_M = 0.6
 
 
 def _finite(*values: float | None) -> bool:
@@ -77,6 +82,20 @@ def _rounded(values: tuple[float, ...], digits: int = 3) -> tuple[float, ...]:
     return tuple(round(v, digits) for v in values)
 
 
+def moved_beyond(shown: Vec3 | None, point: Vec3, pixel_m: float) -> bool:
+    """Whether ``point`` is more than a pixel away from where the model is ``shown``."""
+    return shown is None or max(abs(a - b) for a, b in zip(point, shown, strict=True)) > pixel_m
+
+
+def turned_beyond(shown: tuple[float, ...] | None, wxyz: tuple[float, ...],
+                  pixel_m: float) -> bool:
+    """Whether the attitude ``wxyz`` turns the model's tips more than a pixel from ``shown``."""
+    if shown is None:
+        return True
+    dot = min(1.0, abs(sum(a * b for a, b in zip(wxyz, shown, strict=True))))
+    return 2.0 * math.acos(dot) * _MODEL_REACH_M > pixel_m
+
+
 class _Assigner:
     """Sets a node's property only when its value changed: every set is a message to every
     watching browser, and most of a hovering vehicle's scene does not change."""
@@ -97,12 +116,17 @@ class _Polyline:
 
     def __init__(self, scene: viser.SceneApi, name: str, colour: Rgb, thickness: float) -> None:
         self._colour = np.array(colour, dtype=np.uint8)
+        self._shown: list[tuple[float, ...]] = []
         self._handle = scene.add_line_segments(
             name, points=np.zeros((1, 2, 3), dtype=np.float32), colors=colour,
             thickness=thickness, thickness_units="screen", visible=False,
         )
 
     def show(self, points: list[Vec3]) -> None:
+        rounded = [_rounded(p) for p in points]
+        if self._handle.visible and rounded == self._shown:
+            return  # the same line: nothing sent, nothing redrawn
+        self._shown = rounded
         segments = _polyline_segments(points)
         self._handle.points = segments
         self._handle.colors = np.broadcast_to(self._colour, segments.shape).astype(np.uint8)
@@ -142,8 +166,15 @@ class VehicleView(LabelledModel):
         )
         self.home_label = scene.add_label(f"{base}/home/label", text="H", position=(0, 0, 0.3))
         self.rtl_path = _Polyline(scene, f"{base}/rtl", _RTL_COLOUR, 2.5)
+        # where the model is drawn: moved (and turned) only by what a pixel of the view shows
+        self._shown_position: Vec3 | None = None
+        self._shown_wxyz: tuple[float, ...] | None = None
 
-    def update(self, state: VehicleState, offset_enu: Vec3, now_s: float) -> None:
+    def update(self, state: VehicleState, offset_enu: Vec3, now_s: float,
+               pixel_m: float = DEFAULT_PIXEL_M) -> None:
+        """Sets the nodes from a state; the model moves (and turns) only when the change is
+        more than ``pixel_m``, what one pixel of the closest view spans at the vehicle: each
+        change is a message to every browser and a redraw there."""
         colour = state_colour(
             armed=state.armed, mode=state.mode, user_mode=state.user_mode,
             system_status=state.system_status,
@@ -162,20 +193,25 @@ class VehicleView(LabelledModel):
             p = state.position_ned
             position_ned = (p.north_m, p.east_m, p.down_m)
             self.position_enu = _shift(ned_to_enu(*position_ned), offset_enu)
-            self._set(self.model.root, "position", _rounded(self.position_enu))
-            self._set(self.label, "position", _rounded(_shift(self.position_enu, (0.0, 0.0, 0.8))))
+            if moved_beyond(self._shown_position, self.position_enu, pixel_m):
+                self._shown_position = self.position_enu
+                self._set(self.model.root, "position", _rounded(self.position_enu))
+                self._set(self.label, "position",
+                          _rounded(_shift(self.position_enu, (0.0, 0.0, 0.8))))
             if self.trail.add(now_s, self.position_enu) or now_s - self._trail_drawn_s > 5.0:
                 self._redraw_trail(now_s, colour)
         if state.attitude is not None:
             a = state.attitude
-            wxyz = attitude_wxyz_enu(a.roll_deg, a.pitch_deg, a.yaw_deg)
-            self._set(self.model.root, "wxyz", _rounded(wxyz, 5))
+            wxyz = tuple(attitude_wxyz_enu(a.roll_deg, a.pitch_deg, a.yaw_deg))
+            if turned_beyond(self._shown_wxyz, wxyz, pixel_m):
+                self._shown_wxyz = wxyz
+                self._set(self.model.root, "wxyz", _rounded(wxyz, 5))
 
         self._update_setpoint(state, position_ned, offset_enu)
         home_enu = self._update_home(state, offset_enu)
         self._update_target(state, offset_enu)
-        if state.mode == "RTL" and home_enu is not None and self.position_enu is not None:
-            self.rtl_path.show(rtl_path_enu(self.position_enu, home_enu))
+        if state.mode == "RTL" and home_enu is not None and self._shown_position is not None:
+            self.rtl_path.show(rtl_path_enu(self._shown_position, home_enu))
         else:
             self.rtl_path.hide()
 
@@ -206,10 +242,10 @@ class VehicleView(LabelledModel):
         if self.position_enu is None:
             point_ned = None
         point_enu = self._place(self.setpoint_marker, point_ned, offset_enu)
-        if point_enu is None or self.position_enu is None:
+        if point_enu is None or self._shown_position is None:
             self.setpoint_line.hide()
         else:
-            self.setpoint_line.show([self.position_enu, point_enu])
+            self.setpoint_line.show([self._shown_position, point_enu])
 
     def _update_home(self, state: VehicleState, offset_enu: Vec3) -> Vec3 | None:
         return self._place(self.home_marker, _ned(state.home), offset_enu)

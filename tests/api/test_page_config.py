@@ -20,7 +20,7 @@ async def test_config_gives_the_tile_url_to_observers_and_not_without_a_token() 
         assert answer.json() == {
             "map_tile_url": TILES, "map_tile_attribution": "© Example", "fleet": False,
             "map_tiles_offline": False, "map_tile_min_zoom": None, "map_tile_max_zoom": None,
-            "map_tile_bounds": None,
+            "map_tile_bounds": None, "scene": False,
         }
         async with httpx.AsyncClient(
             transport=httpx.ASGITransport(app=api.app), base_url="http://testserver"
@@ -32,6 +32,12 @@ async def test_config_without_tiles_says_null() -> None:
     async with api_for(None, connect=["udpin:127.0.0.1:0"]) as api:
         answer = await api.client.get("/api/v1/config")
         assert answer.json()["map_tile_url"] is None
+
+
+@pytest.mark.parametrize("scene", [True, False])
+async def test_config_says_whether_the_scene_is_served(scene: bool) -> None:
+    async with api_for(None, connect=["udpin:127.0.0.1:0"], scene=scene) as api:
+        assert (await api.client.get("/api/v1/config")).json()["scene"] is scene
 
 
 @pytest.mark.parametrize(

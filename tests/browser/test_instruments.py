@@ -227,5 +227,9 @@ def test_an_observer_sees_the_setpoint_flown_not_the_forms_defaults(
     flown = second_page.text_content("#sp-flown-text") or ""
     assert flown.startswith("Position · North "), flown
     assert abs(_number(flown.split("North ")[1]) - north) < 0.05, flown
-    assert page.text_content("#sp-flown-text") == flown
+    # the pilot's page shows the same, drawn by its own schedule (not at the observer's instant)
+    page.wait_for_function(
+        "([text]) => document.getElementById('sp-flown-text').textContent === text",
+        arg=[flown], timeout=PAGE_TIMEOUT_MS,
+    )
     assert second_page.is_disabled("#sp-north_m")  # observing: shown, not editable

@@ -1,5 +1,6 @@
-"""What the page needs to know of the server's settings: the 2D map's tiles, and whether
-it is a fleet server. Behind the token, since a tile URL may carry the tile provider's key."""
+"""What the page needs to know of the server's settings: the 2D map's tiles, whether it is a
+fleet server and whether it serves the 3D scene. Behind the token, since a tile URL may carry
+the tile provider's key."""
 
 from __future__ import annotations
 
@@ -32,6 +33,9 @@ class PageConfigOut(BaseModel):
         default=None, description="west, south, east, north (degrees) the archive covers"
     )
     fleet: bool = Field(description="a fleet server (--fleet): /api/v1/fleet and its socket")
+    scene: bool = Field(
+        default=True, description="the 3D scene is served at /scene/ (false: --no-scene)"
+    )
 
 
 @router.get("/config", response_model=PageConfigOut, responses=AUTH_RESPONSES)
@@ -43,6 +47,7 @@ async def page_config(context: Context, _role: Reader) -> PageConfigOut:
             map_tile_url=settings.map_tile_url,
             map_tile_attribution=settings.map_tile_attribution,
             fleet=settings.fleet,
+            scene=settings.scene,
         )
     info = archive.info
     return PageConfigOut(
@@ -53,4 +58,5 @@ async def page_config(context: Context, _role: Reader) -> PageConfigOut:
         map_tile_max_zoom=info.max_zoom,
         map_tile_bounds=list(info.bounds) if info.bounds else None,
         fleet=settings.fleet,
+        scene=settings.scene,
     )

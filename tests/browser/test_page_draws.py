@@ -1,0 +1,157 @@
+"""The page draws only what changed, as soon as it comes, and nothing while hidden: with a
+landed vehicle whose state does not change, nothing on the page is written over a window
+although states keep coming; a state is drawn within 100 ms of its arrival at the page's
+socket; a hidden page (document.visibilityState, as a browser says it of a background tab)
+draws nothing and catches up at once when shown again."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import httpx
+
+from .flows import settle_vehicle
+from .harness import Serve
+
+SERVE_ARGS = ["--sim-speed", "2"]
+PAGE_TIMEOUT_MS = 20_000
+# A window over which a landed vehicle's page is watched (about 20 states come in it).
+QUIET_WINDOW_S = 2.0
+DRAWN_WITHIN_MS = 100.0
+HIDDEN_RATE_HZ = 1  # web/api.js
+
+# Every state message for the selected vehicle, with its arrival time at the socket (this
+# listener is the socket's first: it runs before the page's own handler).
+STATE_ARRIVALS = """
+window.__arrivals = [];
+window.__linkQualities = [];
+const PageSocket = window.WebSocket;
+window.WebSocket = class extends PageSocket {
+  constructor(url, ...rest) {
+    super(url, ...rest);
+    if (!String(url).includes("/ws/telemetry")) return;
+    this.addEventListener("message", (event) => {
+      const arrived = performance.now();
+      const message = JSON.parse(event.data);
+      if (message.type === "state" && message.vehicle === window.skyhelm?.page.vehicleId) {
+        window.__arrivals.push(arrived);
+        window.__linkQualities.push(JSON.stringify(message.link_quality));
+      }
+    });
+  }
+};
+"""
+WATCH_MUTATIONS = """
+() => {
+  window.__mutations = [];
+  window.__observer = new MutationObserver((records) => {
+    for (const r of records) {
+      const el = r.target.nodeType === 1 ? r.target : r.target.parentElement;
+      const name = el?.id || el?.className || el?.tagName;
+      window.__mutations.push(`${name} ${r.type} ${r.attributeName || ""}`);
+    }
+  });
+  window.__observer.observe(document.body, {
+    subtree: true, attributes: true, characterData: true, childList: true,
+  });
+}
+"""
+# How a browser tells a page it went to the background, and back (headless Chromium keeps
+# every page "visible", so the property and the event are set as a browser sets them).
+SET_VISIBILITY = """
+(state) => {
+  Object.defineProperty(document, "visibilityState", { configurable: true, get: () => state });
+  Object.defineProperty(document, "hidden", { configurable: true, get: () => state === "hidden" });
+  document.dispatchEvent(new Event("visibilitychange"));
+}
+"""
+
+
+def _open(browser: Any, serve: Serve) -> Any:
+    page = browser.new_page()
+    page.add_init_script(STATE_ARRIVALS)
+    page.goto(f"{serve.url}&scene=off")
+    page.wait_for_function("document.getElementById('mode').textContent !== '–'",
+                           timeout=PAGE_TIMEOUT_MS)
+    return page
+
+
+def _arrivals(page: Any) -> int:
+    count: int = page.evaluate("window.__arrivals.length")
+    return count
+
+
+def test_a_landed_vehicle_whose_state_does_not_change_writes_nothing_to_the_page(
+    api: httpx.Client, serve: Serve, browser: Any
+) -> None:
+    settle_vehicle(api, flying=False)
+    page = _open(browser, serve)
+    try:
+        # the first states drawn, the ages settled
+        page.wait_for_function("window.skyhelm.draws.state >= 10", timeout=PAGE_TIMEOUT_MS)
+        page.evaluate(WATCH_MUTATIONS)
+        came = _arrivals(page)
+        time.sleep(QUIET_WINDOW_S)  # the window watched, not a wait for a condition
+        mutations: list[str] = page.evaluate("window.__mutations")
+        assert _arrivals(page) - came >= 5, "states kept coming over the window"
+        # the link's measured frame loss is the one thing that may change on its own (a
+        # frame lost on a busy machine): only then may the LINK box change
+        qualities = set(page.evaluate(f"window.__linkQualities.slice({came - 1})"))
+        if len(qualities) > 1:
+            mutations = [m for m in mutations if not m.startswith(("link-loss ", "link-slot "))]
+        assert mutations == [], mutations
+    finally:
+        page.close()
+
+
+def test_every_state_is_drawn_within_100_ms_of_its_arrival(
+    api: httpx.Client, serve: Serve, browser: Any
+) -> None:
+    settle_vehicle(api, flying=False)
+    page = _open(browser, serve)
+    try:
+        page.wait_for_function("window.__arrivals.length >= 40", timeout=PAGE_TIMEOUT_MS)
+        arrivals: list[float] = page.evaluate("window.__arrivals.slice(-30, -1)")
+        drawn: list[float] = page.evaluate("window.skyhelm.drawTimes.state")
+        late = []
+        for arrived in arrivals:
+            after = [t for t in drawn if t >= arrived]
+            assert after, f"the state that came at {arrived:.0f} ms was never drawn"
+            if after[0] - arrived > DRAWN_WITHIN_MS:
+                late.append(round(after[0] - arrived))
+        assert late == [], f"drawn later than {DRAWN_WITHIN_MS} ms after arrival: {late}"
+    finally:
+        page.close()
+
+
+def test_a_hidden_page_draws_nothing_and_catches_up_at_once_when_shown(
+    api: httpx.Client, serve: Serve, browser: Any
+) -> None:
+    settle_vehicle(api, flying=False)
+    page = _open(browser, serve)
+    try:
+        page.wait_for_function("window.skyhelm.draws.state >= 5", timeout=PAGE_TIMEOUT_MS)
+        page.evaluate(SET_VISIBILITY, "hidden")
+        page.evaluate(WATCH_MUTATIONS)
+        draws: dict[str, int] = page.evaluate("({...window.skyhelm.draws})")
+        came = _arrivals(page)
+        time.sleep(QUIET_WINDOW_S)  # the window watched while hidden
+        # a hidden page asks for a state a second (and both sockets speak at the switch)
+        assert 1 <= _arrivals(page) - came <= QUIET_WINDOW_S * HIDDEN_RATE_HZ + 2
+        assert page.evaluate("({...window.skyhelm.draws})") == draws
+        assert page.evaluate("window.__mutations") == []
+        # shown again: the newest state is drawn at once, before the next one comes
+        shown_at: float = page.evaluate(
+            f"() => {{ ({SET_VISIBILITY})('visible'); return performance.now(); }}"
+        )
+        page.wait_for_function(
+            f"window.skyhelm.draws.state > {draws['state']}", timeout=PAGE_TIMEOUT_MS
+        )
+        first = min(t for t in page.evaluate("window.skyhelm.drawTimes.state") if t >= shown_at)
+        assert first - shown_at <= DRAWN_WITHIN_MS
+        # and states come at the full rate again
+        came = _arrivals(page)
+        page.wait_for_function(f"window.__arrivals.length >= {came + 8}", timeout=PAGE_TIMEOUT_MS)
+    finally:
+        page.close()

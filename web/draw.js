@@ -1,0 +1,102 @@
+// Drawing at the pace a person can see: a part of the page (the state's numbers, the plots,
+// the map) asks to be drawn when what it shows changed; it is drawn at once, never twice
+// within `minGapMs` (a change that comes sooner is drawn when that time is up), never while
+// the page is hidden (document.visibilityState) or the part itself is hidden, and at once
+// when it shows again.
+// The parts due together are drawn in one task, by a timer: no requestAnimationFrame at all
+// (each one asks the browser for a frame, which costs even when nothing changed, and a
+// window the browser gives few frames, headless Chromium's second page, would lag); what a
+// draw changes is painted in the browser's next frame.
+//
+// window.skyhelm.draws counts the draws of each part and window.skyhelm.drawTimes keeps
+// when (performance.now(), the last DRAW_TIMES_KEPT) it drew, for the browser tests and the
+// console.
+
+export const draws = {};
+export const drawTimes = {};
+const DRAW_TIMES_KEPT = 100;
+const painters = [];
+const due = new Set();
+let task = null;
+
+export const pageHidden = () => document.visibilityState === "hidden";
+
+function drawDue() {
+  task = null;
+  const now = performance.now();
+  for (const painter of [...due]) {
+    due.delete(painter);
+    painter.run(now);
+  }
+}
+
+export class Painter {
+  /** `draw()` draws the part; `shown()` says whether the part can be seen now. */
+  constructor(name, draw, { minGapMs = 100, shown = () => true } = {}) {
+    this.name = name;
+    this.draw = draw;
+    this.minGapMs = minGapMs;
+    this.shown = shown;
+    this.dirty = false;
+    this.lastMs = -Infinity;
+    this.timer = null;
+    draws[name] = 0;
+    drawTimes[name] = [];
+    painters.push(this);
+  }
+
+  /** What this part shows changed: draw it soon. */
+  request() {
+    this.dirty = true;
+    this.plan();
+  }
+
+  plan() {
+    if (!this.dirty || this.timer !== null || due.has(this)) return;
+    if (pageHidden() || !this.shown()) return; // drawn when shown again (wake())
+    const waitMs = this.lastMs + this.minGapMs - performance.now();
+    if (waitMs > 0) {
+      this.timer = setTimeout(() => { this.timer = null; this.run(performance.now()); }, waitMs);
+      return;
+    }
+    due.add(this);
+    if (task === null) task = setTimeout(drawDue, 0);
+  }
+
+  run(now) {
+    if (!this.dirty || pageHidden() || !this.shown()) return;
+    this.dirty = false;
+    this.lastMs = now;
+    draws[this.name] += 1;
+    const times = drawTimes[this.name];
+    times.push(now);
+    if (times.length > DRAW_TIMES_KEPT) times.shift();
+    try { this.draw(); } catch (err) { console.error(err); }
+  }
+
+  /** Shown again (the page or the part): what changed meanwhile is drawn at once. */
+  wake() {
+    if (!this.dirty) return;
+    this.lastMs = -Infinity;
+    clearTimeout(this.timer);
+    this.timer = null;
+    this.plan();
+  }
+}
+
+/** Every part shown again: those that changed while hidden catch up in the next frame. */
+export function wakeAll() {
+  for (const painter of painters) painter.wake();
+}
+
+document.addEventListener("visibilitychange", () => { if (!pageHidden()) wakeAll(); });
+
+/** Sets an attribute only when its value changes (every set is a DOM mutation). */
+export function setAttr(el, name, value) {
+  if (el && el.getAttribute(name) !== value) el.setAttribute(name, value);
+}
+
+/** Sets one inline style property only when it changes. */
+export function setStyle(el, property, value) {
+  if (el && el.style[property] !== value) el.style[property] = value;
+}
