@@ -199,9 +199,9 @@ function showVehicles(vehicles) {
       return option;
     }));
   }
-  setAttr(select, "title", select.selectedOptions[0]?.title || "");
   if (page.fleetVehicle) { // another edge's vehicle is shown: the local list stays a list
     select.value = "";
+    setAttr(select, "title", "");
     return;
   }
   const keep = vehicles.find((v) => v.id === previous);
@@ -212,7 +212,7 @@ function showVehicles(vehicles) {
     return;
   }
   select.value = chosen.id;
-  select.title = select.selectedOptions[0]?.title || "";
+  setAttr(select, "title", select.selectedOptions[0]?.title || "");
   page.vehicleType = chosen.type;
   if (!keep) selectVehicle(chosen.id);
 }

@@ -5,6 +5,7 @@
 import {
   CLOSE_NOT_FOUND, ControlSession, describeError, reconnectDelayMs, request,
 } from "./api.js";
+import { setAttr } from "./draw.js";
 import { FleetControlSession } from "./fleet-control.js";
 import { page, vehiclePath } from "./page.js";
 import { $, banner, log, setText } from "./ui.js";
@@ -259,8 +260,8 @@ export function renderHolder(lease = page.state?.lease) {
   const session = lease?.session || shownHolder.session;
   setText("holder-since", holder || mine ? `· ${time.slice(0, 5)}` : "");
   const whole = `${since}${holder && session ? ` · ${session}` : ""}`;
-  $("holder-since").title = whole;
-  $("holder").parentElement.title = `who controls the vehicle: ${name}${whole ? ` ${whole}` : ""}`;
+  setAttr($("holder-since"), "title", whole);
+  setAttr($("holder").parentElement, "title", `who controls the vehicle: ${name}${whole ? ` ${whole}` : ""}`);
   const otherHolds = Boolean(holder) && !mine;
   const asking = page.control && !page.control.open;
   $("take-control").classList.toggle("hidden", mine || page.readOnly);
@@ -272,8 +273,8 @@ export function renderHolder(lease = page.state?.lease) {
   if ($("take-control").title !== takeTitle) $("take-control").title = takeTitle;
   $("force-control").classList.toggle("hidden", !otherHolds || page.readOnly);
   $("force-control").disabled = !page.connected;
-  $("force-control").title = page.connected
-    ? "take control at once, without asking the holder" : "the server is not connected";
+  setAttr($("force-control"), "title", page.connected
+    ? "take control at once, without asking the holder" : "the server is not connected");
   $("release").classList.toggle("hidden", !mine);
 }
 
