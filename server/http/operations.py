@@ -1,6 +1,7 @@
 """Vehicle commands and intents by name, with their request bodies: the REST routes and the
 WebSocket control session run the same tables, so both refuse and answer alike. The checks
-(the envelope for take-off, reposition and moves) are the link's own."""
+(the envelope for take-off, reposition, setpoints and intents) are the link's own, made
+where it sends them."""
 
 from __future__ import annotations
 
@@ -22,7 +23,6 @@ from server.http.schemas.intents import (
     VelocityIntentBody,
 )
 from server.link import CommandResult, SentSetpoint, Vehicle, intents
-from server.link.codec.envelope import GeoTarget, check_takeoff_altitude, check_target
 from server.link.intents import IntentResult
 
 
@@ -45,7 +45,6 @@ async def disarm(vehicle: Vehicle, body: schemas.ArmBody) -> CommandResult:
 
 
 async def takeoff(vehicle: Vehicle, body: schemas.TakeoffBody) -> CommandResult:
-    check_takeoff_altitude(vehicle.envelope, body.altitude_m)
     return await vehicle.takeoff(body.altitude_m)
 
 
@@ -66,7 +65,6 @@ async def set_mode(vehicle: Vehicle, body: schemas.ModeBody) -> CommandResult:
 
 
 async def reposition(vehicle: Vehicle, body: schemas.RepositionBody) -> CommandResult:
-    _check_reposition_envelope(vehicle, body)
     return await vehicle.reposition(
         body.lat_deg,
         body.lon_deg,
@@ -122,22 +120,6 @@ async def run_command(name: str, vehicle: Vehicle, body: BaseModel | None) -> Co
     """Run the operation ``name`` with its body (None: the body's defaults)."""
     operation = OPERATIONS[name]
     return await operation.run(vehicle, body if body is not None else operation.body())
-
-
-def _check_reposition_envelope(vehicle: Vehicle, body: schemas.RepositionBody) -> None:
-    """The envelope guards repositions as it guards setpoints: they fly the vehicle too.
-    Without a home neither the distance nor an AMSL altitude's height can be known."""
-    home = vehicle.home
-    alt_rel_m = body.alt_rel_m
-    if alt_rel_m is None and body.alt_amsl_m is not None and home is not None:
-        alt_rel_m = body.alt_amsl_m - home.alt_amsl_m
-    check_target(
-        vehicle.envelope,
-        home,
-        GeoTarget(body.lat_deg, body.lon_deg, alt_rel_m),
-        what="reposition",
-        alt_field="alt_rel_m" if body.alt_rel_m is not None else "alt_amsl_m",
-    )
 
 
 # -- intents ------------------------------------------------------------------------------
