@@ -5,6 +5,7 @@ All are coroutines so they run on the event loop, which owns the leases and the 
 
 from __future__ import annotations
 
+import contextlib
 import functools
 from collections.abc import AsyncIterator
 from dataclasses import dataclass
@@ -18,9 +19,10 @@ from starlette.requests import HTTPConnection
 from server.control.audit import AuditLog
 from server.control.auth import Role, TokenChecker, token_from
 from server.control.deadman import Deadman
-from server.control.lease import Lease, LeaseManager
+from server.control.lease import Lease, LeaseInvalid, LeaseManager
 from server.control.lease_ops import holder_name
 from server.control.registry import VehicleRegistry
+from server.http.contract import input_first
 from server.http.errors import ApiError
 from server.http.security import Guards
 from server.http.tile_archive import TileArchive
@@ -144,10 +146,20 @@ LeaseIdHeader = Annotated[
 
 
 async def hold_lease(
-    _: Pilot, vehicle: KnownVehicle, context: Context, x_lease_id: LeaseIdHeader = None
+    request: Request,
+    _: Pilot,
+    vehicle: KnownVehicle,
+    context: Context,
+    x_lease_id: LeaseIdHeader = None,
 ) -> AsyncIterator[Lease]:
-    """Control calls renew the lease, and it cannot lapse while the call runs."""
-    with context.leases.hold(vehicle.sysid, x_lease_id) as lease:
+    """Control calls renew the lease, and it cannot lapse while the call runs. A refused
+    lease is answered for an input the schema allows; other input is a 422 first."""
+    with contextlib.ExitStack() as held:
+        try:
+            lease = held.enter_context(context.leases.hold(vehicle.sysid, x_lease_id))
+        except LeaseInvalid:
+            await input_first(request)
+            raise
         yield lease
 
 

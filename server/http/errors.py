@@ -22,7 +22,7 @@ from server.control.lease import (
 )
 from server.control.lease_ops import AskerGone
 from server.http.schemas import CommandResultOut, ErrorOut, UnprocessableOut
-from server.link import CommandOutcome, CommandResult, ParamError, SetpointRejected
+from server.link import CommandOutcome, CommandResult, ParamError, ParamUnknown, SetpointRejected
 
 
 class ApiError(Exception):
@@ -131,6 +131,8 @@ def error_status(exc: Exception) -> tuple[int, dict[str, Any]] | None:
         if exc.holder is not None:  # who holds control now, e.g. after a takeover
             locked["holder"] = exc.holder
         return 423, locked
+    if isinstance(exc, ParamUnknown):
+        return 404, {"reason": str(exc)}
     if isinstance(exc, ParamError):
         return 409, {"reason": str(exc)}
     if isinstance(exc, TimeoutError):
@@ -209,8 +211,8 @@ def validation_detail(errors: Sequence[Any]) -> list[Any]:
 
 # the failures answered as error_status says; anything else is a bug (500)
 ANSWERED_ERRORS: tuple[type[Exception], ...] = (
-    ApiError, SetpointRejected, LeaseInvalid, ParamError, TimeoutError, LeaseHeld,
-    TakeoverRefused, TtlOutOfBounds, UnknownRequest, AskerGone,
+    ApiError, SetpointRejected, LeaseInvalid, ParamError, ParamUnknown, TimeoutError,
+    LeaseHeld, TakeoverRefused, TtlOutOfBounds, UnknownRequest, AskerGone,
 )  # fmt: skip
 
 

@@ -217,7 +217,17 @@ COMMAND_PATHS = {
 
 VEHICLE_ID = Param("vehicle_id", TypeAdapter(Annotated[int, Field(ge=0, le=255)]))
 _PARAM_NAME = Param(
-    "name", TypeAdapter(Annotated[str, Field(pattern=vehicle_ops.PARAM_NAME_PATTERN)])
+    "name",
+    TypeAdapter(
+        Annotated[
+            str,
+            Field(pattern=vehicle_ops.PARAM_NAME_PATTERN, min_length=1,
+                  max_length=vehicle_ops.PARAM_NAME_LENGTH),
+        ]
+    ),
+)  # fmt: skip
+_PARAM_NAMES = Param(
+    "names", TypeAdapter(Annotated[str, Field(pattern=vehicle_ops.PARAM_NAMES_PATTERN)] | None)
 )
 
 CALLS: tuple[VehicleCall, ...] = (
@@ -240,7 +250,7 @@ CALLS: tuple[VehicleCall, ...] = (
     VehicleCall("DELETE", "sticks", Access.CONTROL, _delete_sticks),
     VehicleCall(
         "GET", "params", Access.CONNECTED, _get_params,
-        query=(Param("names", TypeAdapter(str | None)),),
+        query=(_PARAM_NAMES,),
     ),
     VehicleCall("GET", "params/{name}", Access.CONNECTED, _get_param, params=(_PARAM_NAME,)),
     VehicleCall(

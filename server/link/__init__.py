@@ -30,7 +30,7 @@ from server.link.core.state import (
 )
 from server.link.link import Link
 from server.link.plugins.manual_control import Sticks
-from server.link.plugins.params import ParamError
+from server.link.plugins.params import ParamError, ParamUnknown
 from server.link.vehicle import Vehicle
 
 __all__ = [
@@ -49,6 +49,7 @@ __all__ = [
     "LinkStats",
     "OriginState",
     "ParamError",
+    "ParamUnknown",
     "PositionNedState",
     "SetpointRejected",
     "StateSubscription",

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import AfterValidator, Field, model_validator
+from pydantic import AfterValidator, ConfigDict, Field, model_validator
 
 from server.link import PX4_MODE_NAMES
 from skyhelm_wire.common import AltM, LatDeg, LonDeg, StrictBody, YawDeg
@@ -40,6 +40,12 @@ class ModeBody(StrictBody):
 
 
 class RepositionBody(StrictBody):
+    # the rule below, published: never both altitudes as numbers
+    model_config = ConfigDict(json_schema_extra={"not": {
+        "required": ["alt_amsl_m", "alt_rel_m"],
+        "properties": {"alt_amsl_m": {"type": "number"}, "alt_rel_m": {"type": "number"}},
+    }})  # fmt: skip
+
     lat_deg: LatDeg
     lon_deg: LonDeg
     alt_amsl_m: AltM | None = None
@@ -69,6 +75,13 @@ class OriginBody(StrictBody):
 
 class HomeBody(StrictBody):
     """All three fields, or none for the current position."""
+
+    # the rule below, published: a number for lat_deg asks one for lon_deg, and the reverse
+    model_config = ConfigDict(json_schema_extra={"allOf": [
+        {"if": {"required": [a], "properties": {a: {"type": "number"}}},
+         "then": {"required": [b], "properties": {b: {"type": "number"}}}}
+        for a, b in (("lat_deg", "lon_deg"), ("lon_deg", "lat_deg"))
+    ]})  # fmt: skip
 
     lat_deg: LatDeg | None = None
     lon_deg: LonDeg | None = None
