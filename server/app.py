@@ -42,9 +42,9 @@ from server.fleet.edge import EdgeService
 from server.fleet.view import FleetVehicle
 from server.fleet.view_service import FleetService
 from server.foxglove import FoxgloveBridge, FoxgloveProxy
+from server.http.context import ApiContext
 from server.http.contract import hold_to_contract
-from server.http.deps import ApiContext
-from server.http.errors import install_error_handlers
+from server.http.error_handlers import install_error_handlers
 from server.http.security import install_security
 from server.http.tile_archive import open_tile_archive
 from server.link import Envelope, Link

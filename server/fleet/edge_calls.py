@@ -20,9 +20,15 @@ from server.control.auth import TokenChecker, token_from
 from server.control.lease import LeaseInvalid
 from server.control.lease_ops import Client
 from server.control.publishers import StatePublishers
-from server.http.deps import ApiContext, known_vehicle, pilot_only, require_connected, role_of
+from server.http.context import (
+    ApiContext,
+    known_vehicle,
+    pilot_only,
+    require_connected,
+    role_of,
+)
 from server.http.errors import ANSWERED_ERRORS, ApiError, error_status, validation_detail
-from server.http.security import Refusal, refusal_body, retry_after_header
+from server.http.guards import Refusal, refusal_body, retry_after_header
 from server.http.vehicle_calls import (
     VEHICLE_ID,
     Access,

@@ -15,16 +15,15 @@ from typing import Annotated, Any
 
 from pydantic import BaseModel, Field, TypeAdapter, ValidationError
 
-from server.control import lease_ops
+from server.control import lease_ops, operations, vehicle_ops
 from server.control.publishers import StatePublishers
-from server.http import operations, vehicle_ops
-from server.http.deps import ApiContext
-from server.http.errors import COMMAND_STATUS, command_out
+from server.http.context import ApiContext
+from server.http.errors import command_answer, command_status
 from server.http.schemas import ParamValueBody, SetpointBody
-from server.http.schemas.intents import GotoIntentBody, OffsetIntentBody, VelocityIntentBody
-from server.http.schemas.sticks import SticksBody
 from server.link import Vehicle
 from skyhelm_wire.control import ControlBody, RenewBody, TakeoverAnswerBody
+from skyhelm_wire.intents import GotoIntentBody, OffsetIntentBody, VelocityIntentBody
+from skyhelm_wire.sticks import SticksBody
 
 
 class Access(enum.Enum):
@@ -174,7 +173,8 @@ async def _set_param(args: CallArgs) -> Reply:
 def _command(name: str) -> Run:
     async def run(args: CallArgs) -> Reply:
         result = await operations.run_command(name, args.vehicle, args.body)
-        return model_reply(command_out(result), COMMAND_STATUS[result.outcome])
+        status, body = command_answer(result)
+        return Reply(status, _json(body))
 
     return run
 
@@ -184,7 +184,7 @@ def _intent(name: str) -> Run:
         answer = await operations.answer_intent(
             args.context.deadman, args.vehicle, name, args.body
         )
-        return Reply(answer.status, _json(answer.body))
+        return Reply(command_status(answer.outcome), _json(answer.body))
 
     return run
 

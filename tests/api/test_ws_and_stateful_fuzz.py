@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 from schemathesis.checks import not_a_server_error
 from websockets.asyncio.client import connect
 
-from server.http.operations import INTENT_NAMES, OPERATIONS
+from server.control.operations import INTENT_NAMES, OPERATIONS
 from tests.api.test_ws import receive, served
 from tests.serve_process import skyhelm_serve
 

@@ -1,7 +1,7 @@
 """Vehicle commands. Each answers with the vehicle's real result: 200 ACCEPTED, 409 refused
 (MAV_RESULT and the vehicle's reason), 504 no answer, 503 link lost.
 
-There is one route per operation of :data:`server.http.operations.OPERATIONS`, taking that
+There is one route per operation of :data:`server.control.operations.OPERATIONS`, taking that
 operation's body: the WebSocket control session runs the same table, so both refuse and
 answer alike. A body whose fields all have defaults may be left out."""
 
@@ -15,9 +15,10 @@ from fastapi import APIRouter, Body
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel
 
+from server.control.operations import OPERATIONS, run_command
 from server.http.deps import ControlledVehicle
-from server.http.errors import COMMAND_RESPONSES, command_response
-from server.http.operations import OPERATIONS, run_command
+from server.http.error_handlers import command_response
+from server.http.errors import COMMAND_RESPONSES
 from server.http.schemas import CommandResultOut
 from server.link import Vehicle
 

@@ -1,4 +1,4 @@
-"""Intent requests (brake, velocity, offset, go-to) and their answer."""
+"""Intents: their requests (brake, velocity, offset, go-to) and their answer."""
 
 from __future__ import annotations
 
@@ -6,7 +6,6 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from server.link.intents import IntentName
 from skyhelm_wire.commands import CommandResultOut
 from skyhelm_wire.common import LatDeg, LonDeg, StrictBody, YawDeg, limits_of
 from skyhelm_wire.setpoint_kinds import AltitudeM, DegreesPerSecond, Metres, MetresPerSecond
@@ -14,6 +13,8 @@ from skyhelm_wire.setpoints import SentSetpointOut
 
 SpeedMS = Annotated[float, limits_of(MetresPerSecond)]
 DistanceM = Annotated[float, limits_of(Metres)]
+IntentName = Literal["brake", "velocity", "offset", "goto"]
+"""What a pilot or a script means (server.link.intents flies each)."""
 YawRateDegS = Annotated[float | None, limits_of(DegreesPerSecond)]
 AltRelM = Annotated[float | None, limits_of(AltitudeM)]
 

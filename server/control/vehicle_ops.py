@@ -1,20 +1,21 @@
 """A vehicle's reads, setpoint, sticks and parameters as REST and the fleet edge run them:
-plain arguments in, the answer's model out, refusals raised as what ``errors.error_status``
-answers (the commands and intents are ``operations.py``)."""
+plain arguments in, the answer's model out, refusals raised as the link's and the control
+core's exceptions (the commands and intents are ``operations.py``)."""
 
 from __future__ import annotations
 
 from dataclasses import asdict
 
 from server.control.deadman import Deadman
+from server.control.operations import sent_out
 from server.control.publishers import StatePublishers
 from server.control.views import finite, stream_dict
-from server.http.operations import sent_out
-from server.http.schemas import ParamOut, ParamsOut, ParamValueBody, SentSetpointOut, SetpointBody
-from server.http.schemas.sticks import SticksBody, SticksOut
 from server.link import Sticks, Vehicle
 from server.link.plugins.manual_control import MANUAL_CONTROL_RATE_HZ
+from skyhelm_wire.params import ParamOut, ParamsOut, ParamValueBody
+from skyhelm_wire.setpoints import SentSetpointOut, SetpointBody
 from skyhelm_wire.state import StreamOut
+from skyhelm_wire.sticks import SticksBody, SticksOut
 
 # PX4 parameter ids are at most 16 characters, ASCII letters, digits and "_"; a list of them
 # is comma-separated (the query of GET /params)

@@ -1,7 +1,8 @@
-"""Vehicle commands and intents by name, with their request bodies: the REST routes and the
-WebSocket control session run the same tables, so both refuse and answer alike. The checks
-(the envelope for take-off, reposition, setpoints and intents) are the link's own, made
-where it sends them."""
+"""Vehicle commands and intents by name, with their request bodies: the REST routes, the
+WebSocket control session and the fleet edge run the same tables, so all refuse and answer
+alike. Refusals are the link's and the control core's own exceptions (``refusals``), which
+each adapter answers in its transport's terms. The checks (the envelope for take-off,
+reposition, setpoints and intents) are the link's own, made where it sends them."""
 
 from __future__ import annotations
 
@@ -12,9 +13,12 @@ from typing import Any
 from pydantic import BaseModel
 
 from server.control.deadman import Deadman
-from server.http import schemas
-from server.http.errors import COMMAND_STATUS, ApiError, command_out
-from server.http.schemas.intents import (
+from server.control.refusals import InvalidInput
+from server.link import CommandOutcome, CommandResult, SentSetpoint, Vehicle, intents
+from server.link.intents import IntentResult
+from skyhelm_wire import commands as schemas
+from skyhelm_wire.commands import CommandResultOut
+from skyhelm_wire.intents import (
     BrakeBody,
     GeoTargetOut,
     GotoIntentBody,
@@ -22,8 +26,7 @@ from server.http.schemas.intents import (
     OffsetIntentBody,
     VelocityIntentBody,
 )
-from server.link import CommandResult, SentSetpoint, Vehicle, intents
-from server.link.intents import IntentResult
+from skyhelm_wire.setpoints import SentSetpointOut, setpoint_body
 
 
 class NoBody(BaseModel):
@@ -171,20 +174,32 @@ INTENTS: dict[str, Intent] = {
 INTENT_NAMES = frozenset(INTENTS)
 
 
+def command_out(result: CommandResult) -> CommandResultOut:
+    """What a command came to, as every adapter answers it."""
+    return CommandResultOut(
+        command=result.command,
+        result=result.outcome.name,  # type: ignore[arg-type]
+        result_code=result.result_code,
+        elapsed_ms=round(result.elapsed_ms, 1),
+        reason=result.reason,
+    )
+
+
 @dataclass(frozen=True)
 class IntentAnswer:
-    """An intent's answer: its status and JSON body, and whether the deadman must watch it
-    (a live velocity) or stop watching (anything else)."""
+    """An intent's answer: the outcome of the command it sent (None: it streamed a
+    setpoint), its JSON body, and whether the deadman must watch it (a live velocity) or
+    stop watching (anything else)."""
 
-    status: int
+    outcome: CommandOutcome | None
     body: dict[str, Any]
     live: bool
 
 
-def sent_out(sent: SentSetpoint) -> schemas.SentSetpointOut:
+def sent_out(sent: SentSetpoint) -> SentSetpointOut:
     """What went on the wire, as the setpoint routes and the control socket answer it."""
-    return schemas.SentSetpointOut(
-        setpoint=schemas.setpoint_body(sent.setpoint),
+    return SentSetpointOut(
+        setpoint=setpoint_body(sent.setpoint),
         message=sent.message,
         frame=sent.frame,
         type_mask=sent.type_mask,
@@ -209,15 +224,15 @@ def intent_out(result: IntentResult, *, live: bool) -> IntentOut:
 
 async def run_intent(name: str, vehicle: Vehicle, args: object) -> IntentAnswer:
     """Validate ``args`` (a body model or its JSON form) and run the intent. Bad input,
-    envelope refusals and missing positions raise what ``errors.error_status`` answers."""
+    envelope refusals and missing positions raise (``InvalidInput``, ``SetpointRejected``)."""
     intent = INTENTS.get(name)
     if intent is None:
-        raise ApiError(422, f"unknown intent; one of {', '.join(INTENTS)}", field="name")
+        raise InvalidInput(f"unknown intent; one of {', '.join(INTENTS)}", field="name")
     body = args if isinstance(args, intent.body) else intent.body.model_validate(args or {})
     result = await intent.run(vehicle, body)
     live = bool(getattr(body, "live", False)) and result.sent is not None
-    status = 200 if result.command is None else COMMAND_STATUS[result.command.outcome]
-    return IntentAnswer(status, intent_out(result, live=live).model_dump(mode="json"), live)
+    outcome = None if result.command is None else result.command.outcome
+    return IntentAnswer(outcome, intent_out(result, live=live).model_dump(mode="json"), live)
 
 
 async def answer_intent(
