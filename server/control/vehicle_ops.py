@@ -17,12 +17,6 @@ from skyhelm_wire.setpoints import SentSetpointOut, SetpointBody
 from skyhelm_wire.state import StreamOut
 from skyhelm_wire.sticks import SticksBody, SticksOut
 
-# PX4 parameter ids are at most 16 characters, ASCII letters, digits and "_"; a list of them
-# is comma-separated (the query of GET /params)
-PARAM_NAME_LENGTH = 16
-PARAM_NAME_PATTERN = r"^[A-Za-z0-9_]{1,16}$"
-PARAM_NAMES_PATTERN = r"^[A-Za-z0-9_]{1,16}(,[A-Za-z0-9_]{1,16})*$"
-
 
 def state_json(publishers: StatePublishers, vehicle: Vehicle) -> bytes:
     """The state publisher's latest encoding (the one the telemetry sockets send), with the
@@ -69,7 +63,7 @@ def stop_sticks(deadman: Deadman, vehicle: Vehicle) -> SticksOut:
 
 
 def param_names(names: str | None) -> list[str] | None:
-    """The ids of ``names`` (checked against PARAM_NAMES_PATTERN before), or None: all."""
+    """The ids of ``names`` (checked against the wire's PARAM_NAMES_PATTERN), or None: all."""
     return None if names is None else names.split(",")
 
 

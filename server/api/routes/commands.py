@@ -19,8 +19,8 @@ from server.control.operations import OPERATIONS, run_command
 from server.http.deps import ControlledVehicle
 from server.http.error_handlers import command_response
 from server.http.errors import COMMAND_RESPONSES
-from server.http.schemas import CommandResultOut
 from server.link import Vehicle
+from skyhelm_wire.calls import CALL
 
 router = APIRouter(
     prefix="/vehicles/{vehicle_id}",
@@ -28,31 +28,32 @@ router = APIRouter(
     responses=COMMAND_RESPONSES,
 )
 
-# (operation, path, route name (it names the OpenAPI operationId), what the route documents)
-_ROUTES: tuple[tuple[str, str, str, str | None], ...] = (
-    ("arm", "/arm", "arm", None),
-    ("disarm", "/disarm", "disarm",
+# (operation, route name (it names the OpenAPI operationId), what the route documents); the
+# method and path are the wire's (skyhelm_wire.calls)
+_ROUTES: tuple[tuple[str, str, str | None], ...] = (
+    ("arm", "arm", None),
+    ("disarm", "disarm",
      'Without force PX4 refuses unless landed ("Disarming denied: not landed").'),
-    ("takeoff", "/takeoff", "takeoff",
+    ("takeoff", "takeoff",
      "Climb to altitude_m above home (default: the vehicle's MIS_TAKEOFF_ALT); above the\n"
      "envelope's max_alt_rel_m: 422."),
-    ("land", "/land", "land", None),
-    ("rtl", "/rtl", "rtl", None),
-    ("hold", "/hold", "hold", None),
-    ("mode", "/mode", "set_mode", "Resolves when the vehicle reports the mode (or says why not)."),
-    ("reposition", "/reposition", "reposition",
+    ("land", "land", None),
+    ("rtl", "rtl", None),
+    ("hold", "hold", None),
+    ("mode", "set_mode", "Resolves when the vehicle reports the mode (or says why not)."),
+    ("reposition", "reposition",
      "MAV_CMD_DO_REPOSITION: fly there and hold (ends OFFBOARD). Outside the envelope: 422\n"
      "naming the field and the limit. The goto intent picks this or a setpoint by mode."),
-    ("vtol_transition", "/vtol/transition", "vtol_transition",
+    ("vtol_transition", "vtol_transition",
      "With wait, resolves when EXTENDED_SYS_STATE shows the new VTOL state."),
-    ("origin", "/origin", "set_origin",
+    ("origin", "set_origin",
      "SET_GPS_GLOBAL_ORIGIN, confirmed by the GPS_GLOBAL_ORIGIN the vehicle sends back."),
-    ("home", "/home", "set_home",
+    ("home", "set_home",
      "MAV_CMD_DO_SET_HOME at the given point, or at the current position without a body."),
-    ("offboard_start", "/offboard/start", "offboard_start",
+    ("offboard_start", "offboard_start",
      "Stream the setpoint (default: hold here) and switch to OFFBOARD; resolves when the\n"
      "vehicle reports OFFBOARD."),
-    ("offboard_stop", "/offboard/stop", "offboard_stop",
+    ("offboard_stop", "offboard_stop",
      "Switch to then_mode, then stop streaming."),
 )
 
@@ -100,10 +101,11 @@ def _endpoint(name: str, route_name: str, doc: str | None) -> _Endpoint:
 
 
 def _add_routes() -> None:
-    for name, path, route_name, doc in _ROUTES:
+    for name, route_name, doc in _ROUTES:
+        call = CALL[name]
         router.add_api_route(
-            path, _endpoint(name, route_name, doc), methods=["POST"],
-            response_model=CommandResultOut,
+            f"/{call.path}", _endpoint(name, route_name, doc), methods=[call.method],
+            response_model=call.answer,
         )
 
 

@@ -7,10 +7,10 @@ from typing import Annotated
 from fastapi import APIRouter, Path, Query
 
 from server.control import vehicle_ops
-from server.control.vehicle_ops import PARAM_NAME_LENGTH, PARAM_NAME_PATTERN, PARAM_NAMES_PATTERN
 from server.http.deps import ConnectedVehicle, ControlledVehicle
 from server.http.errors import CONTROL_RESPONSES, READ_RESPONSES, Responses
 from server.http.schemas import ErrorOut, ParamOut, ParamsOut, ParamValueBody
+from skyhelm_wire.calls import PARAM_NAME_LENGTH, PARAM_NAME_PATTERN, PARAM_NAMES_PATTERN
 
 router = APIRouter(prefix="/vehicles/{vehicle_id}/params", tags=["params"])
 
