@@ -35,6 +35,9 @@ class NoBody(BaseModel):
 
 @dataclass(frozen=True)
 class Operation:
+    """A command: its body and its function, whose name and docstring its REST route takes
+    (they name and describe it in OpenAPI)."""
+
     body: type[BaseModel]
     run: Callable[[Vehicle, Any], Awaitable[CommandResult]]
 
@@ -44,10 +47,13 @@ async def arm(vehicle: Vehicle, body: schemas.ArmBody) -> CommandResult:
 
 
 async def disarm(vehicle: Vehicle, body: schemas.ArmBody) -> CommandResult:
+    """Without force PX4 refuses unless landed ("Disarming denied: not landed")."""
     return await vehicle.disarm(force=body.force)
 
 
 async def takeoff(vehicle: Vehicle, body: schemas.TakeoffBody) -> CommandResult:
+    """Climb to altitude_m above home (default: the vehicle's MIS_TAKEOFF_ALT); above the
+    envelope's max_alt_rel_m: 422."""
     return await vehicle.takeoff(body.altitude_m)
 
 
@@ -64,10 +70,13 @@ async def hold(vehicle: Vehicle, _: NoBody) -> CommandResult:
 
 
 async def set_mode(vehicle: Vehicle, body: schemas.ModeBody) -> CommandResult:
+    """Resolves when the vehicle reports the mode (or says why not)."""
     return await vehicle.set_mode(body.mode)
 
 
 async def reposition(vehicle: Vehicle, body: schemas.RepositionBody) -> CommandResult:
+    """MAV_CMD_DO_REPOSITION: fly there and hold (ends OFFBOARD). Outside the envelope: 422
+    naming the field and the limit. The goto intent picks this or a setpoint by mode."""
     return await vehicle.reposition(
         body.lat_deg,
         body.lon_deg,
@@ -80,25 +89,31 @@ async def reposition(vehicle: Vehicle, body: schemas.RepositionBody) -> CommandR
 
 
 async def vtol_transition(vehicle: Vehicle, body: schemas.VtolTransitionBody) -> CommandResult:
+    """With wait, resolves when EXTENDED_SYS_STATE shows the new VTOL state."""
     return await vehicle.vtol_transition(
         body.to == "fixed_wing", immediate=body.immediate, wait=body.wait
     )
 
 
 async def set_origin(vehicle: Vehicle, body: schemas.OriginBody) -> CommandResult:
+    """SET_GPS_GLOBAL_ORIGIN, confirmed by the GPS_GLOBAL_ORIGIN the vehicle sends back."""
     return await vehicle.set_gps_origin(body.lat_deg, body.lon_deg, body.alt_amsl_m)
 
 
 async def set_home(vehicle: Vehicle, body: schemas.HomeBody) -> CommandResult:
+    """MAV_CMD_DO_SET_HOME at the given point, or at the current position without a body."""
     return await vehicle.set_home(body.lat_deg, body.lon_deg, body.alt_amsl_m)
 
 
 async def offboard_start(vehicle: Vehicle, body: schemas.OffboardStartBody) -> CommandResult:
+    """Stream the setpoint (default: hold here) and switch to OFFBOARD; resolves when the
+    vehicle reports OFFBOARD."""
     setpoint = body.setpoint.to_link() if body.setpoint is not None else None
     return await vehicle.start_offboard(setpoint)
 
 
 async def offboard_stop(vehicle: Vehicle, body: schemas.OffboardStopBody) -> CommandResult:
+    """Switch to then_mode, then stop streaming."""
     return await vehicle.stop_offboard(body.then_mode)
 
 

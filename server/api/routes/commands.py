@@ -28,36 +28,6 @@ router = APIRouter(
     responses=COMMAND_RESPONSES,
 )
 
-# (operation, route name (it names the OpenAPI operationId), what the route documents); the
-# method and path are the wire's (skyhelm_wire.calls)
-_ROUTES: tuple[tuple[str, str, str | None], ...] = (
-    ("arm", "arm", None),
-    ("disarm", "disarm",
-     'Without force PX4 refuses unless landed ("Disarming denied: not landed").'),
-    ("takeoff", "takeoff",
-     "Climb to altitude_m above home (default: the vehicle's MIS_TAKEOFF_ALT); above the\n"
-     "envelope's max_alt_rel_m: 422."),
-    ("land", "land", None),
-    ("rtl", "rtl", None),
-    ("hold", "hold", None),
-    ("mode", "set_mode", "Resolves when the vehicle reports the mode (or says why not)."),
-    ("reposition", "reposition",
-     "MAV_CMD_DO_REPOSITION: fly there and hold (ends OFFBOARD). Outside the envelope: 422\n"
-     "naming the field and the limit. The goto intent picks this or a setpoint by mode."),
-    ("vtol_transition", "vtol_transition",
-     "With wait, resolves when EXTENDED_SYS_STATE shows the new VTOL state."),
-    ("origin", "set_origin",
-     "SET_GPS_GLOBAL_ORIGIN, confirmed by the GPS_GLOBAL_ORIGIN the vehicle sends back."),
-    ("home", "set_home",
-     "MAV_CMD_DO_SET_HOME at the given point, or at the current position without a body."),
-    ("offboard_start", "offboard_start",
-     "Stream the setpoint (default: hold here) and switch to OFFBOARD; resolves when the\n"
-     "vehicle reports OFFBOARD."),
-    ("offboard_stop", "offboard_stop",
-     "Switch to then_mode, then stop streaming."),
-)
-
-
 async def run_operation(name: str, vehicle: Vehicle, body: BaseModel | None) -> JSONResponse:
     return command_response(await run_command(name, vehicle, body))
 
@@ -101,11 +71,13 @@ def _endpoint(name: str, route_name: str, doc: str | None) -> _Endpoint:
 
 
 def _add_routes() -> None:
-    for name, route_name, doc in _ROUTES:
+    """One route per operation, at the wire's method and path, named and described by the
+    operation's function."""
+    for name, operation in OPERATIONS.items():
         call = CALL[name]
+        endpoint = _endpoint(name, operation.run.__name__, operation.run.__doc__)
         router.add_api_route(
-            f"/{call.path}", _endpoint(name, route_name, doc), methods=[call.method],
-            response_model=call.answer,
+            f"/{call.path}", endpoint, methods=[call.method], response_model=call.answer
         )
 
 
