@@ -29,6 +29,9 @@ _State = TypeVar("_State")
 _Json = TypeVar("_Json")
 _Value = TypeVar("_Value")
 _None = TypeVar("_None")
+_Intent = TypeVar("_Intent")
+_Sent = TypeVar("_Sent")
+_Params = TypeVar("_Params")
 
 # Long enough for a takeover the holder is asked about (takeover_ask_s, 10 s by default)
 # and for a mode switch the vehicle confirms.
@@ -85,7 +88,7 @@ class Waiting:
         return False
 
 
-class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
+class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None, _Intent, _Sent, _Params]):
     """The API of one vehicle (and the server's shared reads), for a client that sends each
     kind of answer through its own sender."""
 
@@ -113,6 +116,9 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
     _json: Callable[[Call], _Json]
     _value: Callable[[Call], _Value]
     _none: Callable[[Call], _None]
+    _intent: Callable[[Call], _Intent]  # an Answer[IntentOut]
+    _sent: Callable[[Call], _Sent]  # an Answer[SentSetpointOut]
+    _params: Callable[[Call], _Params]  # {name: value}
     # reads the state (renewing a held lease) until the wait is over, pausing between reads
     _wait: Callable[[Waiting, float], _State]
 
@@ -333,17 +339,17 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
 
     def set_setpoint(
         self, setpoint: SetpointKind | Mapping[str, Any], *, live: bool = False
-    ) -> _Json:
+    ) -> _Sent:
         """Replace the streamed setpoint; ``live`` ones (hold-to-fly input) are braked by the
         deadman when no update follows in time. Answers what is sent:
         ``{setpoint, message, frame, type_mask}``."""
         live_query = {"live": "true"} if live else None
-        return self._json(self._named("set_setpoint", setpoint_json(setpoint), params=live_query))
+        return self._sent(self._named("set_setpoint", setpoint_json(setpoint), params=live_query))
 
-    def brake(self) -> _Json:
+    def brake(self) -> _Intent:
         """Brake, then hold where the vehicle stops (HOLD mode when not streaming). Answers
         ``{intent, via, setpoint, command, target, live}``, as every intent does."""
-        return self._json(self._named("brake"))
+        return self._intent(self._named("brake"))
 
     def velocity(
         self,
@@ -357,13 +363,13 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
         yaw_rate_deg_s: float | None = None,
         hold_altitude: bool = False,
         live: bool = True,
-    ) -> _Json:
+    ) -> _Intent:
         """Fly at a velocity: forward/right in the body frame or north/east, ``up_m_s``
         positive up, ``yaw_rate_deg_s`` clockwise seen from above (``hold_altitude``: keep
         the altitude instead). Live input by default: without a new call within the
         server's deadman timeout the vehicle brakes and holds; ``live=False`` flies it until
         replaced. Needs OFFBOARD (``offboard_start``) to fly."""
-        return self._json(self._named("velocity", _arguments(locals())))
+        return self._intent(self._named("velocity", _arguments(locals())))
 
     def offset(
         self,
@@ -372,23 +378,23 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
         east_m: float = 0.0,
         up_m: float = 0.0,
         yaw_deg: float | None = None,
-    ) -> _Json:
+    ) -> _Intent:
         """Go by an offset from where the vehicle is (checked against the envelope)."""
-        return self._json(self._named("offset", _arguments(locals())))
+        return self._intent(self._named("offset", _arguments(locals())))
 
     def goto(
         self, lat_deg: float, lon_deg: float, alt_rel_m: float | None = None, *,
         yaw_deg: float | None = None,
-    ) -> _Json:  # fmt: skip
+    ) -> _Intent:  # fmt: skip
         """Go to a point, ``alt_rel_m`` above home (default: the current altitude)."""
-        return self._json(self._named("goto", _arguments(locals())))
+        return self._intent(self._named("goto", _arguments(locals())))
 
     # -- parameters -------------------------------------------------------------------
 
-    def params(self, *names: str) -> _Json:
+    def params(self, *names: str) -> _Params:
         """``{name: value}`` for the names given, or every parameter."""
         params = {"names": ",".join(names)} if names else {}
-        return self._json(self._named("params", params=params, pick="params"))
+        return self._params(self._named("params", params=params, pick="params"))
 
     def param(self, name: str) -> _Value:
         return self._value(self._named("param", path={"name": name}, pick="value"))
