@@ -14,19 +14,22 @@ $(PY):
 	$(PYTHON) -m venv $(VENV)
 	$(PIP) install -q --upgrade pip
 
-# The wire format and the Python client are distributions of their own (wire/,
-# clients/python/); installed from their paths in the same pip call, never from an index.
-$(STAMP): pyproject.toml wire/pyproject.toml clients/python/pyproject.toml | $(PY)
-	$(PIP) install -q -e ./wire -e ./clients/python -e .
+# The Python client is a distribution of its own (clients/python/), with the wire format
+# (wire/skyhelm_wire) inside it; installed from its path in the same pip call, never from
+# an index. A venv made when the wire was a distribution of its own drops that one first.
+$(STAMP): pyproject.toml clients/python/pyproject.toml | $(PY)
+	$(PIP) uninstall -q -y skyhelm-wire 2>/dev/null || true
+	$(PIP) install -q -e ./clients/python -e .
 	touch $@
 
 # One pip call for the product and its test tools: a second would resolve everything again.
-$(TSTAMP): pyproject.toml wire/pyproject.toml clients/python/pyproject.toml | $(PY)
-	$(PIP) install -q -e ./wire -e ./clients/python -e '.[test]'
+$(TSTAMP): pyproject.toml clients/python/pyproject.toml | $(PY)
+	$(PIP) uninstall -q -y skyhelm-wire 2>/dev/null || true
+	$(PIP) install -q -e ./clients/python -e '.[test]'
 	touch $(STAMP) $@
 
 $(BSTAMP): pyproject.toml $(TSTAMP)
-	$(PIP) install -q -e ./wire -e ./clients/python -e '.[test,bench]'
+	$(PIP) install -q -e ./clients/python -e '.[test,bench]'
 	touch $@
 
 ## Start the server with the embedded simulated vehicle and print the URL.

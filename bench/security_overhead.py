@@ -19,7 +19,8 @@ from bench._results import machine_info, write_results
 from server.control.auth import TokenChecker
 from server.control.auth_lockout import Lockout
 from server.control.ratelimit import RateLimiter
-from server.http.security import Guards, SecurityMiddleware, install_log_redaction
+from server.http.guards import Guards
+from server.http.security import SecurityMiddleware, install_log_redaction
 
 TOKEN = "bench-token-0123456789"
 REQUESTS = 20_000

@@ -43,8 +43,9 @@ from server.fleet.edge import EdgeService
 from server.fleet.view import FleetVehicle
 from server.fleet.view_service import FleetService
 from server.foxglove import FoxgloveBridge, FoxgloveProxy
-from server.http.deps import ApiContext
-from server.http.errors import install_error_handlers
+from server.http.context import ApiContext
+from server.http.contract import hold_to_contract
+from server.http.error_handlers import install_error_handlers
 from server.http.security import install_security
 from server.http.tile_archive import open_tile_archive
 from server.link import Envelope, Link
@@ -203,6 +204,7 @@ def create_app(settings: Settings, *, freeze_gc_at_start: bool = False) -> FastA
     api.include_router(signing_routes.router)
     api.include_router(ws.router)
     app.include_router(api)
+    hold_to_contract(app, settings)
     if hub is not None:
         hub.mount(app, check_token=tokens.is_valid)
     if foxglove is not None and settings.foxglove_port is not None:

@@ -5,22 +5,12 @@
 // renews it) and renewed with PUT /control while the tab is open; the edge checks all of it.
 
 import { ApiError, LeaseSession, request, unanswered } from "./api.js";
+// the control socket's command names as REST calls, and those without a body (generated
+// from the wire's call table: python -m tools.gen_calls_js)
+import { COMMANDS, NO_BODY } from "./calls.js";
 
-// what the control socket's command names are on REST (docs/api.md, "Endpoints")
-const COMMANDS = {
-  arm: ["POST", "/arm"], disarm: ["POST", "/disarm"], takeoff: ["POST", "/takeoff"],
-  land: ["POST", "/land"], rtl: ["POST", "/rtl"], hold: ["POST", "/hold"],
-  mode: ["POST", "/mode"], reposition: ["POST", "/reposition"],
-  vtol_transition: ["POST", "/vtol/transition"], origin: ["POST", "/origin"],
-  home: ["POST", "/home"], offboard_start: ["POST", "/offboard/start"],
-  offboard_stop: ["POST", "/offboard/stop"], brake: ["POST", "/intents/brake"],
-  velocity: ["PUT", "/intents/velocity"], offset: ["POST", "/intents/offset"],
-  goto: ["POST", "/intents/goto"],
-};
 // renew at a third of the TTL: two renewals may be lost before the lease lapses
 const RENEW_FRACTION = 1 / 3;
-// commands the edge takes without a body
-const NO_BODY = new Set(["land", "rtl", "hold", "brake"]);
 
 /** "/fleet/edges/edge-a/vehicles/1" */
 function fleetVehiclePath(vehicle, suffix = "") {

@@ -24,19 +24,18 @@ from server.control.lease import (
     UnknownRequest,
 )
 from server.control.lease_ops import AskerGone, lease_out, unless_gone
-from server.http.deps import ApiContext
+from server.control.operations import INTENT_NAMES, OPERATIONS, run_intent, sent_out
+from server.control.vehicle_ops import fly_sticks, stop_sticks
+from server.http.context import ApiContext
 from server.http.errors import (
-    COMMAND_STATUS,
     ApiError,
-    command_out,
+    command_answer,
+    command_status,
     error_status,
     non_finite_field,
     refuse_non_finite,
 )
-from server.http.operations import INTENT_NAMES, OPERATIONS, run_intent, sent_out
 from server.http.schemas import SetpointBody
-from server.http.schemas.sticks import SticksBody
-from server.http.vehicle_ops import fly_sticks, stop_sticks
 from server.http.ws_common import (
     CLOSE_BAD_REQUEST,
     CLOSE_LEASE_HELD,
@@ -47,6 +46,7 @@ from server.http.ws_common import (
     close_socket,
 )
 from server.link import Vehicle
+from skyhelm_wire.sticks import SticksBody
 
 log = logging.getLogger(__name__)
 
@@ -340,13 +340,13 @@ class _ControlSession:
         body = operation.body.model_validate(args if args is not None else {})
         with self._held():
             result = await operation.run(self._vehicle, body)
-        return COMMAND_STATUS[result.outcome], command_out(result).model_dump(mode="json")
+        return command_answer(result)
 
     async def _intent(self, name: str, args: Any) -> tuple[int, dict[str, Any]]:
         with self._held():
             answer = await run_intent(name, self._vehicle, args)
         self._context.deadman.watch_live(self._vehicle.sysid, live=answer.live)
-        return answer.status, answer.body
+        return command_status(answer.outcome), answer.body
 
     @contextmanager
     def _held(self) -> Iterator[None]:

@@ -17,6 +17,9 @@ from typing import Generic, TypeVar
 
 T = TypeVar("T")
 
+# Events are not values: each consumer's queue holds this many, the oldest dropped first
+EVENT_BACKLOG = 256
+
 
 class Slot(Generic[T]):
     """Latest wins: holds at most one value; put() replaces a value not yet read. Read it

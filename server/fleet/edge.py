@@ -28,7 +28,7 @@ from server.fleet.edge_calls import EdgeCalls
 from server.fleet.edge_publish import VehiclePublication
 from server.fleet.keys import FleetKeys, check_name
 from server.fleet.session import ZenohOptions, open_session, options_from_settings, undeclare
-from server.http.deps import ApiContext
+from server.http.context import ApiContext
 from server.link import Vehicle
 from server.link.codec.aio import cancel_and_wait
 from server.settings import Settings

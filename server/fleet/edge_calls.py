@@ -17,11 +17,18 @@ from typing import Any
 from urllib.parse import parse_qsl
 
 from server.control.auth import TokenChecker, token_from
+from server.control.lease import LeaseInvalid
 from server.control.lease_ops import Client
 from server.control.publishers import StatePublishers
-from server.http.deps import ApiContext, known_vehicle, pilot_only, require_connected, role_of
+from server.http.context import (
+    ApiContext,
+    known_vehicle,
+    pilot_only,
+    require_connected,
+    role_of,
+)
 from server.http.errors import ANSWERED_ERRORS, ApiError, error_status, validation_detail
-from server.http.security import Refusal, refusal_body, retry_after_header
+from server.http.guards import Refusal, refusal_body, retry_after_header
 from server.http.vehicle_calls import (
     VEHICLE_ID,
     Access,
@@ -102,25 +109,30 @@ class EdgeCalls:
             return _invalid(errors)
         vehicle = known_vehicle(context, vehicle_id)
         lease_id = headers.get("x-lease-id")
+        checked = validate(call, body, query_values, found.params)
         if call.access is Access.CONTROL:
-            # the call renews the lease, and it cannot lapse while the call runs
-            with context.leases.hold(vehicle.sysid, lease_id):
-                require_connected(vehicle)
-                return await self._call(call, vehicle, lease_id, body, query_values, found.params)
+            # the call renews the lease, and it cannot lapse while the call runs; a refused
+            # lease is answered only for a valid input (as REST: server/http/contract.py)
+            try:
+                with context.leases.hold(vehicle.sysid, lease_id):
+                    require_connected(vehicle)
+                    return await self._call(call, vehicle, lease_id, checked)
+            except LeaseInvalid:
+                if checked[3]:
+                    return _invalid(checked[3])
+                raise
         if call.access is Access.CONNECTED:
             require_connected(vehicle)
-        return await self._call(call, vehicle, lease_id, body, query_values, found.params)
+        return await self._call(call, vehicle, lease_id, checked)
 
     async def _call(
         self,
         call: VehicleCall,
         vehicle: Vehicle,
         lease_id: str | None,
-        body: Any,
-        query: Mapping[str, str],
-        params: Mapping[str, str],
+        checked: tuple[Any, dict[str, Any], dict[str, Any], list[dict[str, Any]]],
     ) -> Reply:
-        value, query_values, path_values, errors = validate(call, body, query, params)
+        value, query_values, path_values, errors = checked
         if errors:
             return _invalid(errors)
         args = CallArgs(

@@ -28,10 +28,10 @@ from typing import Any
 import zenoh
 
 from server.control.publisher import Published, StatePublisher
+from server.control.slots import EVENT_BACKLOG
 from server.control.views import event_message, state_json, stream_dict
 from server.fleet.keys import TIER_RATE_HZ, FleetKeys, StateTier
 from server.fleet.session import undeclare
-from server.http.ws_common import EVENT_BACKLOG
 from server.link import Vehicle
 from server.link.codec.aio import cancel_and_wait
 

@@ -1,16 +1,16 @@
-"""How failures become HTTP answers. Bad input is a 422 naming the field, a vehicle's refusal
-a 409 carrying its MAV_RESULT and reason, no answer a 504, a lost vehicle a 503: never a 500."""
+"""How failures become HTTP answers: the status and body of each refusal the link and the
+control core raise (transport-neutral), as REST, the control socket and the fleet edge
+answer them. Bad input is a 422 naming the field, a vehicle's refusal a 409 carrying its
+MAV_RESULT and reason, no answer a 504, a lost vehicle a 503: never a 500. No web framework
+here (the fleet edge answers through it): the app installs it with ``error_handlers``."""
 
 from __future__ import annotations
 
+import enum
 import math
 from collections.abc import Sequence
 from typing import Any
 
-from fastapi import FastAPI, Request
-from fastapi.encoders import jsonable_encoder
-from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse
 from pydantic import BaseModel, ValidationError
 
 from server.control.lease import (
@@ -21,8 +21,10 @@ from server.control.lease import (
     UnknownRequest,
 )
 from server.control.lease_ops import AskerGone
+from server.control.operations import command_out
+from server.control.refusals import InvalidInput
 from server.http.schemas import CommandResultOut, ErrorOut, UnprocessableOut
-from server.link import CommandOutcome, CommandResult, ParamError, SetpointRejected
+from server.link import CommandOutcome, CommandResult, ParamError, ParamUnknown, SetpointRejected
 
 
 class ApiError(Exception):
@@ -60,20 +62,14 @@ COMMAND_STATUS: dict[CommandOutcome, int] = {
 }
 
 
-def command_out(result: CommandResult) -> CommandResultOut:
-    return CommandResultOut(
-        command=result.command,
-        result=result.outcome.name,  # type: ignore[arg-type]
-        result_code=result.result_code,
-        elapsed_ms=round(result.elapsed_ms, 1),
-        reason=result.reason,
-    )
+def command_status(outcome: CommandOutcome | None) -> int:
+    """A command's status by its outcome; 200 for what sent no command (a setpoint)."""
+    return 200 if outcome is None else COMMAND_STATUS[outcome]
 
 
-def command_response(result: CommandResult) -> JSONResponse:
-    return JSONResponse(
-        command_out(result).model_dump(mode="json"), status_code=COMMAND_STATUS[result.outcome]
-    )
+def command_answer(result: CommandResult) -> tuple[int, dict[str, Any]]:
+    """A command's status and JSON body."""
+    return COMMAND_STATUS[result.outcome], command_out(result).model_dump(mode="json")
 
 
 def _described(model: type[BaseModel], description: str) -> dict[str, Any]:
@@ -111,6 +107,9 @@ def error_status(exc: Exception) -> tuple[int, dict[str, Any]] | None:
     REST handlers and the WebSocket control session both answer through this."""
     if isinstance(exc, ApiError):
         return exc.status_code, exc.detail
+    if isinstance(exc, InvalidInput):
+        return 422, {"reason": exc.reason, **({"field": exc.field} if exc.field else {}),
+                     **exc.cause}
     if isinstance(exc, LeaseHeld):
         return 409, {"reason": str(exc), "holder": exc.lease.holder}
     if isinstance(exc, TakeoverRefused):
@@ -131,6 +130,8 @@ def error_status(exc: Exception) -> tuple[int, dict[str, Any]] | None:
         if exc.holder is not None:  # who holds control now, e.g. after a takeover
             locked["holder"] = exc.holder
         return 423, locked
+    if isinstance(exc, ParamUnknown):
+        return 404, {"reason": str(exc)}
     if isinstance(exc, ParamError):
         return 409, {"reason": str(exc)}
     if isinstance(exc, TimeoutError):
@@ -148,15 +149,6 @@ def _validation_reason(exc: ValidationError) -> str:
         f"{'.'.join(str(p) for p in error['loc']) or 'body'}: {error['msg']}"
         for error in exc.errors()
     )
-
-
-async def _handle(_: Request, exc: Exception) -> JSONResponse:
-    answer = error_status(exc)
-    if answer is None:  # pragma: no cover - registered only for the types above
-        raise exc
-    status_code, detail = answer
-    headers = exc.headers if isinstance(exc, ApiError) else None
-    return JSONResponse({"detail": detail}, status_code=status_code, headers=headers)
 
 
 def json_safe(value: Any) -> Any:
@@ -195,26 +187,28 @@ def refuse_non_finite(message: Any) -> None:
         raise ApiError(422, "NaN and infinity are not numbers (JSON has neither)", field=field)
 
 
-async def _invalid_request(_: Request, exc: Exception) -> JSONResponse:
-    """FastAPI's 422, with the offending input echoed safely (Python's JSON parser takes
-    NaN and Infinity, which the answer could not encode: a 500 instead of the 422)."""
-    assert isinstance(exc, RequestValidationError)
-    return JSONResponse({"detail": validation_detail(exc.errors())}, status_code=422)
-
-
 def validation_detail(errors: Sequence[Any]) -> list[Any]:
-    """The ``detail`` of a 422 for invalid input: FastAPI's errors, safe to encode."""
-    return [json_safe(jsonable_encoder(error)) for error in errors]
+    """The ``detail`` of a 422 for invalid input: FastAPI's errors, safe to encode (as its
+    jsonable_encoder writes them: an exception in ``ctx`` as {}, a tuple as a list)."""
+    return [json_safe(_plain(error)) for error in errors]
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {str(key): _plain(item) for key, item in value.items()}
+    if isinstance(value, list | tuple | set | frozenset):
+        return [_plain(item) for item in value]
+    if isinstance(value, enum.Enum):
+        return _plain(value.value)
+    if isinstance(value, BaseException):
+        return {}
+    if value is None or isinstance(value, str | int | float | bool):
+        return value
+    return str(value)
 
 
 # the failures answered as error_status says; anything else is a bug (500)
 ANSWERED_ERRORS: tuple[type[Exception], ...] = (
-    ApiError, SetpointRejected, LeaseInvalid, ParamError, TimeoutError, LeaseHeld,
-    TakeoverRefused, TtlOutOfBounds, UnknownRequest, AskerGone,
+    ApiError, InvalidInput, SetpointRejected, LeaseInvalid, ParamError, ParamUnknown,
+    TimeoutError, LeaseHeld, TakeoverRefused, TtlOutOfBounds, UnknownRequest, AskerGone,
 )  # fmt: skip
-
-
-def install_error_handlers(app: FastAPI) -> None:
-    for exc_type in ANSWERED_ERRORS:
-        app.add_exception_handler(exc_type, _handle)
-    app.add_exception_handler(RequestValidationError, _invalid_request)

@@ -14,12 +14,9 @@
 
 from __future__ import annotations
 
-import json
 import logging
-import math
 import re
 from collections.abc import Awaitable, Callable, Iterable, Mapping, MutableMapping
-from dataclasses import dataclass
 from typing import Any
 from urllib.parse import urlsplit
 
@@ -28,9 +25,12 @@ from starlette.datastructures import QueryParams
 from starlette.requests import cookie_parser
 
 from server.control.auth import TOKEN_COOKIE, TOKEN_QUERY, Role, TokenChecker, token_from
-from server.control.auth_lockout import Lockout
-from server.control.ratelimit import RateLimiter
-from server.settings import Settings
+from server.http.guards import (
+    SAFE_METHODS,
+    Guards,
+    refusal_body,
+    retry_after_header,
+)
 
 Scope = MutableMapping[str, Any]
 Message = MutableMapping[str, Any]
@@ -38,7 +38,6 @@ Receive = Callable[[], Awaitable[Message]]
 Send = Callable[[Message], Awaitable[None]]
 Asgi = Callable[[Scope, Receive, Send], Awaitable[None]]
 
-SAFE_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
 API_PATH = "/api/"
 SCENE_PATH = "/scene"
 DOCS_PATHS = ("/docs", "/redoc")
@@ -143,74 +142,6 @@ def install_log_redaction() -> None:
 
 
 # --- limits ----------------------------------------------------------------------------------
-
-
-@dataclass
-class Guards:
-    """The server's abuse limits: REST control calls and control-socket messages per token,
-    wrong tokens per address."""
-
-    control: RateLimiter
-    ws_messages: RateLimiter
-    lockout: Lockout
-    ws_close_after: int
-
-    @classmethod
-    def from_settings(cls, settings: Settings) -> Guards:
-        return cls(
-            control=RateLimiter(settings.control_rate_per_s, settings.control_burst),
-            ws_messages=RateLimiter(settings.ws_message_rate_per_s, settings.ws_message_burst),
-            lockout=Lockout(
-                settings.lockout_free_failures, settings.lockout_base_s, settings.lockout_max_s
-            ),
-            ws_close_after=settings.ws_abuse_close_after,
-        )
-
-    def admit_token(
-        self, tokens: TokenChecker, address: str, token: str
-    ) -> tuple[Role | None, Refusal | None]:
-        """The token's role (None: wrong), or a refusal while the address is locked out;
-        a wrong token counts against the address, a right one clears it."""
-        wait_s = self.lockout.retry_after_s(address)
-        if wait_s > 0:
-            return None, Refusal(LOCKED_OUT_REASON, wait_s)
-        role = tokens.role_of(token)
-        if role is None:
-            self.lockout.failed(address)
-        else:
-            self.lockout.succeeded(address)
-        return role, None
-
-    def admit_call(self, role: Role, method: str) -> Refusal | None:
-        """A refusal when a control call (any method but GET/HEAD/OPTIONS) goes over the
-        token's rate limit."""
-        if method in SAFE_METHODS:
-            return None
-        wait_s = self.control.take(role.value)
-        if wait_s <= 0:
-            return None
-        reason = (
-            f"rate limit: {self.control.rate_per_s:g} control calls/s "
-            f"(burst {self.control.burst:g}) per token"
-        )
-        return Refusal(reason, wait_s)
-
-
-LOCKED_OUT_REASON = "too many wrong tokens from this address; try again later"
-
-
-@dataclass(frozen=True)
-class Refusal:
-    """A call refused before it runs: 429, with the wait for Retry-After."""
-
-    reason: str
-    retry_after_s: float
-    status: int = 429
-
-
-def retry_after_header(wait_s: float) -> str:
-    """Retry-After is whole seconds; never 0 for a refusal."""
-    return str(max(1, math.ceil(wait_s)))
 
 
 def origin_allowed(headers: Mapping[str, str], allowed: Iterable[str]) -> bool:
@@ -323,13 +254,6 @@ def _with_headers(send: Send, csp: str) -> Send:
         await send(message)
 
     return send_with_headers
-
-
-def refusal_body(reason: str, retry_after_s: float | None, **cause: str) -> bytes:
-    detail: dict[str, Any] = {"reason": reason, **cause}
-    if retry_after_s is not None:
-        detail["retry_after_s"] = round(retry_after_s, 3)
-    return json.dumps({"detail": detail}).encode()
 
 
 async def _refuse(

@@ -1,8 +1,9 @@
-"""The calls under ``/api/v1/vehicles/{vehicle_id}`` as a table: for each method and path,
-who may make it, its body, query and path parameters, and the function its REST route runs
-(lease_ops, vehicle_ops, operations). The fleet edge runs a call that came over Zenoh
-through this table (server/fleet/edge_calls.py); each REST route calls the same function,
-so both answer alike. ``tests/fleet/test_edge_parity.py`` holds the two side by side."""
+"""The calls under ``/api/v1/vehicles/{vehicle_id}``, from the wire's table
+(``skyhelm_wire.calls``: method, path, who may make it, the body, query and path models),
+each paired here with the function its REST route runs (lease_ops, vehicle_ops,
+operations). The fleet edge runs a call that came over Zenoh through this table
+(server/fleet/edge_calls.py); each REST route calls the same function, so both answer
+alike. ``tests/fleet/test_edge_parity.py`` holds the two side by side."""
 
 from __future__ import annotations
 
@@ -15,20 +16,18 @@ from typing import Annotated, Any
 
 from pydantic import BaseModel, Field, TypeAdapter, ValidationError
 
-from server.control import lease_ops
+from server.control import lease_ops, operations, vehicle_ops
 from server.control.publishers import StatePublishers
-from server.http import operations, vehicle_ops
-from server.http.deps import ApiContext
-from server.http.errors import COMMAND_STATUS, command_out
-from server.http.schemas import ParamValueBody, SetpointBody
-from server.http.schemas.intents import GotoIntentBody, OffsetIntentBody, VelocityIntentBody
-from server.http.schemas.sticks import SticksBody
+from server.http.context import ApiContext
+from server.http.errors import command_answer, command_status
 from server.link import Vehicle
-from skyhelm_wire.control import ControlBody, RenewBody, TakeoverAnswerBody
+from skyhelm_wire.calls import CALLS as WIRE_CALLS
+from skyhelm_wire.calls import CallSpec
+from skyhelm_wire.control import ControlBody, RenewBody
 
 
 class Access(enum.Enum):
-    """What a call asks of its caller, checked in REST's order."""
+    """What a call asks of its caller, checked in REST's order (the wire's ``Access``)."""
 
     READ = "read"  # any token; the vehicle known
     CONNECTED = "connected"  # any token; the vehicle known and connected
@@ -178,7 +177,8 @@ async def _set_param(args: CallArgs) -> Reply:
 def _command(name: str) -> Run:
     async def run(args: CallArgs) -> Reply:
         result = await operations.run_command(name, args.vehicle, args.body)
-        return model_reply(command_out(result), COMMAND_STATUS[result.outcome])
+        status, body = command_answer(result)
+        return Reply(status, _json(body))
 
     return run
 
@@ -188,7 +188,7 @@ def _intent(name: str) -> Run:
         answer = await operations.answer_intent(
             args.context.deadman, args.vehicle, name, args.body
         )
-        return Reply(answer.status, _json(answer.body))
+        return Reply(command_status(answer.outcome), _json(answer.body))
 
     return run
 
@@ -197,75 +197,43 @@ def _json(body: Any) -> bytes:
     return json.dumps(body, allow_nan=False).encode()
 
 
-def _body(model: Any) -> TypeAdapter[Any]:
-    return TypeAdapter(model)
-
-
-def _command_call(name: str, path: str) -> VehicleCall:
-    """As routes/commands.py declares it: no body for an empty model, an optional one when
-    every field has a default."""
-    model = operations.OPERATIONS[name].body
-    if not model.model_fields:
-        return VehicleCall("POST", path, Access.CONTROL, _command(name))
-    required = any(f.is_required() for f in model.model_fields.values())
-    return VehicleCall("POST", path, Access.CONTROL, _command(name), _body(model), required)
-
-
-# the command routes' paths (routes/commands.py)
-COMMAND_PATHS = {
-    "arm": "arm", "disarm": "disarm", "takeoff": "takeoff", "land": "land", "rtl": "rtl",
-    "hold": "hold", "mode": "mode", "reposition": "reposition",
-    "vtol_transition": "vtol/transition", "origin": "origin", "home": "home",
-    "offboard_start": "offboard/start", "offboard_stop": "offboard/stop",
+# the function each call of the wire's table runs, by the call's name
+_RUNS: dict[str, Run] = {
+    "state": _state, "stream": _stream, "control_status": _status, "acquire": _acquire,
+    "renew": _renew, "release": _release, "answer_takeover": _answer_takeover,
+    "set_setpoint": _setpoint, "sticks": _get_sticks, "fly_sticks": _put_sticks,
+    "stop_sticks": _delete_sticks, "params": _get_params, "param_metadata": _get_param_metadata,
+    "param": _get_param,
+    "set_param": _set_param,
+    **{name: _command(name) for name in operations.OPERATIONS},
+    **{name: _intent(name) for name in operations.INTENTS},
 }  # fmt: skip
 
-VEHICLE_ID = Param("vehicle_id", TypeAdapter(Annotated[int, Field(ge=0, le=255)]))
-_PARAM_NAME = Param(
-    "name", TypeAdapter(Annotated[str, Field(pattern=vehicle_ops.PARAM_NAME_PATTERN)])
-)
 
-CALLS: tuple[VehicleCall, ...] = (
-    VehicleCall("GET", "", Access.READ, _state),
-    VehicleCall("GET", "stream", Access.READ, _stream),
-    VehicleCall("GET", "control", Access.READ, _status),
-    VehicleCall("POST", "control", Access.PILOT, _acquire, _body(ControlBody)),
-    VehicleCall("PUT", "control", Access.PILOT, _renew, _body(RenewBody)),
-    VehicleCall("DELETE", "control", Access.PILOT, _release),
-    VehicleCall(
-        "POST", "control/requests/{request_id}", Access.PILOT, _answer_takeover,
-        _body(TakeoverAnswerBody), True, params=(Param("request_id", TypeAdapter(str)),),
-    ),
-    VehicleCall(
-        "PUT", "setpoint", Access.CONTROL, _setpoint, _body(SetpointBody), True,
-        query=(Param("live", TypeAdapter(bool), False),),
-    ),
-    VehicleCall("GET", "sticks", Access.READ, _get_sticks),
-    VehicleCall("PUT", "sticks", Access.CONTROL, _put_sticks, _body(SticksBody), True),
-    VehicleCall("DELETE", "sticks", Access.CONTROL, _delete_sticks),
-    VehicleCall(
-        "GET", "params", Access.CONNECTED, _get_params,
-        query=(Param("names", TypeAdapter(str | None)),),
-    ),
-    VehicleCall("GET", "params/metadata", Access.CONNECTED, _get_param_metadata),
-    VehicleCall("GET", "params/{name}", Access.CONNECTED, _get_param, params=(_PARAM_NAME,)),
-    VehicleCall(
-        "PUT", "params/{name}", Access.CONTROL, _set_param, _body(ParamValueBody), True,
-        params=(_PARAM_NAME,),
-    ),
-    *(_command_call(name, path) for name, path in COMMAND_PATHS.items()),
-    VehicleCall("POST", "intents/brake", Access.CONTROL, _intent("brake")),
-    VehicleCall(
-        "PUT", "intents/velocity", Access.CONTROL, _intent("velocity"),
-        _body(VelocityIntentBody), True,
-    ),
-    VehicleCall(
-        "POST", "intents/offset", Access.CONTROL, _intent("offset"),
-        _body(OffsetIntentBody), True,
-    ),
-    VehicleCall(
-        "POST", "intents/goto", Access.CONTROL, _intent("goto"), _body(GotoIntentBody), True
-    ),
-)
+def _params(model: type[BaseModel] | None) -> tuple[Param, ...]:
+    """A query or path model's fields as the route declares each parameter."""
+    if model is None:
+        return ()
+    return tuple(
+        Param(name, TypeAdapter(field.rebuild_annotation()),
+              None if field.is_required() else field.default)
+        for name, field in model.model_fields.items()
+    )  # fmt: skip
+
+
+def _vehicle_call(spec: CallSpec) -> VehicleCall:
+    return VehicleCall(
+        spec.method, spec.path, Access(spec.access), _RUNS[spec.name],
+        TypeAdapter(spec.body) if spec.body is not None else None, spec.body_required,
+        _params(spec.query), _params(spec.path_params),
+    )  # fmt: skip
+
+
+if set(_RUNS) != {spec.name for spec in WIRE_CALLS}:
+    raise ImportError(f"calls without a function or functions without a call: "
+                      f"{sorted(set(_RUNS) ^ {spec.name for spec in WIRE_CALLS})}")  # fmt: skip
+CALLS: tuple[VehicleCall, ...] = tuple(_vehicle_call(spec) for spec in WIRE_CALLS)
+VEHICLE_ID = Param("vehicle_id", TypeAdapter(Annotated[int, Field(ge=0, le=255)]))
 
 
 @dataclass(frozen=True)

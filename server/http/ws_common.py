@@ -27,10 +27,10 @@ from fastapi import WebSocket, WebSocketDisconnect
 from starlette.websockets import WebSocketState
 
 from server.control.auth import Role, token_from
-from server.http.deps import READ_ONLY_REASON, ApiContext
+from server.control.slots import EVENT_BACKLOG as EVENT_BACKLOG
+from server.http.context import READ_ONLY_REASON, ApiContext
 from server.http.security import origin_allowed
 
-EVENT_BACKLOG = 256
 SEND_TIMEOUT_S = 5.0
 CLOSE_UNAUTHORIZED = 4401
 CLOSE_FORBIDDEN = 4403

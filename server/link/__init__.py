@@ -32,7 +32,7 @@ from server.link.link import Link
 from server.link.plugins.component_metadata import MetadataError
 from server.link.plugins.manual_control import Sticks
 from server.link.plugins.param_metadata import ParamInfo
-from server.link.plugins.params import ParamError
+from server.link.plugins.params import ParamError, ParamUnknown
 from server.link.vehicle import Vehicle
 
 __all__ = [
@@ -53,6 +53,7 @@ __all__ = [
     "OriginState",
     "ParamError",
     "ParamInfo",
+    "ParamUnknown",
     "PositionNedState",
     "SetpointRejected",
     "StateSubscription",

@@ -52,6 +52,7 @@ from server.link.codec.setpoints import (
     VelocityNed,
 )
 from server.link.vehicle import Vehicle
+from skyhelm_wire.intents import IntentName
 
 HOLD_STOPPED_M_S = 0.3  # below this speed the vehicle counts as stopped
 HOLD_BRAKE_TIMEOUT_S = 5.0  # hold wherever it is after this long, slow or not
@@ -67,7 +68,6 @@ _ALTITUDE_HOLD_MASK = (
 )
 _YAW_BITS = POSITION_TARGET_TYPEMASK_YAW_IGNORE | POSITION_TARGET_TYPEMASK_YAW_RATE_IGNORE
 
-IntentName = Literal["brake", "velocity", "offset", "goto"]
 Via = Literal["setpoint", "reposition", "hold_mode"]
 VelocityFrame = Literal["body", "ned"]
 

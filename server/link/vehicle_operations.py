@@ -83,8 +83,9 @@ class VehicleOperations:
     """How long set_mode waits for the vehicle to report the mode (``Action``)."""
     origin_timeout_s = PluginSetting[float]("action.origin_timeout_s")
     """How long each try of set_gps_origin waits for its echo (``Action``)."""
-    envelope = PluginSetting[Envelope]("offboard.envelope")
-    """The limits every setpoint is checked against (``Offboard.envelope``)."""
+    envelope = PluginSetting[Envelope]("action.envelope")
+    """The limits every move is checked against where it is sent: take-off, reposition
+    (``Action``), setpoints (``Offboard``), the intents (``Action.envelope``)."""
     stream_rate_hz = PluginSetting[float]("offboard.streamer.rate_hz")
     """The setpoint stream's rate (``Offboard.streamer``)."""
     offboard_prestream_s = PluginSetting[float]("offboard.prestream_s")
@@ -141,7 +142,7 @@ class VehicleOperations:
         return await self.action.disarm(force)
 
     async def takeoff(self, altitude_rel_m: float | None = None) -> CommandResult:
-        """Climb to altitude_rel_m above home (``Action.takeoff``)."""
+        """Climb to altitude_rel_m above home, within the envelope (``Action.takeoff``)."""
         return await self.action.takeoff(altitude_rel_m)
 
     async def land(self) -> CommandResult:
@@ -171,7 +172,7 @@ class VehicleOperations:
         yaw_deg: float | None = None,
         loiter_radius_m: float | None = None,
     ) -> CommandResult:
-        """Fly to a place with DO_REPOSITION (``Action.reposition``)."""
+        """Fly to a place with DO_REPOSITION, within the envelope (``Action.reposition``)."""
         return await self.action.reposition(
             lat_deg, lon_deg, alt_amsl_m=alt_amsl_m, alt_rel_m=alt_rel_m,
             ground_speed_m_s=ground_speed_m_s, yaw_deg=yaw_deg, loiter_radius_m=loiter_radius_m,

@@ -315,7 +315,7 @@ def test_tokens_have_names_from_the_settings() -> None:
 
 
 def test_session_names_are_token_name_and_client_label() -> None:
-    from server.http.deps import ApiContext
+    from server.http.context import ApiContext
 
     tokens = TokenChecker("pilot-token-1234", pilot_name="ops")
     context = ApiContext(*cast("Any", (None, tokens, None, None, None)))

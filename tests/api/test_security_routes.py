@@ -43,9 +43,19 @@ EXCEPTIONS: dict[tuple[str, str], tuple[int, int, int]] = {
     ("POST", "/api/v1/signing"): (401, 403, 409),
 }
 # A body that passes validation where {} would not, so the answer is the lease's, not a 422.
+_V = "/api/v1/vehicles/{vehicle_id}"
+# a body each route takes (the input is checked before the lease: {} would be a 422 there)
 BODIES: dict[tuple[str, str], dict[str, Any]] = {
-    ("POST", "/api/v1/vehicles/{vehicle_id}/control/requests/{request_id}"): {"grant": True},
+    ("POST", f"{_V}/control/requests/{{request_id}}"): {"grant": True},
     ("POST", "/api/v1/signing"): {"action": "generate"},
+    ("POST", f"{_V}/mode"): {"mode": "HOLD"},
+    ("POST", f"{_V}/reposition"): {"lat_deg": 0.0, "lon_deg": 0.0},
+    ("POST", f"{_V}/vtol/transition"): {"to": "multicopter"},
+    ("POST", f"{_V}/origin"): {"lat_deg": 0.0, "lon_deg": 0.0, "alt_amsl_m": 0.0},
+    ("POST", f"{_V}/intents/goto"): {"lat_deg": 0.0, "lon_deg": 0.0},
+    ("PUT", f"{_V}/setpoint"): {"type": "position_ned", "north_m": 0.0, "east_m": 0.0,
+                                "down_m": 0.0},
+    ("PUT", f"{_V}/params/{{name}}"): {"value": 1.0},
 }
 SOCKETS: dict[str, tuple[int, int | None, int]] = {
     # no token, observer (None: admitted), pilot without the lease

@@ -267,7 +267,15 @@ async def test_a_parameter_name_outside_px4_ids_is_422_naming_the_field(quad_api
     for names in ("MIS_TAKEOFF_ALT,\u00a0\uf9b7", "COM)", "A B"):
         answer = await quad_api.client.get("/api/v1/vehicles/1/params", params={"names": names})
         assert answer.status_code == 422, (names, answer.text)
-        assert answer.json()["detail"]["field"] == "names"
+        assert answer.json()["detail"][0]["loc"] == ["query", "names"]
+
+
+async def test_a_parameter_the_vehicle_lacks_is_404(quad_api: Api) -> None:
+    for url in ("/api/v1/vehicles/1/params/NO_SUCH_PARAM",
+                "/api/v1/vehicles/1/params?names=MIS_TAKEOFF_ALT,NO_SUCH_PARAM"):  # fmt: skip
+        answer = await quad_api.client.get(url)
+        assert answer.status_code == 404, answer.text
+        assert answer.json()["detail"]["reason"] == "the vehicle has no parameter NO_SUCH_PARAM"
 
 
 async def test_param_write_needs_the_lease(quad_api: Api) -> None:

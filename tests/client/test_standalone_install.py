@@ -1,7 +1,8 @@
-"""The Python client installs alone: into a fresh venv, from the repository's paths
-(clients/python and wire, as its README says), it brings none of the server's dependencies,
-importing it loads nothing of the server or the sim, and examples/fly_square.py flies the
-square with that venv's python against a served simulated quad."""
+"""The Python client installs alone: into a fresh venv, from its one path (clients/python,
+the wire format inside it, as its README says), pip asks an index for no skyhelm-* name, it
+brings none of the server's dependencies, importing it loads nothing of the server or the
+sim, and examples/fly_square.py flies the square with that venv's python against a served
+simulated quad."""
 
 from __future__ import annotations
 
@@ -47,7 +48,7 @@ class Standalone:
         self.log = directory / "pip.log"
         command = [sys.executable, "-m", "pip", "--python", str(self.python), "install"]
         command += ["--disable-pip-version-check", "--no-input", "--no-compile"]
-        command += [str(ROOT / "wire"), str(ROOT / "clients" / "python")]
+        command += [str(ROOT / "clients" / "python")]
         with self.log.open("w") as log:
             self._pip = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, env=_env())
 
@@ -94,11 +95,11 @@ def test_the_client_installs_alone_and_flies_the_square(
     listed = standalone.run("-c", _LIST_DISTRIBUTIONS)
     assert listed.returncode == 0, listed.stderr
     distributions = set(json.loads(listed.stdout))
-    assert {"skyhelm-client", "skyhelm-wire", "httpx", "pydantic"} <= distributions
+    assert {"skyhelm-client", "httpx", "pydantic"} <= distributions
     assert not distributions & SERVER_ONLY, distributions & SERVER_ONLY
-    assert "skyhelm" not in distributions
+    assert {name for name in distributions if name.startswith("skyhelm")} == {"skyhelm-client"}
 
-    imported = standalone.run("-c", _IMPORT_CLIENT)
+    imported = standalone.run("-c", _IMPORT_CLIENT + "; import skyhelm_wire.state")
     assert imported.returncode == 0, imported.stderr
     loaded = json.loads(imported.stdout)
     assert Path(loaded["file"]).is_relative_to(standalone.python.parent.parent)
@@ -112,3 +113,30 @@ def test_the_client_installs_alone_and_flies_the_square(
     assert flight.returncode == 0, output[-3000:]
     assert output.count("at north") == 4, output[-3000:]
     assert "landed" in output
+
+
+def test_pip_asks_no_index_for_a_skyhelm_name(tmp_path: Path) -> None:
+    """What ``pip install ./clients/python`` would fetch, resolved as for an empty venv:
+    the client from its path and third-party projects only; no index is asked for a
+    skyhelm-* page (a name we do not own there)."""
+    report = tmp_path / "report.json"
+    command = [sys.executable, "-m", "pip", "install", "--dry-run", "--ignore-installed",
+               "--disable-pip-version-check", "--no-input", "-v", "--report", str(report),
+               str(ROOT / "clients" / "python")]  # fmt: skip
+    resolved = subprocess.run(
+        command, capture_output=True, text=True, timeout=INSTALL_TIMEOUT_S, check=False,
+        env=_env(),
+    )  # fmt: skip
+    assert resolved.returncode == 0, resolved.stderr[-3000:]
+    installs = json.loads(report.read_text())["install"]
+    ours = [item for item in installs if item["metadata"]["name"].lower().startswith("skyhelm")]
+    assert [item["metadata"]["name"] for item in ours] == ["skyhelm-client"]
+    assert ours[0]["is_direct"]
+    assert ours[0]["download_info"]["url"] == (ROOT / "clients" / "python").as_uri()
+    assert {"httpx", "websockets", "pydantic"} <= {
+        item["metadata"]["name"].lower() for item in installs}  # fmt: skip
+    # pip -v names every project page it reads (or fails to): none of ours
+    log = resolved.stdout + resolved.stderr
+    pages = [line for line in log.splitlines() if "skyhelm" in line.lower()
+             and ("/simple/" in line or "project page" in line.lower())]  # fmt: skip
+    assert not pages, pages

@@ -24,7 +24,7 @@ from server.fleet.edge_calls import ZENOH_ADDRESS, EdgeCalls
 from server.fleet.edge_publish import Sequence
 from server.fleet.proxy import call_timeout_s
 from server.fleet.session import open_session
-from server.http.deps import ApiContext
+from server.http.context import ApiContext
 from server.http.vehicle_calls import CALLS
 from tests.api.conftest import OBSERVER, PILOT, app_running, make_settings
 from tests.fleet.fake_edge import free_tcp_endpoint, loopback_options

@@ -135,8 +135,13 @@ async def test_refusals_before_the_call_answer_alike(both: Both) -> None:
     assert (await both.same("GET", "/arm")).status == 405
     no_lease = await both.same("POST", "/arm", body={})
     assert no_lease.status == 423
-    wrong_lease = await both.same("PUT", "/setpoint", lease="not-the-lease", body={})
+    here = {"type": "position_ned", "north_m": 0.0, "east_m": 0.0, "down_m": 0.0}
+    wrong_lease = await both.same("PUT", "/setpoint", lease="not-the-lease", body=here)
     assert wrong_lease.status == 423
+    # the input is checked before the lease: a body the schema refuses is 422 without one
+    invalid = await both.same("PUT", "/setpoint", lease="not-the-lease", body={})
+    assert invalid.status == 422
+    assert (await both.same("POST", "/arm", body={"force": 0})).status == 422
 
 
 async def test_invalid_input_answers_422_alike(both: Both) -> None:

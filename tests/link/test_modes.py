@@ -6,6 +6,7 @@ import pytest
 
 from server.link.codec import modes
 from server.link.codec.modes import PX4_MODE_NAMES
+from skyhelm_wire import modes as wire_modes
 
 
 @pytest.mark.parametrize("name", PX4_MODE_NAMES)
@@ -48,3 +49,7 @@ def test_unknown_auto_sub_mode_is_named_by_its_numbers() -> None:
 def test_set_mode_base_mode_has_custom_bit_and_armed_bit_when_armed() -> None:
     assert modes.set_mode_base_mode(armed=False) == 1
     assert modes.set_mode_base_mode(armed=True) == 129
+
+
+def test_the_codec_knows_every_mode_name_the_wire_takes_and_no_other() -> None:
+    assert PX4_MODE_NAMES == wire_modes.PX4_MODE_NAMES

@@ -14,6 +14,7 @@ from server.link.plugins.params import (
     MAV_PARAM_TYPE_UINT8,
     MAV_PARAM_TYPE_UINT16,
     ParamError,
+    ParamUnknown,
     decode_param_value,
     encode_param_value,
 )
@@ -100,8 +101,28 @@ async def test_get_decodes_an_int_parameter_by_its_type(scripted: ScriptedSessio
     assert await scripted.vehicle.get_param("MIS_TAKEOFF_ALT") == pytest.approx(2.5)
 
 
-async def test_unknown_parameter_times_out_after_retries(scripted: ScriptedSession) -> None:
+async def test_unknown_parameter_is_told_by_the_list_then_at_once(
+    scripted: ScriptedSession,
+) -> None:
     _px4_params(scripted.peer)
+
+    with pytest.raises(ParamUnknown) as unknown:
+        await scripted.vehicle.get_param("NO_SUCH_PARAM")
+    assert unknown.value.name == "NO_SUCH_PARAM"
+    # asked by name with retries, then the whole list said the vehicle has no such name
+    assert len(scripted.peer.messages("PARAM_REQUEST_READ")) == 4
+    assert len(scripted.peer.messages("PARAM_REQUEST_LIST")) == 1
+    # the list is known now: another unknown name is refused without asking
+    with pytest.raises(ParamUnknown):
+        await scripted.vehicle.get_param("NOR_THIS_ONE")
+    assert len(scripted.peer.messages("PARAM_REQUEST_READ")) == 4
+    assert await scripted.vehicle.get_param("NAV_DLL_ACT") == 0
+
+
+async def test_a_vehicle_silent_on_the_list_too_times_out(scripted: ScriptedSession) -> None:
+    server = _px4_params(scripted.peer)
+    server.names = []  # answers nothing to a list
+    server.params = {}
 
     with pytest.raises(TimeoutError):
         await scripted.vehicle.get_param("NO_SUCH_PARAM")

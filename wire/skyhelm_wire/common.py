@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field
 from pydantic.fields import FieldInfo
 
 from skyhelm_wire.setpoint_kinds import AltitudeM, Degrees, LatitudeDeg, LongitudeDeg, quantity_of
@@ -22,6 +22,16 @@ def limits_of(hint: Any) -> FieldInfo:
     return limits
 
 
+def _whole(value: Any) -> Any:
+    """JSON has one number type: 3.0 is an integer where the schema asks for one."""
+    if isinstance(value, float) and value.is_integer():
+        return int(value)
+    return value
+
+
+# the last annotation of an integer in a strict body, after its limits: 3 or 3.0, never
+# true or "3"
+WHOLE = BeforeValidator(_whole)
 LatDeg = Annotated[float, limits_of(LatitudeDeg)]
 LonDeg = Annotated[float, limits_of(LongitudeDeg)]
 AltM = Annotated[float, limits_of(AltitudeM)]
@@ -29,9 +39,11 @@ YawDeg = Annotated[float | None, limits_of(Degrees)]
 
 
 class StrictBody(BaseModel):
-    """A request body: unknown fields and NaN/inf are a 422, never passed on."""
+    """A request body: unknown fields, NaN/inf and a value of another JSON type than the
+    schema's (``0`` for a boolean, ``true`` or ``"1"`` for a number) are a 422, never
+    passed on."""
 
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True)
 
 
 class ErrorDetail(BaseModel):

@@ -7,7 +7,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, Field
 
-from skyhelm_wire.common import StrictBody
+from skyhelm_wire.common import WHOLE, StrictBody
 from skyhelm_wire.setpoints import SetpointBody
 
 ClientName = Annotated[
@@ -37,9 +37,8 @@ class ControlBody(StrictBody):
     force: bool = Field(default=False, description="with takeover: take it at once, without asking")
     client_name: ClientName = None
     ttl_s: TtlS = None
-    client_pid: int | None = Field(
+    client_pid: Annotated[int, Field(ge=1), WHOLE] | None = Field(
         default=None,
-        ge=1,
         description="the calling process's id, for a client on the server's machine: once "
         "the server has seen that this process owns the request's connection, the lease "
         "ends as soon as the process exits (docs/control.md)",

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Annotated, Any, ClassVar, Literal
 
 from pydantic import BaseModel, Field, create_model
 
-from skyhelm_wire.common import StrictBody, limits_of
+from skyhelm_wire.common import WHOLE, StrictBody, limits_of
 from skyhelm_wire.setpoint_kinds import (
     SETPOINT_KINDS,
     KindField,
@@ -40,8 +40,11 @@ def _pydantic_type(hint: Any) -> Any:
         members = [_pydantic_type(arg) for arg in typing.get_args(hint)]
         return typing.Union[tuple(members)]  # noqa: UP007 (built from a runtime list)
     if typing.get_origin(hint) is Annotated:
-        return Annotated[typing.get_args(hint)[0], limits_of(hint)]
-    return hint
+        base = typing.get_args(hint)[0]
+        if base is int:
+            return Annotated[int, limits_of(hint), WHOLE]
+        return Annotated[base, limits_of(hint)]
+    return Annotated[int, WHOLE] if hint is int else hint
 
 
 def _field(field: KindField) -> tuple[Any, Any]:

@@ -28,12 +28,13 @@ from skyhelm_client.errors import (
     Unavailable,
     WaitTimedOut,
 )
-from skyhelm_client.models import CommandResult, Lease, Message, Ned, State
+from skyhelm_client.models import Answer, CommandResult, Lease, Message, Ned, ParamValues, State
 from skyhelm_client.sync import SkyHelm
 from skyhelm_wire import setpoint_kinds as setpoints
 from skyhelm_wire.setpoint_kinds import PositionNed, SetpointKind, VelocityBody, VelocityNed
 
 __all__ = [
+    "Answer",
     "AsyncSkyHelm",
     "CommandResult",
     "Forbidden",
@@ -44,6 +45,7 @@ __all__ = [
     "NoAnswer",
     "NoLease",
     "NotFound",
+    "ParamValues",
     "PositionNed",
     "Refused",
     "SetpointKind",

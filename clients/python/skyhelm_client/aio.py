@@ -12,8 +12,18 @@ from websockets.asyncio.client import connect
 
 from skyhelm_client.calls import Call, Calls, Waiting
 from skyhelm_client.errors import SkyHelmError
-from skyhelm_client.models import CommandResult, Lease, Message, State
+from skyhelm_client.models import (
+    Answer,
+    CommandResult,
+    Lease,
+    Message,
+    ParamValues,
+    State,
+    param_values,
+)
 from skyhelm_client.urls import ws_url
+from skyhelm_wire.intents import IntentOut
+from skyhelm_wire.setpoints import SentSetpointOut
 
 _Co = Coroutine[Any, Any, Any]
 
@@ -26,6 +36,9 @@ class AsyncSkyHelm(
         _Co,
         Coroutine[Any, Any, float],
         Coroutine[Any, Any, None],
+        Coroutine[Any, Any, Answer[IntentOut]],
+        Coroutine[Any, Any, Answer[SentSetpointOut]],
+        Coroutine[Any, Any, ParamValues],
     ]
 ):
     """One vehicle of a SkyHelm server, for asyncio::
@@ -84,6 +97,15 @@ class AsyncSkyHelm(
 
     async def _none(self, call: Call) -> None:
         await self._send(call)
+
+    async def _intent(self, call: Call) -> Answer[IntentOut]:
+        return Answer((await self._send(call))[1], IntentOut)
+
+    async def _sent(self, call: Call) -> Answer[SentSetpointOut]:
+        return Answer((await self._send(call))[1], SentSetpointOut)
+
+    async def _params(self, call: Call) -> ParamValues:
+        return param_values((await self._send(call))[1])
 
     def _now(self) -> float:
         return asyncio.get_running_loop().time()

@@ -20,6 +20,7 @@ from skyhelm_client import exit_release
 from skyhelm_client.errors import NoLease, error_for, timed_out
 from skyhelm_client.models import Lease, State
 from skyhelm_client.urls import API_PREFIX, split_url
+from skyhelm_wire.calls import CALL
 from skyhelm_wire.setpoint_kinds import SetpointKind, describe
 
 _Cmd = TypeVar("_Cmd")
@@ -28,6 +29,9 @@ _State = TypeVar("_State")
 _Json = TypeVar("_Json")
 _Value = TypeVar("_Value")
 _None = TypeVar("_None")
+_Intent = TypeVar("_Intent")
+_Sent = TypeVar("_Sent")
+_Params = TypeVar("_Params")
 
 # Long enough for a takeover the holder is asked about (takeover_ask_s, 10 s by default)
 # and for a mode switch the vehicle confirms.
@@ -84,7 +88,7 @@ class Waiting:
         return False
 
 
-class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
+class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None, _Intent, _Sent, _Params]):
     """The API of one vehicle (and the server's shared reads), for a client that sends each
     kind of answer through its own sender."""
 
@@ -112,6 +116,9 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
     _json: Callable[[Call], _Json]
     _value: Callable[[Call], _Value]
     _none: Callable[[Call], _None]
+    _intent: Callable[[Call], _Intent]  # an Answer[IntentOut]
+    _sent: Callable[[Call], _Sent]  # an Answer[SentSetpointOut]
+    _params: Callable[[Call], _Params]  # {name: value}
     # reads the state (renewing a held lease) until the wait is over, pausing between reads
     _wait: Callable[[Waiting, float], _State]
 
@@ -166,14 +173,24 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
     def _vehicle(self, path: str = "") -> str:
         return f"/vehicles/{self.vehicle_id}{path}"
 
-    def _op(
+    def _named(
         self,
-        path: str,
+        name: str,
         body: Any = None,
-        method: str = "POST",
+        *,
         params: dict[str, str] | None = None,
+        path: Mapping[str, str] | None = None,
+        lease: LeaseEffect = "keep",
+        pick: str | None = None,
     ) -> Call:
-        return Call(method, self._vehicle(path), body, params or {}, control=True)
+        """The call ``name`` of the wire's table (its method and path), on this vehicle;
+        the pilot's and the control calls carry the lease id."""
+        spec = CALL[name]
+        where = spec.path.format(**path) if path else spec.path
+        return Call(
+            spec.method, self._vehicle(f"/{where}" if where else ""), body, params or {},
+            control=spec.access in ("pilot", "control"), lease=lease, pick=pick,
+        )  # fmt: skip
 
     # -- reads ------------------------------------------------------------------------
 
@@ -186,7 +203,7 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
         return self._json(Call("GET", "/vehicles"))
 
     def state(self) -> _State:
-        return self._state(Call("GET", self._vehicle()))
+        return self._state(self._named("state"))
 
     def wait_until(
         self,
@@ -203,13 +220,13 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
         return self._wait(waiting, poll_s)
 
     def stream_stats(self) -> _Json:
-        return self._json(Call("GET", self._vehicle("/stream")))
+        return self._json(self._named("stream"))
 
     # -- control ----------------------------------------------------------------------
 
     def _control(self, method: str, body: dict[str, Any] | None) -> _Lease:
-        call = Call(method, self._vehicle("/control"), body, control=True, lease="grant")
-        return self._lease(call)
+        return self._lease(self._named("acquire" if method == "POST" else "renew", body,
+                                       lease="grant"))  # fmt: skip
 
     def acquire(self, *, ttl_s: float | None = None, client_name: str | None = None) -> _Lease:
         """Take the control lease (409 :class:`Refused` naming the holder while someone else
@@ -234,18 +251,18 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
     def control_status(self) -> _Json:
         """Who holds control: ``{holder, session, since_s, expires_in_s, ttl_s, request}``;
         ``request`` is a pending takeover (``request_id``, ``by``) the holder may answer."""
-        return self._json(Call("GET", self._vehicle("/control")))
+        return self._json(self._named("control_status"))
 
     def _release_call(self) -> Call:
-        return Call("DELETE", self._vehicle("/control"), control=True, lease="drop")
+        return self._named("release", lease="drop")
 
     def release(self) -> _None:
         return self._none(self._release_call())
 
     def answer_takeover(self, request_id: str, *, grant: bool) -> _Json:
         """The holder's answer to a ``takeover_requested`` control event."""
-        path = self._vehicle(f"/control/requests/{request_id}")
-        return self._json(Call("POST", path, {"grant": grant}, control=True))
+        call = self._named("answer_takeover", {"grant": grant}, path={"request_id": request_id})
+        return self._json(call)
 
     def audit(self, *, limit: int = 100) -> _Json:
         params = {"vehicle": str(self.vehicle_id), "limit": str(limit)}
@@ -254,27 +271,27 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
     # -- commands ---------------------------------------------------------------------
 
     def arm(self, *, force: bool = False) -> _Cmd:
-        return self._command(self._op("/arm", {"force": force}))
+        return self._command(self._named("arm", {"force": force}))
 
     def disarm(self, *, force: bool = False) -> _Cmd:
-        return self._command(self._op("/disarm", {"force": force}))
+        return self._command(self._named("disarm", {"force": force}))
 
     def takeoff(self, *, altitude_m: float | None = None) -> _Cmd:
         """Climb to ``altitude_m`` above home (default: the vehicle's MIS_TAKEOFF_ALT)."""
-        return self._command(self._op("/takeoff", _given(altitude_m=altitude_m)))
+        return self._command(self._named("takeoff", _given(altitude_m=altitude_m)))
 
     def land(self) -> _Cmd:
-        return self._command(self._op("/land"))
+        return self._command(self._named("land"))
 
     def rtl(self) -> _Cmd:
-        return self._command(self._op("/rtl"))
+        return self._command(self._named("rtl"))
 
     def hold(self) -> _Cmd:
-        return self._command(self._op("/hold"))
+        return self._command(self._named("hold"))
 
     def set_mode(self, mode: str) -> _Cmd:
         """A PX4 mode by name (``"OFFBOARD"``, ``"POSCTL"``, ...), confirmed by the vehicle."""
-        return self._command(self._op("/mode", {"mode": mode}))
+        return self._command(self._named("mode", {"mode": mode}))
 
     def reposition(
         self, lat_deg: float, lon_deg: float, alt_rel_m: float | None = None, *,
@@ -284,7 +301,7 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
         """Fly to a point and hold there (ends OFFBOARD); the altitude above home or AMSL
         (neither: the current one); the rest None: PX4's own (MPC_XY_CRUISE, the heading
         now, NAV_LOITER_RAD)."""
-        return self._command(self._op("/reposition", _arguments(locals())))
+        return self._command(self._named("reposition", _arguments(locals())))
 
     def vtol_transition(
         self,
@@ -294,11 +311,11 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
         wait: bool = True,
     ) -> _Cmd:
         body = {"to": to, "immediate": immediate, "wait": wait}
-        return self._command(self._op("/vtol/transition", body))
+        return self._command(self._named("vtol_transition", body))
 
     def set_origin(self, *, lat_deg: float, lon_deg: float, alt_amsl_m: float) -> _Cmd:
         body = {"lat_deg": lat_deg, "lon_deg": lon_deg, "alt_amsl_m": alt_amsl_m}
-        return self._command(self._op("/origin", body))
+        return self._command(self._named("origin", body))
 
     def set_home(
         self,
@@ -308,31 +325,31 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
         alt_amsl_m: float | None = None,
     ) -> _Cmd:
         """Home at the point given, or where the vehicle is without one."""
-        return self._command(self._op("/home", _arguments(locals())))
+        return self._command(self._named("home", _arguments(locals())))
 
     def offboard_start(self, setpoint: SetpointKind | Mapping[str, Any] | None = None) -> _Cmd:
         """Stream ``setpoint`` (default: hold here) and switch to OFFBOARD."""
         body = {"setpoint": setpoint_json(setpoint)} if setpoint is not None else {}
-        return self._command(self._op("/offboard/start", body))
+        return self._command(self._named("offboard_start", body))
 
     def offboard_stop(self, *, then_mode: str = "HOLD") -> _Cmd:
-        return self._command(self._op("/offboard/stop", {"then_mode": then_mode}))
+        return self._command(self._named("offboard_stop", {"then_mode": then_mode}))
 
     # -- setpoints and intents --------------------------------------------------------
 
     def set_setpoint(
         self, setpoint: SetpointKind | Mapping[str, Any], *, live: bool = False
-    ) -> _Json:
+    ) -> _Sent:
         """Replace the streamed setpoint; ``live`` ones (hold-to-fly input) are braked by the
         deadman when no update follows in time. Answers what is sent:
         ``{setpoint, message, frame, type_mask}``."""
         live_query = {"live": "true"} if live else None
-        return self._json(self._op("/setpoint", setpoint_json(setpoint), "PUT", live_query))
+        return self._sent(self._named("set_setpoint", setpoint_json(setpoint), params=live_query))
 
-    def brake(self) -> _Json:
+    def brake(self) -> _Intent:
         """Brake, then hold where the vehicle stops (HOLD mode when not streaming). Answers
         ``{intent, via, setpoint, command, target, live}``, as every intent does."""
-        return self._json(self._op("/intents/brake"))
+        return self._intent(self._named("brake"))
 
     def velocity(
         self,
@@ -346,13 +363,13 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
         yaw_rate_deg_s: float | None = None,
         hold_altitude: bool = False,
         live: bool = True,
-    ) -> _Json:
+    ) -> _Intent:
         """Fly at a velocity: forward/right in the body frame or north/east, ``up_m_s``
         positive up, ``yaw_rate_deg_s`` clockwise seen from above (``hold_altitude``: keep
         the altitude instead). Live input by default: without a new call within the
         server's deadman timeout the vehicle brakes and holds; ``live=False`` flies it until
         replaced. Needs OFFBOARD (``offboard_start``) to fly."""
-        return self._json(self._op("/intents/velocity", _arguments(locals()), "PUT"))
+        return self._intent(self._named("velocity", _arguments(locals())))
 
     def offset(
         self,
@@ -361,30 +378,30 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None]):
         east_m: float = 0.0,
         up_m: float = 0.0,
         yaw_deg: float | None = None,
-    ) -> _Json:
+    ) -> _Intent:
         """Go by an offset from where the vehicle is (checked against the envelope)."""
-        return self._json(self._op("/intents/offset", _arguments(locals())))
+        return self._intent(self._named("offset", _arguments(locals())))
 
     def goto(
         self, lat_deg: float, lon_deg: float, alt_rel_m: float | None = None, *,
         yaw_deg: float | None = None,
-    ) -> _Json:  # fmt: skip
+    ) -> _Intent:  # fmt: skip
         """Go to a point, ``alt_rel_m`` above home (default: the current altitude)."""
-        return self._json(self._op("/intents/goto", _arguments(locals())))
+        return self._intent(self._named("goto", _arguments(locals())))
 
     # -- parameters -------------------------------------------------------------------
 
-    def params(self, *names: str) -> _Json:
+    def params(self, *names: str) -> _Params:
         """``{name: value}`` for the names given, or every parameter."""
         params = {"names": ",".join(names)} if names else {}
-        return self._json(Call("GET", self._vehicle("/params"), params=params, pick="params"))
+        return self._params(self._named("params", params=params, pick="params"))
 
     def param(self, name: str) -> _Value:
-        return self._value(Call("GET", self._vehicle(f"/params/{name}"), pick="value"))
+        return self._value(self._named("param", path={"name": name}, pick="value"))
 
     def set_param(self, name: str, value: float, *, force: bool = False) -> _Value:
         """Set a parameter; answers the value the vehicle echoed. A value outside the range
         of the vehicle's metadata is refused (422) unless ``force``."""
         body = {"value": value, "force": True} if force else {"value": value}
-        call = Call("PUT", self._vehicle(f"/params/{name}"), body, control=True, pick="value")
+        call = self._named("set_param", body, path={"name": name}, pick="value")
         return self._value(call)

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from functools import cached_property
 from typing import Any, Generic, TypeVar
 
-from pydantic import ConfigDict, TypeAdapter
+from pydantic import BaseModel, ConfigDict, TypeAdapter
 
 from skyhelm_wire.commands import CommandResultOut
 from skyhelm_wire.control import LeaseOut
@@ -18,6 +18,9 @@ from skyhelm_wire.messages import StateMessage, TelemetryMessage
 from skyhelm_wire.state import VehicleStateOut
 
 _T = TypeVar("_T")
+_M = TypeVar("_M", bound=BaseModel)
+ParamValues = dict[str, float | int | None]
+_PARAM_VALUES: TypeAdapter[ParamValues] = TypeAdapter(ParamValues)
 _TELEMETRY: TypeAdapter[TelemetryMessage] = TypeAdapter(TelemetryMessage)
 
 
@@ -168,3 +171,30 @@ class Message:
     @property
     def state(self) -> State | None:
         return State(self.data) if self.type == "state" else None
+
+
+class Answer(Mapping[str, Any], Generic[_M]):
+    """A JSON answer by key, as scripts index it (``answer["via"]``), and ``model``: the
+    same answer typed with the wire's model the server answers with (``answer.model.via``),
+    so a field the server renames fails here and a misspelt one in a script fails mypy."""
+
+    def __init__(self, data: Mapping[str, Any], model_type: type[_M]) -> None:
+        self._data = dict(data)
+        self.model: _M = model_type.model_validate(self._data)
+
+    def __getitem__(self, key: str) -> Any:
+        return self._data[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._data)
+
+    def __len__(self) -> int:
+        return len(self._data)
+
+    def __repr__(self) -> str:
+        return f"Answer({self.model!r})"
+
+
+def param_values(data: Any) -> ParamValues:
+    """``{name: value}`` as GET /params answers it (null: not a finite number)."""
+    return _PARAM_VALUES.validate_python(data)

@@ -12,11 +12,26 @@ from websockets.sync.client import connect
 
 from skyhelm_client.calls import Call, Calls, Waiting
 from skyhelm_client.errors import SkyHelmError
-from skyhelm_client.models import CommandResult, Lease, Message, State
+from skyhelm_client.models import (
+    Answer,
+    CommandResult,
+    Lease,
+    Message,
+    ParamValues,
+    State,
+    param_values,
+)
 from skyhelm_client.urls import ws_url
+from skyhelm_wire.intents import IntentOut
+from skyhelm_wire.setpoints import SentSetpointOut
 
 
-class SkyHelm(Calls[CommandResult, Lease, State, Any, float, None]):
+class SkyHelm(
+    Calls[
+        CommandResult, Lease, State, Any, float, None,
+        Answer[IntentOut], Answer[SentSetpointOut], ParamValues,
+    ]
+):  # fmt: skip
     """One vehicle of a SkyHelm server, over REST (and the telemetry WebSocket)::
 
         with SkyHelm("http://127.0.0.1:8000/?token=...") as sky:
@@ -75,6 +90,15 @@ class SkyHelm(Calls[CommandResult, Lease, State, Any, float, None]):
 
     def _none(self, call: Call) -> None:
         self._send(call)
+
+    def _intent(self, call: Call) -> Answer[IntentOut]:
+        return Answer(self._send(call)[1], IntentOut)
+
+    def _sent(self, call: Call) -> Answer[SentSetpointOut]:
+        return Answer(self._send(call)[1], SentSetpointOut)
+
+    def _params(self, call: Call) -> ParamValues:
+        return param_values(self._send(call)[1])
 
     def _now(self) -> float:
         return self.clock()

@@ -1,7 +1,7 @@
 """Vehicle commands. Each answers with the vehicle's real result: 200 ACCEPTED, 409 refused
 (MAV_RESULT and the vehicle's reason), 504 no answer, 503 link lost.
 
-There is one route per operation of :data:`server.http.operations.OPERATIONS`, taking that
+There is one route per operation of :data:`server.control.operations.OPERATIONS`, taking that
 operation's body: the WebSocket control session runs the same table, so both refuse and
 answer alike. A body whose fields all have defaults may be left out."""
 
@@ -15,46 +15,18 @@ from fastapi import APIRouter, Body
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel
 
+from server.control.operations import OPERATIONS, run_command
 from server.http.deps import ControlledVehicle
-from server.http.errors import COMMAND_RESPONSES, command_response
-from server.http.operations import OPERATIONS, run_command
-from server.http.schemas import CommandResultOut
+from server.http.error_handlers import command_response
+from server.http.errors import COMMAND_RESPONSES
 from server.link import Vehicle
+from skyhelm_wire.calls import CALL
 
 router = APIRouter(
     prefix="/vehicles/{vehicle_id}",
     tags=["commands"],
     responses=COMMAND_RESPONSES,
 )
-
-# (operation, path, route name (it names the OpenAPI operationId), what the route documents)
-_ROUTES: tuple[tuple[str, str, str, str | None], ...] = (
-    ("arm", "/arm", "arm", None),
-    ("disarm", "/disarm", "disarm",
-     'Without force PX4 refuses unless landed ("Disarming denied: not landed").'),
-    ("takeoff", "/takeoff", "takeoff",
-     "Climb to altitude_m above home (default: the vehicle's MIS_TAKEOFF_ALT); above the\n"
-     "envelope's max_alt_rel_m: 422."),
-    ("land", "/land", "land", None),
-    ("rtl", "/rtl", "rtl", None),
-    ("hold", "/hold", "hold", None),
-    ("mode", "/mode", "set_mode", "Resolves when the vehicle reports the mode (or says why not)."),
-    ("reposition", "/reposition", "reposition",
-     "MAV_CMD_DO_REPOSITION: fly there and hold (ends OFFBOARD). Outside the envelope: 422\n"
-     "naming the field and the limit. The goto intent picks this or a setpoint by mode."),
-    ("vtol_transition", "/vtol/transition", "vtol_transition",
-     "With wait, resolves when EXTENDED_SYS_STATE shows the new VTOL state."),
-    ("origin", "/origin", "set_origin",
-     "SET_GPS_GLOBAL_ORIGIN, confirmed by the GPS_GLOBAL_ORIGIN the vehicle sends back."),
-    ("home", "/home", "set_home",
-     "MAV_CMD_DO_SET_HOME at the given point, or at the current position without a body."),
-    ("offboard_start", "/offboard/start", "offboard_start",
-     "Stream the setpoint (default: hold here) and switch to OFFBOARD; resolves when the\n"
-     "vehicle reports OFFBOARD."),
-    ("offboard_stop", "/offboard/stop", "offboard_stop",
-     "Switch to then_mode, then stop streaming."),
-)
-
 
 async def run_operation(name: str, vehicle: Vehicle, body: BaseModel | None) -> JSONResponse:
     return command_response(await run_command(name, vehicle, body))
@@ -99,10 +71,13 @@ def _endpoint(name: str, route_name: str, doc: str | None) -> _Endpoint:
 
 
 def _add_routes() -> None:
-    for name, path, route_name, doc in _ROUTES:
+    """One route per operation, at the wire's method and path, named and described by the
+    operation's function."""
+    for name, operation in OPERATIONS.items():
+        call = CALL[name]
+        endpoint = _endpoint(name, operation.run.__name__, operation.run.__doc__)
         router.add_api_route(
-            path, _endpoint(name, route_name, doc), methods=["POST"],
-            response_model=CommandResultOut,
+            f"/{call.path}", endpoint, methods=[call.method], response_model=call.answer
         )
 
 

@@ -10,7 +10,8 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Body, Depends, Query, Request, Response
 
 from server.control import lease_ops
-from server.http.deps import ApiContext, Context, KnownVehicle, LeaseIdHeader, Pilot, Reader
+from server.http.context import ApiContext
+from server.http.deps import Context, KnownVehicle, LeaseIdHeader, Pilot, Reader
 from server.http.errors import CONTROL_RESPONSES, READ_RESPONSES
 from server.http.schemas import ErrorOut
 from server.link import Vehicle

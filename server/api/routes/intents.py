@@ -11,16 +11,16 @@ from fastapi import APIRouter
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel
 
-from server.http import operations
+from server.control import operations
 from server.http.deps import Context, ControlledVehicle
-from server.http.errors import COMMAND_RESPONSES
-from server.http.schemas.intents import (
+from server.http.errors import COMMAND_RESPONSES, command_status
+from server.link import Vehicle
+from skyhelm_wire.intents import (
     GotoIntentBody,
     IntentOut,
     OffsetIntentBody,
     VelocityIntentBody,
 )
-from server.link import Vehicle
 
 router = APIRouter(
     prefix="/vehicles/{vehicle_id}/intents",
@@ -33,7 +33,7 @@ async def answer_intent(
     context: Context, vehicle: Vehicle, name: str, body: BaseModel | None
 ) -> JSONResponse:
     answer = await operations.answer_intent(context.deadman, vehicle, name, body)
-    return JSONResponse(answer.body, status_code=answer.status)
+    return JSONResponse(answer.body, status_code=command_status(answer.outcome))
 
 
 @router.post("/brake", response_model=IntentOut)

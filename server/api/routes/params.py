@@ -6,17 +6,32 @@ from typing import Annotated
 
 from fastapi import APIRouter, Path, Query
 
-from server.http import vehicle_ops
+from server.control import vehicle_ops
 from server.http.deps import ConnectedVehicle, ControlledVehicle
 from server.http.errors import CONTROL_RESPONSES, READ_RESPONSES, Responses
 from server.http.schemas import ErrorOut, ParamMetadataOut, ParamOut, ParamsOut, ParamValueBody
-from server.http.vehicle_ops import PARAM_NAME_PATTERN
+from skyhelm_wire.calls import PARAM_NAME_LENGTH, PARAM_NAME_PATTERN, PARAM_NAMES_PATTERN
 
 router = APIRouter(prefix="/vehicles/{vehicle_id}/params", tags=["params"])
 
-ParamName = Annotated[str, Path(pattern=PARAM_NAME_PATTERN, examples=["MIS_TAKEOFF_ALT"])]
+ParamName = Annotated[
+    str,
+    Path(
+        pattern=PARAM_NAME_PATTERN, min_length=1, max_length=PARAM_NAME_LENGTH,
+        examples=["MIS_TAKEOFF_ALT"],
+    ),
+]  # fmt: skip
+ParamNames = Annotated[
+    str | None,
+    Query(
+        pattern=PARAM_NAMES_PATTERN,
+        description="comma-separated, each as a parameter's name; omit for all",
+        examples=["MIS_TAKEOFF_ALT,MPC_XY_VEL_MAX"],
+    ),
+]
 _NO_ANSWER: Responses = {
-    504: {"model": ErrorOut, "description": "no answer (PX4 ignores unknown names)"}
+    404: {"model": ErrorOut, "description": "no such vehicle, or no such parameter on it"},
+    504: {"model": ErrorOut, "description": "no answer from the vehicle"},
 }
 _REFUSED: Responses = {
     409: {"model": ErrorOut, "description": "the vehicle refused or kept another value"}
@@ -28,7 +43,7 @@ _READ: Responses = {**READ_RESPONSES, **_LOST, **_NO_ANSWER, **_REFUSED}
 @router.get("", response_model=ParamsOut, responses=_READ)
 async def get_params(
     vehicle: ConnectedVehicle,
-    names: Annotated[str | None, Query(description="comma-separated; omit for all")] = None,
+    names: ParamNames = None,
 ) -> ParamsOut:
     return await vehicle_ops.get_params(vehicle, names)
 

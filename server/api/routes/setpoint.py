@@ -7,10 +7,10 @@ from typing import Annotated
 from fastapi import APIRouter, Body, Query
 
 from server.control.deadman import LIVE_DESCRIPTION
+from server.control.vehicle_ops import put_setpoint as put_setpoint_of
 from server.http.deps import Context, ControlledVehicle
 from server.http.errors import CONTROL_RESPONSES
 from server.http.schemas import SentSetpointOut, SetpointBody
-from server.http.vehicle_ops import put_setpoint as put_setpoint_of
 
 router = APIRouter(prefix="/vehicles/{vehicle_id}", tags=["setpoint"])
 

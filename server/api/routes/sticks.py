@@ -9,10 +9,10 @@ from __future__ import annotations
 
 from fastapi import APIRouter
 
+from server.control.vehicle_ops import fly_sticks, sticks_out, stop_sticks
 from server.http.deps import Context, ControlledVehicle, KnownVehicle
 from server.http.errors import CONTROL_RESPONSES, READ_RESPONSES
-from server.http.schemas.sticks import SticksBody, SticksOut
-from server.http.vehicle_ops import fly_sticks, sticks_out, stop_sticks
+from skyhelm_wire.sticks import SticksBody, SticksOut
 
 router = APIRouter(prefix="/vehicles/{vehicle_id}", tags=["sticks"])
 

@@ -51,7 +51,10 @@ async def tile(
     z: Annotated[int, Path(ge=0, le=MAX_ZOOM, description="zoom level")],
     x: Annotated[int, Path(ge=0, description="column, from the west")],
     y: Annotated[int, Path(ge=0, description="row, from the north (XYZ, as Leaflet)")],
-    ext: Annotated[str, Path(description="the archive's tile format: png, jpg or webp")],
+    ext: Annotated[
+        str,
+        Path(pattern=r"^[A-Za-z0-9]+$", description="the archive's tile format: png, jpg or webp"),
+    ],
     if_none_match: Annotated[str | None, Header()] = None,
 ) -> Response:
     archive = context.tiles

@@ -7,11 +7,11 @@ from typing import Any
 from fastapi import APIRouter, Request, Response
 
 from server.control.publishers import StatePublishers
+from server.control.vehicle_ops import state_json, stream_out
 from server.control.views import summary_dict
 from server.http.deps import Context, KnownVehicle, Reader
 from server.http.errors import AUTH_RESPONSES, READ_RESPONSES
 from server.http.schemas import StreamOut, VehicleStateOut, VehicleSummaryOut
-from server.http.vehicle_ops import state_json, stream_out
 
 router = APIRouter(tags=["vehicles"])
 

@@ -1,13 +1,13 @@
-"""Request and response models of the v1 API. Field names carry units; enum values are the
-PX4/MAVLink names the link layer uses. The wire format (state, setpoints, command results,
-the lease, errors) is the wire package's (``skyhelm_wire``), re-exported here; the modules
-here hold the request bodies that need the link (mode names, intents) or only the API."""
+"""Request and response models of the v1 API, as the HTTP routes name them: every one is
+the wire package's (``skyhelm_wire``), re-exported here. Field names carry units; enum
+values are the PX4/MAVLink names the link layer uses."""
 
-from server.http.schemas.commands import (
+from skyhelm_wire.commands import (
     ArmBody,
+    CommandResultName,
+    CommandResultOut,
     HomeBody,
     ModeBody,
-    ModeName,
     OffboardStartBody,
     OffboardStopBody,
     OriginBody,
@@ -15,15 +15,6 @@ from server.http.schemas.commands import (
     TakeoffBody,
     VtolTransitionBody,
 )
-from server.http.schemas.params import (
-    ParamChoiceOut,
-    ParamInfoOut,
-    ParamMetadataOut,
-    ParamOut,
-    ParamsOut,
-    ParamValueBody,
-)
-from skyhelm_wire.commands import CommandResultName, CommandResultOut
 from skyhelm_wire.common import (
     AltM,
     ChildProcessOut,
@@ -37,6 +28,15 @@ from skyhelm_wire.common import (
     YawDeg,
 )
 from skyhelm_wire.control import ControlBody, LeaseOut, LeaseStatusOut
+from skyhelm_wire.modes import ModeName
+from skyhelm_wire.params import (
+    ParamChoiceOut,
+    ParamInfoOut,
+    ParamMetadataOut,
+    ParamOut,
+    ParamsOut,
+    ParamValueBody,
+)
 from skyhelm_wire.setpoints import (
     SETPOINT_BODIES,
     SentSetpointOut,

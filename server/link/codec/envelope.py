@@ -1,10 +1,12 @@
 """The operator's safety envelope and how a move is held to it.
 
 One set of limits guards everything that flies the vehicle somewhere: setpoints (through
-``setpoint_checks``), take-off altitude, DO_REPOSITION and the offset and go-to intents. A
-refusal is a ``SetpointRejected`` naming the offending input (``field``), the bound
-(``limit``) and, in its reason, the limit's name, so REST, the control socket and the page
-all answer the same 422.
+``setpoint_checks``), take-off altitude, DO_REPOSITION and the offset and go-to intents. The
+link checks each where it sends it (``Action.takeoff``, ``Action.reposition``,
+``Offboard.set_setpoint``, the intents), so a Python program driving a ``Vehicle``, REST,
+the control socket, the fleet and the page meet the same refusal: a ``SetpointRejected``
+naming the offending input (``field``), the bound (``limit``) and, in its reason, the
+limit's name, which every API surface answers as the same 422.
 """
 
 from __future__ import annotations
@@ -66,6 +68,29 @@ def check_takeoff_altitude(envelope: Envelope, altitude_m: float | None) -> None
         raise SetpointRejected(
             "takeoff altitude above the envelope", field="altitude_m", limit=limit
         )
+
+
+def check_reposition(
+    envelope: Envelope,
+    home: HomeState | None,
+    lat_deg: float,
+    lon_deg: float,
+    *,
+    alt_amsl_m: float | None,
+    alt_rel_m: float | None,
+) -> None:
+    """DO_REPOSITION flies the vehicle as a setpoint does. Without a home neither the
+    distance nor an AMSL altitude's height can be known."""
+    height_m = alt_rel_m
+    if height_m is None and alt_amsl_m is not None and home is not None:
+        height_m = alt_amsl_m - home.alt_amsl_m
+    check_target(
+        envelope,
+        home,
+        GeoTarget(lat_deg, lon_deg, height_m),
+        what="reposition",
+        alt_field="alt_rel_m" if alt_rel_m is not None else "alt_amsl_m",
+    )
 
 
 def check_target(

@@ -14,6 +14,7 @@ from pymavlink.dialects.v20 import development as mavlink
 
 from server.link.codec import modes
 from server.link.codec.commands import CommandInt, CommandOutcome, CommandResult, not_sent
+from server.link.codec.envelope import Envelope, check_reposition, check_takeoff_altitude
 from server.link.core.requests import Confirmation
 from server.link.core.state import VTOL_STATE_NAMES
 from server.link.core.vehicle_core import VehicleCore
@@ -67,6 +68,8 @@ class Action:
     def __init__(self, core: VehicleCore, telemetry: Telemetry) -> None:
         self._core = core
         self._telemetry = telemetry
+        # the operator's limits: take-off and reposition here, setpoints in Offboard
+        self.envelope = Envelope()
         # when this client's own arm / disarm was last accepted, on the loop's clock
         self._arm_accepted_s: float | None = None
         self._disarm_accepted_s: float | None = None
@@ -105,7 +108,9 @@ class Action:
         return result
 
     async def takeoff(self, altitude_rel_m: float | None = None) -> CommandResult:
-        """Climb to altitude_rel_m above home (None: PX4's MIS_TAKEOFF_ALT)."""
+        """Climb to altitude_rel_m above home (None: PX4's MIS_TAKEOFF_ALT). Above the
+        envelope: SetpointRejected, nothing sent."""
+        check_takeoff_altitude(self.envelope, altitude_rel_m)
         alt_amsl = NAN
         if altitude_rel_m is not None:
             home_alt = self._home_alt_amsl()
@@ -211,9 +216,14 @@ class Action:
         yaw_deg: float | None = None,
         loiter_radius_m: float | None = None,
     ) -> CommandResult:
-        """DO_REPOSITION as COMMAND_INT (degE7 is exact; float degrees are not)."""
+        """DO_REPOSITION as COMMAND_INT (degE7 is exact; float degrees are not). Outside
+        the envelope: SetpointRejected, nothing sent."""
         if alt_amsl_m is not None and alt_rel_m is not None:
             raise ValueError("give alt_amsl_m or alt_rel_m, not both")
+        check_reposition(
+            self.envelope, self._telemetry.home, lat_deg, lon_deg,
+            alt_amsl_m=alt_amsl_m, alt_rel_m=alt_rel_m,
+        )  # fmt: skip
         alt = NAN if alt_amsl_m is None else alt_amsl_m
         if alt_rel_m is not None:
             home_alt = self._home_alt_amsl()

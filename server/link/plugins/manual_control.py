@@ -17,6 +17,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+from server.link.codec.envelope import SetpointRejected
 from server.link.core.state import StreamStats
 from server.link.core.vehicle_core import VehicleCore
 from server.link.plugins.offboard import Offboard
@@ -25,6 +26,8 @@ from server.link.stream.streamer import SetpointStreamer, sender_event
 MANUAL_CONTROL_RATE_HZ = 25.0  # QGroundControl's joystick rate
 # MANUAL_CONTROL.z is 0..1000; 500 is the centred throttle stick
 THROTTLE_CENTRED = 0.5
+# each stick's travel: MANUAL_CONTROL's -1000..1000 (z 0..1000) as fractions
+_TRAVEL = (("pitch", -1.0, 1.0), ("roll", -1.0, 1.0), ("yaw", -1.0, 1.0), ("throttle", 0.0, 1.0))
 
 
 @dataclass(frozen=True)
@@ -38,12 +41,18 @@ class Sticks:
     throttle: float = THROTTLE_CENTRED
 
     def __post_init__(self) -> None:
-        for name in ("pitch", "roll", "yaw"):
+        """A stick beyond its travel is refused as a move outside the envelope is: a
+        ``SetpointRejected`` naming the stick and the bound it broke."""
+        for name, low, high in _TRAVEL:
             value = getattr(self, name)
-            if not (math.isfinite(value) and -1.0 <= value <= 1.0):
-                raise ValueError(f"{name} must be within -1..1")
-        if not (math.isfinite(self.throttle) and 0.0 <= self.throttle <= 1.0):
-            raise ValueError("throttle must be within 0..1")
+            if not math.isfinite(value):
+                raise SetpointRejected(f"{name} is not a number", field=name)
+            if not low <= value <= high:
+                raise SetpointRejected(
+                    f"{name} {value:g} outside its travel {low:g}..{high:g}",
+                    field=name,
+                    limit=high if value > high else low,
+                )
 
     def centred(self) -> Sticks:
         """All sticks at rest: hold in POSCTL/ALTCTL, hover thrust in STABILIZED."""

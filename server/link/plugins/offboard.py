@@ -45,7 +45,6 @@ class Offboard:
         self._core = core
         self._telemetry = telemetry
         self._action = action
-        self.envelope = Envelope()
         self.setpoint: Setpoint | None = None  # what is streamed now, offsets resolved
         self.streamer = SetpointStreamer(
             core.send, rate_hz=stream_rate_hz, channel=core.stream_channel)  # its rate, stats
@@ -64,6 +63,11 @@ class Offboard:
     def stop_stream(self, why: str) -> None:
         """Stop streaming (an event says why) without a mode change."""
         self._stop_stream(why)
+
+    @property
+    def envelope(self) -> Envelope:
+        """The operator's limits, one set for every move (``Action.envelope``)."""
+        return self._action.envelope
 
     # -- setpoints ------------------------------------------------------------------------
     def check(self, sp: Setpoint) -> Setpoint:

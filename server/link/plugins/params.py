@@ -69,6 +69,14 @@ def same_value(a: float | int, b: float | int, param_type: int) -> bool:
     return bool(a32 == b32 or (math.isnan(a32) and math.isnan(b32)))
 
 
+class ParamUnknown(LookupError):
+    """The vehicle has no parameter of this name: its whole list, read, does not hold it."""
+
+    def __init__(self, name: str) -> None:
+        super().__init__(f"the vehicle has no parameter {name}")
+        self.name = name
+
+
 @dataclass(frozen=True)
 class ParamEntry:
     value: float | int
@@ -117,16 +125,32 @@ class ParamClient:
         requests.send(requests.mav.param_request_read_encode(*requests.target, wire_name, index))
 
     async def get(self, name: str) -> float | int:
-        """Read one parameter. TimeoutError when the vehicle stays silent: PX4 never answers
-        for a name it does not know."""
+        """Read one parameter. PX4 never answers for a name it does not know, so silence is
+        told apart by the vehicle's whole list: ParamUnknown at once when the list read
+        before lacks the name, or after the list is read; TimeoutError when the vehicle
+        answers neither."""
+        if self._lacks(name):
+            raise ParamUnknown(name)
         wire_name = name.encode("ascii")[:PARAM_ID_LEN]
         self.cache.pop(name, None)
 
         if not await self._requests.until(
             lambda: self._request_read(wire_name), lambda: name in self.cache, self.timeout_s
         ):
+            if not self._list_complete():
+                await self.get_all()
+            if self._lacks(name):
+                raise ParamUnknown(name)
             raise TimeoutError(f"no answer for parameter {name}")
         return self.cache[name].value
+
+    def _list_complete(self) -> bool:
+        """Whether every parameter of the vehicle's list has been seen since it was asked."""
+        return self._count is not None and not self._missing()
+
+    def _lacks(self, name: str) -> bool:
+        """True when the whole list is known and ``name`` is not in it."""
+        return self._list_complete() and name not in self._by_index.values()
 
     async def reread(self) -> dict[str, float | int]:
         """A rebooted vehicle: forget what it said and read again what had been read."""

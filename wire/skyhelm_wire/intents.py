@@ -1,12 +1,11 @@
-"""Intent requests (brake, velocity, offset, go-to) and their answer."""
+"""Intents: their requests (brake, velocity, offset, go-to) and their answer."""
 
 from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from server.link.intents import IntentName
 from skyhelm_wire.commands import CommandResultOut
 from skyhelm_wire.common import LatDeg, LonDeg, StrictBody, YawDeg, limits_of
 from skyhelm_wire.setpoint_kinds import AltitudeM, DegreesPerSecond, Metres, MetresPerSecond
@@ -14,6 +13,8 @@ from skyhelm_wire.setpoints import SentSetpointOut
 
 SpeedMS = Annotated[float, limits_of(MetresPerSecond)]
 DistanceM = Annotated[float, limits_of(Metres)]
+IntentName = Literal["brake", "velocity", "offset", "goto"]
+"""What a pilot or a script means (server.link.intents flies each)."""
 YawRateDegS = Annotated[float | None, limits_of(DegreesPerSecond)]
 AltRelM = Annotated[float | None, limits_of(AltitudeM)]
 
@@ -24,6 +25,23 @@ class BrakeBody(StrictBody):
 
 class VelocityIntentBody(StrictBody):
     """Fly at a speed: (forward, right) in the body frame or (north, east)."""
+
+    # the rules below, published: only the frame's own fields, and no climb with an
+    # altitude hold
+    model_config = ConfigDict(json_schema_extra={"allOf": [
+        {
+            "if": {"properties": {"frame": {"const": "ned"}}, "required": ["frame"]},
+            "then": {"properties": {"forward_m_s": {"type": "null"},
+                                    "right_m_s": {"type": "null"}}},
+            "else": {"properties": {"north_m_s": {"type": "null"},
+                                    "east_m_s": {"type": "null"}}},
+        },
+        {
+            "if": {"properties": {"hold_altitude": {"const": True}},
+                   "required": ["hold_altitude"]},
+            "then": {"properties": {"up_m_s": {"const": 0}}},
+        },
+    ]})  # fmt: skip
 
     frame: Literal["body", "ned"] = "body"
     forward_m_s: SpeedMS | None = Field(None, description="frame body")

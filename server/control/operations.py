@@ -1,6 +1,8 @@
-"""Vehicle commands and intents by name, with their request bodies: the REST routes and the
-WebSocket control session run the same tables, so both refuse and answer alike. The checks
-(the envelope for take-off, reposition and moves) are the link's own."""
+"""Vehicle commands and intents by name, with their request bodies: the REST routes, the
+WebSocket control session and the fleet edge run the same tables, so all refuse and answer
+alike. Refusals are the link's and the control core's own exceptions (``refusals``), which
+each adapter answers in its transport's terms. The checks (the envelope for take-off,
+reposition, setpoints and intents) are the link's own, made where it sends them."""
 
 from __future__ import annotations
 
@@ -11,9 +13,12 @@ from typing import Any
 from pydantic import BaseModel
 
 from server.control.deadman import Deadman
-from server.http import schemas
-from server.http.errors import COMMAND_STATUS, ApiError, command_out
-from server.http.schemas.intents import (
+from server.control.refusals import InvalidInput
+from server.link import CommandOutcome, CommandResult, SentSetpoint, Vehicle, intents
+from server.link.intents import IntentResult
+from skyhelm_wire import commands as schemas
+from skyhelm_wire.commands import CommandResultOut
+from skyhelm_wire.intents import (
     BrakeBody,
     GeoTargetOut,
     GotoIntentBody,
@@ -21,9 +26,7 @@ from server.http.schemas.intents import (
     OffsetIntentBody,
     VelocityIntentBody,
 )
-from server.link import CommandResult, SentSetpoint, Vehicle, intents
-from server.link.codec.envelope import GeoTarget, check_takeoff_altitude, check_target
-from server.link.intents import IntentResult
+from skyhelm_wire.setpoints import SentSetpointOut, setpoint_body
 
 
 class NoBody(BaseModel):
@@ -32,6 +35,9 @@ class NoBody(BaseModel):
 
 @dataclass(frozen=True)
 class Operation:
+    """A command: its body and its function, whose name and docstring its REST route takes
+    (they name and describe it in OpenAPI)."""
+
     body: type[BaseModel]
     run: Callable[[Vehicle, Any], Awaitable[CommandResult]]
 
@@ -41,11 +47,13 @@ async def arm(vehicle: Vehicle, body: schemas.ArmBody) -> CommandResult:
 
 
 async def disarm(vehicle: Vehicle, body: schemas.ArmBody) -> CommandResult:
+    """Without force PX4 refuses unless landed ("Disarming denied: not landed")."""
     return await vehicle.disarm(force=body.force)
 
 
 async def takeoff(vehicle: Vehicle, body: schemas.TakeoffBody) -> CommandResult:
-    check_takeoff_altitude(vehicle.envelope, body.altitude_m)
+    """Climb to altitude_m above home (default: the vehicle's MIS_TAKEOFF_ALT); above the
+    envelope's max_alt_rel_m: 422."""
     return await vehicle.takeoff(body.altitude_m)
 
 
@@ -62,11 +70,13 @@ async def hold(vehicle: Vehicle, _: NoBody) -> CommandResult:
 
 
 async def set_mode(vehicle: Vehicle, body: schemas.ModeBody) -> CommandResult:
+    """Resolves when the vehicle reports the mode (or says why not)."""
     return await vehicle.set_mode(body.mode)
 
 
 async def reposition(vehicle: Vehicle, body: schemas.RepositionBody) -> CommandResult:
-    _check_reposition_envelope(vehicle, body)
+    """MAV_CMD_DO_REPOSITION: fly there and hold (ends OFFBOARD). Outside the envelope: 422
+    naming the field and the limit. The goto intent picks this or a setpoint by mode."""
     return await vehicle.reposition(
         body.lat_deg,
         body.lon_deg,
@@ -79,25 +89,31 @@ async def reposition(vehicle: Vehicle, body: schemas.RepositionBody) -> CommandR
 
 
 async def vtol_transition(vehicle: Vehicle, body: schemas.VtolTransitionBody) -> CommandResult:
+    """With wait, resolves when EXTENDED_SYS_STATE shows the new VTOL state."""
     return await vehicle.vtol_transition(
         body.to == "fixed_wing", immediate=body.immediate, wait=body.wait
     )
 
 
 async def set_origin(vehicle: Vehicle, body: schemas.OriginBody) -> CommandResult:
+    """SET_GPS_GLOBAL_ORIGIN, confirmed by the GPS_GLOBAL_ORIGIN the vehicle sends back."""
     return await vehicle.set_gps_origin(body.lat_deg, body.lon_deg, body.alt_amsl_m)
 
 
 async def set_home(vehicle: Vehicle, body: schemas.HomeBody) -> CommandResult:
+    """MAV_CMD_DO_SET_HOME at the given point, or at the current position without a body."""
     return await vehicle.set_home(body.lat_deg, body.lon_deg, body.alt_amsl_m)
 
 
 async def offboard_start(vehicle: Vehicle, body: schemas.OffboardStartBody) -> CommandResult:
+    """Stream the setpoint (default: hold here) and switch to OFFBOARD; resolves when the
+    vehicle reports OFFBOARD."""
     setpoint = body.setpoint.to_link() if body.setpoint is not None else None
     return await vehicle.start_offboard(setpoint)
 
 
 async def offboard_stop(vehicle: Vehicle, body: schemas.OffboardStopBody) -> CommandResult:
+    """Switch to then_mode, then stop streaming."""
     return await vehicle.stop_offboard(body.then_mode)
 
 
@@ -122,22 +138,6 @@ async def run_command(name: str, vehicle: Vehicle, body: BaseModel | None) -> Co
     """Run the operation ``name`` with its body (None: the body's defaults)."""
     operation = OPERATIONS[name]
     return await operation.run(vehicle, body if body is not None else operation.body())
-
-
-def _check_reposition_envelope(vehicle: Vehicle, body: schemas.RepositionBody) -> None:
-    """The envelope guards repositions as it guards setpoints: they fly the vehicle too.
-    Without a home neither the distance nor an AMSL altitude's height can be known."""
-    home = vehicle.home
-    alt_rel_m = body.alt_rel_m
-    if alt_rel_m is None and body.alt_amsl_m is not None and home is not None:
-        alt_rel_m = body.alt_amsl_m - home.alt_amsl_m
-    check_target(
-        vehicle.envelope,
-        home,
-        GeoTarget(body.lat_deg, body.lon_deg, alt_rel_m),
-        what="reposition",
-        alt_field="alt_rel_m" if body.alt_rel_m is not None else "alt_amsl_m",
-    )
 
 
 # -- intents ------------------------------------------------------------------------------
@@ -189,20 +189,32 @@ INTENTS: dict[str, Intent] = {
 INTENT_NAMES = frozenset(INTENTS)
 
 
+def command_out(result: CommandResult) -> CommandResultOut:
+    """What a command came to, as every adapter answers it."""
+    return CommandResultOut(
+        command=result.command,
+        result=result.outcome.name,  # type: ignore[arg-type]
+        result_code=result.result_code,
+        elapsed_ms=round(result.elapsed_ms, 1),
+        reason=result.reason,
+    )
+
+
 @dataclass(frozen=True)
 class IntentAnswer:
-    """An intent's answer: its status and JSON body, and whether the deadman must watch it
-    (a live velocity) or stop watching (anything else)."""
+    """An intent's answer: the outcome of the command it sent (None: it streamed a
+    setpoint), its JSON body, and whether the deadman must watch it (a live velocity) or
+    stop watching (anything else)."""
 
-    status: int
+    outcome: CommandOutcome | None
     body: dict[str, Any]
     live: bool
 
 
-def sent_out(sent: SentSetpoint) -> schemas.SentSetpointOut:
+def sent_out(sent: SentSetpoint) -> SentSetpointOut:
     """What went on the wire, as the setpoint routes and the control socket answer it."""
-    return schemas.SentSetpointOut(
-        setpoint=schemas.setpoint_body(sent.setpoint),
+    return SentSetpointOut(
+        setpoint=setpoint_body(sent.setpoint),
         message=sent.message,
         frame=sent.frame,
         type_mask=sent.type_mask,
@@ -227,15 +239,15 @@ def intent_out(result: IntentResult, *, live: bool) -> IntentOut:
 
 async def run_intent(name: str, vehicle: Vehicle, args: object) -> IntentAnswer:
     """Validate ``args`` (a body model or its JSON form) and run the intent. Bad input,
-    envelope refusals and missing positions raise what ``errors.error_status`` answers."""
+    envelope refusals and missing positions raise (``InvalidInput``, ``SetpointRejected``)."""
     intent = INTENTS.get(name)
     if intent is None:
-        raise ApiError(422, f"unknown intent; one of {', '.join(INTENTS)}", field="name")
+        raise InvalidInput(f"unknown intent; one of {', '.join(INTENTS)}", field="name")
     body = args if isinstance(args, intent.body) else intent.body.model_validate(args or {})
     result = await intent.run(vehicle, body)
     live = bool(getattr(body, "live", False)) and result.sent is not None
-    status = 200 if result.command is None else COMMAND_STATUS[result.command.outcome]
-    return IntentAnswer(status, intent_out(result, live=live).model_dump(mode="json"), live)
+    outcome = None if result.command is None else result.command.outcome
+    return IntentAnswer(outcome, intent_out(result, live=live).model_dump(mode="json"), live)
 
 
 async def answer_intent(

@@ -1,35 +1,29 @@
 """A vehicle's reads, setpoint, sticks and parameters as REST and the fleet edge run them:
-plain arguments in, the answer's model out, refusals raised as what ``errors.error_status``
-answers (the commands and intents are ``operations.py``)."""
+plain arguments in, the answer's model out, refusals raised as the link's and the control
+core's exceptions (the commands and intents are ``operations.py``)."""
 
 from __future__ import annotations
 
-import re
 from dataclasses import asdict
 
 from server.control.deadman import Deadman
+from server.control.operations import sent_out
 from server.control.publishers import StatePublishers
 from server.control.views import finite, stream_dict
-from server.http.errors import ApiError
-from server.http.operations import sent_out
-from server.http.schemas import (
+from server.control.refusals import InvalidInput
+from server.link import MetadataError, ParamInfo, Sticks, Vehicle
+from server.link.plugins.manual_control import MANUAL_CONTROL_RATE_HZ
+from skyhelm_wire.params import (
     ParamChoiceOut,
     ParamInfoOut,
     ParamMetadataOut,
     ParamOut,
     ParamsOut,
     ParamValueBody,
-    SentSetpointOut,
-    SetpointBody,
 )
-from server.http.schemas.sticks import SticksBody, SticksOut
-from server.link import MetadataError, ParamInfo, Sticks, Vehicle
-from server.link.plugins.manual_control import MANUAL_CONTROL_RATE_HZ
+from skyhelm_wire.setpoints import SentSetpointOut, SetpointBody
 from skyhelm_wire.state import StreamOut
-
-# PX4 parameter ids are at most 16 characters.
-PARAM_NAME_PATTERN = r"^[A-Za-z0-9_]{1,16}$"
-_NAME = re.compile(r"[A-Za-z0-9_]{1,16}")
+from skyhelm_wire.sticks import SticksBody, SticksOut
 
 
 def state_json(publishers: StatePublishers, vehicle: Vehicle) -> bytes:
@@ -77,17 +71,8 @@ def stop_sticks(deadman: Deadman, vehicle: Vehicle) -> SticksOut:
 
 
 def param_names(names: str | None) -> list[str] | None:
-    """A comma-separated list of parameter ids, or 422 naming ``names``."""
-    if names is None:
-        return None
-    wanted = [name.strip() for name in names.split(",") if name.strip()]
-    for name in wanted:
-        if len(name) > 16:
-            raise ApiError(422, f"parameter name {name!r} is longer than 16", field="names")
-        if _NAME.fullmatch(name) is None:
-            # the same rule as a single name in the path: PX4's ids are ASCII
-            raise ApiError(422, f"parameter name {name!r} is not [A-Za-z0-9_]", field="names")
-    return wanted
+    """The ids of ``names`` (checked against the wire's PARAM_NAMES_PATTERN), or None: all."""
+    return None if names is None else names.split(",")
 
 
 async def get_params(vehicle: Vehicle, names: str | None) -> ParamsOut:
@@ -111,8 +96,8 @@ def check_param_range(info: ParamInfo | None, value: float | int) -> None:
     why = None if info is None else info.out_of_range(value)
     if info is None or why is None:
         return
-    raise ApiError(
-        422, f"{why}; send force: true to set it anyway", field="value",
+    raise InvalidInput(
+        f"{why}; send force: true to set it anyway", field="value",
         minimum=info.min, maximum=info.max, units=info.units or None,
         description=info.short_desc or None,
     )  # fmt: skip
