@@ -27,7 +27,9 @@ argument) carries pickled tuples; the server's messages:
   connected socket);
 - ``("stream", sid, key, frame, crc_extra, dests, period_s)``: send now and then every
   period on t0 + k·period; ``("update", sid, frame, crc_extra, dests)`` changes what the
-  next tick sends; ``("period", sid, period_s)`` re-phases from the last send;
+  next tick sends; ``("change", sid, frame, crc_extra, dests)`` sends a changed frame now
+  in place of the next tick (:meth:`Deadlines.early_s`: the ticks after it keep their
+  times, so the rate stays); ``("period", sid, period_s)`` re-phases from the last send;
   ``("stop", sid)``.
 
 Its reports, batched every ``REPORT_PERIOD_S``: ``("sent", key, [(unix_s, frame)], dropped,
@@ -109,6 +111,12 @@ class Deadlines:
     @property
     def next_s(self) -> float:
         return self.t0_s + self.k * self.period_s
+
+    def early_s(self) -> float:
+        """The earliest the next tick may go with a changed frame: once the tick before it
+        was due. A change then goes at once unless one already went early since: at most
+        one frame per period of the schedule, however often the frame changes."""
+        return self.next_s - self.period_s
 
     def after_tick(self, now_s: float) -> float:
         """The deadline after a tick that ran at ``now_s``."""
@@ -273,6 +281,17 @@ class SenderProcess:
             stream = self.streams.get(sid)
             if stream is not None:
                 stream.frame, stream.crc_extra, stream.dests = frame, crc_extra, dests
+        elif kind == "change":
+            _, sid, frame, crc_extra, dests = message
+            stream = self.streams.get(sid)
+            if stream is not None:
+                stream.frame, stream.crc_extra, stream.dests = frame, crc_extra, dests
+                now = time.monotonic()
+                early_s = stream.deadlines.early_s()
+                if now >= early_s:
+                    self.tick(sid, stream, now)  # the next tick, now
+                else:
+                    self.schedule(sid, stream, early_s)
         elif kind == "period":
             _, sid, period_s = message
             stream = self.streams.get(sid)
