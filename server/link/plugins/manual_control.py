@@ -3,9 +3,9 @@
 Sticks that changed go out at once, in place of the streamer's next tick
 (``SetpointStreamer.change``); the ticks after it keep their absolute-deadline schedule, so
 sticks arriving faster or slower than 25 Hz never change the rate, and a stick moved is
-felt without waiting for a tick. Fields as PX4's mavlink_receiver reads them: x pitch (forward +), y roll
-(right +), r yaw (clockwise +), each -1000..1000, z throttle 0..1000 (500 = centred: hold
-altitude in ALTCTL/POSCTL, hover thrust in STABILIZED).
+felt without waiting for a tick. Fields as PX4's mavlink_receiver reads them: x pitch
+(forward +), y roll (right +), r yaw (clockwise +), each -1000..1000, z throttle 0..1000
+(500 = centred: hold altitude in ALTCTL/POSCTL, hover thrust in STABILIZED).
 
 Manual control and the offboard setpoint stream are exclusive: starting one stops the other,
 each with an event. Stopping the sticks after they flew is, for PX4, a manual control loss
