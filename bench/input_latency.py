@@ -45,6 +45,8 @@ from typing import Any
 import httpx
 from websockets.asyncio.client import ClientConnection, connect
 
+from bench._markdown import table
+from bench._report import Section
 from bench._results import machine_info, write_results
 from bench._serve import PROJECT_ROOT, READY_PREFIX, percentile
 from server.simproc import SimProcess
@@ -127,11 +129,17 @@ class _Socket:
     def __init__(self, ws: ClientConnection) -> None:
         self.ws = ws
         self.ids = 0
+        self.answered = 0
+        self._answers = asyncio.Condition()
         self._reader = asyncio.create_task(self._read())
 
     async def _read(self) -> None:
-        async for _ in self.ws:
-            pass
+        async for text in self.ws:
+            answer_id = json.loads(text).get("id")
+            if isinstance(answer_id, int):
+                async with self._answers:
+                    self.answered = max(self.answered, answer_id)
+                    self._answers.notify_all()
 
     async def send(self, message: dict[str, Any]) -> float:
         self.ids += 1
@@ -141,6 +149,12 @@ class _Socket:
         return sent_s
 
     async def close(self) -> None:
+        """Once every message was answered (or 5 s passed): the server is not left
+        answering a closed socket."""
+        async with self._answers:
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(
+                    self._answers.wait_for(lambda: self.answered >= self.ids), 5.0)
         self._reader.cancel()
         with contextlib.suppress(asyncio.CancelledError):
             await self._reader
@@ -336,6 +350,39 @@ async def run(presses: int, before: str | None) -> dict[str, Any]:
     result["worst_p99_ms"] = max(w for w in worst if w is not None)
     result["machine"] = machine_info(load_before)
     return result
+
+
+def _cell(summary: dict[str, Any]) -> str:
+    if not summary["count"]:
+        return "–"
+    return f"{summary['p50_ms']:.1f} / {summary['p99_ms']:.1f} / {summary['max_ms']:.1f}"
+
+
+def report(result: dict[str, Any]) -> Section | None:
+    """Press and release latency per input path, before and after when both were run."""
+    after = result.get("after")
+    if not after:
+        return None
+    before = result.get("before")
+    rows = []
+    for case in CASES:
+        for edge in ("press", "release"):
+            row = [f"{case}, {edge}"]
+            if before:
+                row.append(_cell(before[case][edge]))
+            row.append(_cell(after[case][edge]))
+            rows.append(row)
+    headers = ["input", *([f"before ({before['commit']}) p50 / p99 / max ms"] if before else []),
+               "p50 / p99 / max ms"]
+    worst = result["worst_p99_ms"]
+    markdown = (
+        f"A key or a stick, given as the page gives it (control socket) or over REST, to the "
+        f"first frame carrying the change at the vehicle's socket (kernel receive times at a "
+        f"relay), {result['presses']} presses and releases per path: worst p99 "
+        f"**{worst:.1f} ms** (goal ≤ 20 ms: {'met' if worst <= 20.0 else 'NOT met'}).\n\n"
+        + table(headers, rows)
+    )
+    return Section("A key or a stick to the vehicle", 45, markdown)
 
 
 def main() -> None:
