@@ -58,6 +58,9 @@ STICKS_ID = 69  # MANUAL_CONTROL
 HOLD_S = 0.30
 BETWEEN_S = 0.30
 KEY_REPEAT_S = 0.10  # the page's key repeat (web/offboard.js)
+# a sample slower than the goal (20 ms) whose REST answer came later too: the server's
+# request path was slow (the loop, the machine), not the sender's
+SLOW_S = 0.020
 STICKS_PERIOD_S = 0.04  # the page's sticks (web/sticks.js, 25 Hz)
 SPEED_M_S = 1.0
 # where each case's frames are found, and whether a frame carries the pressed input
@@ -174,10 +177,14 @@ async def _presses(
     relay: SenderRelay, msg_id: int, presses: int,
     press: Callable[[], Awaitable[float]], hold: Callable[[], Awaitable[None]],
     release: Callable[[], Awaitable[float]], between: Callable[[], Awaitable[None]],
+    answers: dict[float, float] | None = None,
 ) -> dict[str, list[float]]:
     """Press, hold, release, wait, ``presses`` times after one press not counted (the
-    first of a stream starts the server's sender process); latencies in ms."""
-    out: dict[str, list[float]] = {"press_ms": [], "release_ms": [], "missed": []}
+    first of a stream starts the server's sender process); latencies in ms. ``answers``
+    (REST): each request's answer time by its send time, so a slow sample tells whether
+    the server's request path was slow too (the answer after the frame's usual time)."""
+    out: dict[str, list[float]] = {"press_ms": [], "release_ms": [], "missed": [],
+                                   "slow_answered_late": []}
     for n in range(presses + 1):
         await between()
         pressed_s = await press()
@@ -193,6 +200,10 @@ async def _presses(
                 out["missed"].append(since_s)
             else:
                 out[key].append((arrived - since_s) * 1e3)
+                answered_s = (answers or {}).get(since_s)
+                if (arrived - since_s > SLOW_S and answered_s is not None
+                        and answered_s - since_s > SLOW_S):
+                    out["slow_answered_late"].append(since_s)
     return out
 
 
@@ -243,10 +254,13 @@ async def _rest_cases(base: str, relay: SenderRelay, presses: int) -> dict[str, 
         lease.raise_for_status()
         headers = {"X-Lease-Id": lease.json()["lease_id"]}
 
+        answers: dict[float, float] = {}
+
         async def put(path: str, body: dict[str, Any]) -> float:
             sent_s = time.time()
             response = await client.put(f"/api/v1/vehicles/1/{path}", json=body,
                                         headers=headers)
+            answers[sent_s] = time.time()
             response.raise_for_status()
             return sent_s
 
@@ -261,14 +275,16 @@ async def _rest_cases(base: str, relay: SenderRelay, presses: int) -> dict[str, 
                                  lambda: put("setpoint?live=true", velocity(SPEED_M_S)), HOLD_S),
             release=lambda: put("setpoint?live=true", velocity(0.0)),
             between=lambda: _repeat(KEY_REPEAT_S,
-                                    lambda: put("setpoint?live=true", velocity(0.0)), BETWEEN_S))
+                                    lambda: put("setpoint?live=true", velocity(0.0)), BETWEEN_S),
+            answers=answers)
         results["rest sticks"] = await _presses(
             relay, STICKS_ID, presses,
             press=lambda: put("sticks", _sticks(1.0)),
             hold=lambda: _repeat(STICKS_PERIOD_S, lambda: put("sticks", _sticks(1.0)), HOLD_S),
             release=lambda: put("sticks", _sticks(0.0)),
             between=lambda: _repeat(STICKS_PERIOD_S, lambda: put("sticks", _sticks(0.0)),
-                                    BETWEEN_S))
+                                    BETWEEN_S),
+            answers=answers)
         await client.delete("/api/v1/vehicles/1/sticks", headers=headers)
         await client.delete("/api/v1/vehicles/1/control", headers=headers)
     return results
@@ -300,6 +316,8 @@ async def measure(root: Path, presses: int) -> dict[str, Any]:
     return {case: {"press": _summary(raw[case]["press_ms"]),
                    "release": _summary(raw[case]["release_ms"]),
                    "missed": len(raw[case]["missed"]),
+                   # samples over SLOW_S whose REST answer also came after SLOW_S
+                   "slow_answered_late": len(raw[case]["slow_answered_late"]),
                    "samples_ms": {"press": raw[case]["press_ms"],
                                   "release": raw[case]["release_ms"]}}
             for case in CASES}
@@ -333,6 +351,9 @@ def _print(label: str, figures: dict[str, Any]) -> None:
             else:
                 parts.append(f"{edge} -")
         missed = f", missed {row['missed']}" if row["missed"] else ""
+        if row.get("slow_answered_late"):
+            missed += (f", {row['slow_answered_late']} over {SLOW_S * 1e3:.0f} ms answered "
+                       f"later than that too")
         print(f"{label:>6} {case:<14} {' | '.join(parts)}  (n={row['press']['count']}{missed})")
 
 
