@@ -403,6 +403,13 @@ def report(result: dict[str, Any]) -> Section | None:
         f"**{worst:.1f} ms** (goal ≤ 20 ms: {'met' if worst <= 20.0 else 'NOT met'}).\n\n"
         + table(headers, rows)
     )
+    late = [(label, sum(figures[case].get("slow_answered_late", 0) for case in CASES))
+            for label, figures in (("before", before), ("after", after)) if figures]
+    if any(count for _, count in late):
+        markdown += (
+            f"\n\nSamples over {SLOW_S * 1e3:.0f} ms whose REST answer came later than that "
+            "too (the server's request path was slow: the loop, the machine; not the "
+            "stream): " + ", ".join(f"{label} {count}" for label, count in late) + ".\n")
     return Section("A key or a stick to the vehicle", 45, markdown)
 
 
