@@ -21,7 +21,7 @@ the counted ones starts each stream (and the server's sender process).
 ``--before REF`` runs the same cases first against the server of a git commit (exported
 with ``git archive`` to a temporary directory), so both figures come from one run.
 
-    .venv/bin/python -m bench.input_latency [--presses 20] [--before REF]
+    .venv/bin/python -m bench.input_latency [--presses 20] [--before REF] [--quick]
 """
 
 from __future__ import annotations
@@ -416,10 +416,12 @@ def report(result: dict[str, Any]) -> Section | None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--presses", type=int, default=20)
+    parser.add_argument("--quick", action="store_true", help="5 presses: a smoke run")
     parser.add_argument("--before", metavar="REF",
                         help="also measure the server of this git commit first")
     args = parser.parse_args()
-    write_results("input_latency", asyncio.run(run(args.presses, args.before)))
+    presses = 5 if args.quick else args.presses
+    write_results("input_latency", asyncio.run(run(presses, args.before)))
 
 
 if __name__ == "__main__":
