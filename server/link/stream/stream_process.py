@@ -84,6 +84,8 @@ SIGNING_TICKS_PER_S = 100_000
 # Unsent reports kept while the server does not read them; older tlog records go first.
 MAX_PENDING_RECORDS = 20_000
 MAX_PENDING_NOTES = 1_000  # ~50 s of reports
+# A changed frame goes early no sooner than this after the tick before (Deadlines.early_s).
+EARLY_MARGIN_S = 0.002
 # The shared state (see the module's docstring).
 STATE_HEARTBEAT = struct.Struct("<d")
 STATE_LINK = struct.Struct("<IQ")
@@ -113,10 +115,12 @@ class Deadlines:
         return self.t0_s + self.k * self.period_s
 
     def early_s(self) -> float:
-        """The earliest the next tick may go with a changed frame: once the tick before it
-        was due. A change then goes at once unless one already went early since: at most
-        one frame per period of the schedule, however often the frame changes."""
-        return self.next_s - self.period_s
+        """The earliest the next tick may go with a changed frame: just after the tick
+        before it was due. A change then goes at once unless one already went early since:
+        at most one frame per period of the schedule, however often the frame changes. The
+        margin keeps two frames apart and the interval after an early frame under two
+        periods (which would count as a gap)."""
+        return self.next_s - self.period_s + min(EARLY_MARGIN_S, self.period_s / 4.0)
 
     def after_tick(self, now_s: float) -> float:
         """The deadline after a tick that ran at ``now_s``."""
