@@ -28,6 +28,7 @@ class Heard:
     seq: int
     sysid: int
     compid: int
+    payload: bytes = b""  # as on the wire (MAVLink 2 trims its trailing zeros)
 
 
 def _frames(data: bytes) -> list[tuple[int, int, int, int, bytes]]:
@@ -76,8 +77,8 @@ class SenderRelay:
                     data, ancillary, _flags, self._server = self.to_server.recvmsg(65536, 64)
                     arrived = kernel_receive_time(ancillary)
                     self.to_vehicle.sendto(data, self.vehicle)
-                    for msg_id, seq, sysid, compid, _ in _frames(data):
-                        self.heard.append(Heard(arrived, msg_id, seq, sysid, compid))
+                    for msg_id, seq, sysid, compid, payload in _frames(data):
+                        self.heard.append(Heard(arrived, msg_id, seq, sysid, compid, payload))
                 else:
                     data = self.to_vehicle.recv(65536)
                     if self._server is not None:

@@ -167,6 +167,87 @@ async def test_a_key_change_reaches_the_process_in_order_with_the_frames(tmp_pat
     assert len(frames) - marks[1] >= 5  # the stream went on, signed with the new key
 
 
+def _xs(frames: list[tuple[float, bytes]]) -> list[tuple[float, float]]:
+    """(kernel receive time, x) of each setpoint frame."""
+    out = []
+    for arrived, frame in frames:
+        msg = mavlink.MAVLink(None).parse_char(frame)
+        if msg is not None and msg.get_type() == "SET_POSITION_TARGET_LOCAL_NED":
+            out.append((arrived, msg.x))
+    return out
+
+
+async def test_a_change_reaches_the_vehicle_before_the_next_tick_was_due() -> None:
+    """A pilot's changed input goes out of the process when it comes, in place of the next
+    tick; the ticks after it keep their times. Times are the kernel's receive times at the
+    vehicle's socket, against the stream's own schedule (its first frame's arrival)."""
+    period_s = 0.5
+    receiver = Receiver()
+    link = await Link.open(f"udpout:127.0.0.1:{receiver.port}")
+    try:
+        streamer = SetpointStreamer(link.send, rate_hz=1.0 / period_s,
+                                    channel=link.stream_channel)
+        streamer.stream(_msg(1))
+        assert streamer.in_process
+        await wait_for(lambda: bool(_xs(receiver.frames)), 5.0, "the first setpoint")
+        first_s = _xs(receiver.frames)[0][0]
+        # give the change well inside a period (a busy test process tries the next one)
+        while True:
+            into_s = (time.time() - first_s) % period_s
+            if 0.1 <= into_s <= 0.3:
+                break
+            await asyncio.sleep(0.02)
+        changed_s = time.time()
+        streamer.change(_msg(2))
+        next_due_s = changed_s - into_s + period_s
+        await wait_for(lambda: any(x == 2 for _, x in _xs(receiver.frames)), 5.0,
+                       "the changed setpoint")
+        await asyncio.sleep(next_due_s + period_s + 0.2 - time.time())
+        streamer.stop()
+    finally:
+        await link.close()
+    receiver.close()
+    heard = _xs(receiver.frames)
+    changed = [t for t, x in heard if x == 2]
+    assert changed[0] < next_due_s - 0.05, (
+        f"the change came {changed[0] - changed_s:.3f} s after it was given, "
+        f"{changed[0] - next_due_s:.3f} s after the next tick was due")
+    # it took the place of that tick: the next frame is the one after, on its time
+    after = changed[1]
+    assert after >= next_due_s + period_s - 0.05
+    assert [t for t, _ in heard if changed[0] < t < after] == []
+
+
+async def test_changes_faster_than_the_stream_do_not_raise_its_rate() -> None:
+    """Sticks changing at ~100 Hz on a 10 Hz stream in the process: never more frames
+    than one a period (and one early) at the vehicle's socket."""
+    period_s = 0.1
+    receiver = Receiver()
+    link = await Link.open(f"udpout:127.0.0.1:{receiver.port}")
+    try:
+        streamer = SetpointStreamer(link.send, rate_hz=1.0 / period_s,
+                                    channel=link.stream_channel)
+        streamer.stream(_msg(0))
+        assert streamer.in_process
+        await wait_for(lambda: bool(_xs(receiver.frames)), 5.0, "the first setpoint")
+        begin_s = time.time()
+        for k in range(1, 101):
+            streamer.change(_msg(k))
+            await asyncio.sleep(0.01)
+        end_s = time.time()
+        await wait_for(lambda: any(x == 100 for _, x in _xs(receiver.frames)), 5.0,
+                       "the last change")
+        streamer.stop()
+    finally:
+        await link.close()
+    receiver.close()
+    heard = [(t, x) for t, x in _xs(receiver.frames) if x >= 1]
+    within = [t for t, _ in heard if t <= end_s]
+    assert len(within) <= (end_s - begin_s) / period_s + 2, (
+        f"{len(within)} frames in {end_s - begin_s:.2f} s of a {1 / period_s:g} Hz stream")
+    assert len({x for _, x in heard}) >= 5  # and the changes went out, the newest each time
+
+
 async def test_a_link_without_a_socket_to_hand_over_streams_on_the_thread() -> None:
     async with await Link.open("tcpin:127.0.0.1:0") as link:
         streamer = SetpointStreamer(link.send, rate_hz=50, channel=link.stream_channel)

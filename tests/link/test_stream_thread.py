@@ -142,6 +142,27 @@ async def test_threaded_streamer_sends_on_deadlines_rephases_on_change_and_stops
     assert stats.since_last_ms == pytest.approx(7200)
 
 
+async def test_threaded_streamer_sends_a_change_at_once_in_place_of_the_next_tick() -> None:
+    """The sender thread's side of ``change``: at once, the ticks after it on their times;
+    a second change within that period waits for the time the tick before the next was
+    due (one frame a period, however often the input changes)."""
+    streamer, sender, clock, sent = _fake_streamer(rate_hz=2)
+    streamer.stream(_msg(1))
+    _run_until(sender, clock, 100.6)
+    clock.now_s = 100.7
+    streamer.change(_msg(2))  # at once: in place of the tick due at 101.0
+    clock.now_s = 100.8
+    streamer.change(_msg(3))  # within the period of the one that went early: waits for 101.0
+    _run_until(sender, clock, 102.1)
+    streamer.stop()
+    _run_until(sender, clock, 110.0)
+
+    # (and 2 ms more: two frames never closer, an interval never two whole periods)
+    assert [x for _, x in sent] == [1, 1, 2, 3, 3]
+    assert [t for t, _ in sent] == pytest.approx([100.0, 100.5, 100.7, 101.002, 102.0])
+    assert sender.pending() == 0
+
+
 async def test_threaded_streamer_skips_missed_ticks_counts_the_gap_and_follows_a_rate_change(
 ) -> None:
     streamer, sender, clock, sent = _fake_streamer(rate_hz=50)

@@ -231,3 +231,64 @@ async def test_update_keeps_the_schedule_however_often_the_message_changes(
     # each tick sends the newest message given before it
     for t, x in rec.sent[1:]:
         assert x == pytest.approx(int((t - t0) * 60.0 + 1e-6), abs=1.0)
+
+
+async def test_a_change_goes_out_at_once_in_place_of_the_next_tick(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A pilot's input (sticks, keys): sent when it comes, not at the next tick; the ticks
+    after it keep their times, so the stream sends no more frames than before."""
+    rec = _Recorder(monkeypatch)
+    streamer = SetpointStreamer(rec, rate_hz=2.0)  # slow, so "at once" is clearly not a tick
+    streamer.stream(_msg(1))
+    t0 = rec.times[0]
+    await asyncio.sleep(0.6)  # the tick at t0 + 0.5 went
+    changed_at = _now()
+    streamer.change(_msg(2))
+    await asyncio.sleep(1.5)
+    streamer.stop()
+
+    assert [x for _, x in rec.sent] == [1, 1, 2, 2, 2]
+    # the change at once (it took the place of the tick at t0 + 1.0), the ticks on their times
+    _assert_times(rec.times, [t0, t0 + 0.5, changed_at, t0 + 1.5, t0 + 2.0])
+    assert changed_at == pytest.approx(t0 + 0.6, abs=EXACT_S)
+
+
+async def test_changes_faster_than_the_rate_never_raise_it(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Sticks changing at 60 Hz on a 25 Hz stream: the first change goes at once, the
+    others each wait for the time the tick before the next was due: one frame a period."""
+    rec = _Recorder(monkeypatch)
+    streamer = SetpointStreamer(rec, rate_hz=25.0)
+    t0 = _now()
+    streamer.change(_msg(0.0))  # a stopped stream starts at once
+    for k in range(1, 60):  # 60 changes a second for one second
+        await asyncio.sleep(1.0 / 60.0)
+        streamer.change(_msg(float(k)))
+    await asyncio.sleep(0.001)
+    streamer.stop()
+    # the n-th frame never goes before the (n-1)-th tick was due: at most one frame more
+    # than the ticks alone would have sent in the second, never two early in a period
+    assert len(rec.times) <= 26
+    for n, t in enumerate(rec.times[1:], start=1):
+        assert t >= t0 + (n - 1) * 0.04 - EXACT_S, f"frame {n} ahead of the schedule"
+    # and each frame is the newest input given by then, sent when it came or when the
+    # period it waits for began: no frame waits longer than a period
+    for t, x in rec.sent[1:]:
+        given_at = t0 + x / 60.0
+        assert given_at - EXACT_S <= t <= given_at + 0.04 + EXACT_S
+
+
+async def test_a_repeated_change_of_a_stopped_stream_starts_it(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    rec = _Recorder(monkeypatch)
+    streamer = SetpointStreamer(rec, rate_hz=10.0)
+    streamer.change(_msg(1))
+    await asyncio.sleep(0.25)
+    streamer.stop()
+    streamer.change(_msg(2))
+    await asyncio.sleep(0.05)
+    streamer.stop()
+    assert [x for _, x in rec.sent] == [1, 1, 1, 2]

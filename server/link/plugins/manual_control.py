@@ -1,10 +1,11 @@
 """Manual control: the pilot's sticks sent as MANUAL_CONTROL at 25 Hz (QGroundControl's rate).
 
-The newest sticks replace the message the streamer sends on its absolute-deadline schedule
-(``SetpointStreamer.update``): sticks arriving faster or slower than 25 Hz change what is
-sent, never when. Fields as PX4's mavlink_receiver reads them: x pitch (forward +), y roll
-(right +), r yaw (clockwise +), each -1000..1000, z throttle 0..1000 (500 = centred: hold
-altitude in ALTCTL/POSCTL, hover thrust in STABILIZED).
+Sticks that changed go out at once, in place of the streamer's next tick
+(``SetpointStreamer.change``); the ticks after it keep their absolute-deadline schedule, so
+sticks arriving faster or slower than 25 Hz never change the rate, and a stick moved is
+felt without waiting for a tick. Fields as PX4's mavlink_receiver reads them: x pitch
+(forward +), y roll (right +), r yaw (clockwise +), each -1000..1000, z throttle 0..1000
+(500 = centred: hold altitude in ALTCTL/POSCTL, hover thrust in STABILIZED).
 
 Manual control and the offboard setpoint stream are exclusive: starting one stops the other,
 each with an event. Stopping the sticks after they flew is, for PX4, a manual control loss
@@ -85,16 +86,20 @@ class ManualControl:
         return self.streamer.active
 
     def set_sticks(self, sticks: Sticks) -> Sticks:
-        """Send these sticks from the next 25 Hz tick on (at once when not yet sending).
-        Stops the offboard stream first: the two are exclusive."""
+        """Send these sticks at once when they changed (in place of the next 25 Hz tick),
+        else from the next tick on. Stops the offboard stream first: the two are exclusive."""
         if not self.streamer.active:
             self._offboard.stop_stream("manual control started")
         core = self._core
         x, y, z, r = sticks.axes()
         msg = core.mav.manual_control_encode(core.sysid, x, y, z, r, 0)
         starting = not self.streamer.active
+        changed = self.sticks is None or sticks.axes() != self.sticks.axes()
         self.sticks = sticks
-        self.streamer.update(msg)
+        if changed:
+            self.streamer.change(msg)
+        else:
+            self.streamer.update(msg)
         if starting:
             core.publish_event("manual_control", {"active": True, "reason": "sticks"})
         core.hub.notify()

@@ -329,10 +329,13 @@ def _slot_at(slot: int) -> int:
 
 def _merged(queued: tuple[Any, ...], newer: tuple[Any, ...]) -> tuple[Any, ...]:
     """A stream's queued message with a newer one of the same stream: a queued "stream"
-    (send now, re-phase) keeps doing so with the newer frame; otherwise the newer wins."""
-    if queued[0] == "stream" and newer[0] == "update":
+    (send now, re-phase) or "change" (send now) keeps doing so with the newer frame;
+    otherwise the newer wins."""
+    if queued[0] == "stream" and newer[0] in ("update", "change"):
         _, sid, frame, crc_extra, dests = newer
         return ("stream", sid, queued[2], frame, crc_extra, dests, queued[6])
+    if queued[0] == "change" and newer[0] == "update":
+        return ("change", *newer[1:])
     return newer
 
 
@@ -422,6 +425,14 @@ class StreamChannel:
             return
         frame, crc_extra = self._out.frame(msg)
         self._out.process.post(("update", self.sid, frame, crc_extra, self._dests(msg)),
+                               key=("stream", self.sid))
+
+    def change(self, msg: mavlink.MAVLink_message) -> None:
+        """Send ``msg`` now in place of the next tick (``Deadlines.early_s``)."""
+        if self.sid is None:
+            return
+        frame, crc_extra = self._out.frame(msg)
+        self._out.process.post(("change", self.sid, frame, crc_extra, self._dests(msg)),
                                key=("stream", self.sid))
 
     def period(self, period_s: float) -> None:

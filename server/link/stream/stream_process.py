@@ -27,7 +27,9 @@ argument) carries pickled tuples; the server's messages:
   connected socket);
 - ``("stream", sid, key, frame, crc_extra, dests, period_s)``: send now and then every
   period on t0 + k·period; ``("update", sid, frame, crc_extra, dests)`` changes what the
-  next tick sends; ``("period", sid, period_s)`` re-phases from the last send;
+  next tick sends; ``("change", sid, frame, crc_extra, dests)`` sends a changed frame now
+  in place of the next tick (:meth:`Deadlines.early_s`: the ticks after it keep their
+  times, so the rate stays); ``("period", sid, period_s)`` re-phases from the last send;
   ``("stop", sid)``.
 
 Its reports, batched every ``REPORT_PERIOD_S``: ``("sent", key, [(unix_s, frame)], dropped,
@@ -82,6 +84,8 @@ SIGNING_TICKS_PER_S = 100_000
 # Unsent reports kept while the server does not read them; older tlog records go first.
 MAX_PENDING_RECORDS = 20_000
 MAX_PENDING_NOTES = 1_000  # ~50 s of reports
+# A changed frame goes early no sooner than this after the tick before (Deadlines.early_s).
+EARLY_MARGIN_S = 0.002
 # The shared state (see the module's docstring).
 STATE_HEARTBEAT = struct.Struct("<d")
 STATE_LINK = struct.Struct("<IQ")
@@ -109,6 +113,14 @@ class Deadlines:
     @property
     def next_s(self) -> float:
         return self.t0_s + self.k * self.period_s
+
+    def early_s(self) -> float:
+        """The earliest the next tick may go with a changed frame: just after the tick
+        before it was due. A change then goes at once unless one already went early since:
+        at most one frame per period of the schedule, however often the frame changes. The
+        margin keeps two frames apart and the interval after an early frame under two
+        periods (which would count as a gap)."""
+        return self.next_s - self.period_s + min(EARLY_MARGIN_S, self.period_s / 4.0)
 
     def after_tick(self, now_s: float) -> float:
         """The deadline after a tick that ran at ``now_s``."""
@@ -273,6 +285,17 @@ class SenderProcess:
             stream = self.streams.get(sid)
             if stream is not None:
                 stream.frame, stream.crc_extra, stream.dests = frame, crc_extra, dests
+        elif kind == "change":
+            _, sid, frame, crc_extra, dests = message
+            stream = self.streams.get(sid)
+            if stream is not None:
+                stream.frame, stream.crc_extra, stream.dests = frame, crc_extra, dests
+                now = time.monotonic()
+                early_s = stream.deadlines.early_s()
+                if now >= early_s:
+                    self.tick(sid, stream, now)  # the next tick, now
+                else:
+                    self.schedule(sid, stream, early_s)
         elif kind == "period":
             _, sid, period_s = message
             stream = self.streams.get(sid)

@@ -2,7 +2,11 @@
 
 Ticks fall on t0 + k·period, so a late tick does not push every later one back; a tick that
 comes too late to matter is skipped and shows up as a gap. A new setpoint goes out at once
-(from the caller, on the loop) and re-phases the schedule.
+(from the caller, on the loop) and re-phases the schedule. A changed frame of a running
+stream (``change``: a pilot's sticks) goes out at once too, in place of the next tick: the
+ticks after it keep their times, and a change within a period of one that went early waits
+for the time the tick before the next was due, so the rate never rises however often the
+input changes (``Deadlines.early_s``).
 
 Who keeps the time, on a real clock: the server's setpoint sender process
 (server.link.stream.stream_process, through a ``channel`` of the link: UDP links), which needs
@@ -202,6 +206,29 @@ class SetpointStreamer:
                 return
         self.stream(msg)
 
+    def change(self, msg: mavlink.MAVLink_message) -> None:
+        """Send a changed ``msg`` now in place of the next tick; the ticks after it keep
+        their times (a change within a period of one sent early waits for the time the
+        tick before the next was due: the rate stays). stream() it when stopped."""
+        with self._lock:
+            if self.active:
+                self._msg = msg
+                if self._channel is not None:
+                    try:
+                        self._channel.change(msg)
+                        return
+                    except ProcessGone:  # the thread goes on with it
+                        self._to_thread()
+                now = self._clock()
+                early_s = self._deadlines.early_s()
+                if now >= early_s:
+                    self._emit(now)
+                    self._schedule(self._deadlines.after_tick(now))
+                else:
+                    self._schedule(early_s)
+                return
+        self.stream(msg)
+
     # -- the sender process's supervisor --
     def sender_lost(self, process: object) -> None:
         """The process timing this stream is gone: the thread takes the stream over now,
@@ -308,12 +335,15 @@ class SetpointStreamer:
         return self._clock() - self._started_s
 
     def _rephase(self) -> None:
+        self._schedule(self._deadlines.rephase(
+            self._last_s if self._last_s is not None else self._clock()))
+
+    def _schedule(self, first_s: float) -> None:
+        """The next tick at ``first_s`` (the jobs and timers of before end)."""
         self._generation += 1
         if self._handle is not None:
             self._handle.cancel()
             self._handle = None
-        first_s = self._deadlines.rephase(
-            self._last_s if self._last_s is not None else self._clock())
         if self._threaded:
             assert self._sender is not None
             generation = self._generation
