@@ -14,6 +14,7 @@ export const CALLS = Object.freeze({
   fly_sticks: ["PUT", "sticks"],
   stop_sticks: ["DELETE", "sticks"],
   params: ["GET", "params"],
+  param_metadata: ["GET", "params/metadata"],
   param: ["GET", "params/{name}"],
   set_param: ["PUT", "params/{name}"],
   arm: ["POST", "arm"],

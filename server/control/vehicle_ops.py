@@ -9,8 +9,8 @@ from dataclasses import asdict
 from server.control.deadman import Deadman
 from server.control.operations import sent_out
 from server.control.publishers import StatePublishers
-from server.control.views import finite, stream_dict
 from server.control.refusals import InvalidInput
+from server.control.views import finite, stream_dict
 from server.link import MetadataError, ParamInfo, Sticks, Vehicle
 from server.link.plugins.manual_control import MANUAL_CONTROL_RATE_HZ
 from skyhelm_wire.params import (
