@@ -10,7 +10,7 @@ from __future__ import annotations
 from typing import Protocol
 
 from sim.lib.params import ParamReader
-from sim.lib.topics import ControlSetpoint, VehicleStateTruth, VtolState
+from sim.lib.topics import ControlSetpoint, LandingStatus, VehicleStateTruth, VtolState
 from sim.models.fixed_wing import FixedWingModel
 from sim.models.multicopter import MulticopterModel
 from sim.models.rover import RoverModel
@@ -49,6 +49,11 @@ class AirframeModel(Protocol):
     actuator_outputs: list[float]
     power_fraction: float
 
+    # what the land detector and the multicopter position controller share (None: no
+    # multicopter, the land detector reads the state alone)
+    @property
+    def landing(self) -> LandingStatus | None: ...
+
     def step(self, dt_s: float, armed: bool, setpoint: ControlSetpoint | None) -> None: ...
 
     def request_transition(self, to_fixed_wing: bool, immediate: bool) -> None: ...
@@ -71,13 +76,15 @@ _MC_PARAMS: dict[str, float | int] = {
     "MPC_Z_VEL_MAX_UP": 3.0,
     "MPC_Z_VEL_MAX_DN": 1.5,
     "MPC_TKO_SPEED": 1.5,
+    "MPC_TKO_RAMP_T": 3.0,
+    "COM_SPOOLUP_TIME": 1.0,
     "MPC_LAND_SPEED": 0.7,
     "MPC_ACC_HOR": 3.0,
     "MPC_ACC_HOR_MAX": 5.0,
     # the controllers use the true hover thrust (SIH_MASS, SIH_T_MAX), as PX4's hover thrust
     # estimator would after converging; the parameter reports it (set per airframe below)
     "MPC_THR_HOVER": 0.5,
-    "MPC_THR_MIN": 0.08,
+    "MPC_THR_MIN": 0.12,
     "MPC_THR_MAX": 1.0,
     "MPC_THR_XY_MARG": 0.3,
     "MPC_TILTMAX_AIR": 45.0,
