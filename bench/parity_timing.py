@@ -13,7 +13,7 @@ within 0.5 m; last setpoint → leaves OFFBOARD, the stick-less Position sink ra
 resumed → OFFBOARD; NAV_LAND at 5 m → ON_GROUND and → disarmed; RTL from 20 m north and
 10 m up → home within 2 m, → ON_GROUND, → disarmed. VTOL: the front and back transition
 times. Then the parameter census: every parameter the sim has against PX4 SITL's value for
-the same airframe.
+the same airframe (quad, VTOL, plane; PX4 v1.16 has no SIH rover).
 
 With a PX4 SITL build (``/root/px4sitl``, ``$SKYHELM_PX4_SITL_DIR``) both vehicles fly in
 the same run (PX4 instance ``--px4-instance``, default 4, and the next one for the VTOL);
@@ -44,7 +44,7 @@ from pathlib import Path
 from typing import Any
 
 os.environ["MAVLINK20"] = "1"
-from pymavlink import mavutil  # noqa: E402
+from pymavlink import mavutil
 
 from bench._markdown import table
 from bench._report import Section
@@ -125,6 +125,7 @@ class Gcs:
     _stream: list[float] | None = None
     _stream_wall: float = -math.inf
     stream_period_s: float = 0.05
+    resend_s: float = 0.1
 
     # -- receiving -------------------------------------------------------------------
 
@@ -194,7 +195,9 @@ class Gcs:
 
     # -- waiting, on the vehicle's clock ---------------------------------------------
 
-    def until(self, what: str, done: Callable[[], bool], timeout_s: float = STEP_TIMEOUT_S) -> float:
+    def until(
+        self, what: str, done: Callable[[], bool], timeout_s: float = STEP_TIMEOUT_S
+    ) -> float:
         """The vehicle clock at which `done` first holds."""
         start = self.clock_s
         wall_end = time.monotonic() + timeout_s * 4 + 30.0
@@ -219,7 +222,7 @@ class Gcs:
         """Send until ACCEPTED (PX4's DO_SET_MODE acks twice: the last ack counts)."""
         sent_wall = -math.inf
         while True:
-            if time.monotonic() - sent_wall > 0.25:
+            if time.monotonic() - sent_wall > self.resend_s:
                 self.acks.clear()
                 self.command(command, *params)
                 sent_wall = time.monotonic()
@@ -412,7 +415,7 @@ def sim_vehicle(airframe: str, speed: float) -> Iterator[Gcs]:
          "--api-port", str(port), "--api-local-port", "0", "--gcs-port", "0",
          "--gcs-local-port", "0", "--exit-on-stdin-eof"],
         stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    gcs = Gcs(conn, stream_period_s=0.05 / max(speed, 1.0))
+    gcs = Gcs(conn, stream_period_s=0.05 / max(speed, 1.0), resend_s=0.1 / max(speed, 1.0))
     try:
         yield gcs
     finally:
@@ -484,10 +487,12 @@ def measure(vehicles: Callable[[str], contextlib.AbstractContextManager[Gcs]],
     for _ in range(runs):
         with vehicles("quad") as gcs:
             quad_runs.append(fly_quad(gcs))
-    with vehicles("quad") as gcs:
-        boot(gcs)
-        params = {"quad": read_params(gcs)}
-        gcs.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 0)
+    params: dict[str, dict[str, float | int]] = {}
+    for airframe in ("quad", "plane"):
+        with vehicles(airframe) as gcs:
+            gcs.until("first HEARTBEAT", lambda: not math.isnan(gcs.first_heartbeat_s), 60.0)
+            gcs.hold_for(2.0)
+            params[airframe] = read_params(gcs)
     vtol_runs: list[dict[str, float]] = []
     for _ in range(runs):
         with vehicles("vtol") as gcs:
@@ -543,7 +548,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.px4 and root is None:
         print("no PX4 SITL build", file=sys.stderr)
         return 1
-    models = {"quad": "sihsim_quadx", "vtol": "sihsim_standard_vtol"}
+    models = {"quad": "sihsim_quadx", "vtol": "sihsim_standard_vtol",
+              "plane": "sihsim_airplane"}
     sim = measure(lambda airframe: sim_vehicle(airframe, args.speed), args.runs)
     if root is not None:
         instance = args.px4_instance

@@ -37,11 +37,11 @@ PX4_DEFAULTS: dict[str, float | int] = {
     "GF_MAX_VER_DIST": 0.0,
     # navigator
     "MIS_TAKEOFF_ALT": 2.5,
-    "NAV_ACC_RAD": 2.0,
+    "NAV_ACC_RAD": 10.0,
     "NAV_MC_ALT_RAD": 0.8,
     "NAV_LOITER_RAD": 80.0,
     "RTL_RETURN_ALT": 60.0,
-    "RTL_DESCEND_ALT": 10.0,
+    "RTL_DESCEND_ALT": 30.0,
     "RTL_LAND_DELAY": 0.0,
     "RTL_MIN_DIST": 10.0,
     "RTL_TYPE": 0,
@@ -91,13 +91,27 @@ PX4_DEFAULTS: dict[str, float | int] = {
     "SYS_HITL": 0,
 }
 
-# SIH airframe files override a few PX4 defaults (the sih_* airframes in ROMFS).
+# PX4 SITL's startup files set per vehicle type (ROMFS rc.mc_defaults, rc.vtol_defaults and
+# rc.fw_defaults, then the SIH airframe files 10040_sihsim_quadx, 10043_sihsim_standard_vtol
+# and 10041_sihsim_airplane); rcS's SITL values (COM_RC_IN_MODE 1, COM_LOW_BAT_ACT 3) are
+# in PX4_DEFAULTS above, as every SITL vehicle starts with them.
+_MC_DEFAULTS: dict[str, float | int] = {
+    "NAV_ACC_RAD": 2.0, "RTL_RETURN_ALT": 30.0, "RTL_DESCEND_ALT": 10.0,
+    "MIS_TAKEOFF_ALT": 2.5, "SYS_AUTOSTART": 1100,
+}
 AIRFRAME_OVERRIDES: dict[str, dict[str, float | int]] = {
-    "quad": {"MIS_TAKEOFF_ALT": 2.5, "RTL_RETURN_ALT": 30.0, "SYS_AUTOSTART": 1100},
-    "hexa": {"MIS_TAKEOFF_ALT": 2.5, "RTL_RETURN_ALT": 30.0, "SYS_AUTOSTART": 1100},
-    "octo": {"MIS_TAKEOFF_ALT": 2.5, "RTL_RETURN_ALT": 30.0, "SYS_AUTOSTART": 1100},
+    "quad": _MC_DEFAULTS,
+    "hexa": _MC_DEFAULTS,
+    "octo": _MC_DEFAULTS,
     "plane": {"MIS_TAKEOFF_ALT": 20.0, "RTL_RETURN_ALT": 60.0, "SYS_AUTOSTART": 1101},
-    "vtol": {"MIS_TAKEOFF_ALT": 20.0, "RTL_RETURN_ALT": 60.0, "SYS_AUTOSTART": 1103},
+    "vtol": {
+        "MIS_TAKEOFF_ALT": 20.0, "RTL_RETURN_ALT": 60.0, "RTL_TYPE": 1,
+        "MPC_ACC_HOR_MAX": 2.0, "MPC_VEL_MANUAL": 5.0, "MPC_XY_VEL_MAX": 8.0,
+        "MC_ROLL_P": 5.0, "MC_PITCH_P": 5.0, "MC_ROLLRATE_MAX": 120.0, "MC_YAW_P": 2.0,
+        "MC_YAWRATE_MAX": 120.0, "MPC_MAN_Y_MAX": 60.0,
+        "FW_AIRSPD_MIN": 7.0, "FW_AIRSPD_TRIM": 10.0, "FW_AIRSPD_MAX": 12.0,
+        "SYS_AUTOSTART": 1103,
+    },
     "rover": {"SYS_AUTOSTART": 1100},
 }
 

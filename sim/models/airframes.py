@@ -181,8 +181,8 @@ _VTOL_PARAMS: dict[str, float | int] = {
     "MPC_XY_VEL_MAX": 8.0,
     "FW_AIRSPD_MIN": 7.0,
     "FW_AIRSPD_TRIM": 10.0,
-    "FW_AIRSPD_MAX": 15.0,
-    "FW_THR_TRIM": 0.3,
+    "FW_AIRSPD_MAX": 12.0,
+    "FW_THR_TRIM": 0.6,
     "FW_USE_AIRSPD": 1,
     "VT_ARSP_TRANS": 10.0,
     "VT_TRANS_MIN_TM": 2.0,
@@ -220,7 +220,8 @@ def _multicopter_params(mass_kg: float, rotor_count: int) -> dict[str, float | i
     scale = mass_kg / float(_SIH_PARAMS["SIH_MASS"])
     return {
         "SIH_MASS": mass_kg,
-        "MPC_THR_HOVER": _hover_thrust(mass_kg, rotor_count),
+        # PX4's default; the controllers fly with the true hover thrust (hover_thrust())
+        "MPC_THR_HOVER": 0.5 if rotor_count == 4 else _hover_thrust(mass_kg, rotor_count),
         **{name: float(_SIH_PARAMS[name]) * scale for name in ("SIH_IXX", "SIH_IYY", "SIH_IZZ")},
     }
 
@@ -237,7 +238,7 @@ _PARAM_TABLES: dict[str, tuple[dict[str, float | int], ...]] = {
         _MC_PARAMS,
         _FW_PARAMS,
         _VTOL_PARAMS,
-        {"MPC_THR_HOVER": _hover_thrust(float(_VTOL_PARAMS["SIH_MASS"]), 4)},
+        {"MPC_THR_HOVER": 0.5},
     ),
     "rover": (_ROVER_PARAMS,),
 }
