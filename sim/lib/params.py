@@ -103,7 +103,11 @@ AIRFRAME_OVERRIDES: dict[str, dict[str, float | int]] = {
     "quad": _MC_DEFAULTS,
     "hexa": _MC_DEFAULTS,
     "octo": _MC_DEFAULTS,
-    "plane": {"MIS_TAKEOFF_ALT": 20.0, "RTL_RETURN_ALT": 60.0, "SYS_AUTOSTART": 1101},
+    "plane": {
+        "MIS_TAKEOFF_ALT": 25.0, "RTL_RETURN_ALT": 100.0, "RTL_DESCEND_ALT": 100.0,
+        "RTL_LAND_DELAY": -1.0, "RTL_TYPE": 1, "NAV_ACC_RAD": 10.0, "COM_DISARM_PRFLT": -1.0,
+        "FW_THR_TRIM": 0.6, "SYS_AUTOSTART": 1101,
+    },
     "vtol": {
         "MIS_TAKEOFF_ALT": 20.0, "RTL_RETURN_ALT": 60.0, "RTL_TYPE": 1,
         "MPC_ACC_HOR_MAX": 2.0, "MPC_VEL_MANUAL": 5.0, "MPC_XY_VEL_MAX": 8.0,
