@@ -7,8 +7,11 @@ param_type. A Python int default marks an INT32 parameter, a float a REAL32 one.
 
 from __future__ import annotations
 
+import functools
+import json
 import struct
 from collections.abc import Callable, Iterator, Mapping
+from importlib import resources
 from typing import Protocol
 
 MAV_PARAM_TYPE_INT32 = 6
@@ -120,6 +123,24 @@ AIRFRAME_OVERRIDES: dict[str, dict[str, float | int]] = {
 }
 
 
+# The values a fresh PX4 v1.16 SITL vehicle reports for the MPC_, NAV_, RTL_, COM_, MIS_ and
+# LNDMC_ families (sim/data/px4_sitl_params.json, written by tools/px4_param_data.py from
+# the SIH quad, standard VTOL and airplane): scripts read and set them. The airframes
+# without a PX4 SIH counterpart take the quad's.
+_SITL_VALUES_FOR = {"vtol": "vtol", "plane": "plane"}
+
+
+@functools.cache
+def _sitl_values() -> dict[str, dict[str, float | int]]:
+    text = resources.files("sim").joinpath("data/px4_sitl_params.json").read_text()
+    loaded: dict[str, dict[str, float | int]] = json.loads(text)
+    return loaded
+
+
+def sitl_family_values(airframe: str) -> dict[str, float | int]:
+    return dict(_sitl_values()[_SITL_VALUES_FOR.get(airframe, "quad")])
+
+
 class ParamReader(Protocol):
     """Read access to current parameter values; integers come back as float."""
 
@@ -165,6 +186,7 @@ class ParamStore:
         cls, airframe: str, airframe_defaults: Mapping[str, float | int]
     ) -> ParamStore:
         merged: dict[str, float | int] = dict(PX4_DEFAULTS)
+        merged.update(sitl_family_values(airframe))
         merged.update(airframe_defaults)
         merged.update(AIRFRAME_OVERRIDES.get(airframe, {}))
         return cls(merged)
