@@ -36,9 +36,14 @@ PER_BENCH_BUDGET_S = 90.0
 PER_BENCH_TIMEOUT_S = 600.0
 # Arguments this run gives a benchmark in place of its own defaults, to keep it within
 # PER_BENCH_BUDGET_S (the bench's own defaults stay its long run).
-DEFAULT_ARGS: dict[str, list[str]] = {}
+DEFAULT_ARGS: dict[str, list[str]] = {
+    # the sim against PX4's recorded figures (~45 s); flying real PX4 SITL beside it takes
+    # ~10 min: `python -m bench.parity_timing` alone, or `make test-px4`
+    "parity_timing": ["--runs", "1", "--no-px4"],
+}
 # --quick: smaller sizes for benchmarks without a --quick flag of their own.
 QUICK_ARGS: dict[str, list[str]] = {
+    "parity_timing": ["--runs", "1", "--no-px4"],
     "api_load": ["--seconds", "5", "--clients", "20"],
     "command_latency": ["--count", "5"],
     "hostile_input": ["--frames", "3000"],

@@ -41,7 +41,7 @@ __all__ = [
     "StatusText",
 ]
 
-# PX4 SITL: first HEARTBEAT about 1.5 s after start, GPS fix and ready to arm about 3 s.
+# PX4 SITL: first HEARTBEAT (and home) about 1.5 s after start, ready to arm about 3 s.
 BOOT_TIME_S = 1.5
 READY_TIME_S = 3.0
 # While disarmed on the ground home follows the vehicle; refresh it this often.
@@ -96,7 +96,8 @@ class SimVehicle:
             self.params, self.commander, self.model, self.announce,
             fixed_wing_only=airframe == "plane", ground_vehicle=airframe == "rover",
         )
-        self.land_detector = LandDetector(ground_vehicle=airframe == "rover")
+        self.land_detector = LandDetector(ground_vehicle=airframe == "rover", params=self.params)
+        self._plane = airframe == "plane"
         self.battery = Battery(self.params)
         self.messages = MessageFactory(self)
         self.receiver = Receiver(self)
@@ -246,7 +247,8 @@ class SimVehicle:
     def step(self, dt_s: float = PHYSICS_DT_S) -> None:
         self.now_s += dt_s
         now = self.now_s
-        if not self.booted and now >= BOOT_TIME_S:
+        booting = not self.booted and now >= BOOT_TIME_S
+        if booting:
             self.booted = True
         if not self.commander.ready and now >= READY_TIME_S:
             self._become_ready()
@@ -255,7 +257,10 @@ class SimVehicle:
         setpoint = self._current_setpoint()
         motors_on = commander.armed and commander.nav_mode != modes.TERMINATION
         self.model.step(dt_s, motors_on, setpoint)
-        self.land_detector.update(dt_s, self.model.truth, commander.armed)
+        self.land_detector.update(
+            dt_s, self.model.truth, commander.armed, self.model.landing,
+            fixed_wing=self._plane or self.model.in_fixed_wing_flight,
+        )
         self.battery.update(dt_s, self.model.power_fraction if motors_on else 0.0)
         if (
             commander.ready
@@ -263,6 +268,11 @@ class SimVehicle:
             and commander.landed
             and now - self._home_refreshed_s >= HOME_FOLLOW_PERIOD_S
         ):
+            self.set_home_here()
+        if booting and not self.commander.home.valid:
+            # PX4 SITL (SIH) has its position, hence home, as its first HEARTBEAT goes out
+            # (its HOME_POSITION stream sends it with that HEARTBEAT); arming waits for
+            # the rest of its checks (READY_TIME_S)
             self.set_home_here()
         if self.booted:
             for link, streams in self._links:

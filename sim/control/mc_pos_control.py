@@ -28,6 +28,8 @@ class PositionControl:
         self.yawspeed_sp_rad_s = math.nan
         self.hold_position_ned_m: list[float] | None = None
         self.hover_thrust = 0.5
+        # the vertical velocity setpoint of the last update (NaN: not controlled)
+        self.vel_sp_down_m_s = math.nan
         self.read_params_from(None)
 
     def read_params_from(self, params: ParamReader | None) -> None:
@@ -67,6 +69,7 @@ class PositionControl:
             pos_sp = sp.position_ned_m
         self._update_yaw_setpoint(dt_s, truth, sp)
         vel_sp = self._velocity_setpoint(truth, sp, pos_sp)
+        self.vel_sp_down_m_s = vel_sp[2]
         thr_sp = self._velocity_control(dt_s, truth, vel_sp, sp.acceleration_ned_m_s2, landed)
         collective = math.sqrt(thr_sp[0] ** 2 + thr_sp[1] ** 2 + thr_sp[2] ** 2)
         if collective > 1e-6:

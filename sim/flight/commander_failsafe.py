@@ -18,10 +18,11 @@ from sim.lib.params import ParamReader
 MAV_SEVERITY_CRITICAL = 2
 MAV_SEVERITY_INFO = 6
 
-# PX4 applies a failsafe action a moment after its trigger and switches back to the
-# user's OFFBOARD a moment after the stream resumes (observed 1.1-1.3 s and ~0.1 s).
+# PX4 applies a failsafe action a moment after its trigger (observed 1.1-1.3 s after the
+# last setpoint) and switches back to the user's OFFBOARD at its next check once the
+# stream resumes (0.02 s after the first new setpoint on PX4 v1.16 SITL).
 FAILSAFE_ACTION_DELAY_S = 0.15
-OFFBOARD_RESUME_DELAY_S = 0.1
+OFFBOARD_RESUME_DELAY_S = 0.01
 
 # how the commander speaks: a MAV_SEVERITY and a STATUSTEXT
 Announce = Callable[[int, str], None]

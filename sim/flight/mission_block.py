@@ -36,11 +36,15 @@ class MissionBlock:
     ground_vehicle: bool = False
 
     def land_speed_m_s(self, altitude_m: float) -> float:
-        """PX4's descent speed over ground: fast above MPC_LAND_ALT1, slow below ALT2."""
+        """FlightTaskAuto's landing descent: MPC_Z_VEL_MAX_DN above MPC_LAND_ALT1, blended
+        down to MPC_LAND_SPEED at MPC_LAND_ALT2, and MPC_LAND_CRWL once the range finder
+        reads less than MPC_LAND_ALT3."""
         slow = self.params.get("MPC_LAND_SPEED")
         fast = self.params.get("MPC_Z_VEL_MAX_DN")
         alt1 = self.params.get("MPC_LAND_ALT1")
         alt2 = self.params.get("MPC_LAND_ALT2")
+        if 0.0 <= altitude_m <= self.params.get("MPC_LAND_ALT3"):
+            return self.params.get("MPC_LAND_CRWL")
         if altitude_m >= alt1:
             return fast
         if altitude_m <= alt2 or alt1 <= alt2:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from enum import Enum
 
+from sim.flight.auto_trajectory import StraightMove
 from sim.flight.commander_failsafe import MAV_SEVERITY_INFO
 from sim.flight.mission_block import MissionBlock
 from sim.lib.quat import yaw_from_quat
@@ -45,9 +46,13 @@ class RtlDirect:
         self._climb_xy = [0.0, 0.0]
         self._land_xy = [0.0, 0.0]
         self._yaw_rad = math.nan
+        self._move = StraightMove(block.params)
+        self._last_s = 0.0
 
     def start(self, now_s: float, truth: VehicleStateTruth) -> None:
         self.phases_seen = []
+        self._move.reset()
+        self._last_s = now_s
         home = self._block.commander.home
         home_down = home.position_ned_m[2]
         down = truth.position_ned_m[2]
@@ -76,7 +81,28 @@ class RtlDirect:
             self._enter_phase(nxt, now_s)
             phase = nxt
             nxt = self._next_phase(phase, now_s, truth)
-        return self._phase_setpoint(phase, truth)
+        dt_s, self._last_s = now_s - self._last_s, now_s
+        return self._smoothed(self._phase_setpoint(phase, truth), dt_s, truth)
+
+    def _smoothed(
+        self, sp: TrajectorySetpoint | None, dt_s: float, truth: VehicleStateTruth
+    ) -> TrajectorySetpoint | None:
+        """A multicopter flies the climb, the return and the descent as PX4's auto flight
+        task does: along a jerk-limited straight line (`sim.flight.auto_trajectory`)."""
+        multicopter = not (self._block.ground_vehicle or self._block.airframe.in_fixed_wing_flight
+                           or self.phase in (RtlPhase.LAND, RtlPhase.IDLE))
+        if sp is None or not multicopter or not all(
+                math.isfinite(x) for x in sp.position_ned_m):
+            self._move.reset()
+            return sp
+        xy_speed = sp.max_speed_xy_m_s
+        if not math.isfinite(xy_speed):
+            xy_speed = self._block.params.get("MPC_XY_CRUISE")
+        position, velocity = self._move.setpoint(
+            dt_s, truth.position_ned_m, sp.position_ned_m, xy_speed)
+        return TrajectorySetpoint(
+            position_ned_m=position, velocity_ned_m_s=velocity, yaw_rad=sp.yaw_rad,
+            max_speed_xy_m_s=sp.max_speed_xy_m_s)
 
     def _home_distance_m(self, truth: VehicleStateTruth) -> float:
         home = self._block.commander.home.position_ned_m

@@ -7,8 +7,11 @@ param_type. A Python int default marks an INT32 parameter, a float a REAL32 one.
 
 from __future__ import annotations
 
+import functools
+import json
 import struct
 from collections.abc import Callable, Iterator, Mapping
+from importlib import resources
 from typing import Protocol
 
 MAV_PARAM_TYPE_INT32 = 6
@@ -24,19 +27,21 @@ PX4_DEFAULTS: dict[str, float | int] = {
     "COM_DL_LOSS_T": 10,
     "NAV_DLL_ACT": 0,
     "NAV_RCL_ACT": 2,
-    "COM_RC_IN_MODE": 3,
+    "COM_RC_IN_MODE": 1,
     "COM_RCL_EXCEPT": 0,
     "COM_RC_OVERRIDE": 1,
     "COM_RC_LOSS_T": 0.5,
     "COM_FAIL_ACT_T": 5.0,
     "COM_ARM_WO_GPS": 1,
-    "COM_LOW_BAT_ACT": 0,
+    "COM_LOW_BAT_ACT": 3,
+    "COM_SPOOLUP_TIME": 1.0,
     "GF_ACTION": 2,
     "GF_MAX_HOR_DIST": 0.0,
     "GF_MAX_VER_DIST": 0.0,
     # navigator
     "MIS_TAKEOFF_ALT": 2.5,
     "NAV_ACC_RAD": 10.0,
+    "NAV_MC_ALT_RAD": 0.8,
     "NAV_LOITER_RAD": 80.0,
     "RTL_RETURN_ALT": 60.0,
     "RTL_DESCEND_ALT": 30.0,
@@ -50,11 +55,18 @@ PX4_DEFAULTS: dict[str, float | int] = {
     "MPC_LAND_SPEED": 0.7,
     "MPC_LAND_ALT1": 10.0,
     "MPC_LAND_ALT2": 5.0,
+    "MPC_LAND_ALT3": 1.0,
+    "MPC_LAND_CRWL": 0.3,
     "MPC_Z_VEL_MAX_DN": 1.5,
     "MPC_Z_VEL_MAX_UP": 3.0,
     "MPC_XY_CRUISE": 5.0,
     "MPC_XY_VEL_MAX": 12.0,
     "MPC_THR_HOVER": 0.5,
+    # land detector (multicopter)
+    "LNDMC_TRIG_TIME": 1.0,
+    "LNDMC_Z_VEL_MAX": 0.25,
+    "LNDMC_XY_VEL_MAX": 1.5,
+    "LNDMC_ROT_MAX": 20.0,
     # manual flight tasks (sticks)
     "MPC_VEL_MANUAL": 10.0,
     "MPC_XY_MAN_EXPO": 0.6,
@@ -71,7 +83,7 @@ PX4_DEFAULTS: dict[str, float | int] = {
     "BAT1_N_CELLS": 4,
     "BAT1_V_CHARGED": 4.05,
     "BAT1_V_EMPTY": 3.6,
-    "BAT1_CAPACITY": 5000.0,
+    "BAT1_CAPACITY": -1.0,
     "SIM_BAT_MIN_PCT": 50.0,
     "SIM_BAT_ENABLE": 1,
     # identity
@@ -82,15 +94,51 @@ PX4_DEFAULTS: dict[str, float | int] = {
     "SYS_HITL": 0,
 }
 
-# SIH airframe files override a few PX4 defaults (the sih_* airframes in ROMFS).
+# PX4 SITL's startup files set per vehicle type (ROMFS rc.mc_defaults, rc.vtol_defaults and
+# rc.fw_defaults, then the SIH airframe files 10040_sihsim_quadx, 10043_sihsim_standard_vtol
+# and 10041_sihsim_airplane); rcS's SITL values (COM_RC_IN_MODE 1, COM_LOW_BAT_ACT 3) are
+# in PX4_DEFAULTS above, as every SITL vehicle starts with them.
+_MC_DEFAULTS: dict[str, float | int] = {
+    "NAV_ACC_RAD": 2.0, "RTL_RETURN_ALT": 30.0, "RTL_DESCEND_ALT": 10.0,
+    "MIS_TAKEOFF_ALT": 2.5, "SYS_AUTOSTART": 1100,
+}
 AIRFRAME_OVERRIDES: dict[str, dict[str, float | int]] = {
-    "quad": {"MIS_TAKEOFF_ALT": 2.5, "RTL_RETURN_ALT": 30.0, "SYS_AUTOSTART": 1100},
-    "hexa": {"MIS_TAKEOFF_ALT": 2.5, "RTL_RETURN_ALT": 30.0, "SYS_AUTOSTART": 1100},
-    "octo": {"MIS_TAKEOFF_ALT": 2.5, "RTL_RETURN_ALT": 30.0, "SYS_AUTOSTART": 1100},
-    "plane": {"MIS_TAKEOFF_ALT": 20.0, "RTL_RETURN_ALT": 60.0, "SYS_AUTOSTART": 1101},
-    "vtol": {"MIS_TAKEOFF_ALT": 20.0, "RTL_RETURN_ALT": 60.0, "SYS_AUTOSTART": 1103},
+    "quad": _MC_DEFAULTS,
+    "hexa": _MC_DEFAULTS,
+    "octo": _MC_DEFAULTS,
+    "plane": {
+        "MIS_TAKEOFF_ALT": 25.0, "RTL_RETURN_ALT": 100.0, "RTL_DESCEND_ALT": 100.0,
+        "RTL_LAND_DELAY": -1.0, "RTL_TYPE": 1, "NAV_ACC_RAD": 10.0, "COM_DISARM_PRFLT": -1.0,
+        "FW_THR_TRIM": 0.6, "SYS_AUTOSTART": 1101,
+    },
+    "vtol": {
+        "MIS_TAKEOFF_ALT": 20.0, "RTL_RETURN_ALT": 60.0, "RTL_TYPE": 1,
+        "MPC_ACC_HOR_MAX": 2.0, "MPC_VEL_MANUAL": 5.0, "MPC_XY_VEL_MAX": 8.0,
+        "MC_ROLL_P": 5.0, "MC_PITCH_P": 5.0, "MC_ROLLRATE_MAX": 120.0, "MC_YAW_P": 2.0,
+        "MC_YAWRATE_MAX": 120.0, "MPC_MAN_Y_MAX": 60.0,
+        "FW_AIRSPD_MIN": 7.0, "FW_AIRSPD_TRIM": 10.0, "FW_AIRSPD_MAX": 12.0,
+        "SYS_AUTOSTART": 1103,
+    },
     "rover": {"SYS_AUTOSTART": 1100},
 }
+
+
+# The values a fresh PX4 v1.16 SITL vehicle reports for the MPC_, NAV_, RTL_, COM_, MIS_ and
+# LNDMC_ families (sim/data/px4_sitl_params.json, written by tools/px4_param_data.py from
+# the SIH quad, standard VTOL and airplane): scripts read and set them. The airframes
+# without a PX4 SIH counterpart take the quad's.
+_SITL_VALUES_FOR = {"vtol": "vtol", "plane": "plane"}
+
+
+@functools.cache
+def _sitl_values() -> dict[str, dict[str, float | int]]:
+    text = resources.files("sim").joinpath("data/px4_sitl_params.json").read_text()
+    loaded: dict[str, dict[str, float | int]] = json.loads(text)
+    return loaded
+
+
+def sitl_family_values(airframe: str) -> dict[str, float | int]:
+    return dict(_sitl_values()[_SITL_VALUES_FOR.get(airframe, "quad")])
 
 
 class ParamReader(Protocol):
@@ -138,6 +186,7 @@ class ParamStore:
         cls, airframe: str, airframe_defaults: Mapping[str, float | int]
     ) -> ParamStore:
         merged: dict[str, float | int] = dict(PX4_DEFAULTS)
+        merged.update(sitl_family_values(airframe))
         merged.update(airframe_defaults)
         merged.update(AIRFRAME_OVERRIDES.get(airframe, {}))
         return cls(merged)

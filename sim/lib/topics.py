@@ -42,6 +42,28 @@ class TrajectorySetpoint:
 
 
 @dataclass
+class LandingStatus:
+    """What PX4's multicopter land detector and position controller tell each other.
+
+    One way `vehicle_land_detected` (landed, maybe_landed, ground_contact); the other the
+    collective thrust setpoint, the vertical velocity setpoint, whether the climb rate is
+    controlled, the hover thrust and the takeoff state (`takeoff_status`).
+    """
+
+    landed: bool = True
+    maybe_landed: bool = True
+    ground_contact: bool = True
+    thrust_setpoint: float = 0.0
+    velocity_setpoint_down_m_s: float = NAN
+    climb_rate_controlled: bool = True
+    hover_thrust: float = 0.5
+    takeoff_state: int = 0
+    # set by the vehicle's land detector; a model flown alone (no detector) skips the
+    # takeoff handling, as PX4's controller does when told to (COM_THROW_EN's skip)
+    detector_attached: bool = False
+
+
+@dataclass
 class AttitudeSetpoint:
     """PX4 `vehicle_attitude_setpoint`: attitude quaternion and normalised body thrust.
 

@@ -1,6 +1,8 @@
 """Component metadata as PX4 v1.16 serves it: COMPONENT_METADATA / COMPONENT_INFORMATION on
-MAV_CMD_REQUEST_MESSAGE name the general metadata file, which lists the parameters' and the
-events' metadata; all are xz-compressed JSON read over MAVLink FTP (`sim.mavlink.mavlink_ftp`).
+MAV_CMD_REQUEST_MESSAGE name the general metadata file, which lists the parameter metadata
+(PX4's own for every parameter the sim has: type, default, range, unit, descriptions, enum
+values; sim/data/px4_parameters.json) and the events metadata; all are xz-compressed JSON read
+over MAVLink FTP (`sim.mavlink.mavlink_ftp`).
 
 PX4 builds these files at compile time (generate_component_general.py): each fileCrc is
 MAVLink's CRC32 (reflected 0xEDB88320, start 0, no final inversion) of the uncompressed JSON.
@@ -22,8 +24,8 @@ COMP_METADATA_TYPE_PARAMETER = 1
 COMP_METADATA_TYPE_EVENTS = 4
 
 GENERAL_METADATA_PATH = "etc/extras/component_general.json.xz"
+PARAMETER_METADATA_PATH = "etc/extras/parameters.json.xz"
 EVENTS_METADATA_PATH = "etc/extras/all_events.json.xz"
-PARAMETERS_METADATA_PATH = "etc/extras/parameters.json.xz"
 URI_MAX_LEN = 100
 
 
@@ -64,7 +66,7 @@ class ComponentMetadata:
             "metadataTypes": [{
                 "fileCrc": mavlink_crc32(parameters_json),
                 "type": COMP_METADATA_TYPE_PARAMETER,
-                "uri": "mftp://" + PARAMETERS_METADATA_PATH,
+                "uri": "mftp://" + PARAMETER_METADATA_PATH,
             }, {
                 "fileCrc": mavlink_crc32(events_json),
                 "type": COMP_METADATA_TYPE_EVENTS,
@@ -77,8 +79,8 @@ class ComponentMetadata:
         self.general_uri = "mftp://" + GENERAL_METADATA_PATH
         self.files: dict[str, bytes] = {
             GENERAL_METADATA_PATH: _xz(general_json),
+            PARAMETER_METADATA_PATH: _xz(parameters_json),
             EVENTS_METADATA_PATH: _xz(events_json),
-            PARAMETERS_METADATA_PATH: _xz(parameters_json),
         }
 
     def build(self, msg_id: int, time_boot_ms: int) -> CustomMessage | None:

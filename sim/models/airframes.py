@@ -10,7 +10,7 @@ from __future__ import annotations
 from typing import Protocol
 
 from sim.lib.params import ParamReader
-from sim.lib.topics import ControlSetpoint, VehicleStateTruth, VtolState
+from sim.lib.topics import ControlSetpoint, LandingStatus, VehicleStateTruth, VtolState
 from sim.models.fixed_wing import FixedWingModel
 from sim.models.multicopter import MulticopterModel
 from sim.models.rover import RoverModel
@@ -49,6 +49,11 @@ class AirframeModel(Protocol):
     actuator_outputs: list[float]
     power_fraction: float
 
+    # what the land detector and the multicopter position controller share (None: no
+    # multicopter, the land detector reads the state alone)
+    @property
+    def landing(self) -> LandingStatus | None: ...
+
     def step(self, dt_s: float, armed: bool, setpoint: ControlSetpoint | None) -> None: ...
 
     def request_transition(self, to_fixed_wing: bool, immediate: bool) -> None: ...
@@ -71,13 +76,15 @@ _MC_PARAMS: dict[str, float | int] = {
     "MPC_Z_VEL_MAX_UP": 3.0,
     "MPC_Z_VEL_MAX_DN": 1.5,
     "MPC_TKO_SPEED": 1.5,
+    "MPC_TKO_RAMP_T": 3.0,
+    "COM_SPOOLUP_TIME": 1.0,
     "MPC_LAND_SPEED": 0.7,
     "MPC_ACC_HOR": 3.0,
     "MPC_ACC_HOR_MAX": 5.0,
     # the controllers use the true hover thrust (SIH_MASS, SIH_T_MAX), as PX4's hover thrust
     # estimator would after converging; the parameter reports it (set per airframe below)
     "MPC_THR_HOVER": 0.5,
-    "MPC_THR_MIN": 0.08,
+    "MPC_THR_MIN": 0.12,
     "MPC_THR_MAX": 1.0,
     "MPC_THR_XY_MARG": 0.3,
     "MPC_TILTMAX_AIR": 45.0,
@@ -174,8 +181,8 @@ _VTOL_PARAMS: dict[str, float | int] = {
     "MPC_XY_VEL_MAX": 8.0,
     "FW_AIRSPD_MIN": 7.0,
     "FW_AIRSPD_TRIM": 10.0,
-    "FW_AIRSPD_MAX": 15.0,
-    "FW_THR_TRIM": 0.3,
+    "FW_AIRSPD_MAX": 12.0,
+    "FW_THR_TRIM": 0.6,
     "FW_USE_AIRSPD": 1,
     "VT_ARSP_TRANS": 10.0,
     "VT_TRANS_MIN_TM": 2.0,
@@ -213,7 +220,8 @@ def _multicopter_params(mass_kg: float, rotor_count: int) -> dict[str, float | i
     scale = mass_kg / float(_SIH_PARAMS["SIH_MASS"])
     return {
         "SIH_MASS": mass_kg,
-        "MPC_THR_HOVER": _hover_thrust(mass_kg, rotor_count),
+        # PX4's default; the controllers fly with the true hover thrust (hover_thrust())
+        "MPC_THR_HOVER": 0.5 if rotor_count == 4 else _hover_thrust(mass_kg, rotor_count),
         **{name: float(_SIH_PARAMS[name]) * scale for name in ("SIH_IXX", "SIH_IYY", "SIH_IZZ")},
     }
 
@@ -230,7 +238,7 @@ _PARAM_TABLES: dict[str, tuple[dict[str, float | int], ...]] = {
         _MC_PARAMS,
         _FW_PARAMS,
         _VTOL_PARAMS,
-        {"MPC_THR_HOVER": _hover_thrust(float(_VTOL_PARAMS["SIH_MASS"]), 4)},
+        {"MPC_THR_HOVER": 0.5},
     ),
     "rover": (_ROVER_PARAMS,),
 }

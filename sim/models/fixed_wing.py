@@ -8,7 +8,7 @@ from sim.control.fw_control import FixedWingControl, SurfacesThrottle
 from sim.control.setpoint_guard import safe_setpoint
 from sim.lib.params import ParamReader
 from sim.lib.quat import Vec3, rotate_body_to_ned, rotate_ned_to_body
-from sim.lib.topics import ControlSetpoint, VehicleStateTruth, VtolState
+from sim.lib.topics import ControlSetpoint, LandingStatus, VehicleStateTruth, VtolState
 from sim.models.multicopter import PARAM_REFRESH_PERIOD_S, make_rigid_body, refresh_rigid_body
 from sim.physics.aero import WingGeometry, forces_and_moments
 from sim.physics.rigid_body import GRAVITY_M_S2, RigidBody
@@ -122,6 +122,7 @@ class FixedWingModel:
         )
         self.actuator_outputs = [0.0, 0.0, 0.0, 0.0]
         self.power_fraction = 0.0
+        self.landing: LandingStatus | None = None  # no multicopter land detection
 
     def step(self, dt_s: float, armed: bool, setpoint: ControlSetpoint | None) -> None:
         if self.frame.tick_params(dt_s):

@@ -8,7 +8,7 @@ from sim.control.mc_control import MulticopterControl
 from sim.control.setpoint_guard import safe_setpoint
 from sim.lib.params import ParamReader
 from sim.lib.quat import rotate_body_to_ned
-from sim.lib.topics import ControlSetpoint, VehicleStateTruth, VtolState
+from sim.lib.topics import ControlSetpoint, LandingStatus, VehicleStateTruth, VtolState
 from sim.physics.mixer import Mixer
 from sim.physics.rigid_body import GRAVITY_M_S2, RigidBody
 
@@ -108,7 +108,12 @@ class MulticopterModel:
         self.power_fraction = 0.0
         self._since_refresh_s = 0.0
 
+    @property
+    def landing(self) -> LandingStatus:
+        return self.control.landing
+
     def step(self, dt_s: float, armed: bool, setpoint: ControlSetpoint | None) -> None:
+        self.control.note_armed(dt_s, armed)
         self._since_refresh_s += dt_s
         if self._since_refresh_s >= PARAM_REFRESH_PERIOD_S:
             self._since_refresh_s = 0.0

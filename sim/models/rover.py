@@ -17,6 +17,7 @@ from sim.lib.quat import quat_from_yaw, wrap_pi, yaw_from_quat
 from sim.lib.topics import (
     AttitudeSetpoint,
     ControlSetpoint,
+    LandingStatus,
     RatesSetpoint,
     TrajectorySetpoint,
     VehicleStateTruth,
@@ -44,6 +45,7 @@ class RoverModel:
         self.yaw_rate_rad_s = 0.0
         self.actuator_outputs = [0.0, 0.0]
         self.power_fraction = 0.0
+        self.landing: LandingStatus | None = None  # no multicopter land detection
         self._since_refresh_s = math.inf
         self._refresh_params()
 

@@ -18,7 +18,7 @@ from sim.control.mc_control import MulticopterControl
 from sim.control.setpoint_guard import safe_setpoint
 from sim.lib.params import ParamReader
 from sim.lib.quat import euler_from_quat, rotate_ned_to_body, yaw_from_quat
-from sim.lib.topics import ControlSetpoint, TrajectorySetpoint, VtolState
+from sim.lib.topics import ControlSetpoint, LandingStatus, TrajectorySetpoint, VtolState
 from sim.models.fixed_wing import Airframe
 from sim.models.multicopter import RotorSet
 from sim.physics.aero import WingGeometry
@@ -108,11 +108,16 @@ class VtolModel:
         self.in_fixed_wing_flight = state == VtolState.FW
         return state
 
+    @property
+    def landing(self) -> LandingStatus:
+        return self.mc.landing
+
     def request_transition(self, to_fixed_wing: bool, immediate: bool) -> None:
         self.transition.request(to_fixed_wing, immediate, airborne=not self.truth.on_ground)
         self._publish_state()
 
     def step(self, dt_s: float, armed: bool, setpoint: ControlSetpoint | None) -> None:
+        self.mc.note_armed(dt_s, armed)
         if self.frame.tick_params(dt_s):
             self.rotors.refresh_params()
             self.fw.refresh_params()

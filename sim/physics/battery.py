@@ -11,6 +11,8 @@ from sim.lib.params import ParamReader
 # Current at full power; a 1 kg quad hovering draws about a quarter of it.
 MAX_CURRENT_A = 60.0
 IDLE_CURRENT_A = 0.4
+# BAT1_CAPACITY -1 (PX4 SITL's value) means "unknown": drain as a pack of this size
+NOMINAL_CAPACITY_MAH = 5000.0
 
 
 class Battery:
@@ -24,7 +26,10 @@ class Battery:
         self.current_a = IDLE_CURRENT_A + MAX_CURRENT_A * min(max(power_fraction, 0.0), 1.0)
         used_mah = self.current_a * dt_s / 3.6
         self.consumed_mah += used_mah
-        capacity_mah = max(self._params.get("BAT1_CAPACITY"), 1.0)
+        capacity_mah = self._params.get("BAT1_CAPACITY")
+        if capacity_mah <= 0.0:
+            capacity_mah = NOMINAL_CAPACITY_MAH
+        capacity_mah = max(capacity_mah, 1.0)
         floor = min(max(self._params.get("SIM_BAT_MIN_PCT") / 100.0, 0.0), 1.0)
         self.remaining = max(floor, self.remaining - used_mah / capacity_mah)
 

@@ -12,7 +12,9 @@ async def test_vtol_transitions_to_fixed_wing_and_back() -> None:
         assert (await api.state())["vtol_state"] == "MC"
         assert (await api.control("arm")).status_code == 200
         assert (await api.control("takeoff", {"altitude_m": 20.0})).status_code == 200
-        await api.wait_state(lambda s: s["position_ned"]["down_m"] < -18.0, 30.0, "climb")
+        # PX4 refuses the transition until the takeoff hands over to Hold at 20 m
+        await api.wait_state(
+            lambda s: s["mode"] == "HOLD" and s["position_ned"]["down_m"] < -18.0, 30.0, "climb")
 
         forward = await api.control("vtol/transition", {"to": "fixed_wing", "wait": True})
         assert forward.status_code == 200, forward.text

@@ -161,7 +161,7 @@ async def test_parameters_read_and_write_including_an_int() -> None:
     async with open_sim(speed=SPEED) as session:
         vehicle = session.vehicle
 
-        assert await vehicle.get_param("COM_RC_IN_MODE") == 3
+        assert await vehicle.get_param("COM_RC_IN_MODE") == 1  # PX4 SITL's rcS sets it
         assert await vehicle.set_param("COM_RC_IN_MODE", 4) == 4
         assert await vehicle.get_param("COM_RC_IN_MODE") == 4
         assert await vehicle.set_param("MPC_XY_CRUISE", 7.5) == pytest.approx(7.5)

@@ -14,7 +14,7 @@ from sim.process.runner import SimCluster
 
 # MAVSDK's command timeouts and heartbeat checks run on wall time; these speeds keep
 # the sim well inside them while saving wall time in flight phases.
-FLIGHT_SPEED = 4.0
+FLIGHT_SPEED = 5.0
 
 
 def free_port(kind: int) -> int:

@@ -17,7 +17,13 @@ from pymavlink.dialects.v20 import development as mavlink
 
 from sim.lib.numeric import clamp, finite_or
 from sim.lib.params import ParamReader
-from sim.lib.topics import ControlSetpoint, TrajectorySetpoint, VehicleStateTruth, VtolState
+from sim.lib.topics import (
+    ControlSetpoint,
+    LandingStatus,
+    TrajectorySetpoint,
+    VehicleStateTruth,
+    VtolState,
+)
 from sim.mavlink.endpoint import MavlinkCodec
 from sim.vehicle import PHYSICS_DT_S, READY_TIME_S, SimVehicle
 
@@ -42,6 +48,7 @@ class PointMassAirframe:
         self.in_fixed_wing_flight = name == "plane"
         self.actuator_outputs = [0.0, 0.0, 0.0, 0.0]
         self.power_fraction = 0.0
+        self.landing: LandingStatus | None = None  # landed when resting on the ground
         self.transitions: list[tuple[bool, bool]] = []
         self.last_setpoint: ControlSetpoint | None = None
         self._params = params

@@ -107,12 +107,13 @@ def test_loss_action_disarm(harness: Harness) -> None:
     harness.run_until(lambda: not harness.vehicle.armed, 3.0)
 
 
-def test_stream_resume_returns_to_offboard_after_about_0_1_s(harness: Harness) -> None:
+def test_stream_resume_returns_to_offboard_at_the_next_check(harness: Harness) -> None:
     fly_offboard(harness)
     harness.run_until(lambda: harness.vehicle.mode_name == "POSCTL", 3.0)
     harness.local_ned(POSITION_AND_YAW, position=(0, 0, -3))
     took = harness.run_until(lambda: harness.vehicle.mode_name == "OFFBOARD", 1.0)
-    assert 0.05 <= took <= 0.2
+    # PX4 v1.16 SITL: 0.02-0.1 s after the first new setpoint (bench/parity_timing.py)
+    assert 0.005 <= took <= 0.1
     assert not harness.vehicle.commander.failsafe
 
 

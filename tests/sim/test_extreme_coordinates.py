@@ -90,6 +90,7 @@ def test_vehicle_flies_on_after_the_origin_moves_to_a_pole(harness: Harness) -> 
 def test_far_away_home_is_set_and_reported_in_range(
     harness: Harness, lat_deg: float, lon_deg: float, alt_m: float,
 ) -> None:
+    harness.api.clear()  # the HOME_POSITION streamed since the boot
     harness.command_long(SET_HOME, 0, 0, 0, 90.0, lat_deg, lon_deg, alt_m)
     assert harness.last_ack(SET_HOME) == ACCEPTED
     home = harness.vehicle.commander.home

@@ -65,7 +65,9 @@ def test_general_metadata_and_events_file_download_with_matching_crcs(harness: H
     assert uri == "mftp://etc/extras/component_general.json.xz"
     general_json = lzma.decompress(_download(harness, uri.removeprefix("mftp://"), burst=True))
     assert mavlink_crc32(general_json) == crc
-    params_type, events_type = json.loads(general_json)["metadataTypes"]
+    # PX4 lists its parameter metadata first, then the events
+    parameters_type, events_type = json.loads(general_json)["metadataTypes"]
+    assert parameters_type["type"] == 1  # COMP_METADATA_TYPE_PARAMETER
     assert events_type["type"] == 4  # COMP_METADATA_TYPE_EVENTS
     assert events_type["uri"] == "mftp://etc/extras/all_events.json.xz"
     path = events_type["uri"].removeprefix("mftp://")
@@ -75,14 +77,26 @@ def test_general_metadata_and_events_file_download_with_matching_crcs(harness: H
     assert px4["namespace"] == "px4"
     disarmed = px4["event_groups"]["default"]["events"][str(DISARMED_BY & 0xFFFFFF)]
     assert disarmed["message"] == "Disarmed by {1}"
-    assert params_type["type"] == 1  # COMP_METADATA_TYPE_PARAMETER
-    assert params_type["uri"] == "mftp://etc/extras/parameters.json.xz"
-    params_json = lzma.decompress(_download(harness, "etc/extras/parameters.json.xz", burst=True))
-    assert mavlink_crc32(params_json) == params_type["fileCrc"]
-    described = json.loads(params_json)["parameters"]
-    (velocity,) = [p for p in described if p["name"] == "MPC_XY_VEL_MAX"]
-    assert (velocity["min"], velocity["max"], velocity["units"]) == (0.0, 20.0, "m/s")
-    assert velocity["shortDesc"] == "Maximum horizontal velocity"
+
+
+def test_parameter_metadata_is_px4s_for_every_parameter_the_vehicle_has(
+    harness: Harness,
+) -> None:
+    _crc, uri = _component_metadata(harness)
+    general_json = lzma.decompress(_download(harness, uri.removeprefix("mftp://"), burst=True))
+    (parameters_type,) = [t for t in json.loads(general_json)["metadataTypes"] if t["type"] == 1]
+    assert parameters_type["uri"] == "mftp://etc/extras/parameters.json.xz"
+    path = parameters_type["uri"].removeprefix("mftp://")
+    metadata_json = lzma.decompress(_download(harness, path, burst=True))
+    assert mavlink_crc32(metadata_json) == parameters_type["fileCrc"]
+    by_name = {p["name"]: p for p in json.loads(metadata_json)["parameters"]}
+    land_speed = by_name["MPC_LAND_SPEED"]
+    assert (land_speed["type"], land_speed["units"], land_speed["min"]) == ("Float", "m/s", 0.6)
+    assert land_speed["shortDesc"]
+    assert by_name["COM_RC_IN_MODE"]["type"] == "Int32"
+    assert "values" in by_name["COM_RC_IN_MODE"]
+    # the point-mass harness has the quad's parameters; every one is described
+    assert set(harness.vehicle.params) <= set(by_name)
 
 
 def test_component_information_names_the_same_file(harness: Harness) -> None:
@@ -126,6 +140,7 @@ def test_list_directory(harness: Harness) -> None:
     (listing,) = _request(harness, ftp.CMD_LIST_DIRECTORY, data=b"etc/extras")
     entries = listing.data[:listing.size].split(b"\0")
     names = [e.split(b"\t")[0] for e in entries if e]
-    assert names == [b"Fall_events.json.xz", b"Fcomponent_general.json.xz", b"Fparameters.json.xz"]
+    assert names == [
+        b"Fall_events.json.xz", b"Fcomponent_general.json.xz", b"Fparameters.json.xz"]
     (end,) = _request(harness, ftp.CMD_LIST_DIRECTORY, seq=2, offset=3, data=b"etc/extras")
     assert end.data[0] == ftp.ERR_EOF

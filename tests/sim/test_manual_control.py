@@ -197,7 +197,7 @@ def test_com_rc_in_mode_decides_whether_mavlink_sticks_count(
 
 
 def test_keep_first_ignores_a_second_link_until_reboot(harness: Harness) -> None:
-    assert harness.vehicle.params.get("COM_RC_IN_MODE") == RcInMode.RC_OR_JOYSTICK_KEEP_FIRST
+    harness.vehicle.params.set("COM_RC_IN_MODE", int(RcInMode.RC_OR_JOYSTICK_KEEP_FIRST))
     sticks(harness, x=300, link=harness.api)
     harness.run(1.0)  # the first source timed out...
     sticks(harness, x=-300, link=harness.gcs)  # ...yet another source is still not taken

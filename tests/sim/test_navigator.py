@@ -45,16 +45,6 @@ def test_takeoff_param7_is_amsl(harness: Harness) -> None:
     assert altitude_m(harness) == pytest.approx(8.0, abs=0.1)
 
 
-def test_takeoff_climb_speed_ramps_up_to_mpc_tko_speed(harness: Harness) -> None:
-    harness.vehicle.params.set("MIS_TAKEOFF_ALT", 10.0)
-    harness.command_long(mavlink.MAV_CMD_NAV_TAKEOFF, *NAN7)
-    harness.arm()
-    harness.run(1.5)  # half of MPC_TKO_RAMP_T
-    assert -harness.vehicle.truth.velocity_ned_m_s[2] == pytest.approx(0.75, abs=0.15)
-    harness.run(2.5)
-    assert -harness.vehicle.truth.velocity_ned_m_s[2] == pytest.approx(1.5, abs=0.05)
-
-
 def test_land_descends_at_land_speed_below_alt2_then_disarms(harness: Harness) -> None:
     take_off(harness)
     harness.command_long(mavlink.MAV_CMD_NAV_LAND)
@@ -71,6 +61,8 @@ def test_land_speed_profile_between_land_altitudes(harness: Harness) -> None:
     assert nav.land_speed_m_s(20.0) == 1.5
     assert nav.land_speed_m_s(7.5) == pytest.approx((1.5 + 0.7) / 2)
     assert nav.land_speed_m_s(2.0) == 0.7
+    # below MPC_LAND_ALT3 (the range finder reads it) PX4 crawls at MPC_LAND_CRWL
+    assert nav.land_speed_m_s(0.8) == 0.3
 
 
 def test_hold_keeps_position(harness: Harness) -> None:

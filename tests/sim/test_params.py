@@ -52,7 +52,8 @@ def test_param_read_by_name_and_by_index(harness: Harness) -> None:
     harness.deliver(mavlink.MAVLink_param_request_read_message(1, 1, b"COM_RC_IN_MODE", -1))
     (value,) = harness.api.of_type("PARAM_VALUE")
     assert value.param_type == mavlink.MAV_PARAM_TYPE_INT32
-    assert decode_param_value(value.param_value, value.param_type) == 3
+    # PX4 SITL's startup files set COM_RC_IN_MODE 1 (joystick only)
+    assert decode_param_value(value.param_value, value.param_type) == 1
     harness.api.clear()
     harness.deliver(mavlink.MAVLink_param_request_read_message(1, 1, b"", value.param_index))
     assert harness.api.of_type("PARAM_VALUE")[0].param_id == "COM_RC_IN_MODE"

@@ -45,8 +45,20 @@ def return_and_disarm(h: Harness) -> tuple[float, float]:
     return landed_s, v.now_s
 
 
+def test_plane_rtl_loiters_forever_with_px4_sitls_rtl_land_delay() -> None:
+    h = winged("plane")
+    assert h.vehicle.params.get("RTL_LAND_DELAY") == -1.0  # rc.fw_defaults
+    take_off(h)
+    h.command_long(mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH)
+    h.run_until(lambda: h.vehicle.navigator.rtl_phase == RtlPhase.LOITER_HOLD, 240.0)
+    h.run(30.0)
+    assert h.vehicle.navigator.rtl_phase == RtlPhase.LOITER_HOLD
+    assert h.vehicle.armed
+
+
 def test_plane_rtl_loiters_down_then_lands_on_its_circle_and_disarms() -> None:
     h = winged("plane")
+    h.vehicle.params.set("RTL_LAND_DELAY", 0.0)
     take_off(h)
     landed_s, disarmed_s = return_and_disarm(h)
     assert h.vehicle.rtl_phases == [
