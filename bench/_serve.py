@@ -15,12 +15,12 @@ CLK_TCK = os.sysconf("SC_CLK_TCK")
 
 @contextlib.asynccontextmanager
 async def served(
-    command: Sequence[str], env: Mapping[str, str] | None = None
+    command: Sequence[str], env: Mapping[str, str] | None = None, cwd: Path = PROJECT_ROOT
 ) -> AsyncIterator[tuple[asyncio.subprocess.Process, str]]:
-    """Run ``command`` (a `skyhelm serve` command line) until its ready line; yields the
-    process and the server's base URL; SIGINT at the end (SIGKILL after 20 s)."""
+    """Run ``command`` (a `skyhelm serve` command line) in ``cwd`` until its ready line;
+    yields the process and the server's base URL; SIGINT at the end (SIGKILL after 20 s)."""
     proc = await asyncio.create_subprocess_exec(
-        *command, stdout=asyncio.subprocess.PIPE, cwd=PROJECT_ROOT,
+        *command, stdout=asyncio.subprocess.PIPE, cwd=cwd,
         env=None if env is None else {**os.environ, **env},
     )
     try:

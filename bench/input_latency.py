@@ -48,7 +48,7 @@ from websockets.asyncio.client import ClientConnection, connect
 from bench._markdown import table
 from bench._report import Section
 from bench._results import machine_info, write_results
-from bench._serve import PROJECT_ROOT, READY_PREFIX, percentile
+from bench._serve import PROJECT_ROOT, percentile, served
 from server.simproc import SimProcess
 from tests.faults.sender_relay import Heard, SenderRelay
 
@@ -91,27 +91,13 @@ def _first(relay: SenderRelay, msg_id: int, since_s: float, pressed: bool) -> fl
 @contextlib.asynccontextmanager
 async def _server(root: Path, relay_port: int) -> AsyncIterator[str]:
     """`skyhelm serve` of the tree at ``root`` linked to the relay; yields its base URL."""
-    proc = await asyncio.create_subprocess_exec(
+    command = [
         sys.executable, "-c", _SERVE, "serve", "--port", "0", "--token", TOKEN,
         "--connect", f"udpout:127.0.0.1:{relay_port}", "--no-scene", "--no-tlog",
         "--no-access-log", "--log-level", "warning",
-        stdout=asyncio.subprocess.PIPE, cwd=root,
-        env={**os.environ, "PYTHONPATH": str(root)},
-    )
-    try:
-        assert proc.stdout is not None
-        line = (await asyncio.wait_for(proc.stdout.readline(), 60)).decode()
-        if not line.startswith(READY_PREFIX):
-            raise RuntimeError(f"skyhelm serve did not start: {line!r}")
-        yield line.split(READY_PREFIX)[1].split("/?token=")[0]
-    finally:
-        if proc.returncode is None:
-            proc.send_signal(2)
-            try:
-                await asyncio.wait_for(proc.wait(), 20)
-            except TimeoutError:
-                proc.kill()
-                await proc.wait()
+    ]
+    async with served(command, env={"PYTHONPATH": str(root)}, cwd=root) as (_proc, url):
+        yield url
 
 
 async def _vehicle_seen(client: httpx.AsyncClient) -> None:

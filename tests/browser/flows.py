@@ -55,9 +55,11 @@ def arm_and_take_off(page: Any, api: httpx.Client, altitude: float) -> None:
     click_and_wait_result(page, "#btn-arm", confirm=True)
     page.fill("#takeoff-alt", str(altitude))
     click_and_wait_result(page, "#btn-takeoff")
+    # up, and the take-off over (PX4 refuses some commands, a VTOL transition among them,
+    # while it is still in TAKEOFF)
     wait_for(
-        f"altitude above {altitude - 0.8} m",
-        lambda: altitude_m(vehicle_state(api)) > altitude - 0.8,
+        f"altitude above {altitude - 0.8} m, out of TAKEOFF",
+        lambda: altitude_m(s := vehicle_state(api)) > altitude - 0.8 and s["mode"] != "TAKEOFF",
         60.0,
     )
 

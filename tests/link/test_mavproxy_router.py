@@ -38,7 +38,8 @@ async def _fly_takeoff_offboard_land(link: Link, inst: SimInstance) -> None:
     vehicle = await asyncio.wait_for(link.subscribe_vehicles().get(), 10.0)
     assert vehicle.sysid == inst.sysid
     await _until(lambda: vehicle.snapshot().home is not None
-                 and vehicle.snapshot().position_ned is not None, 15.0, "home and position")
+                 and vehicle.snapshot().position_ned is not None
+                 and vehicle.snapshot().ready_to_arm is True, 15.0, "home, position, ready")
 
     assert (await vehicle.arm()).ok
     assert (await vehicle.takeoff(3.0)).ok

@@ -53,7 +53,9 @@ async def _record_flight(log_dir: Path) -> Recording:
             await wait_for(lambda: 1 in link.vehicles, 10.0, "discovery")
             vehicle = link.vehicles[1]
             assert isinstance(vehicle, Vehicle)
-            await wait_for(lambda: vehicle.snapshot().home is not None, 10.0, "home")
+            # home comes with the first HEARTBEAT (as on PX4); arming waits for the checks
+            await wait_for(lambda: vehicle.snapshot().home is not None
+                           and vehicle.snapshot().ready_to_arm is True, 10.0, "home, ready")
 
             async def watch() -> None:
                 nonlocal max_alt_rel_m

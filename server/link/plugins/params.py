@@ -138,7 +138,12 @@ class ParamClient:
             lambda: self._request_read(wire_name), lambda: name in self.cache, self.timeout_s
         ):
             if not self._list_complete():
-                await self.get_all()
+                try:
+                    await self.get_all()
+                except TimeoutError:
+                    raise TimeoutError(
+                        f"no answer for parameter {name}, nor to PARAM_REQUEST_LIST"
+                    ) from None
             if self._lacks(name):
                 raise ParamUnknown(name)
             raise TimeoutError(f"no answer for parameter {name}")

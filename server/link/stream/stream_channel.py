@@ -238,7 +238,8 @@ class SenderProcess:
         if not self.alive:
             return None
         (beat_s,) = stream_process.STATE_HEARTBEAT.unpack_from(self._state, 0)
-        return max(0.0, time.monotonic() - float(beat_s))
+        # never older than the process itself: a beat not yet written is no silence
+        return max(0.0, time.monotonic() - max(float(beat_s), self.started_s))
 
     def kill(self, why: str) -> None:
         """End it for a fault (its end of file then reports ``why``)."""
