@@ -5,8 +5,9 @@
   height; done when airspeed ≥ VT_ARSP_TRANS after at least VT_TRANS_MIN_TM (without an
   airspeed sensor, FW_USE_AIRSPD 0: after VT_F_TR_OL_TM); after VT_TRANS_TIMEOUT without
   that, quadchute back to MC.
-- back: pusher off, the rotors brake; done below MPC_XY_CRUISE forward speed or after
-  VT_B_TRANS_DUR.
+- back: pusher off, the rotors brake; done (standard.cpp's exit conditions) once the
+  forward speed (the velocity along the body x axis) is below MPC_XY_CRUISE, once more than
+  VT_B_TRANS_DUR has passed, or at once when disarmed or landed (can_transition_on_ground).
 """
 
 from __future__ import annotations
@@ -57,7 +58,13 @@ class VtolTransition:
         if state != VtolState.FW:
             self.pusher_throttle = 0.0
 
-    def update(self, dt_s: float, airspeed_m_s: float, forward_speed_m_s: float) -> VtolState:
+    def update(
+        self,
+        dt_s: float,
+        airspeed_m_s: float,
+        forward_speed_m_s: float,
+        disarmed_or_landed: bool = False,
+    ) -> VtolState:
         self.elapsed_s += dt_s
         p = self.params.get
         if self.state == VtolState.TRANSITION_TO_FW:
@@ -74,11 +81,17 @@ class VtolTransition:
             elif self.elapsed_s >= p("VT_TRANS_TIMEOUT"):
                 self.quadchutes += 1
                 self._enter(VtolState.MC)
-        elif self.state == VtolState.TRANSITION_TO_MC and (
-            forward_speed_m_s < p("MPC_XY_CRUISE") or self.elapsed_s >= p("VT_B_TRANS_DUR")
+        elif self.state == VtolState.TRANSITION_TO_MC and self.back_transition_done(
+            forward_speed_m_s, disarmed_or_landed
         ):
             self._enter(VtolState.MC)
         return self.state
+
+    def back_transition_done(self, forward_speed_m_s: float, disarmed_or_landed: bool) -> bool:
+        """PX4's exit from TRANSITION_TO_MC: slow enough, out of time, or on the ground."""
+        slow_enough = forward_speed_m_s < self.params.get("MPC_XY_CRUISE")
+        out_of_time = self.elapsed_s > self.params.get("VT_B_TRANS_DUR")
+        return disarmed_or_landed or slow_enough or out_of_time
 
 
 class VtolModel:
@@ -125,7 +138,11 @@ class VtolModel:
             self.fw.thrust_max_n = self.frame.pusher_max_n
         t = self.truth
         forward = rotate_ned_to_body(t.q_wxyz, t.velocity_ned_m_s)[0]
-        self.transition.update(dt_s, t.airspeed_m_s, forward)
+        # without a land detector (a model flown alone) only disarming counts as landed
+        landed = self.landing.detector_attached and self.landing.landed
+        self.transition.update(
+            dt_s, t.airspeed_m_s, forward, disarmed_or_landed=not armed or landed
+        )
         state = self._publish_state()
         if state not in (VtolState.TRANSITION_TO_FW, VtolState.TRANSITION_TO_MC):
             self._transition_hold = None

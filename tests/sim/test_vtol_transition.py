@@ -205,3 +205,61 @@ def test_vtol_never_produces_nan_under_random_setpoints_and_transitions() -> Non
         assert t.position_ned_m[2] <= 0.0
         assert all(math.isfinite(u) for u in vtol.actuator_outputs)
         assert vtol.in_fixed_wing_flight == (vtol.vtol_state == VtolState.FW)
+
+
+def _back_transition_from_fixed_wing(params: StaticParams) -> tuple[float, float, float]:
+    """Back transition from fixed-wing cruise: (time to MC, and the forward speed each physics
+    step saw on its last two ticks in TRANSITION_TO_MC; a step decides on the state it starts
+    from)."""
+    vtol = _hovering_vtol(params)
+    vtol.request_transition(to_fixed_wing=True, immediate=False)
+    fly(vtol, HOLD, 15.0)
+    assert vtol.vtol_state == VtolState.FW
+    vtol.request_transition(to_fixed_wing=False, immediate=False)
+    before = [_forward_speed(vtol)]
+
+    def switched() -> bool:
+        if vtol.vtol_state == VtolState.MC:
+            return True
+        before.append(_forward_speed(vtol))
+        return False
+
+    elapsed = fly(vtol, HOLD, 10.0, until=switched)
+    assert elapsed is not None
+    return elapsed, before[-2], before[-1]
+
+
+def test_back_transition_ends_on_the_first_tick_below_mpc_xy_cruise() -> None:
+    # PX4 standard.cpp: the forward (body x) speed below MPC_XY_CRUISE ends it, long before
+    # VT_B_TRANS_DUR (10 s); a faster MPC_XY_CRUISE ends it sooner
+    cruise = default_params("vtol").get("MPC_XY_CRUISE")
+    assert cruise == 5.0
+    elapsed, speed_before, speed_at = _back_transition_from_fixed_wing(default_params("vtol"))
+    assert speed_before >= cruise > speed_at
+    assert elapsed < 3.0
+    faster = default_params("vtol")
+    faster.values["MPC_XY_CRUISE"] = 8.0
+    elapsed_8, speed_before_8, speed_at_8 = _back_transition_from_fixed_wing(faster)
+    assert speed_before_8 >= 8.0 > speed_at_8
+    assert elapsed_8 < elapsed - 0.3
+
+
+def test_back_transition_ends_at_once_when_disarmed_or_landed() -> None:
+    # PX4 can_transition_on_ground(): !armed || landed, whatever the speed and the time
+    logic = VtolTransition(default_params("vtol"))
+    logic.request(to_fixed_wing=True, immediate=True, airborne=True)
+    logic.request(to_fixed_wing=False, immediate=False, airborne=True)
+    fast = {"airspeed_m_s": 15.0, "forward_speed_m_s": 15.0}
+    assert logic.update(0.01, **fast) == VtolState.TRANSITION_TO_MC
+    assert logic.update(0.01, **fast, disarmed_or_landed=True) == VtolState.MC
+
+
+def test_back_transition_time_limit_is_strictly_after_vt_b_trans_dur() -> None:
+    params = default_params("vtol")
+    params.values["VT_B_TRANS_DUR"] = 0.5
+    logic = VtolTransition(params)
+    logic.request(to_fixed_wing=True, immediate=True, airborne=True)
+    logic.request(to_fixed_wing=False, immediate=False, airborne=True)
+    fast = {"airspeed_m_s": 15.0, "forward_speed_m_s": 15.0}
+    assert logic.update(0.5, **fast) == VtolState.TRANSITION_TO_MC
+    assert logic.update(0.01, **fast) == VtolState.MC
