@@ -96,7 +96,7 @@ class SenderProcess:
         state_fd = os.memfd_create("skyhelm-sender-state", os.MFD_CLOEXEC)
         os.ftruncate(state_fd, stream_process.STATE_BYTES)
         self._state = mmap.mmap(state_fd, stream_process.STATE_BYTES)
-        stream_process.STATE_HEARTBEAT.pack_into(self._state, 0, time.monotonic())
+        stream_process.write_heartbeat(self._state, time.monotonic())
         started = threading.Event()
         failure: list[BaseException] = []
 
@@ -199,8 +199,8 @@ class SenderProcess:
         self._links[key] = reports
         slot = self._free_slots.pop() if self._free_slots else -1
         if slot >= 0:
-            stream_process.STATE_LINK.pack_into(self._state, _slot_at(slot), seq % 256,
-                                                signing[2] if signing else 0)
+            stream_process.write_link_state(self._state, _slot_at(slot), seq % 256,
+                                            signing[2] if signing else 0)
         self.post(("link", key, seq, signing, slot), (sock.fileno(),))
         return slot
 
