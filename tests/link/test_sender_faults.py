@@ -15,6 +15,8 @@ import resource
 import secrets
 import signal
 import socket
+import subprocess
+import threading
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -306,3 +308,36 @@ def test_the_state_page_never_holds_zeros_while_it_is_written() -> None:
     assert seq.seen == [(41, 7_000_000)]
     assert stream_process.STATE_LINK.unpack_from(page, slot_at) == (42, 7_000_001)
     assert stream_process.STATE_HEARTBEAT.unpack_from(page, 0) == (1000.05,)  # untouched
+
+
+def test_a_start_slower_than_its_timeout_leaves_no_process_and_no_closed_descriptor(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """On a slow machine the fork may come after the server stopped waiting: the
+    descriptors it passes are still open then (closed once the fork is done, not at the
+    timeout), and the late process, which nobody owns, is killed."""
+    real_popen = subprocess.Popen
+    started: list[subprocess.Popen[bytes]] = []
+    errors: list[OSError] = []
+    done = threading.Event()
+
+    def slow_popen(*args: Any, **kwargs: Any) -> subprocess.Popen[bytes]:
+        time.sleep(0.3)  # the fork comes after the timeout
+        try:
+            proc = real_popen(*args, **kwargs)
+        except OSError as exc:
+            errors.append(exc)
+            raise
+        finally:
+            done.set()
+        started.append(proc)
+        return proc
+
+    monkeypatch.setattr(stream_channel, "START_TIMEOUT_S", 0.05)
+    monkeypatch.setattr(stream_channel.subprocess, "Popen", slow_popen)
+    with pytest.raises(ProcessGone, match=r"not started in 0\.05 s"):
+        stream_channel.SenderProcess()
+    assert done.wait(5.0)
+    assert errors == [], "the descriptors passed were closed before the fork"
+    assert len(started) == 1
+    assert started[0].wait(5.0) == -signal.SIGKILL  # killed: nobody owns it

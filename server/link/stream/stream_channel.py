@@ -98,10 +98,13 @@ class SenderProcess:
         self._state = mmap.mmap(state_fd, stream_process.STATE_BYTES)
         stream_process.write_heartbeat(self._state, time.monotonic())
         started = threading.Event()
+        abandoned = threading.Event()  # the start took too long: nobody owns its process
+        start_lock = threading.Lock()
         failure: list[BaseException] = []
 
         def keep() -> None:
             # this thread forks and then waits: the child's parent-death signal is tied to it
+            proc: subprocess.Popen[bytes] | None = None
             try:
                 proc = subprocess.Popen(
                     [sys.executable, "-S", "-E", str(PROCESS_SCRIPT), str(os.getpid()),
@@ -110,18 +113,31 @@ class SenderProcess:
                     close_fds=True)
             except OSError as exc:
                 failure.append(exc)
+            finally:
+                # closed once the fork is done, however long it took: a number passed is
+                # never closed, or reused by another file, before the child has its copy
+                theirs.close()
+                os.close(state_fd)
+            with start_lock:
+                if proc is not None and not abandoned.is_set():
+                    self._proc = proc
+                    self.pid = proc.pid
                 started.set()
+            if proc is None:
                 return
-            self._proc = proc
-            self.pid = proc.pid
-            started.set()
+            if self._proc is not proc:
+                proc.kill()  # started after the server stopped waiting for it
+                proc.wait()
+                return
             proc.wait()
             self._gone(self._cause(proc.returncode))
 
         threading.Thread(target=keep, name="setpoint-process-keeper", daemon=True).start()
-        started.wait(START_TIMEOUT_S)
-        theirs.close()
-        os.close(state_fd)
+        if not started.wait(START_TIMEOUT_S):
+            with start_lock:
+                if not started.is_set():
+                    abandoned.set()
+                    failure.append(TimeoutError(f"not started in {START_TIMEOUT_S:g} s"))
         if failure or self.pid is None:
             self.alive = False
             raise ProcessGone(f"cannot start the setpoint sender process: {failure}")
