@@ -9,22 +9,25 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import itertools
+import mmap
 import os
 import resource
 import secrets
 import signal
 import socket
+import subprocess
+import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
 from server.link.codec.signing_keys import SigningKeyStore
 from server.link.link import Link
-from server.link.stream import stream_channel
+from server.link.stream import stream_channel, stream_process
 from server.link.stream.sender_supervisor import ProcessGone, SenderSupervisor
 from server.link.stream.streamer import SetpointStreamer
 from tests.link.test_stream_process import Receiver
@@ -260,3 +263,81 @@ async def test_streams_work_above_descriptor_1023(
     assert stats.active
     assert stats.sent >= 15
     _check_wire(flight, KILL_GAP_S)
+
+
+class _Probe:
+    """A value that, when a writer converts it, reads what the page holds at that moment:
+    between the writer's first touch of the page and its last."""
+
+    def __init__(self, page: mmap.mmap, value: float, read: Callable[[mmap.mmap], Any]) -> None:
+        self._page, self._value, self._read = page, value, read
+        self.seen: list[Any] = []
+
+    def __float__(self) -> float:
+        self.seen.append(self._read(self._page))
+        return self._value
+
+    def __index__(self) -> int:
+        self.seen.append(self._read(self._page))
+        return int(self._value)
+
+
+def test_the_state_page_never_holds_zeros_while_it_is_written() -> None:
+    """A live sender was once killed as silent for "no heartbeat for 5109734 ms" (the
+    machine's uptime): the supervisor read 0.0 while the process was between zero-filling
+    its heartbeat and writing it (``Struct.pack_into`` does both, with the value converted
+    in between). A reader at that moment sees the previous heartbeat and link slot."""
+    fd = os.memfd_create("skyhelm-test-state", os.MFD_CLOEXEC)
+    try:
+        os.ftruncate(fd, stream_process.STATE_BYTES)
+        page = mmap.mmap(fd, stream_process.STATE_BYTES)
+    finally:
+        os.close(fd)
+    slot_at = stream_process.STATE_SLOTS_AT + 3 * stream_process.STATE_SLOT_BYTES
+    stream_process.write_heartbeat(page, 1000.0)
+    stream_process.write_link_state(page, slot_at, 41, 7_000_000)
+
+    beat = _Probe(page, 1000.05,
+                  lambda p: stream_process.STATE_HEARTBEAT.unpack_from(p, 0)[0])
+    stream_process.write_heartbeat(page, cast(float, beat))
+    assert beat.seen == [1000.0]
+    assert stream_process.STATE_HEARTBEAT.unpack_from(page, 0) == (1000.05,)
+
+    seq = _Probe(page, 42, lambda p: stream_process.STATE_LINK.unpack_from(p, slot_at))
+    stream_process.write_link_state(page, slot_at, cast(int, seq), 7_000_001)
+    assert seq.seen == [(41, 7_000_000)]
+    assert stream_process.STATE_LINK.unpack_from(page, slot_at) == (42, 7_000_001)
+    assert stream_process.STATE_HEARTBEAT.unpack_from(page, 0) == (1000.05,)  # untouched
+
+
+def test_a_start_slower_than_its_timeout_leaves_no_process_and_no_closed_descriptor(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """On a slow machine the fork may come after the server stopped waiting: the
+    descriptors it passes are still open then (closed once the fork is done, not at the
+    timeout), and the late process, which nobody owns, is killed."""
+    real_popen = subprocess.Popen
+    started: list[subprocess.Popen[bytes]] = []
+    errors: list[OSError] = []
+    done = threading.Event()
+
+    def slow_popen(*args: Any, **kwargs: Any) -> subprocess.Popen[bytes]:
+        time.sleep(0.3)  # the fork comes after the timeout
+        try:
+            proc = real_popen(*args, **kwargs)
+        except OSError as exc:
+            errors.append(exc)
+            raise
+        finally:
+            done.set()
+        started.append(proc)
+        return proc
+
+    monkeypatch.setattr(stream_channel, "START_TIMEOUT_S", 0.05)
+    monkeypatch.setattr(stream_channel.subprocess, "Popen", slow_popen)
+    with pytest.raises(ProcessGone, match=r"not started in 0\.05 s"):
+        stream_channel.SenderProcess()
+    assert done.wait(5.0)
+    assert errors == [], "the descriptors passed were closed before the fork"
+    assert len(started) == 1
+    assert started[0].wait(5.0) == -signal.SIGKILL  # killed: nobody owns it

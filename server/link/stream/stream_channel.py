@@ -96,12 +96,15 @@ class SenderProcess:
         state_fd = os.memfd_create("skyhelm-sender-state", os.MFD_CLOEXEC)
         os.ftruncate(state_fd, stream_process.STATE_BYTES)
         self._state = mmap.mmap(state_fd, stream_process.STATE_BYTES)
-        stream_process.STATE_HEARTBEAT.pack_into(self._state, 0, time.monotonic())
+        stream_process.write_heartbeat(self._state, time.monotonic())
         started = threading.Event()
+        abandoned = threading.Event()  # the start took too long: nobody owns its process
+        start_lock = threading.Lock()
         failure: list[BaseException] = []
 
         def keep() -> None:
             # this thread forks and then waits: the child's parent-death signal is tied to it
+            proc: subprocess.Popen[bytes] | None = None
             try:
                 proc = subprocess.Popen(
                     [sys.executable, "-S", "-E", str(PROCESS_SCRIPT), str(os.getpid()),
@@ -110,18 +113,31 @@ class SenderProcess:
                     close_fds=True)
             except OSError as exc:
                 failure.append(exc)
+            finally:
+                # closed once the fork is done, however long it took: a number passed is
+                # never closed, or reused by another file, before the child has its copy
+                theirs.close()
+                os.close(state_fd)
+            with start_lock:
+                if proc is not None and not abandoned.is_set():
+                    self._proc = proc
+                    self.pid = proc.pid
                 started.set()
+            if proc is None:
                 return
-            self._proc = proc
-            self.pid = proc.pid
-            started.set()
+            if self._proc is not proc:
+                proc.kill()  # started after the server stopped waiting for it
+                proc.wait()
+                return
             proc.wait()
             self._gone(self._cause(proc.returncode))
 
         threading.Thread(target=keep, name="setpoint-process-keeper", daemon=True).start()
-        started.wait(START_TIMEOUT_S)
-        theirs.close()
-        os.close(state_fd)
+        if not started.wait(START_TIMEOUT_S):
+            with start_lock:
+                if not started.is_set():
+                    abandoned.set()
+                    failure.append(TimeoutError(f"not started in {START_TIMEOUT_S:g} s"))
         if failure or self.pid is None:
             self.alive = False
             raise ProcessGone(f"cannot start the setpoint sender process: {failure}")
@@ -199,8 +215,8 @@ class SenderProcess:
         self._links[key] = reports
         slot = self._free_slots.pop() if self._free_slots else -1
         if slot >= 0:
-            stream_process.STATE_LINK.pack_into(self._state, _slot_at(slot), seq % 256,
-                                                signing[2] if signing else 0)
+            stream_process.write_link_state(self._state, _slot_at(slot), seq % 256,
+                                            signing[2] if signing else 0)
         self.post(("link", key, seq, signing, slot), (sock.fileno(),))
         return slot
 

@@ -95,6 +95,20 @@ STATE_SLOTS = 256
 STATE_BYTES = STATE_SLOTS_AT + STATE_SLOTS * STATE_SLOT_BYTES
 
 
+def write_heartbeat(state: mmap.mmap, now_s: float) -> None:
+    """The heartbeat at offset 0, packed first and then copied in whole. Never with
+    ``Struct.pack_into``: it zero-fills its destination before it converts and packs the
+    values, so a reader in another process (the supervisor) can find 0.0 there, a heartbeat
+    as old as the machine's uptime, whenever this process is preempted in between."""
+    state[0:STATE_HEARTBEAT.size] = STATE_HEARTBEAT.pack(now_s)
+
+
+def write_link_state(state: mmap.mmap, offset: int, seq: int, timestamp: int) -> None:
+    """A link slot's next sequence number and last signing timestamp, copied in whole (as
+    :func:`write_heartbeat`: a process killed mid-write leaves no zeros for the server)."""
+    state[offset:offset + STATE_LINK.size] = STATE_LINK.pack(seq, timestamp)
+
+
 class Deadlines:
     """Ticks at t0 + k·period: a late tick does not push later ones back, and a tick later
     than a whole period skips the missed ones instead of bursting them."""
@@ -191,8 +205,8 @@ class LinkOut:
     def write(self, frame: bytes, crc_extra: int, dests: Iterable[Any] | None) -> bool:
         stamped = self.stamper.stamp(frame, crc_extra)
         if self.state is not None:
-            STATE_LINK.pack_into(self.state[0], self.state[1], self.stamper.seq,
-                                 self.stamper.timestamp)
+            write_link_state(self.state[0], self.state[1], self.stamper.seq,
+                             self.stamper.timestamp)
         try:
             if dests is None:
                 self.sock.send(stamped)
@@ -384,7 +398,7 @@ class SenderProcess:
         while True:
             now = time.monotonic()
             if self.state is not None:
-                STATE_HEARTBEAT.pack_into(self.state, 0, now)
+                write_heartbeat(self.state, now)
             until = min(next_report_s, self.heap[0][0] if self.heap else math.inf)
             wait_s = max(0.0, until - now)
             if wait_s < 0.001:  # poll counts whole milliseconds: the rest is slept
