@@ -93,7 +93,8 @@ class SenderSupervisor:
         self._start = start  # starts a process that calls its argument when it is gone
         self._lock = threading.RLock()
         self._process: Process | None = None
-        self._handled: set[int] = set()  # ids of processes whose loss was handled
+        # the process whose loss was handled last (held, so no later process can share its id)
+        self._handled: Process | None = None
         self._members: weakref.WeakSet[Supervised] = weakref.WeakSet()
         self._handovers: weakref.WeakSet[Supervised] = weakref.WeakSet()
         self._listeners: list[Callable[[SenderStatus], None]] = []
@@ -153,9 +154,9 @@ class SenderSupervisor:
     def lost(self, process: Process, why: str) -> None:
         """The process died or was killed (any thread; once per process)."""
         with self._lock:
-            if id(process) in self._handled or process is not self._process:
+            if process is self._handled or process is not self._process:
                 return
-            self._handled.add(id(process))
+            self._handled = process
             stable = time.monotonic() - process.started_s >= STABLE_AFTER_S
             self.failed_in_row = 1 if stable else self.failed_in_row + 1
             self._fault(why)
