@@ -123,7 +123,8 @@ def test_a_stuck_process_is_killed_only_while_it_carries_a_stream() -> None:
     member.streaming_in = process
     wait_for_blocking("the kill", lambda: process.killed is not None, 2.0, 0.005)
     assert "stopped answering" in str(process.killed)
-    assert member.lost == [process]
+    # the kill is marked before its loss reaches the members (the watchdog's own thread)
+    wait_for_blocking("the members told", lambda: member.lost == [process], 2.0, 0.005)
 
 
 def test_a_restart_waits_until_the_new_process_runs(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -168,16 +168,22 @@ def readiness(
     told = {m for c in report.checks if c.text == NOT_SUITABLE_FOR_ARMING
             for m in mode_names(c.mode_groups)}  # fmt: skip
     refused = tuple(m for m in _NOT_SUITABLE_MODES if m not in told)
+    current = [c.shown() for c in ordered if nav_state is not None and c.concerns(nav_state)]
     if refused:  # as PX4 would say it once in one of them
-        others.append(
-            ArmingCheck(NOT_SUITABLE_FOR_ARMING, _NOT_SUITABLE_LEVEL, refused, None, "arming_check")
+        not_suitable = ArmingCheck(
+            NOT_SUITABLE_FOR_ARMING, _NOT_SUITABLE_LEVEL, refused, None, "arming_check"
         )
+        if mode in refused:  # a report from before the switch to a mode PX4 never arms in
+            ready = False
+            current.append(not_suitable)
+        else:
+            others.append(not_suitable)
     return ArmingChecksState(
         ready,
         mode,
         "events",
         can_arm,
-        tuple(c.shown() for c in ordered if nav_state is not None and c.concerns(nav_state)),
+        tuple(current),
         tuple(others),
         _verdict(ready, switch_helps, waiting_for),
         arm_switches_to if not ready and switch_helps else None,
