@@ -23,14 +23,14 @@ MAV_RESULT_TEMPORARILY_REJECTED = 1
 
 
 class _Pilot:
-    def __init__(self, served: Served, vehicle: int) -> None:
+    def __init__(self, served: Served, vehicle: int, client_name: str = "arming modes") -> None:
         self.vehicle = f"/vehicles/{vehicle}"
         self.http = httpx.Client(
             base_url=served.api,
             headers={"Authorization": f"Bearer {served.pilot_token}"},
             timeout=30.0,
         )
-        lease = self.http.post(f"{self.vehicle}/control", json={"client_name": "arming modes"})
+        lease = self.http.post(f"{self.vehicle}/control", json={"client_name": client_name})
         lease.raise_for_status()
         self.http.headers["X-Lease-Id"] = lease.json()["lease_id"]
 

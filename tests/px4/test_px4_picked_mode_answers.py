@@ -16,6 +16,7 @@ import httpx
 import pytest
 
 from tests.px4.conftest import Px4Sitl
+from tests.px4.test_px4_arming_modes import _Pilot as _ArmingPilot
 from tests.serve_process import Served
 from tests.waiting import wait_for_blocking
 
@@ -33,25 +34,15 @@ ARM_SWITCHES = {"RTL", "LAND", "PRECLAND", "FOLLOW_TARGET", "POSCTL_ORBIT", "OFF
 REPORT_S = 6.0
 
 
-class _Pilot:
+class _Pilot(_ArmingPilot):
+    """The arming-modes pilot, renewing its lease on every command (the walk is long)."""
+
     def __init__(self, served: Served, vehicle: int) -> None:
-        self.vehicle = f"/vehicles/{vehicle}"
-        self.http = httpx.Client(
-            base_url=served.api,
-            headers={"Authorization": f"Bearer {served.pilot_token}"},
-            timeout=30.0,
-        )
-        lease = self.http.post(f"{self.vehicle}/control", json={"client_name": "mode answers"})
-        lease.raise_for_status()
-        self.http.headers["X-Lease-Id"] = lease.json()["lease_id"]
+        super().__init__(served, vehicle, "mode answers")
 
     def post(self, path: str, body: dict[str, Any] | None = None) -> httpx.Response:
         self.http.put(f"{self.vehicle}/control")  # renew the lease
-        return self.http.post(f"{self.vehicle}{path}", json=body or {})
-
-    def state(self) -> dict[str, Any]:
-        state: dict[str, Any] = self.http.get(self.vehicle).json()
-        return state
+        return super().post(path, body)
 
     def checks_in(self, mode: str, done: Any = lambda _c: True) -> dict[str, Any]:
         """The arming checks once PX4's report judges ``mode`` (and ``done`` holds)."""
