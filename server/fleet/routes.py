@@ -107,11 +107,6 @@ async def get_fleet_vehicle(
     return vehicle.detail()
 
 
-@router.api_route(
-    "/edges/{edge}/vehicles/{vehicle_id}/{rest:path}",
-    methods=PROXIED_METHODS,
-    responses=PROXY_RESPONSES,
-)
 async def call_fleet_vehicle(
     request: Request, edge: EdgeName, vehicle_id: VehicleId, rest: str, role: Reader
 ) -> Response:
@@ -148,6 +143,18 @@ async def call_fleet_vehicle(
     if answer.body is None and answer.status in (204, 304):
         return Response(status_code=answer.status, headers=headers)
     return JSONResponse(answer.body, status_code=answer.status, headers=headers)
+
+
+# one route per method, each with its own operation id (a route of several methods would
+# publish one operation id for all of them)
+for _method in PROXIED_METHODS:
+    router.add_api_route(
+        "/edges/{edge}/vehicles/{vehicle_id}/{rest:path}",
+        call_fleet_vehicle,
+        methods=[_method],
+        responses=PROXY_RESPONSES,
+        operation_id=f"call_fleet_vehicle_{_method.lower()}",
+    )
 
 
 def _forwarded_headers(request: Request) -> dict[str, str]:

@@ -17,10 +17,10 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+from server.control.slots import EVENT_BACKLOG
+
 # the state's fields a row of GET /fleet/vehicles shows
 _SUMMARY_STATE_FIELDS = ("type", "mode", "armed", "connected", "global", "position_ned")
-# events queued per watcher before the oldest is dropped (a socket that stops reading)
-EVENT_BACKLOG = 256
 
 
 def vehicle_key(edge: str, vehicle_id: int) -> str:

@@ -45,6 +45,7 @@ from foxglove.messages import LogLevel
 from pymavlink.dialects.v20 import development as mavlink
 
 from server.control.publishers import StatePublishers
+from server.control.slots import EVENT_BACKLOG
 from server.control.views import LeaseStatus, finite, state_json, stream_dict
 from server.foxglove import wire
 from server.foxglove.derived import LEVEL_BY_SEVERITY_NAME
@@ -55,7 +56,6 @@ log = logging.getLogger(__name__)
 
 LOOPBACK = "127.0.0.1"
 DEFAULT_STATE_RATE_HZ = 50.0
-EVENT_BACKLOG = 256
 READY_TIMEOUT_S = 30.0
 STOP_TIMEOUT_S = 10.0
 # Frames wait for the next loop iteration in a queue of at most PENDING_FRAMES (beyond it the
