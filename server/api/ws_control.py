@@ -196,7 +196,17 @@ class _ControlSession:
 
     def _track(self, task: asyncio.Future[None]) -> None:
         self._commands.add(task)
-        task.add_done_callback(self._commands.discard)
+        task.add_done_callback(self._finished)
+
+    def _finished(self, task: asyncio.Future[None]) -> None:
+        """An answer that could not be sent because the client went away ends quietly; any
+        other failure is logged once, here (nobody else awaits these tasks)."""
+        self._commands.discard(task)
+        if task.cancelled():
+            return
+        exc = task.exception()
+        if exc is not None and not isinstance(exc, WebSocketDisconnect):
+            log.error("control message failed on vehicle %s", self._vehicle.sysid, exc_info=exc)
 
     async def _receive(self, websocket: WebSocket) -> None:
         while True:

@@ -5,7 +5,10 @@ a live input that falls silent brakes the vehicle while the lease stays."""
 
 from __future__ import annotations
 
+import asyncio
+import gc
 import json
+import logging
 import math
 import time
 from collections.abc import AsyncIterator
@@ -241,3 +244,31 @@ async def test_nan_in_a_socket_message_is_a_422_naming_the_field(quad: Served) -
         assert unanswerable["body"]["detail"]["field"] == "id"
         await ws.send(json.dumps({"type": "heartbeat", "id": 2}))
         assert (await receive_until(ws, {"id": 2}))["status"] == 200
+
+
+async def test_a_client_gone_with_answers_in_flight_ends_quietly(
+    quad: Served, caplog: pytest.LogCaptureFixture
+) -> None:
+    """Answers that can no longer be sent (the client closed its socket while its commands
+    ran) end without an error in the server's log; the lease goes with the socket."""
+    caplog.set_level(logging.ERROR)
+    for _ in range(3):
+        async with connect(quad.url("control", vehicle=1, ttl_s=30)) as ws:
+            await receive(ws)
+            for request_id in range(20):
+                hold = {"type": "command", "id": request_id, "name": "hold"}
+                await ws.send(json.dumps(hold))
+                refused = {"type": "command", "id": 100 + request_id, "name": "takeoff",
+                           "args": {"altitude_m": "high"}}  # fmt: skip
+                await ws.send(json.dumps(refused))
+
+        async def released() -> bool:
+            return (await quad.api.client.get("/api/v1/vehicles/1/control")).json()[
+                "holder"
+            ] is None
+
+        await eventually(released, 5.0, "the lease released", poll_s=0.05)
+    await asyncio.sleep(0.5)  # the commands still running when the socket closed end
+    gc.collect()  # an exception nobody retrieved is logged when its task is collected
+    errors = [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]
+    assert errors == []
