@@ -22,10 +22,8 @@ from sim.lib.quat import euler_from_quat, rotate_ned_to_body, yaw_from_quat
 from sim.lib.topics import ControlSetpoint, LandingStatus, TrajectorySetpoint, VtolState
 from sim.models.fixed_wing import Airframe
 from sim.models.multicopter import RotorSet
-from sim.physics.aero import WingGeometry
 from sim.physics.mixer import Mixer
 
-VTOL_WING = WingGeometry(area_m2=0.55, span_m=1.8, chord_m=0.3)
 MAV_TYPE_VTOL_FIXEDROTOR = 22
 
 
@@ -103,7 +101,8 @@ class VtolModel:
 
     def __init__(self, params: ParamReader) -> None:
         self.params = params
-        self.frame = Airframe(params, VTOL_WING, wheels=False)
+        # SIH's standard VTOL: the pusher gives 2 × SIH_T_MAX, out of the tail's slipstream
+        self.frame = Airframe(params, pusher_t_max=2.0, slipstream=False, wheels=False)
         self.truth = self.frame.truth
         self.rotors = RotorSet(Mixer("4x"), params)
         self.mc = MulticopterControl(params)
