@@ -155,6 +155,9 @@ _FW_PARAMS: dict[str, float | int] = {
     "FW_THR_TRIM": 0.35,
     "FW_THR_MAX": 1.0,
     "FW_THR_MIN": 0.0,
+    "FW_THR_IDLE": 0.0,
+    "FW_LND_FLALT": 0.5,
+    "FW_LND_FL_PMIN": 2.5,
 }
 
 # PX4's SIH airplane (10041_sihsim_airplane): 0.3 kg, SIH's wing and a SIH_T_MAX pusher
@@ -192,6 +195,7 @@ _VTOL_PARAMS: dict[str, float | int] = {
     "VT_PSHER_SLEW": 0.33,
     "VT_F_TRANS_THR": 1.0,
     "VT_B_TRANS_DUR": 10.0,
+    "VT_B_TRANS_RAMP": 3.0,
 }
 
 # Differential rover (PX4 rover_pos_control / rover_differential names)

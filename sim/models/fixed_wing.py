@@ -6,13 +6,19 @@ import math
 
 from sim.control.fw_control import FixedWingControl, SurfacesThrottle
 from sim.control.setpoint_guard import safe_setpoint
+from sim.lib.geo import SIH_LOC_H0_M
 from sim.lib.params import ParamReader
-from sim.lib.quat import Vec3, rotate_body_to_ned, rotate_ned_to_body
+from sim.lib.quat import (
+    Vec3,
+    euler_from_quat,
+    quat_from_euler,
+    rotate_body_to_ned,
+    rotate_ned_to_body,
+)
 from sim.lib.topics import ControlSetpoint, LandingStatus, VehicleStateTruth, VtolState
 from sim.models.multicopter import PARAM_REFRESH_PERIOD_S, make_rigid_body, refresh_rigid_body
-from sim.lib.geo import SIH_LOC_H0_M
-from sim.physics.sih_aero import SihFixedWingAero
 from sim.physics.rigid_body import GRAVITY_M_S2, RigidBody
+from sim.physics.sih_aero import SihFixedWingAero
 
 # Wheels: rolling resistance on the runway, brakes when no thrust is wanted, no side slip
 ROLLING_FRICTION = 0.03
@@ -95,15 +101,19 @@ class Airframe:
         return (force_ned[0] - k * v[0], force_ned[1] - k * v[1], force_ned[2])
 
     def _roll_along_heading(self) -> None:
-        """On the ground the wheels keep the vehicle level and moving along its nose."""
+        """On the ground the wheels keep the wings level and the vehicle moving along its
+        nose; the nose may rise (rotation on the main wheels), never sink below level."""
         t = self.truth
-        q = t.q_wxyz
-        yaw = math.atan2(2.0 * (q[0] * q[3] + q[1] * q[2]), 1.0 - 2.0 * (q[2] ** 2 + q[3] ** 2))
+        _, pitch, yaw = euler_from_quat(t.q_wxyz)
         v = t.velocity_ned_m_s
         forward = max(0.0, v[0] * math.cos(yaw) + v[1] * math.sin(yaw))
         v[0], v[1] = forward * math.cos(yaw), forward * math.sin(yaw)
-        t.q_wxyz[:] = [math.cos(yaw / 2.0), 0.0, 0.0, math.sin(yaw / 2.0)]
-        t.rates_body_rad_s[0] = t.rates_body_rad_s[1] = 0.0
+        w = t.rates_body_rad_s
+        w[0] = 0.0
+        if pitch <= 0.0:
+            pitch = 0.0
+            w[1] = max(0.0, w[1])
+        t.q_wxyz[:] = list(quat_from_euler(0.0, pitch, yaw))
 
     def reset(self, position_ned_m: list[float], yaw_rad: float) -> None:
         self.body.reset(position_ned_m, yaw_rad)

@@ -41,7 +41,7 @@ _AFS_DEG = 20.0
 
 
 def _sign(x: float) -> float:
-    return (0.0 < x) - (x < 0.0)
+    return (x > 0.0) - (x < 0.0)
 
 
 def _wrap_pi(x: float) -> float:
