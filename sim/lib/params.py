@@ -141,9 +141,10 @@ def sitl_family_values(airframe: str) -> dict[str, float | int]:
     return dict(_sitl_values()[_SITL_VALUES_FOR.get(airframe, "quad")])
 
 
-# The multicopter families a PX4 SITL airframe without multicopter modules lacks (the
-# airplane has no mc_pos_control nor multicopter land detector): the sim's shared code
-# (navigator, land detector, sticks) still reads them, as fixed values, not parameters.
+# PX4's airplane runs no mc_pos_control nor multicopter land detector, so of the MPC_ and
+# LNDMC_ families it has only the few MPC_ its shared trajectory code reads: the others are
+# not its parameters; the sim's shared code (navigator, land detector, sticks) reads their
+# PX4 defaults on the plane as fixed values.
 _MULTICOPTER_FAMILIES = ("MPC_", "LNDMC_")
 
 
