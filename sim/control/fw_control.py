@@ -35,6 +35,9 @@ CLIMB_RATE_I_RAD_M = 0.03
 SPEED_P_PER_S = 0.6
 SPEED_I_THROTTLE_PER_M = 0.04
 STALL_PITCH_LIMIT_RAD = math.radians(10.0)
+# Runway takeoff: the nose comes up to this pitch once the airspeed reaches FW_AIRSPD_MIN
+# (PX4's runway takeoff rotates and climbs at FW_TKO_PITCH_MIN, 10°)
+ROTATION_PITCH_RAD = math.radians(10.0)
 
 
 class SurfacesThrottle(NamedTuple):
@@ -76,6 +79,9 @@ class FixedWingControl:
         self.thr_trim = g("FW_THR_TRIM")
         self.thr_max = g("FW_THR_MAX")
         self.thr_min = g("FW_THR_MIN")
+        self.thr_idle = g("FW_THR_IDLE")
+        self.flare_height_m = g("FW_LND_FLALT")
+        self.flare_pitch_rad = math.radians(g("FW_LND_FL_PMIN"))
         self.rate_p = (g("FW_RR_P"), g("FW_PR_P"), g("FW_YR_P"))
         self.rate_i = (g("FW_RR_I"), g("FW_PR_I"), g("FW_YR_I"))
         self.rate_ff = (g("FW_RR_FF"), g("FW_PR_FF"), g("FW_YR_FF"))
@@ -118,10 +124,20 @@ class FixedWingControl:
         roll_sp, speed_sp = self._lateral(truth, sp, yaw, airspeed)
         climb_sp = self._climb_rate_setpoint(truth, sp)
         if truth.on_ground:
-            # runway takeoff: wings level, full throttle while the target is above us
+            # runway takeoff: wings level, full throttle while the target is above us, the
+            # nose up once fast enough to fly
             self.climb_int_rad = 0.0
             self.speed_int = 0.0
-            return 0.0, 0.0, self.thr_max if climb_sp > 0.5 else 0.0
+            if climb_sp <= 0.5:
+                return 0.0, 0.0, 0.0
+            rotate = truth.airspeed_m_s >= self.airspeed_min_m_s
+            return 0.0, ROTATION_PITCH_RAD if rotate else 0.0, self.thr_max
+        if climb_sp < 0.0 and -truth.position_ned_m[2] < self.flare_height_m:
+            # landing flare (PX4 below FW_LND_FLALT): wings level, nose at FW_LND_FL_PMIN,
+            # throttle idle, so the wheels stay down once they touch
+            self.climb_int_rad = 0.0
+            self.speed_int = 0.0
+            return 0.0, self.flare_pitch_rad, self.thr_idle
         pitch_sp, throttle = self._longitudinal(dt_s, truth, climb_sp, speed_sp, airspeed)
         return roll_sp, pitch_sp, throttle
 

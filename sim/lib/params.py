@@ -141,6 +141,23 @@ def sitl_family_values(airframe: str) -> dict[str, float | int]:
     return dict(_sitl_values()[_SITL_VALUES_FOR.get(airframe, "quad")])
 
 
+# PX4's airplane runs no mc_pos_control nor multicopter land detector, so of the MPC_ and
+# LNDMC_ families it has only the few MPC_ its shared trajectory code reads: the others are
+# not its parameters; the sim's shared code (navigator, land detector, sticks) reads their
+# PX4 defaults on the plane as fixed values.
+_MULTICOPTER_FAMILIES = ("MPC_", "LNDMC_")
+
+
+def _absent_on(airframe: str, merged: Mapping[str, float | int]) -> list[str]:
+    if airframe != "plane":
+        return []
+    recorded = _sitl_values()["plane"]
+    return [
+        name for name in merged
+        if name.startswith(_MULTICOPTER_FAMILIES) and name not in recorded
+    ]
+
+
 class ParamReader(Protocol):
     """Read access to current parameter values; integers come back as float."""
 
@@ -175,11 +192,20 @@ class ParamStore:
     effect at once: every reader calls `get` when it needs the value.
     """
 
-    def __init__(self, defaults: Mapping[str, float | int]) -> None:
+    def __init__(
+        self,
+        defaults: Mapping[str, float | int],
+        fixed: Mapping[str, float | int] | None = None,
+    ) -> None:
         self._values: dict[str, float | int] = dict(sorted(defaults.items()))
         self._names = list(self._values)
         self._index = {name: i for i, name in enumerate(self._names)}
         self._listeners: list[Callable[[str, float | int], None]] = []
+        # values the shared code reads that this airframe has no parameter for: constants
+        # of the sim, never listed, read or set over MAVLink
+        self._fixed: dict[str, float | int] = {
+            name: value for name, value in (fixed or {}).items() if name not in self._values
+        }
 
     @classmethod
     def for_airframe(
@@ -189,7 +215,8 @@ class ParamStore:
         merged.update(sitl_family_values(airframe))
         merged.update(airframe_defaults)
         merged.update(AIRFRAME_OVERRIDES.get(airframe, {}))
-        return cls(merged)
+        absent = {name: merged.pop(name) for name in _absent_on(airframe, merged)}
+        return cls(merged, fixed=absent)
 
     def __contains__(self, name: object) -> bool:
         return name in self._values
@@ -201,7 +228,10 @@ class ParamStore:
         return iter(self._names)
 
     def get(self, name: str) -> float:
-        return float(self._values[name])
+        value = self._values.get(name)
+        if value is None:
+            value = self._fixed[name]
+        return float(value)
 
     def value(self, name: str) -> float | int:
         """The value with its own type (int for INT32)."""

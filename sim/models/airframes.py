@@ -155,28 +155,32 @@ _FW_PARAMS: dict[str, float | int] = {
     "FW_THR_TRIM": 0.35,
     "FW_THR_MAX": 1.0,
     "FW_THR_MIN": 0.0,
+    "FW_THR_IDLE": 0.0,
+    "FW_LND_FLALT": 0.5,
+    "FW_LND_FL_PMIN": 2.5,
 }
 
-# The plane: 1.5 kg, 1.5 m span, a 6 N pusher (SIH_F_T_MAX); wheels, no rotor drag
+# PX4's SIH airplane (10041_sihsim_airplane): 0.3 kg, SIH's wing and a SIH_T_MAX pusher
 _PLANE_PARAMS: dict[str, float | int] = {
-    "SIH_MASS": 1.5,
-    "SIH_IXX": 0.05,
-    "SIH_IYY": 0.06,
-    "SIH_IZZ": 0.1,
-    "SIH_KDV": 0.0,
-    "SIH_KDW": 0.01,
-    "SIH_F_T_MAX": 6.0,
+    "SIH_MASS": 0.3,
+    "SIH_IXX": 0.00402,
+    "SIH_IYY": 0.0144,
+    "SIH_IZZ": 0.0177,
+    "SIH_KDV": 0.2,
+    "SIH_T_MAX": 6.0,
 }
 
-# The standard VTOL: 1.2 kg on four SIH rotors, a 1.8 m wing and an 8 N pusher
+# PX4's SIH standard VTOL (10043_sihsim_standard_vtol): 0.2 kg on four 2 N rotors, SIH's
+# wing and a pusher of 2 × SIH_T_MAX
 _VTOL_PARAMS: dict[str, float | int] = {
-    "SIH_MASS": 1.2,
-    "SIH_IXX": 0.06,
-    "SIH_IYY": 0.05,
-    "SIH_IZZ": 0.1,
-    "SIH_KDV": 0.1,
-    "SIH_KDW": 0.02,
-    "SIH_F_T_MAX": 8.0,
+    "SIH_MASS": 0.2,
+    "SIH_IXX": 0.00354,
+    "SIH_IYY": 0.000625,
+    "SIH_IZZ": 0.003,
+    "SIH_KDV": 0.2,
+    "SIH_T_MAX": 2.0,
+    "SIH_Q_MAX": 0.0165,
+    "SIH_L_ROLL": 0.2,
     # a winged airframe hovering is no racer: PX4's VTOL airframes lower the MC speed
     "MPC_XY_VEL_MAX": 8.0,
     "FW_AIRSPD_MIN": 7.0,
@@ -191,6 +195,7 @@ _VTOL_PARAMS: dict[str, float | int] = {
     "VT_PSHER_SLEW": 0.33,
     "VT_F_TRANS_THR": 1.0,
     "VT_B_TRANS_DUR": 10.0,
+    "VT_B_TRANS_RAMP": 3.0,
 }
 
 # Differential rover (PX4 rover_pos_control / rover_differential names)

@@ -6,12 +6,19 @@ import math
 
 from sim.control.fw_control import FixedWingControl, SurfacesThrottle
 from sim.control.setpoint_guard import safe_setpoint
+from sim.lib.geo import SIH_LOC_H0_M
 from sim.lib.params import ParamReader
-from sim.lib.quat import Vec3, rotate_body_to_ned, rotate_ned_to_body
+from sim.lib.quat import (
+    Vec3,
+    euler_from_quat,
+    quat_from_euler,
+    rotate_body_to_ned,
+    rotate_ned_to_body,
+)
 from sim.lib.topics import ControlSetpoint, LandingStatus, VehicleStateTruth, VtolState
 from sim.models.multicopter import PARAM_REFRESH_PERIOD_S, make_rigid_body, refresh_rigid_body
-from sim.physics.aero import WingGeometry, forces_and_moments
 from sim.physics.rigid_body import GRAVITY_M_S2, RigidBody
+from sim.physics.sih_aero import SihFixedWingAero
 
 # Wheels: rolling resistance on the runway, brakes when no thrust is wanted, no side slip
 ROLLING_FRICTION = 0.03
@@ -20,13 +27,19 @@ BRAKE_BELOW_THROTTLE = 0.05
 
 
 class Airframe:
-    """What the plane and the VTOL share: wing, pusher (SIH_F_T_MAX, lagged by SIH_T_TAU),
-    a rigid body and airspeed. With wheels it rolls along its heading on the ground (plane);
-    without, it sits still on skids (VTOL)."""
+    """What the plane and the VTOL share: SIH's fixed-wing aerodynamics, a pusher of
+    `pusher_t_max` × SIH_T_MAX (lagged by SIH_T_TAU), a rigid body and airspeed. As in
+    SIH, the plane's tailplane and fin sit in the pusher's slipstream, the VTOL's do not.
+    With wheels it rolls along its heading on the ground (plane); without, it sits still on
+    skids (VTOL)."""
 
-    def __init__(self, params: ParamReader, wing: WingGeometry, wheels: bool) -> None:
+    def __init__(
+        self, params: ParamReader, pusher_t_max: float, slipstream: bool, wheels: bool
+    ) -> None:
         self.params = params
-        self.wing = wing
+        self.aero = SihFixedWingAero()
+        self.pusher_t_max = pusher_t_max
+        self.slipstream = slipstream
         self.wheels = wheels
         self.truth = VehicleStateTruth()
         self.body: RigidBody = make_rigid_body(self.truth, params)
@@ -37,7 +50,7 @@ class Airframe:
 
     def refresh_params(self) -> None:
         refresh_rigid_body(self.body, self.params)
-        self.pusher_max_n = float(self.params.get("SIH_F_T_MAX"))
+        self.pusher_max_n = self.pusher_t_max * float(self.params.get("SIH_T_MAX"))
         self.tau_s = max(float(self.params.get("SIH_T_TAU")), 1e-3)
 
     def tick_params(self, dt_s: float) -> bool:
@@ -52,16 +65,18 @@ class Airframe:
     def aero_and_pusher(
         self, dt_s: float, surfaces: SurfacesThrottle
     ) -> tuple[Vec3, Vec3]:
-        """Wing forces/moments plus the lagged pusher thrust, force in body axes."""
+        """Aerodynamic forces/moments plus the lagged pusher thrust, force in body axes."""
         t = self.truth
         v_body = rotate_ned_to_body(t.q_wxyz, t.velocity_ned_m_s)
         t.airspeed_m_s = math.sqrt(v_body[0] ** 2 + v_body[1] ** 2 + v_body[2] ** 2)
         rates = t.rates_body_rad_s
-        force, moment = forces_and_moments(
-            self.wing, v_body, (rates[0], rates[1], rates[2]),
-            surfaces.aileron, surfaces.elevator, surfaces.rudder,
-        )
         self.pusher += (surfaces.throttle - self.pusher) * min(1.0, dt_s / self.tau_s)
+        slipstream_n = self.pusher * float(self.params.get("SIH_T_MAX")) if self.slipstream else 0.0
+        force, moment = self.aero.forces_and_moments(
+            (v_body[0], v_body[1], v_body[2]), (rates[0], rates[1], rates[2]),
+            SIH_LOC_H0_M - t.position_ned_m[2],
+            surfaces.aileron, surfaces.elevator, surfaces.rudder, slipstream_n,
+        )
         return (force[0] + self.pusher * self.pusher_max_n, force[1], force[2]), moment
 
     def integrate(self, dt_s: float, force_body_n: Vec3, moment_body_n_m: Vec3) -> None:
@@ -86,22 +101,23 @@ class Airframe:
         return (force_ned[0] - k * v[0], force_ned[1] - k * v[1], force_ned[2])
 
     def _roll_along_heading(self) -> None:
-        """On the ground the wheels keep the vehicle level and moving along its nose."""
+        """On the ground the wheels keep the wings level and the vehicle moving along its
+        nose; the nose may rise (rotation on the main wheels), never sink below level."""
         t = self.truth
-        q = t.q_wxyz
-        yaw = math.atan2(2.0 * (q[0] * q[3] + q[1] * q[2]), 1.0 - 2.0 * (q[2] ** 2 + q[3] ** 2))
+        _, pitch, yaw = euler_from_quat(t.q_wxyz)
         v = t.velocity_ned_m_s
         forward = max(0.0, v[0] * math.cos(yaw) + v[1] * math.sin(yaw))
         v[0], v[1] = forward * math.cos(yaw), forward * math.sin(yaw)
-        t.q_wxyz[:] = [math.cos(yaw / 2.0), 0.0, 0.0, math.sin(yaw / 2.0)]
-        t.rates_body_rad_s[0] = t.rates_body_rad_s[1] = 0.0
+        w = t.rates_body_rad_s
+        w[0] = 0.0
+        if pitch <= 0.0:
+            pitch = 0.0
+            w[1] = max(0.0, w[1])
+        t.q_wxyz[:] = list(quat_from_euler(0.0, pitch, yaw))
 
     def reset(self, position_ned_m: list[float], yaw_rad: float) -> None:
         self.body.reset(position_ned_m, yaw_rad)
         self.pusher = 0.0
-
-
-PLANE_WING = WingGeometry(area_m2=0.35, span_m=1.5, chord_m=0.24)
 
 
 class FixedWingModel:
@@ -115,7 +131,8 @@ class FixedWingModel:
 
     def __init__(self, params: ParamReader) -> None:
         self.params = params
-        self.frame = Airframe(params, PLANE_WING, wheels=True)
+        # SIH's airplane: the pusher gives SIH_T_MAX
+        self.frame = Airframe(params, pusher_t_max=1.0, slipstream=True, wheels=True)
         self.truth = self.frame.truth
         self.control = FixedWingControl(
             params, self.frame.body.mass_kg, self.frame.pusher_max_n

@@ -5,8 +5,10 @@
   height; done when airspeed ≥ VT_ARSP_TRANS after at least VT_TRANS_MIN_TM (without an
   airspeed sensor, FW_USE_AIRSPD 0: after VT_F_TR_OL_TM); after VT_TRANS_TIMEOUT without
   that, quadchute back to MC.
-- back: pusher off, the rotors brake; done (standard.cpp's exit conditions) once the
-  forward speed (the velocity along the body x axis) is below MPC_XY_CRUISE, once more than
+- back: pusher off; the lift rotors' torque and thrust ramp in over VT_B_TRANS_RAMP while
+  the surfaces hold the wings level, so the airframe's drag does the braking; done
+  (standard.cpp's exit conditions) once the forward speed (the velocity along the body x
+  axis) is below MPC_XY_CRUISE, once more than
   VT_B_TRANS_DUR has passed, or at once when disarmed or landed (can_transition_on_ground).
 """
 
@@ -22,10 +24,8 @@ from sim.lib.quat import euler_from_quat, rotate_ned_to_body, yaw_from_quat
 from sim.lib.topics import ControlSetpoint, LandingStatus, TrajectorySetpoint, VtolState
 from sim.models.fixed_wing import Airframe
 from sim.models.multicopter import RotorSet
-from sim.physics.aero import WingGeometry
 from sim.physics.mixer import Mixer
 
-VTOL_WING = WingGeometry(area_m2=0.55, span_m=1.8, chord_m=0.3)
 MAV_TYPE_VTOL_FIXEDROTOR = 22
 
 
@@ -87,6 +87,15 @@ class VtolTransition:
             self._enter(VtolState.MC)
         return self.state
 
+    def mc_weight(self) -> float:
+        """How much of the multicopter controller's torque and thrust reaches the lift
+        rotors (standard.cpp's mc weights): all of it in MC and in the front transition;
+        in the back transition it ramps in over VT_B_TRANS_RAMP while the surfaces fly."""
+        if self.state != VtolState.TRANSITION_TO_MC:
+            return 1.0
+        ramp_s = self.params.get("VT_B_TRANS_RAMP")
+        return min(1.0, self.elapsed_s / ramp_s) if ramp_s > 1e-6 else 1.0
+
     def back_transition_done(self, forward_speed_m_s: float, disarmed_or_landed: bool) -> bool:
         """PX4's exit from TRANSITION_TO_MC: slow enough, out of time, or on the ground."""
         slow_enough = forward_speed_m_s < self.params.get("MPC_XY_CRUISE")
@@ -103,7 +112,8 @@ class VtolModel:
 
     def __init__(self, params: ParamReader) -> None:
         self.params = params
-        self.frame = Airframe(params, VTOL_WING, wheels=False)
+        # SIH's standard VTOL: the pusher gives 2 × SIH_T_MAX, out of the tail's slipstream
+        self.frame = Airframe(params, pusher_t_max=2.0, slipstream=False, wheels=False)
         self.truth = self.frame.truth
         self.rotors = RotorSet(Mixer("4x"), params)
         self.mc = MulticopterControl(params)
@@ -156,12 +166,12 @@ class VtolModel:
                 self.mc.reset()
             else:
                 mc_setpoint = setpoint if state == VtolState.MC else self._transition_setpoint()
-                lift = self._lift_rotors(dt_s, mc_setpoint)
-                if state == VtolState.TRANSITION_TO_FW:
-                    surfaces = self._wings_level(dt_s)
-                else:
-                    # hovering or braking: the rotors fly, the surfaces stay neutral
+                lift = self._lift_rotors(dt_s, mc_setpoint, self.transition.mc_weight())
+                if state == VtolState.MC:
+                    # hovering: the rotors fly, the surfaces stay neutral
                     self.fw.reset()
+                else:
+                    surfaces = self._wings_level(dt_s)
                 surfaces = surfaces._replace(throttle=self.transition.pusher_throttle)
         else:
             self.mc.reset()
@@ -179,12 +189,16 @@ class VtolModel:
             (moment[0] + roll, moment[1] + pitch, moment[2] + yaw),
         )
 
-    def _lift_rotors(self, dt_s: float, setpoint: ControlSetpoint) -> list[float]:
+    def _lift_rotors(
+        self, dt_s: float, setpoint: ControlSetpoint, weight: float = 1.0
+    ) -> list[float]:
         cmd = self.mc.update(
             dt_s, self.truth, setpoint, self.rotors.hover_thrust(self.frame.body.mass_kg)
         )
         mixer = self.rotors.mixer
-        outputs = mixer.mix(cmd.roll, cmd.pitch, cmd.yaw, cmd.thrust)
+        outputs = mixer.mix(
+            cmd.roll * weight, cmd.pitch * weight, cmd.yaw * weight, cmd.thrust * weight
+        )
         self.mc.mixer_saturated = mixer.saturated
         return outputs
 

@@ -7,12 +7,13 @@ import random
 
 import pytest
 
+from sim.lib.geo import SIH_LOC_H0_M
+from sim.lib.quat import Vec3
 from sim.lib.topics import ControlSetpoint, RatesSetpoint, TrajectorySetpoint
 from sim.models.airframes import AirframeModel, default_params, make_airframe
 from sim.models.sim_run import fly, fly_peak
-from sim.physics.aero import WingGeometry, forces_and_moments, lift_coefficient
+from sim.physics.sih_aero import SihFixedWingAero
 
-WING = WingGeometry(area_m2=0.35, span_m=1.5, chord_m=0.24)
 TRIM_M_S = 15.0
 LOITER_M = 80.0
 
@@ -31,28 +32,36 @@ def _distance_xy(plane: AirframeModel, north_m: float, east_m: float) -> float:
     return math.hypot(p[0] - north_m, p[1] - east_m)
 
 
+def _aero(alpha_deg: float, speed_m_s: float = 15.0, aileron: float = 0.0,
+          elevator: float = 0.0, rudder: float = 0.0) -> tuple[Vec3, Vec3]:
+    a = math.radians(alpha_deg)
+    v = (speed_m_s * math.cos(a), 0.0, speed_m_s * math.sin(a))
+    return SihFixedWingAero().forces_and_moments(
+        v, (0.0, 0.0, 0.0), SIH_LOC_H0_M, aileron, elevator, rudder, 0.0)
+
+
 def test_lift_rises_with_angle_of_attack_then_stalls() -> None:
-    attached = [lift_coefficient(WING, math.radians(a)) for a in (0.0, 4.0, 8.0)]
-    peak = max(lift_coefficient(WING, math.radians(a)) for a in range(8, 16))
-    stalled = lift_coefficient(WING, math.radians(20.0))
-    assert attached[0] == pytest.approx(WING.cl0, abs=1e-3)
+    # SIH's wing: zero lift at -4°, every segment stalls at 20° (aero.hpp's flat plates)
+    lift = {a: -_aero(a)[0][2] for a in range(-4, 31)}
+    assert lift[-4] < 0.0 < lift[0]
+    attached = [lift[a] for a in range(-4, 15)]
     assert attached == sorted(attached)
-    assert stalled < 0.5 * peak
-    assert all(
-        math.isfinite(lift_coefficient(WING, math.radians(a))) for a in range(-180, 181, 5)
-    )
+    assert max(lift.values()) == max(lift[a] for a in range(14, 20))
+    assert lift[30] < 0.8 * max(lift.values())
+    for a in range(-180, 181, 5):
+        force, moment = _aero(a)
+        assert all(math.isfinite(x) for x in (*force, *moment))
 
 
 def test_wing_drag_opposes_motion_and_surfaces_move_the_right_way() -> None:
-    force, _ = forces_and_moments(WING, (15.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0, 0.0, 0.0)
+    force, _ = _aero(0.0)
     assert force[0] < 0.0
     assert force[2] < 0.0  # lift is up (−z body) in level flight
-    _, roll_right = forces_and_moments(WING, (15.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.5, 0.0, 0.0)
-    _, nose_up = forces_and_moments(WING, (15.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0, 0.5, 0.0)
-    _, nose_right = forces_and_moments(WING, (15.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0, 0.0, 0.5)
-    assert roll_right[0] > 0.0
-    assert nose_up[1] > 0.0
-    assert nose_right[2] > 0.0
+    assert _aero(0.0, aileron=0.5)[1][0] > 0.0
+    assert _aero(0.0, elevator=0.5)[1][1] > _aero(0.0)[1][1]
+    assert _aero(0.0, rudder=0.5)[1][2] > 0.0
+    # statically stable in pitch: more angle of attack pitches the nose down
+    assert _aero(6.0)[1][1] < _aero(0.0)[1][1] < _aero(-4.0)[1][1]
 
 
 def test_plane_takes_off_from_the_runway_and_circles_the_target() -> None:
@@ -68,7 +77,10 @@ def test_plane_takes_off_from_the_runway_and_circles_the_target() -> None:
     assert worst_radius < 3.0
     worst_alt = fly_peak(plane, sp, 35.0, lambda: abs(plane.truth.position_ned_m[2] + 30.0))
     assert worst_alt < 1.0
-    assert plane.truth.airspeed_m_s == pytest.approx(TRIM_M_S, abs=1.0)
+    # PX4's SIH airplane cannot hold FW_AIRSPD_TRIM (15 m/s) level: SIH_KDV's drag and the
+    # slipstream over the tail take its 6 N; PX4 v1.16 SITL loiters at 12-13 m/s on 90 %
+    # throttle, the sim at about 14 m/s on full throttle: flying, never stalling
+    assert 10.0 <= plane.truth.airspeed_m_s <= TRIM_M_S + 1.0
     assert plane.in_fixed_wing_flight
 
 

@@ -7,7 +7,13 @@ import struct
 
 from pymavlink.dialects.v20 import development as mavlink
 
-from sim.lib.params import ParamStore, decode_param_value, encode_param_value
+from sim.lib.params import (
+    ParamStore,
+    decode_param_value,
+    encode_param_value,
+    sitl_family_values,
+)
+from sim.models.airframes import param_defaults
 from tests.sim.conftest import Harness
 
 
@@ -37,6 +43,27 @@ def test_airframe_param_defaults_are_merged_into_the_store() -> None:
     store = ParamStore.for_airframe("quad", {"SIH_MASS": 1.0, "MC_ROLL_P": 6.5})
     assert store.get("SIH_MASS") == 1.0
     assert "MC_ROLL_P" in store
+
+
+def test_the_plane_has_no_multicopter_parameters_but_its_code_reads_px4_defaults() -> None:
+    # PX4's airplane runs no mc_pos_control nor multicopter land detector: of the MPC_ and
+    # LNDMC_ families it has only the few MPC_ the shared trajectory code reads
+    plane = ParamStore.for_airframe("plane", param_defaults("plane"))
+    px4_airplane = sitl_family_values("plane")
+    multicopter = [name for name in plane if name.startswith(("MPC_", "LNDMC_"))]
+    assert multicopter
+    assert all(plane.value(name) == px4_airplane[name] for name in multicopter)
+    assert "MPC_LAND_SPEED" not in plane
+    assert "LNDMC_TRIG_TIME" not in plane
+    assert plane.get("MPC_LAND_SPEED") == 0.7
+    assert plane.get("LNDMC_TRIG_TIME") == 1.0
+    # SIH's airplane: no parameter of the sim's own, PX4's SIH_* values
+    assert "SIH_F_T_MAX" not in plane
+    assert (plane.get("SIH_MASS"), plane.get("SIH_T_MAX"), plane.get("SIH_KDV")) == (0.3, 6.0, 0.2)
+    vtol = ParamStore.for_airframe("vtol", param_defaults("vtol"))
+    assert "MPC_LAND_SPEED" in vtol
+    assert (vtol.get("SIH_MASS"), vtol.get("SIH_T_MAX"), vtol.get("SIH_Q_MAX")) == (
+        0.2, 2.0, 0.0165)
 
 
 def test_param_request_list_sends_every_parameter_with_index_and_count(harness: Harness) -> None:

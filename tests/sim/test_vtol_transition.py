@@ -94,10 +94,12 @@ def test_back_transition_returns_to_multicopter() -> None:
     assert _state_of(vtol) == VtolState.TRANSITION_TO_MC
     seen, elapsed = _states_until(vtol, VtolState.MC, 10.0)
     assert seen == [VtolState.TRANSITION_TO_MC, VtolState.MC]
-    # ends on MPC_XY_CRUISE forward speed long before VT_B_TRANS_DUR (PX4 SIH: ≈ 1.1 s)
+    # ends on MPC_XY_CRUISE forward speed long before VT_B_TRANS_DUR (PX4 SIH: ≈ 0.65 s)
     assert elapsed < 3.0
     assert _forward_speed(vtol) < 5.0
-    fly(vtol, HOLD, 25.0)
+    # then flies back from its loiter circle as a multicopter; SIH's 0.2 kg VTOL does so at
+    # about 4 m/s (pitched forward, its wing pushes down and its fin yaws it)
+    fly(vtol, HOLD, 40.0)
     assert math.dist(vtol.truth.position_ned_m, HOLD.position_ned_m) < 1.0
 
 
@@ -241,7 +243,7 @@ def test_back_transition_ends_on_the_first_tick_below_mpc_xy_cruise() -> None:
     faster.values["MPC_XY_CRUISE"] = 8.0
     elapsed_8, speed_before_8, speed_at_8 = _back_transition_from_fixed_wing(faster)
     assert speed_before_8 >= 8.0 > speed_at_8
-    assert elapsed_8 < elapsed - 0.3
+    assert elapsed_8 < 0.7 * elapsed
 
 
 def test_back_transition_ends_at_once_when_disarmed_or_landed() -> None:
