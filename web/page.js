@@ -1,6 +1,7 @@
 // The page's shared state: which vehicle is shown, the sockets, the latest state. One object
 // every module reads and writes, also exposed as window.skyhelm.page for the browser tests.
 
+import { VEHICLE_PATH } from "./calls.js";
 import { Freshness } from "./instruments.js";
 import { Plots } from "./plots.js";
 
@@ -28,7 +29,7 @@ export const page = {
 export function vehiclePath(suffix = "") {
   const v = page.fleetVehicle;
   if (v) return `/fleet/edges/${encodeURIComponent(v.edge)}/vehicles/${v.id}${suffix}`;
-  return `/vehicles/${page.vehicleId}${suffix}`;
+  return VEHICLE_PATH.replace("{vehicle_id}", encodeURIComponent(page.vehicleId)) + suffix;
 }
 
 // Any telemetry field can be picked; these two (with their setpoints) are computed by render.js.
