@@ -12,7 +12,9 @@ import pytest
 from fastapi import APIRouter, routing
 from fastapi.routing import APIRoute
 
+from server.api.ws_control import SOCKET_CALLS
 from server.app import create_app
+from server.control import operations
 from server.http.routing import route
 from skyhelm_wire.calls import API_PREFIX, CALL, CALLS, COMMAND_CALLS, VEHICLE_CALLS
 from tests.api.conftest import make_settings
@@ -120,6 +122,23 @@ def test_a_vehicles_call_is_under_the_vehicle_and_a_servers_under_the_api() -> N
     assert {call.name for call in CALLS} - {call.name for call in VEHICLE_CALLS} == {
         "health", "open_session", "close_session", "page_config", "tile", "vehicles", "audit",
         "signing_status", "set_signing"}  # fmt: skip
+
+
+def test_the_control_socket_takes_the_tables_commands_with_their_bodies() -> None:
+    assert set(SOCKET_CALLS) == {call.name for call in COMMAND_CALLS}
+    for call in COMMAND_CALLS:
+        operation = operations.OPERATIONS.get(call.name) or operations.INTENTS[call.name]
+        assert operation.body is call.body or not operation.body.model_fields, call.name
+
+
+def test_an_operation_off_the_table_fails_at_import(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setitem(operations.OPERATIONS, "speed", operations.OPERATIONS["arm"])
+    with pytest.raises(ImportError, match="speed"):
+        operations.held_to_the_table()
+    monkeypatch.delitem(operations.OPERATIONS, "speed")
+    monkeypatch.setitem(operations.OPERATIONS, "takeoff", operations.OPERATIONS["arm"])
+    with pytest.raises(ImportError, match="takeoff takes ArmBody"):
+        operations.held_to_the_table()
 
 
 def test_the_checked_in_call_table_of_the_page_is_current() -> None:
