@@ -99,8 +99,8 @@ def test_a_route_the_table_does_not_have_is_found_documented_or_not() -> None:
     app = create_app(make_settings(None))
     extra = APIRouter(prefix=API_PREFIX)
 
-    @extra.post("/vehicles/{vehicle_id}/speed")
-    async def speed() -> None: ...
+    @extra.post("/vehicles/{vehicle_id}/off-the-table")
+    async def off_the_table() -> None: ...
 
     @extra.get("/hidden", include_in_schema=False)
     async def hidden() -> None: ...
@@ -110,7 +110,7 @@ def test_a_route_the_table_does_not_have_is_found_documented_or_not() -> None:
 
     app.include_router(extra)
     found = _rest_routes(app.routes) - {(call.method, call.route) for call in CALLS}
-    assert found == {("POST", "/vehicles/{vehicle_id}/speed"), ("GET", "/hidden")}
+    assert found == {("POST", "/vehicles/{vehicle_id}/off-the-table"), ("GET", "/hidden")}
 
 
 def test_a_vehicles_call_is_under_the_vehicle_and_a_servers_under_the_api() -> None:
@@ -132,10 +132,10 @@ def test_the_control_socket_takes_the_tables_commands_with_their_bodies() -> Non
 
 
 def test_an_operation_off_the_table_fails_at_import(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setitem(operations.OPERATIONS, "speed", operations.OPERATIONS["arm"])
-    with pytest.raises(ImportError, match="speed"):
+    monkeypatch.setitem(operations.OPERATIONS, "off_the_table", operations.OPERATIONS["arm"])
+    with pytest.raises(ImportError, match="off_the_table"):
         operations.held_to_the_table()
-    monkeypatch.delitem(operations.OPERATIONS, "speed")
+    monkeypatch.delitem(operations.OPERATIONS, "off_the_table")
     monkeypatch.setitem(operations.OPERATIONS, "takeoff", operations.OPERATIONS["arm"])
     with pytest.raises(ImportError, match="takeoff takes ArmBody"):
         operations.held_to_the_table()
