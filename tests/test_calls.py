@@ -6,7 +6,7 @@ python -m tools.gen_calls_js)."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import Any, get_origin
 
 import pytest
 from fastapi import APIRouter, routing
@@ -16,7 +16,14 @@ from server.api.ws_control import SOCKET_CALLS
 from server.app import create_app
 from server.control import operations
 from server.http.routing import route
-from skyhelm_wire.calls import API_PREFIX, CALL, CALLS, COMMAND_CALLS, VEHICLE_CALLS
+from skyhelm_wire.calls import (
+    API_PREFIX,
+    CALL,
+    CALLS,
+    COMMAND_CALLS,
+    FLEET_VEHICLE_PATH,
+    VEHICLE_CALLS,
+)
 from tests.api.conftest import make_settings
 from tools import gen_calls_js
 
@@ -67,20 +74,30 @@ def _rest_routes(routes: list[Any]) -> set[tuple[str, str]]:
     }  # fmt: skip
 
 
-def test_every_rest_route_is_the_wires_call() -> None:
-    app = create_app(make_settings(None))
+# a fleet server's own calls (--fleet), and the route it runs every call of a vehicle of an
+# edge through (the table's vehicle calls, under FLEET_VEHICLE_PATH), one per method
+FLEET_CALLS = {call.name for call in CALLS if call.path.startswith("fleet")}
+PROXIED = {(call.method, f"{FLEET_VEHICLE_PATH}/{{rest:path}}") for call in VEHICLE_CALLS}
+
+
+@pytest.mark.parametrize("fleet", [False, True], ids=["server", "fleet server"])
+def test_every_rest_route_is_the_wires_call(fleet: bool) -> None:
+    settings = make_settings(None, fleet=True, fleet_name="f1") if fleet else make_settings(None)
+    app = create_app(settings)
     offered = _rest_routes(app.routes)
-    assert offered == {(call.method, call.route) for call in CALLS}, (
-        "a REST route not in skyhelm_wire.calls, or a call with no route"
-    )
+    calls = [call for call in CALLS if fleet or call.name not in FLEET_CALLS]
+    tabled = {(call.method, call.route) for call in calls} | (PROXIED if fleet else set())
+    assert offered == tabled, "a REST route not in skyhelm_wire.calls, or a call with no route"
     document = app.openapi()
     operations = {
         (method.upper(), path.removeprefix(API_PREFIX)): operation
         for path, item in document["paths"].items()
         for method, operation in item.items()
     }  # fmt: skip
-    assert set(operations) == offered
-    for call in CALLS:
+    assert set(operations) == {(method, path.replace(":path}", "}")) for method, path in offered}
+    ids = [operation["operationId"] for operation in operations.values()]
+    assert len(ids) == len(set(ids)), "an operation id twice"
+    for call in calls:
         operation = operations[call.method, call.route]
         body, required, _ = _route_models(operation)
         if call.name != "set_setpoint":  # a union of the setpoint kinds' bodies
@@ -90,6 +107,9 @@ def test_every_rest_route_is_the_wires_call() -> None:
             assert "204" in operation["responses"], call.name
         elif call.answer is bytes:
             assert "application/json" not in operation["responses"]["200"].get("content", {})
+        elif get_origin(call.answer) is dict:  # JSON the table gives no model for
+            ok = operation["responses"]["200"]["content"]["application/json"]["schema"]
+            assert ok["type"] == "object", call.name
         elif call.name != "state":  # the state is sent as the publisher's bytes
             route_answer, call_answer = _answer_name(operation, call.answer)
             assert route_answer == call_answer, call.name
@@ -121,7 +141,7 @@ def test_a_vehicles_call_is_under_the_vehicle_and_a_servers_under_the_api() -> N
     assert all(call.scope == "vehicle" for call in VEHICLE_CALLS)
     assert {call.name for call in CALLS} - {call.name for call in VEHICLE_CALLS} == {
         "health", "open_session", "close_session", "page_config", "tile", "vehicles", "audit",
-        "signing_status", "set_signing"}  # fmt: skip
+        "signing_status", "set_signing", "fleet", "fleet_vehicles", "fleet_vehicle"}  # fmt: skip
 
 
 def test_the_control_socket_takes_the_tables_commands_with_their_bodies() -> None:
@@ -159,7 +179,8 @@ def test_the_page_sends_each_command_as_the_table_says() -> None:
 WEB = Path(__file__).resolve().parent.parent / "web"
 # paths the page could write by hand instead of taking them from calls.js
 PAGE_PATH_LITERALS = ('"/api/v1', '`/api/v1', '"/health"', '"/vehicles"', '"/config"',
-                      '"/session"', '"/control"', '"/params', '"/sticks"', '"/setpoint"')
+                      '"/session"', '"/control"', '"/params', '"/sticks"', '"/setpoint"',
+                      '`/fleet/edges', '"/fleet/edges', '"/fleet/vehicles')
 
 
 def test_the_page_takes_every_path_from_the_generated_table() -> None:

@@ -9,7 +9,8 @@ Every call of the table that ``skyhelm_client.calls.Calls`` does not write by ha
 asyncio one (``AsyncCalls``), named after the call (``Calls.METHOD_NAMES`` renames one):
 its path parameters positional, its body's and query's fields keyword arguments, and its
 answer the table's model, validated (``Answer[Model]``; ``CommandResult`` for a command;
-a list of them for a list; ``bytes`` for a body that is not JSON; None for 204).
+a list of them for a list; ``bytes`` for a body that is not JSON; None for 204; the JSON
+(``Any``) for an answer the table gives no model, e.g. ``dict[str, Any]``).
 """
 
 from __future__ import annotations
@@ -122,6 +123,8 @@ def _answer(call: CallSpec, imports: _Imports) -> tuple[str, str]:
     if get_origin(answer) is list:
         item = imports.add(get_args(answer)[0])
         return f"list[Answer[{item}]]", f"_typed_list(call, {item})"
+    if not (isinstance(answer, type) and issubclass(answer, BaseModel)):
+        return "Any", "_json(call)"  # JSON the table gives no model for, as it is
     model = imports.add(answer)
     return f"Answer[{model}]", f"_typed(call, {model})"
 
@@ -170,6 +173,8 @@ def _client(kind: str, args: tuple[str, ...], asynchronous: bool, imports: _Impo
         f"{wrap('list[Answer[_M]]')}: ...\n\n"
         "    @abstractmethod\n"
         f"    def _bytes(self, call: Call) -> {wrap('bytes')}: ...\n\n"
+        "    @abstractmethod\n"
+        f"    def _json(self, call: Call) -> {wrap('Any')}: ...\n\n"
         f"{methods}"
     )
 

@@ -7,14 +7,15 @@
 import { ApiError, LeaseSession, callApi, unanswered } from "./api.js";
 // the control socket's command names as REST calls, those without a body, and every call's
 // method and path (generated from the wire's call table: python -m tools.gen_calls_js)
-import { COMMANDS, NO_BODY } from "./calls.js";
+import { COMMANDS, FLEET_VEHICLE_PATH, NO_BODY } from "./calls.js";
 
 // renew at a third of the TTL: two renewals may be lost before the lease lapses
 const RENEW_FRACTION = 1 / 3;
 
-/** "/fleet/edges/edge-a/vehicles/1" */
+/** The fleet server's path of the vehicle of an edge (FLEET_VEHICLE_PATH filled in). */
 function fleetVehiclePath(vehicle, suffix = "") {
-  return `/fleet/edges/${encodeURIComponent(vehicle.edge)}/vehicles/${vehicle.id}${suffix}`;
+  return FLEET_VEHICLE_PATH.replace("{edge}", encodeURIComponent(vehicle.edge))
+    .replace("{vehicle_id}", encodeURIComponent(vehicle.id)) + suffix;
 }
 
 export class FleetControlSession extends LeaseSession {

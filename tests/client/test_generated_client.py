@@ -55,6 +55,8 @@ def _answer_model(annotation: Any) -> Any:
         return bytes
     if get_origin(annotation) is list:
         return list[_answer_model(get_args(annotation)[0])]  # type: ignore[misc]
+    if annotation is Any:  # JSON the table gives no model for, as it is
+        return Any
     assert get_origin(annotation) is Answer, annotation
     return get_args(annotation)[0]
 
@@ -69,6 +71,9 @@ def test_every_call_is_a_method_answering_the_tables_model(client: type[Any]) ->
         answer = get_type_hints(method)["return"]
         if client is AsyncSkyHelm:  # Coroutine[Any, Any, answer]
             answer = get_args(answer)[2]
+        if _answer_model(answer) is Any:
+            assert get_origin(call.answer) is dict, call.name
+            continue
         assert _answer_model(answer) == call.answer, (call.name, answer)
 
 

@@ -19,6 +19,7 @@ from pydantic import BaseModel, Field
 
 from skyhelm_wire import commands, control, intents, params, sticks
 from skyhelm_wire.common import HealthOut
+from skyhelm_wire.fleet import FleetOut, FleetVehicleOut, FleetVehiclePath
 from skyhelm_wire.page import PageConfigOut, SessionOut
 from skyhelm_wire.setpoints import SentSetpointOut, SetpointBody
 from skyhelm_wire.signing import SigningBody, SigningStatusOut
@@ -26,6 +27,8 @@ from skyhelm_wire.state import StreamOut, VehicleStateOut, VehicleSummaryOut
 
 API_PREFIX = "/api/v1"
 VEHICLE_PATH = "/vehicles/{vehicle_id}"
+# a fleet server runs every call of a vehicle of an edge under this path (+ the call's path)
+FLEET_VEHICLE_PATH = "/fleet/edges/{edge}" + VEHICLE_PATH
 Method = Literal["GET", "POST", "PUT", "DELETE"]
 # who may make a call: no token ("open"), any token (the vehicle known; connected for
 # "connected"), the pilot token ("pilot": the lease's own calls and the server's settings),
@@ -176,6 +179,11 @@ CALLS: tuple[CallSpec, ...] = (
              intents.GotoIntentBody, True),
     _server("signing_status", "GET", "signing", "read", SigningStatusOut),
     _server("set_signing", "POST", "signing", "pilot", SigningStatusOut, SigningBody),
+    # a fleet server's (--fleet) own reads
+    _server("fleet", "GET", "fleet", "read", FleetOut),
+    _server("fleet_vehicles", "GET", "fleet/vehicles", "read", list[FleetVehicleOut]),
+    _server("fleet_vehicle", "GET", FLEET_VEHICLE_PATH.removeprefix("/"), "read", dict[str, Any],
+            path_params=FleetVehiclePath),
 )
 CALL: dict[str, CallSpec] = {call.name: call for call in CALLS}
 # the calls of one vehicle, each under /vehicles/{vehicle_id} (what the fleet edge serves)

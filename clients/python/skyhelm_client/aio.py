@@ -84,6 +84,9 @@ class AsyncSkyHelm(AsyncCalls):
     async def _typed_list(self, call: Call, model: type[_M]) -> list[Answer[_M]]:
         return [Answer(item, model) for item in (await self._send(call))[1]]
 
+    async def _json(self, call: Call) -> Any:
+        return (await self._send(call))[1]
+
     async def _bytes(self, call: Call) -> bytes:
         return bytes((await self._send(call))[1])
 

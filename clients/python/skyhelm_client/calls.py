@@ -225,7 +225,7 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Value, _None, _Intent, _Sent, _P
         vehicle); the pilot's and the control calls carry the lease id."""
         spec = CALL[name]
         values = {key: quote(value, safe="") for key, value in (path or {}).items()}
-        where = spec.route.format(vehicle_id=self.vehicle_id, **values)
+        where = spec.route.format(**{"vehicle_id": str(self.vehicle_id), **values})
         return Call(
             spec.method, where, body, params or {},
             control=spec.access in ("pilot", "control"), lease=lease, pick=pick,

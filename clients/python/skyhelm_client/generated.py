@@ -15,6 +15,7 @@ from skyhelm_client.calls import Call, Calls, given, query
 from skyhelm_client.models import Answer, CommandResult, Lease, ParamValues, State
 from skyhelm_wire.common import HealthOut
 from skyhelm_wire.control import AuditEntryOut, ControlStatusOut, TakeoverAnswerOut
+from skyhelm_wire.fleet import FleetOut, FleetVehicleOut
 from skyhelm_wire.intents import IntentOut
 from skyhelm_wire.page import PageConfigOut, SessionOut
 from skyhelm_wire.params import ParamMetadataOut
@@ -48,6 +49,9 @@ class SyncCalls(
 
     @abstractmethod
     def _bytes(self, call: Call) -> bytes: ...
+
+    @abstractmethod
+    def _json(self, call: Call) -> Any: ...
 
     def health(
         self,
@@ -216,6 +220,36 @@ class SyncCalls(
         )
         return self._typed(call, SigningStatusOut)
 
+    def fleet(
+        self,
+    ) -> Answer[FleetOut]:
+        """GET /api/v1/fleet"""
+        call = self._named(
+            "fleet",
+        )
+        return self._typed(call, FleetOut)
+
+    def fleet_vehicles(
+        self,
+    ) -> list[Answer[FleetVehicleOut]]:
+        """GET /api/v1/fleet/vehicles"""
+        call = self._named(
+            "fleet_vehicles",
+        )
+        return self._typed_list(call, FleetVehicleOut)
+
+    def fleet_vehicle(
+        self,
+        edge: str,
+        vehicle_id: int,
+    ) -> Any:
+        """GET /api/v1/fleet/edges/{edge}/vehicles/{vehicle_id}"""
+        call = self._named(
+            "fleet_vehicle",
+            path={"edge": str(edge), "vehicle_id": str(vehicle_id)},
+        )
+        return self._json(call)
+
 
 class AsyncCalls(
     Calls[
@@ -239,6 +273,9 @@ class AsyncCalls(
 
     @abstractmethod
     def _bytes(self, call: Call) -> Coroutine[Any, Any, bytes]: ...
+
+    @abstractmethod
+    def _json(self, call: Call) -> Coroutine[Any, Any, Any]: ...
 
     def health(
         self,
@@ -406,3 +443,33 @@ class AsyncCalls(
             given(action=action),
         )
         return self._typed(call, SigningStatusOut)
+
+    def fleet(
+        self,
+    ) -> Coroutine[Any, Any, Answer[FleetOut]]:
+        """GET /api/v1/fleet"""
+        call = self._named(
+            "fleet",
+        )
+        return self._typed(call, FleetOut)
+
+    def fleet_vehicles(
+        self,
+    ) -> Coroutine[Any, Any, list[Answer[FleetVehicleOut]]]:
+        """GET /api/v1/fleet/vehicles"""
+        call = self._named(
+            "fleet_vehicles",
+        )
+        return self._typed_list(call, FleetVehicleOut)
+
+    def fleet_vehicle(
+        self,
+        edge: str,
+        vehicle_id: int,
+    ) -> Coroutine[Any, Any, Any]:
+        """GET /api/v1/fleet/edges/{edge}/vehicles/{vehicle_id}"""
+        call = self._named(
+            "fleet_vehicle",
+            path={"edge": str(edge), "vehicle_id": str(vehicle_id)},
+        )
+        return self._json(call)

@@ -86,6 +86,9 @@ class SkyHelm(SyncCalls):
     def _typed_list(self, call: Call, model: type[_M]) -> list[Answer[_M]]:
         return [Answer(item, model) for item in self._send(call)[1]]
 
+    def _json(self, call: Call) -> Any:
+        return self._send(call)[1]
+
     def _bytes(self, call: Call) -> bytes:
         return bytes(self._send(call)[1])
 
