@@ -65,13 +65,9 @@ def setpoint_json(setpoint: SetpointKind | Mapping[str, Any]) -> dict[str, Any]:
     return {key: value for key, value in body.items() if value is not None}
 
 
-def _given(**values: Any) -> dict[str, Any]:
-    return {key: value for key, value in values.items() if value is not None}
-
-
 def given(**values: Any) -> dict[str, Any]:
     """The arguments that were given (not None), as the JSON body named after them."""
-    return _given(**values)
+    return {key: value for key, value in values.items() if value is not None}
 
 
 def query(**values: Any) -> dict[str, str]:
@@ -97,7 +93,7 @@ def json_text(value: Any) -> str:
 def _arguments(values: dict[str, Any]) -> dict[str, Any]:
     """A method's arguments (its ``locals()`` on entry) that were given, as the JSON body
     whose fields they are named after."""
-    return _given(**{key: value for key, value in values.items() if key != "self"})
+    return given(**{key: value for key, value in values.items() if key != "self"})
 
 
 @dataclass
@@ -292,7 +288,7 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Value, _None, _Intent, _Sent, _P
 
     def takeoff(self, *, altitude_m: float | None = None) -> _Cmd:
         """Climb to ``altitude_m`` above home (default: the vehicle's MIS_TAKEOFF_ALT)."""
-        return self._command(self._named("takeoff", _given(altitude_m=altitude_m)))
+        return self._command(self._named("takeoff", given(altitude_m=altitude_m)))
 
     def land(self) -> _Cmd:
         return self._command(self._named("land"))
