@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any, get_args, get_origin, get_type_hints
 
 import pytest
+from pydantic import ValidationError
 
 from skyhelm_client import AsyncSkyHelm, CommandResult, SkyHelm
 from skyhelm_client.calls import Calls
@@ -102,3 +103,14 @@ def test_the_table_made_calls_answer_validated_models(served: Served) -> None:
             assert [entry.model.kind for entry in await sky.audit(limit=1)]
 
     asyncio.run(read())
+
+
+def test_a_picked_answer_is_validated_whole_with_the_tables_model() -> None:
+    with SkyHelm("http://127.0.0.1:9/?token=t") as sky:  # nothing is sent
+        call = sky._named("param", path={"name": "MIS_TAKEOFF_ALT"}, pick="value")
+        assert call.path == "/vehicles/1/params/MIS_TAKEOFF_ALT"
+        assert sky._answer(call, 200, {"name": "MIS_TAKEOFF_ALT", "value": 2.5}) == 2.5
+        with pytest.raises(ValidationError, match="name"):  # the server dropped a field
+            sky._answer(call, 200, {"value": 2.5})
+        with pytest.raises(ValidationError):
+            sky._answer(sky._named("params", pick="params"), 200, {"params": {"A": "x"}})

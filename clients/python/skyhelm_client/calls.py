@@ -48,7 +48,8 @@ LeaseEffect = Literal["keep", "grant", "drop"]
 @dataclass(frozen=True)
 class Call:
     """One HTTP request. ``control`` calls carry the lease id; ``lease`` says what the
-    answer does to the lease the client holds; ``pick`` takes one key of the answer."""
+    answer does to the lease the client holds; ``pick`` takes one key of the answer, once
+    the whole answer is validated with ``model`` (the table's answer model)."""
 
     method: str
     path: str
@@ -57,6 +58,7 @@ class Call:
     control: bool = False
     lease: LeaseEffect = "keep"
     pick: str | None = None
+    model: Any = None
 
 
 def setpoint_json(setpoint: SetpointKind | Mapping[str, Any]) -> dict[str, Any]:
@@ -197,7 +199,11 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Value, _None, _Intent, _Sent, _P
             self._lease_gone()
         if call.control and self.lease is not None:
             self._renewed_at = self._now()
-        return body[call.pick] if call.pick is not None else body
+        if call.pick is None:
+            return body
+        if call.model is not None:
+            call.model.model_validate(body)
+        return body[call.pick]
 
     def _lease_gone(self) -> None:
         self.lease = None
@@ -225,6 +231,7 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Value, _None, _Intent, _Sent, _P
         return Call(
             spec.method, where, body, params or {},
             control=spec.access in ("pilot", "control"), lease=lease, pick=pick,
+            model=spec.answer if pick is not None else None,
         )  # fmt: skip
 
     # -- reads ------------------------------------------------------------------------
