@@ -54,11 +54,10 @@ from server.link.codec.urls import parse_link_url
 from server.scene import FleetScene, SceneHub
 from server.settings import Settings
 from server.simproc import SimProcess
+from skyhelm_wire.calls import API_PREFIX
 from skyhelm_wire.messages import SceneClickMessage
 
 log = logging.getLogger(__name__)
-
-API_PREFIX = "/api/v1"
 
 
 class StartupError(RuntimeError):

@@ -29,6 +29,7 @@ from pydantic_settings import (
 
 from server.link.codec.urls import LinkUrlError, parse_link_url
 from server.link.stream.streamer import DEFAULT_RATE_HZ, MAX_RATE_HZ, MIN_RATE_HZ
+from skyhelm_wire.fleet import FLEET_NAME_PATTERN
 
 OperatorLossAction = Literal["hold", "land", "rtl", "hold-mode", "continue"]
 Airframe = Literal["quad", "hexa", "octo", "plane", "vtol", "rover"]
@@ -66,9 +67,6 @@ def tile_origin(url: str | None) -> str | None:
         host = "*." + host.split(".", 1)[1] if "." in host else host
     return f"{parts.scheme}://{host}"
 
-
-# A fleet or edge name is one Zenoh key chunk: no separators or wildcards.
-FLEET_NAME_PATTERN = r"^[A-Za-z0-9_-]{1,64}$"
 
 
 def _default_web_dir() -> Path | None:

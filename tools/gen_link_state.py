@@ -9,7 +9,10 @@ Each wire model becomes a frozen dataclass the link fills and the API encodes as
 and descriptions. The link's types are the wire's with these rules: a list is a tuple (a
 snapshot is immutable), a `FloatNaN` is a float (NaN while unknown, null in JSON), a wire
 model is its snapshot class, and the few names the API spells differently (`type`, `global`)
-or adds around the snapshot (`id`, `lease`) are mapped in FIELDS below.
+or adds around the snapshot (`id`, `lease`) are mapped in FIELDS below. The names the API
+writes a renamed field under are the wire's (its alias, or its name), written out as
+`API_NAMES` for the API's encoding (`server/control/views.py`), so a name the API shows is
+spelt in the wire model only.
 """
 
 from __future__ import annotations
@@ -153,6 +156,22 @@ def _fields(model: type[BaseModel], name: str) -> list[tuple[str, str, str | Non
     return rows
 
 
+def api_names() -> dict[str, str]:
+    """The snapshot's field -> the name the API writes it under, for the fields FIELDS
+    renames: the wire field's alias, or its name. Only the top class may rename (the API's
+    encoding aliases that class's fields)."""
+    names: dict[str, str] = {}
+    for model, name in CLASSES:
+        for wire_name, mapped in FIELDS.get(name, {}).items():
+            if mapped is None or mapped[0] == wire_name:
+                continue
+            if name != "VehicleState":
+                raise TypeError(f"{name}.{wire_name}: only VehicleState's fields may be renamed")
+            info = model.model_fields[wire_name]
+            names[mapped[0]] = info.serialization_alias or info.alias or wire_name
+    return names
+
+
 def _class(model: type[BaseModel], name: str) -> list[str]:
     frozen = "frozen=True, kw_only=True" if name in KW_ONLY else "frozen=True"
     lines = ["", "", f"@dataclass({frozen})", f"class {name}:"]
@@ -183,8 +202,16 @@ def generate() -> str:
         *imports,
     ]
     body = [line for model, name in CLASSES for line in _class(model, name)]
-    names = "".join(f'    "{name}",\n' for name in sorted(name for _, name in CLASSES))
-    text = "\n".join(head + body) + f"\n\n\n__all__ = [\n{names}]\n"
+    names = "".join(f'    "{name}",\n' for name in sorted(["API_NAMES", *(n for _, n in CLASSES)]))
+    aliases = "".join(f'    "{link}": "{api}",\n' for link, api in api_names().items())
+    api = [
+        "",
+        "",
+        "# VehicleState's fields the API writes under the wire's name for them (its alias or",
+        "# its field name), where the snapshot's differs",
+        f"API_NAMES: dict[str, str] = {{\n{aliases}}}",
+    ]
+    text = "\n".join(head + body + api) + f"\n\n\n__all__ = [\n{names}]\n"
     # as ruff formats it, so the checked-in file passes `ruff format --check`
     ruff = Path(sys.executable).with_name("ruff")
     formatted = subprocess.run(

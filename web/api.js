@@ -1,7 +1,9 @@
 // The public SkyHelm API as the page uses it: REST with the bearer token, the telemetry
 // socket and the pilot's control socket, both reconnecting by themselves.
 
-const API = "/api/v1";
+// every call's method and path: the wire's table (python -m tools.gen_calls_js)
+import { API_PREFIX as API, route } from "./calls.js";
+
 const TOKEN_KEY = "skyhelm.token";
 
 /** The token arrives once, in the URL the server printed (?token=…). It leaves the address
@@ -92,13 +94,22 @@ export async function request(method, path, body, extraHeaders = {}) {
   return data;
 }
 
+/** The call `name` of the wire's call table (calls.js): a server's call, or a vehicle's
+ * under `vehicle`, the vehicle's path (vehiclePath() of page.js); `params` fills the path's
+ * {parameters}. */
+export function callApi(name, { vehicle = "", params, body, headers } = {}) {
+  const [method, path] = route(name, params);
+  return request(method, vehicle + path, body, headers);
+}
+
 // The session cookie (HttpOnly, SameSite=Strict) for the sockets and the scene, set by
 // POST /session with the Bearer token; asked again after a failure.
 let session = null;
 
 export function ensureSession() {
   if (!session) {
-    session = fetch(`${API}/session`, { method: "POST", headers: { Authorization: `Bearer ${token}` } })
+    const [method, path] = route("open_session");
+    session = fetch(API + path, { method, headers: { Authorization: `Bearer ${token}` } })
       .then((response) => {
         if (response.status === 401) reject("the server rejected the token");
         if (!response.ok) throw new Error(`session: HTTP ${response.status}`);

@@ -3,7 +3,7 @@
 // vehicle list and clicks in the 3D scene all come on the telemetry socket.
 
 import { Alerts, alertLog } from "./alerts.js";
-import { TelemetrySocket, onTokenRejected, reconnectDelayMs, request, token } from "./api.js";
+import { TelemetrySocket, callApi, onTokenRejected, reconnectDelayMs, token } from "./api.js";
 import {
   brake, confirmThen, followAgain, goByOffset, goTo, keyboard, runCommand, showResult,
   showSetpointType, startOffboard,
@@ -144,7 +144,7 @@ function reloadAfterReconnect() {
 
 async function loadServerMode() {
   try {
-    page.readOnly = Boolean((await request("GET", "/health")).read_only);
+    page.readOnly = Boolean((await callApi("health")).read_only);
   } catch (err) {
     log("ERROR", `server health: ${err.message}`);
     return;
@@ -158,7 +158,7 @@ async function loadServerMode() {
 // Once at start; after that the telemetry socket brings the list whenever it changes.
 async function loadVehicles() {
   try {
-    showVehicles(await request("GET", "/vehicles"));
+    showVehicles(await callApi("vehicles"));
   } catch (err) {
     log("ERROR", `vehicle list: ${err.message}`);
     // the telemetry socket brings the list when the server answers

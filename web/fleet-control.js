@@ -1,20 +1,21 @@
 // Flying a fleet vehicle: the same interface as the control socket's ControlSession (api.js),
 // over the fleet server's proxied REST routes (/api/v1/fleet/edges/{edge}/vehicles/{id}/…),
 // so every panel of the page flies a vehicle of another edge exactly as a local one. The
-// lease is REST's: taken with POST /control, carried as X-Lease-Id on every call (which
-// renews it) and renewed with PUT /control while the tab is open; the edge checks all of it.
+// lease is REST's: taken with the acquire call, carried as X-Lease-Id on every call (which
+// renews it) and renewed with the renew call while the tab is open; the edge checks all of it.
 
-import { ApiError, LeaseSession, request, unanswered } from "./api.js";
-// the control socket's command names as REST calls, and those without a body (generated
-// from the wire's call table: python -m tools.gen_calls_js)
-import { COMMANDS, NO_BODY } from "./calls.js";
+import { ApiError, LeaseSession, callApi, unanswered } from "./api.js";
+// the control socket's command names as REST calls, those without a body, and every call's
+// method and path (generated from the wire's call table: python -m tools.gen_calls_js)
+import { COMMANDS, FLEET_VEHICLE_PATH, NO_BODY } from "./calls.js";
 
 // renew at a third of the TTL: two renewals may be lost before the lease lapses
 const RENEW_FRACTION = 1 / 3;
 
-/** "/fleet/edges/edge-a/vehicles/1" */
+/** The fleet server's path of the vehicle of an edge (FLEET_VEHICLE_PATH filled in). */
 function fleetVehiclePath(vehicle, suffix = "") {
-  return `/fleet/edges/${encodeURIComponent(vehicle.edge)}/vehicles/${vehicle.id}${suffix}`;
+  return FLEET_VEHICLE_PATH.replace("{edge}", encodeURIComponent(vehicle.edge))
+    .replace("{vehicle_id}", encodeURIComponent(vehicle.id)) + suffix;
 }
 
 export class FleetControlSession extends LeaseSession {
@@ -27,15 +28,20 @@ export class FleetControlSession extends LeaseSession {
     this.acquire({ client_name: clientName, ...(takeover ? { takeover: true } : {}), ...(force ? { force: true } : {}) });
   }
 
-  path(suffix) {
+  path(suffix = "") {
     return fleetVehiclePath(this.vehicle, suffix);
+  }
+
+  /** The call `name` of the wire's table on this vehicle, through its edge. */
+  leaseCall(name, body, leaseId) {
+    return callApi(name, { vehicle: this.path(), body, headers: leaseId ? { "X-Lease-Id": leaseId } : {} });
   }
 
   async acquire(body) {
     try {
-      const lease = await request("POST", this.path("/control"), body);
+      const lease = await this.leaseCall("acquire", body);
       if (this.ended) { // closed while the edge was answering: give it back
-        request("DELETE", this.path("/control"), undefined, { "X-Lease-Id": lease.lease_id }).catch(() => {});
+        this.leaseCall("release", undefined, lease.lease_id).catch(() => {});
         return;
       }
       this.scheduleRenew(lease.ttl_s);
@@ -57,7 +63,7 @@ export class FleetControlSession extends LeaseSession {
   async renew() {
     if (this.ended || !this.leaseId) return;
     try {
-      const lease = await request("PUT", this.path("/control"), {}, { "X-Lease-Id": this.leaseId });
+      const lease = await this.leaseCall("renew", {}, this.leaseId);
       this.holder = lease.holder;
       this.scheduleRenew(lease.ttl_s);
     } catch (err) {
@@ -87,10 +93,12 @@ export class FleetControlSession extends LeaseSession {
     return !this.ended && this.leaseId !== null;
   }
 
-  async call(method, suffix, body) {
+  /** The call `name` (with its path's `params`) under the lease: its answer as the control
+   * socket's. */
+  async call(name, body, params) {
     if (!this.open) return unanswered("not in control");
     try {
-      const answer = await request(method, this.path(suffix), body, { "X-Lease-Id": this.leaseId });
+      const answer = await callApi(name, { vehicle: this.path(), params, body, headers: { "X-Lease-Id": this.leaseId } });
       this.scheduleRenew(this.lease?.ttl_s); // every control call renews the lease
       return { ok: true, status: 200, body: answer };
     } catch (err) {
@@ -102,34 +110,32 @@ export class FleetControlSession extends LeaseSession {
 
   /** A command or an intent, by its control-socket name. */
   command(name, args = {}) {
-    const route = COMMANDS[name];
-    if (!route) return Promise.resolve({ ok: false, status: 422, body: { detail: { reason: `unknown command ${name}`, field: "name" } } });
-    const [method, suffix] = route;
-    return this.call(method, suffix, NO_BODY.has(name) ? undefined : args);
+    if (!COMMANDS[name]) return Promise.resolve({ ok: false, status: 422, body: { detail: { reason: `unknown command ${name}`, field: "name" } } });
+    return this.call(name, NO_BODY.has(name) ? undefined : args);
   }
 
   setpoint(setpoint) {
-    return this.call("PUT", "/setpoint", setpoint);
+    return this.call("set_setpoint", setpoint);
   }
 
-  /** The control socket's other messages: sticks (PUT / DELETE /sticks). */
+  /** The control socket's other messages: sticks (fly_sticks / stop_sticks). */
   send(message) {
     if (message.type === "command") return this.command(message.name, message.args);
     if (message.type === "setpoint") return this.setpoint(message.setpoint);
     if (message.type === "sticks") {
-      return message.stop ? this.call("DELETE", "/sticks") : this.call("PUT", "/sticks", message.sticks);
+      return message.stop ? this.call("stop_sticks") : this.call("fly_sticks", message.sticks);
     }
     return Promise.resolve(unanswered(`not over the fleet: ${message.type}`, 422));
   }
 
   answerTakeover(requestId, grant) {
-    return this.call("POST", `/control/requests/${encodeURIComponent(requestId)}`, { grant });
+    return this.call("answer_takeover", { grant }, { request_id: requestId });
   }
 
   close() {
     if (this.ended) return;
     const leaseId = this.leaseId;
     this.finish({ code: 1000, byUs: true });
-    if (leaseId) request("DELETE", this.path("/control"), undefined, { "X-Lease-Id": leaseId }).catch(() => {});
+    if (leaseId) this.leaseCall("release", undefined, leaseId).catch(() => {});
   }
 }

@@ -5,7 +5,7 @@
 // proxied REST routes (fleet-control.js). All fleet vehicles are drawn on the 2D map.
 
 import {
-  CLOSE_UNAUTHORIZED, ensureSession, reconnectDelayMs, request, socketUrl, tokenRejected,
+  CLOSE_UNAUTHORIZED, callApi, ensureSession, reconnectDelayMs, socketUrl, tokenRejected,
 } from "./api.js";
 import { age } from "./format.js";
 import { page } from "./page.js";
@@ -60,7 +60,7 @@ export class FleetView {
   async start() {
     let config = null;
     try {
-      config = await request("GET", "/config");
+      config = await callApi("page_config");
     } catch {
       return false;
     }

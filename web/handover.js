@@ -3,7 +3,7 @@
 // what the page shows when control is taken from it.
 
 import {
-  CLOSE_NOT_FOUND, ControlSession, describeError, reconnectDelayMs, request,
+  CLOSE_NOT_FOUND, ControlSession, callApi, describeError, reconnectDelayMs,
 } from "./api.js";
 import { setAttr } from "./draw.js";
 import { FleetControlSession } from "./fleet-control.js";
@@ -55,8 +55,10 @@ export async function setClientLabel(text) {
   log("NOTICE", `this tab is called "${clientName()}"`);
   if (!inControl()) return;
   try {
-    const lease = await request("PUT", vehiclePath("/control"), { client_name: clientName() },
-      { "X-Lease-Id": page.control.leaseId });
+    const lease = await callApi("renew", {
+      vehicle: vehiclePath(), body: { client_name: clientName() },
+      headers: { "X-Lease-Id": page.control.leaseId },
+    });
     page.control.holder = lease.holder;
     renderHolder();
   } catch (err) {
@@ -289,7 +291,7 @@ export function shortHolder(holder) {
 // The state names the holder; since when, and over which session, the control resource says.
 async function readHolderSince(holder) {
   try {
-    const status = await request("GET", vehiclePath("/control"));
+    const status = await callApi("control_status", { vehicle: vehiclePath() });
     if (status.holder !== holder || shownHolder.name !== holder) return;
     if (Number.isFinite(status.since_s)) shownHolder.since = Date.now() - status.since_s * 1000;
     shownHolder.session = status.session;

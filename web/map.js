@@ -4,7 +4,7 @@
 // panel). Offline it draws a metre grid around home with a scale bar and a north arrow; with
 // the server's map_tile_url (GET /config) it shows those tiles instead.
 
-import { TelemetrySocket, request } from "./api.js";
+import { TelemetrySocket, callApi } from "./api.js";
 import { altitudeAllowed, runCommand } from "./control.js";
 import { Painter, setAttr, setStyle } from "./draw.js";
 import { inControl } from "./handover.js";
@@ -331,7 +331,7 @@ export class VehicleMap {
   async loadConfig() {
     let config = null;
     try {
-      config = await request("GET", "/config");
+      config = await callApi("page_config");
     } catch {
       return null; // an older server: the grid
     }

@@ -3,7 +3,10 @@
 // from the API's /openapi.json (built from the link's one definition); this module only says
 // which kind each panel type sends, how a field is shown, and the sliders' display ranges.
 
-const SETPOINT_PATH = "/api/v1/vehicles/{vehicle_id}/setpoint";
+import { API_PREFIX, CALLS, VEHICLE_PATH } from "./calls.js";
+
+// the PUT setpoint route as /openapi.json names it
+const SETPOINT_PATH = `${API_PREFIX}${VEHICLE_PATH}/${CALLS.set_setpoint[1]}`;
 
 // How a panel shows an API field: under another key and label, as api = scale·value (+ the
 // home's down_m when fromHome: altitudes above home), in another unit.

@@ -1,6 +1,7 @@
 // The page's shared state: which vehicle is shown, the sockets, the latest state. One object
 // every module reads and writes, also exposed as window.skyhelm.page for the browser tests.
 
+import { FLEET_VEHICLE_PATH, VEHICLE_PATH } from "./calls.js";
 import { Freshness } from "./instruments.js";
 import { Plots } from "./plots.js";
 
@@ -27,8 +28,11 @@ export const page = {
 /** The REST path of the selected vehicle: its own, or the fleet server's proxy to its edge. */
 export function vehiclePath(suffix = "") {
   const v = page.fleetVehicle;
-  if (v) return `/fleet/edges/${encodeURIComponent(v.edge)}/vehicles/${v.id}${suffix}`;
-  return `/vehicles/${page.vehicleId}${suffix}`;
+  if (v) {
+    return FLEET_VEHICLE_PATH.replace("{edge}", encodeURIComponent(v.edge))
+      .replace("{vehicle_id}", encodeURIComponent(v.id)) + suffix;
+  }
+  return VEHICLE_PATH.replace("{vehicle_id}", encodeURIComponent(page.vehicleId)) + suffix;
 }
 
 // Any telemetry field can be picked; these two (with their setpoints) are computed by render.js.

@@ -5,7 +5,7 @@
 // vehicle echoed is shown. Observers read: the edit controls are `.ctl`, enabled only for
 // the tab in control (handover.js).
 
-import { request } from "./api.js";
+import { callApi } from "./api.js";
 import { confirmAction } from "./confirm.js";
 import { updateControls } from "./handover.js";
 import { page, vehiclePath } from "./page.js";
@@ -123,8 +123,8 @@ export class ParamEditor {
     this.summary.textContent = "reading parameters…";
     const needMetadata = Object.keys(this.metadata).length === 0;
     const [values, metadata] = await Promise.allSettled([
-      request("GET", vehiclePath("/params")),
-      needMetadata ? request("GET", vehiclePath("/params/metadata")) : Promise.resolve(null),
+      callApi("params", { vehicle: vehiclePath() }),
+      needMetadata ? callApi("param_metadata", { vehicle: vehiclePath() }) : Promise.resolve(null),
     ]);
     if (key !== this.vehicleKey) return; // another vehicle was chosen meanwhile
     if (values.status === "fulfilled") {
@@ -287,8 +287,10 @@ export class ParamEditor {
     if (!ok) return;
     this.say(`${name}: sent, waiting for the vehicle…`, "pending");
     try {
-      const answer = await request("PUT", vehiclePath(`/params/${name}`), { value },
-        { "X-Lease-Id": page.control?.leaseId || "" });
+      const answer = await callApi("set_param", {
+        vehicle: vehiclePath(), params: { name }, body: { value },
+        headers: { "X-Lease-Id": page.control?.leaseId || "" },
+      });
       this.values[name] = answer.value;
       const shown = `${formatValue(answer.value, info)}${unit}`;
       const text = `${name} = ${shown} (the vehicle's echo)${changedFromDefault(answer.value, info) ? ", changed from the default" : ""}`;

@@ -24,7 +24,7 @@ from server.control.lease import (
     UnknownRequest,
 )
 from server.control.lease_ops import AskerGone, lease_out, unless_gone
-from server.control.operations import INTENT_NAMES, OPERATIONS, run_intent, sent_out
+from server.control.operations import OPERATIONS, run_command, run_intent, sent_out
 from server.control.vehicle_ops import fly_sticks, stop_sticks
 from server.http.context import ApiContext
 from server.http.errors import (
@@ -35,7 +35,6 @@ from server.http.errors import (
     non_finite_field,
     refuse_non_finite,
 )
-from server.http.schemas import SetpointBody
 from server.http.ws_common import (
     CLOSE_BAD_REQUEST,
     CLOSE_LEASE_HELD,
@@ -46,12 +45,30 @@ from server.http.ws_common import (
     close_socket,
 )
 from server.link import Vehicle
-from skyhelm_wire.sticks import SticksBody
+from skyhelm_wire.calls import CALL, COMMAND_CALLS, CallSpec
+from skyhelm_wire.intents import IntentOut
 
 log = logging.getLogger(__name__)
 
 router = APIRouter()
-_setpoint_adapter: TypeAdapter[Any] = TypeAdapter(SetpointBody)
+# what the socket takes, as the wire's calls: the commands and intents made under the lease
+# (which the socket holds) by name, the setpoint's and the sticks' bodies
+SOCKET_CALLS: dict[str, CallSpec] = {
+    call.name: call for call in COMMAND_CALLS if call.access == "control"
+}
+_UNKNOWN_COMMAND = "unknown command; one of " + ", ".join(
+    [*(c.name for c in COMMAND_CALLS if c.answer is not IntentOut),
+     *sorted(c.name for c in COMMAND_CALLS if c.answer is IntentOut)]
+)  # fmt: skip
+
+
+def _body_adapter(name: str) -> TypeAdapter[Any]:
+    body: Any = CALL[name].body
+    return TypeAdapter(body)
+
+
+_setpoint_adapter = _body_adapter("set_setpoint")
+_sticks_adapter = _body_adapter("fly_sticks")
 
 
 @router.websocket("/ws/control")
@@ -304,7 +321,7 @@ class _ControlSession:
                 if message.get("stop") is True:
                     out = stop_sticks(self._context.deadman, self._vehicle)
                 else:
-                    body = SticksBody.model_validate(message.get("sticks") or {})
+                    body = _sticks_adapter.validate_python(message.get("sticks") or {})
                     out = fly_sticks(self._context.deadman, self._vehicle, body)
         except Exception as exc:
             await self._reply_error(request_id, "sticks", exc)
@@ -331,25 +348,25 @@ class _ControlSession:
         self._track(asyncio.create_task(self._command(request_id, name, args)))
 
     async def _command(self, request_id: Any, name: Any, args: Any) -> None:
-        """A command or an intent, run from the same tables as the REST routes."""
+        """A command or an intent of the wire's table by its name, run by the same
+        operations as its REST route."""
         try:
-            if isinstance(name, str) and name in INTENT_NAMES:
-                status, out = await self._intent(name, args)
+            call = SOCKET_CALLS.get(name) if isinstance(name, str) else None
+            if call is None:
+                raise ApiError(422, _UNKNOWN_COMMAND, field="name")
+            if call.answer is IntentOut:
+                status, out = await self._intent(call.name, args)
             else:
-                status, out = await self._operation(name, args)
+                status, out = await self._operation(call.name, args)
         except Exception as exc:
             await self._reply_error(request_id, "command", exc)
             return
         await self._reply(request_id, "command", status, out)
 
-    async def _operation(self, name: Any, args: Any) -> tuple[int, dict[str, Any]]:
-        operation = OPERATIONS.get(name) if isinstance(name, str) else None
-        if operation is None:
-            known = ", ".join([*OPERATIONS, *sorted(INTENT_NAMES)])
-            raise ApiError(422, f"unknown command; one of {known}", field="name")
-        body = operation.body.model_validate(args if args is not None else {})
+    async def _operation(self, name: str, args: Any) -> tuple[int, dict[str, Any]]:
+        body = OPERATIONS[name].body.model_validate(args if args is not None else {})
         with self._held():
-            result = await operation.run(self._vehicle, body)
+            result = await run_command(name, self._vehicle, body)
         return command_answer(result)
 
     async def _intent(self, name: str, args: Any) -> tuple[int, dict[str, Any]]:

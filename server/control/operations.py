@@ -1,14 +1,18 @@
-"""Vehicle commands and intents by name, with their request bodies: the REST routes, the
-WebSocket control session and the fleet edge run the same tables, so all refuse and answer
-alike. Refusals are the link's and the control core's own exceptions (``refusals``), which
-each adapter answers in its transport's terms. The checks (the envelope for take-off,
-reposition, setpoints and intents) are the link's own, made where it sends them."""
+"""Vehicle commands and intents, each the operation of a call of the wire's table
+(``skyhelm_wire.calls``) by its name, taking the call's body: the REST routes, the WebSocket
+control session and the fleet edge run the same tables, so all refuse and answer alike. An
+operation is registered with ``@command("name")`` or ``@intent("name")``; its body is its
+second parameter's annotation, held to the table's at import. Refusals are the link's and
+the control core's own exceptions (``refusals``), which each adapter answers in its
+transport's terms. The checks (the envelope for take-off, reposition, setpoints and
+intents) are the link's own, made where it sends them."""
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar, get_type_hints
 
 from pydantic import BaseModel
 
@@ -17,6 +21,7 @@ from server.control.refusals import InvalidInput
 from server.link import CommandOutcome, CommandResult, SentSetpoint, Vehicle, intents
 from server.link.intents import IntentResult
 from skyhelm_wire import commands as schemas
+from skyhelm_wire.calls import COMMAND_CALLS
 from skyhelm_wire.commands import CommandResultOut
 from skyhelm_wire.intents import (
     BrakeBody,
@@ -27,6 +32,8 @@ from skyhelm_wire.intents import (
     VelocityIntentBody,
 )
 from skyhelm_wire.setpoints import SentSetpointOut, setpoint_body
+
+_F = TypeVar("_F", bound=Callable[..., Any])
 
 
 class NoBody(BaseModel):
@@ -42,38 +49,84 @@ class Operation:
     run: Callable[[Vehicle, Any], Awaitable[CommandResult]]
 
 
+@dataclass(frozen=True)
+class Intent:
+    body: type[BaseModel]
+    run: Callable[[Vehicle, Any], Awaitable[IntentResult]]
+
+
+# the operations by the name of their call, as @command and @intent register them
+OPERATIONS: dict[str, Operation] = {}
+INTENTS: dict[str, Intent] = {}
+
+
+def _body_of(run: Callable[..., Any]) -> type[BaseModel]:
+    """The body an operation takes: the annotation of its second parameter."""
+    second = list(inspect.signature(run).parameters)[1]
+    body: type[BaseModel] = get_type_hints(run)[second]
+    return body
+
+
+def command(name: str) -> Callable[[_F], _F]:
+    """Register the decorated function as the command of the call ``name``."""
+
+    def register(run: _F) -> _F:
+        OPERATIONS[name] = Operation(_body_of(run), run)
+        return run
+
+    return register
+
+
+def intent(name: str) -> Callable[[_F], _F]:
+    """Register the decorated function as the intent of the call ``name``."""
+
+    def register(run: _F) -> _F:
+        INTENTS[name] = Intent(_body_of(run), run)
+        return run
+
+    return register
+
+
+@command("arm")
 async def arm(vehicle: Vehicle, body: schemas.ArmBody) -> CommandResult:
     return await vehicle.arm(force=body.force)
 
 
+@command("disarm")
 async def disarm(vehicle: Vehicle, body: schemas.ArmBody) -> CommandResult:
     """Without force PX4 refuses unless landed ("Disarming denied: not landed")."""
     return await vehicle.disarm(force=body.force)
 
 
+@command("takeoff")
 async def takeoff(vehicle: Vehicle, body: schemas.TakeoffBody) -> CommandResult:
     """Climb to altitude_m above home (default: the vehicle's MIS_TAKEOFF_ALT); above the
     envelope's max_alt_rel_m: 422."""
     return await vehicle.takeoff(body.altitude_m)
 
 
+@command("land")
 async def land(vehicle: Vehicle, _: NoBody) -> CommandResult:
     return await vehicle.land()
 
 
+@command("rtl")
 async def rtl(vehicle: Vehicle, _: NoBody) -> CommandResult:
     return await vehicle.return_to_launch()
 
 
+@command("hold")
 async def hold(vehicle: Vehicle, _: NoBody) -> CommandResult:
     return await vehicle.hold()
 
 
+@command("mode")
 async def set_mode(vehicle: Vehicle, body: schemas.ModeBody) -> CommandResult:
     """Resolves when the vehicle reports the mode (or says why not)."""
     return await vehicle.set_mode(body.mode)
 
 
+@command("reposition")
 async def reposition(vehicle: Vehicle, body: schemas.RepositionBody) -> CommandResult:
     """MAV_CMD_DO_REPOSITION: fly there and hold (ends OFFBOARD). Outside the envelope: 422
     naming the field and the limit. The goto intent picks this or a setpoint by mode."""
@@ -88,6 +141,7 @@ async def reposition(vehicle: Vehicle, body: schemas.RepositionBody) -> CommandR
     )
 
 
+@command("vtol_transition")
 async def vtol_transition(vehicle: Vehicle, body: schemas.VtolTransitionBody) -> CommandResult:
     """With wait, resolves when EXTENDED_SYS_STATE shows the new VTOL state."""
     return await vehicle.vtol_transition(
@@ -95,16 +149,19 @@ async def vtol_transition(vehicle: Vehicle, body: schemas.VtolTransitionBody) ->
     )
 
 
+@command("origin")
 async def set_origin(vehicle: Vehicle, body: schemas.OriginBody) -> CommandResult:
     """SET_GPS_GLOBAL_ORIGIN, confirmed by the GPS_GLOBAL_ORIGIN the vehicle sends back."""
     return await vehicle.set_gps_origin(body.lat_deg, body.lon_deg, body.alt_amsl_m)
 
 
+@command("home")
 async def set_home(vehicle: Vehicle, body: schemas.HomeBody) -> CommandResult:
     """MAV_CMD_DO_SET_HOME at the given point, or at the current position without a body."""
     return await vehicle.set_home(body.lat_deg, body.lon_deg, body.alt_amsl_m)
 
 
+@command("offboard_start")
 async def offboard_start(vehicle: Vehicle, body: schemas.OffboardStartBody) -> CommandResult:
     """Stream the setpoint (default: hold here) and switch to OFFBOARD; resolves when the
     vehicle reports OFFBOARD."""
@@ -112,26 +169,12 @@ async def offboard_start(vehicle: Vehicle, body: schemas.OffboardStartBody) -> C
     return await vehicle.start_offboard(setpoint)
 
 
+@command("offboard_stop")
 async def offboard_stop(vehicle: Vehicle, body: schemas.OffboardStopBody) -> CommandResult:
     """Switch to then_mode, then stop streaming."""
     return await vehicle.stop_offboard(body.then_mode)
 
 
-OPERATIONS: dict[str, Operation] = {
-    "arm": Operation(schemas.ArmBody, arm),
-    "disarm": Operation(schemas.ArmBody, disarm),
-    "takeoff": Operation(schemas.TakeoffBody, takeoff),
-    "land": Operation(NoBody, land),
-    "rtl": Operation(NoBody, rtl),
-    "hold": Operation(NoBody, hold),
-    "mode": Operation(schemas.ModeBody, set_mode),
-    "reposition": Operation(schemas.RepositionBody, reposition),
-    "vtol_transition": Operation(schemas.VtolTransitionBody, vtol_transition),
-    "origin": Operation(schemas.OriginBody, set_origin),
-    "home": Operation(schemas.HomeBody, set_home),
-    "offboard_start": Operation(schemas.OffboardStartBody, offboard_start),
-    "offboard_stop": Operation(schemas.OffboardStopBody, offboard_stop),
-}
 
 
 async def run_command(name: str, vehicle: Vehicle, body: BaseModel | None) -> CommandResult:
@@ -141,16 +184,14 @@ async def run_command(name: str, vehicle: Vehicle, body: BaseModel | None) -> Co
 
 
 # -- intents ------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class Intent:
-    body: type[BaseModel]
-    run: Callable[[Vehicle, Any], Awaitable[IntentResult]]
 
 
+@intent("brake")
 async def brake(vehicle: Vehicle, _: BrakeBody) -> IntentResult:
     return await intents.brake(vehicle)
 
 
+@intent("velocity")
 async def velocity(vehicle: Vehicle, body: VelocityIntentBody) -> IntentResult:
     x_m_s, y_m_s = body.xy_m_s()
     return await intents.velocity(
@@ -164,12 +205,14 @@ async def velocity(vehicle: Vehicle, body: VelocityIntentBody) -> IntentResult:
     )
 
 
+@intent("offset")
 async def offset(vehicle: Vehicle, body: OffsetIntentBody) -> IntentResult:
     return await intents.offset(
         vehicle, north_m=body.north_m, east_m=body.east_m, up_m=body.up_m, yaw_deg=body.yaw_deg
     )
 
 
+@intent("goto")
 async def goto(vehicle: Vehicle, body: GotoIntentBody) -> IntentResult:
     return await intents.goto(
         vehicle,
@@ -180,12 +223,27 @@ async def goto(vehicle: Vehicle, body: GotoIntentBody) -> IntentResult:
     )
 
 
-INTENTS: dict[str, Intent] = {
-    "brake": Intent(BrakeBody, brake),
-    "velocity": Intent(VelocityIntentBody, velocity),
-    "offset": Intent(OffsetIntentBody, offset),
-    "goto": Intent(GotoIntentBody, goto),
-}
+def held_to_the_table() -> None:
+    """Every command and intent of the wire's table has an operation taking its body (a
+    body-less call: one with no fields), and no operation is outside the table."""
+    wanted = {call.name: call for call in COMMAND_CALLS}
+    found: dict[str, Operation | Intent] = {**OPERATIONS, **INTENTS}
+    if set(found) != set(wanted):
+        raise ImportError(f"calls without an operation or operations without a call: "
+                          f"{sorted(set(found) ^ set(wanted))}")  # fmt: skip
+    for name, operation in found.items():
+        call = wanted[name]
+        is_intent = call.answer is IntentOut
+        if is_intent != (name in INTENTS):
+            kind = "an intent" if is_intent else "a command"
+            raise ImportError(f"{name} is {kind} in the table, not registered as one")
+        if call.body is not operation.body and (call.body, operation.body.model_fields) != (
+            None, {}
+        ):
+            raise ImportError(f"{name} takes {operation.body.__name__}; the table: {call.body}")
+
+
+held_to_the_table()
 INTENT_NAMES = frozenset(INTENTS)
 
 

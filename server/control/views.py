@@ -17,10 +17,12 @@ from typing import Any
 from pydantic import ConfigDict, TypeAdapter
 
 from server.link import StreamStats, VehicleEvent, VehicleState
+from server.link.codec.snapshot import API_NAMES
 
-# The API's names for the snapshot's fields; `type` is written by the callers, since the
-# WebSocket message uses that key for the message's own type.
-_API_NAMES = {"global_position": "global"}
+# The API's names for the snapshot's fields, the wire's (generated beside the snapshot from
+# the wire model); `type` is written by the callers, since the WebSocket message uses that key
+# for the message's own type.
+_API_NAMES = API_NAMES
 # Not part of the shared encoding: the vehicle's type goes under a different key in REST and
 # WS; the list of refused telemetry streams is shown on the WebSocket only, as before.
 _WRITTEN_AROUND = {"mav_type", "telemetry_refused"}
@@ -46,6 +48,8 @@ def encode_state(state: VehicleState) -> bytes:
 
 LeaseStatus = tuple[str | None, float | None]
 _json_string: Callable[[str], str] = json.encoder.encode_basestring_ascii
+# the REST state's key for the vehicle's type (the wire's name for the snapshot's mav_type)
+_TYPE_KEY = _json_string(API_NAMES["mav_type"])
 
 
 def _json_or_null(value: str | float | None) -> str:
@@ -74,7 +78,7 @@ def _message_head(sysid: int, mav_type: str, telemetry_refused: tuple[str, ...])
 def state_json(state: VehicleState, body: bytes, lease: LeaseStatus) -> bytes:
     """GET /vehicles/{id}: the encoded body with the vehicle's `id`, `type` and `lease`."""
     vehicle_type = _json_string(state.mav_type)
-    head = f'{{"id":{state.sysid},"type":{vehicle_type},"lease":{_lease_json(lease)},'
+    head = f'{{"id":{state.sysid},{_TYPE_KEY}:{vehicle_type},"lease":{_lease_json(lease)},'
     return head.encode() + body[1:]
 
 

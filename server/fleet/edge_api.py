@@ -41,12 +41,13 @@ import zenoh
 from server.fleet.edge_calls import EdgeCalls
 from server.http.errors import non_finite_field
 from server.http.vehicle_calls import Reply
+from skyhelm_wire.calls import API_PREFIX as API
 
 log = logging.getLogger(__name__)
 
-API_PREFIX = "/api/v1/"
+API_PREFIX = f"{API}/"
 # routes a remote caller may not reach through an edge: another hop of the fleet
-NOT_FORWARDED = ("/api/v1/fleet",)
+NOT_FORWARDED = (f"{API}/fleet",)
 METHODS = frozenset({"GET", "HEAD", "POST", "PUT", "PATCH", "DELETE", "OPTIONS"})
 # the caller's request headers that are read: its token, its lease
 REQUEST_HEADERS = frozenset({"authorization", "x-lease-id"})

@@ -40,10 +40,11 @@ from server.http.vehicle_calls import (
     validated,
 )
 from server.link import Vehicle
+from skyhelm_wire.calls import API_PREFIX, VEHICLE_PATH
 
 log = logging.getLogger(__name__)
 
-VEHICLES_PREFIX = "/api/v1/vehicles/"
+VEHICLES_PREFIX = API_PREFIX + VEHICLE_PATH.removesuffix("{vehicle_id}")
 # the address the lockout counts a call that came over Zenoh against, and its client
 ZENOH_ADDRESS = "zenoh"
 ZENOH_CLIENT: Client = (ZENOH_ADDRESS, 0)

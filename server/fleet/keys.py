@@ -18,7 +18,7 @@ import re
 from dataclasses import dataclass
 from typing import Literal
 
-from server.settings import FLEET_NAME_PATTERN
+from skyhelm_wire.fleet import FLEET_NAME_PATTERN
 
 ROOT = "skyhelm"
 StateTier = Literal["fast", "slow"]

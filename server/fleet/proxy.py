@@ -29,6 +29,7 @@ from typing import Any
 import zenoh
 
 from server.fleet.keys import FleetKeys
+from skyhelm_wire.calls import CALL
 
 QUERY_TIMEOUT_S = 5.0
 # A command runs on the vehicle before the edge answers: OFFBOARD's pre-stream, the command's
@@ -120,7 +121,7 @@ def call_timeout_s(
     takeover is answered at once)."""
     asks = (
         method == "POST"
-        and rest.strip("/") == "control"
+        and rest.strip("/") == CALL["acquire"].path
         and isinstance(body, dict)
         and body.get("takeover") is True
         and body.get("force") is not True

@@ -14,7 +14,6 @@ from urllib.parse import urlencode
 
 from fastapi import APIRouter, Path, Request, Response
 from fastapi.responses import JSONResponse
-from pydantic import BaseModel, Field
 
 from server.control.auth import TOKEN_QUERY, Role, token_from
 from server.fleet.proxy import EdgeReplyError, EdgeTimeout, call_timeout_s, edge_call
@@ -27,15 +26,18 @@ from server.http.errors import (
     ApiError,
     refuse_non_finite,
 )
+from server.http.routing import route
 from server.http.schemas import ErrorOut
-from server.settings import FLEET_NAME_PATTERN
+from skyhelm_wire.calls import API_PREFIX, CALL, FLEET_VEHICLE_PATH, VEHICLE_CALLS, VEHICLE_PATH
+from skyhelm_wire.fleet import FLEET_NAME_PATTERN
 
-router = APIRouter(prefix="/fleet", tags=["fleet"])
+router = APIRouter(tags=["fleet"])
 
 EdgeName = Annotated[
     str, Path(pattern=FLEET_NAME_PATTERN, description="the edge's name in the fleet")
 ]
-PROXIED_METHODS = ["GET", "POST", "PUT", "DELETE"]
+# the methods of the vehicle's calls, each proxied to the vehicle's edge
+PROXIED_METHODS = list(dict.fromkeys(call.method for call in VEHICLE_CALLS))
 # the edge's answer headers a caller may act on
 PASSED_HEADERS = ("retry-after", "www-authenticate", "location")
 
@@ -48,52 +50,26 @@ PROXY_RESPONSES: dict[int | str, dict[str, Any]] = {
 }
 
 
-class FleetEdgeOut(BaseModel):
-    edge: str
-    alive: bool
-    vehicles: list[int] = Field(description="ids (sysids) of the vehicles heard from it")
-
-
-class FleetOut(BaseModel):
-    fleet: str
-    edges: list[FleetEdgeOut]
-
-
-class FleetVehicleOut(BaseModel):
-    key: str = Field(description="<edge>/<id>")
-    edge: str
-    id: int
-    alive: bool = Field(description="its liveliness token is present")
-    age_s: float | None = Field(description="since its last state arrived here")
-    state_age_s: float | None = Field(description="now - the edge's sent_unix_s")
-    controller: str | None = Field(description="who holds its control lease")
-    type: str | None
-    mode: str | None
-    armed: bool | None
-    connected: bool | None
-    global_: dict[str, Any] | None = Field(alias="global")
-    position_ned: dict[str, Any] | None
-
-
 def fleet_of(request: Request) -> FleetService:
     service: FleetService = request.app.state.fleet
     return service
 
 
-@router.get("", response_model=FleetOut, responses=AUTH_RESPONSES)
+@route(router, CALL["fleet"], responses=AUTH_RESPONSES)
 async def get_fleet(request: Request, _: Reader) -> dict[str, Any]:
     """The fleet's edges, alive or lost, with their vehicles' ids."""
     return fleet_of(request).view.summary()
 
 
-@router.get("/vehicles", response_model=list[FleetVehicleOut], responses=AUTH_RESPONSES)
+@route(router, CALL["fleet_vehicles"], responses=AUTH_RESPONSES)
 async def list_fleet_vehicles(request: Request, _: Reader) -> list[dict[str, Any]]:
     """Every vehicle heard from, with its freshness and who controls it."""
     return [vehicle.summary() for vehicle in fleet_of(request).view.vehicles()]
 
 
-@router.get(
-    "/edges/{edge}/vehicles/{vehicle_id}",
+@route(
+    router,
+    CALL["fleet_vehicle"],
     responses={**READ_RESPONSES, 200: {"description": "GET /vehicles/{id} of its edge, "
                                        "plus edge, id, key, alive, age_s, state_age_s"}},
 )
@@ -125,7 +101,7 @@ async def call_fleet_vehicle(
         raise ApiError(503, f"edge {edge} is not alive")
     call = {
         "method": request.method,
-        "path": f"/api/v1/vehicles/{vehicle_id}/{rest}",
+        "path": f"{API_PREFIX}{VEHICLE_PATH.format(vehicle_id=vehicle_id)}/{rest}",
         "query": _query_without_token(request),
         "headers": _forwarded_headers(request),
         "body": await _json_body(request),
@@ -145,16 +121,13 @@ async def call_fleet_vehicle(
     return JSONResponse(answer.body, status_code=answer.status, headers=headers)
 
 
-# one route per method, each with its own operation id (a route of several methods would
-# publish one operation id for all of them)
+# every call of a fleet vehicle (the wire's vehicle calls) is run by its edge: one route per
+# method, so that each is its own operation in OpenAPI
 for _method in PROXIED_METHODS:
     router.add_api_route(
-        "/edges/{edge}/vehicles/{vehicle_id}/{rest:path}",
-        call_fleet_vehicle,
-        methods=[_method],
+        f"{FLEET_VEHICLE_PATH}/{{rest:path}}", call_fleet_vehicle, methods=[_method],
         responses=PROXY_RESPONSES,
-        operation_id=f"call_fleet_vehicle_{_method.lower()}",
-    )
+    )  # fmt: skip
 
 
 def _forwarded_headers(request: Request) -> dict[str, str]:

@@ -21,7 +21,7 @@ from server.control.publishers import StatePublishers
 from server.http.context import ApiContext
 from server.http.errors import command_answer, command_status
 from server.link import Vehicle
-from skyhelm_wire.calls import CALLS as WIRE_CALLS
+from skyhelm_wire.calls import VEHICLE_CALLS as WIRE_CALLS
 from skyhelm_wire.calls import CallSpec
 from skyhelm_wire.control import ControlBody, RenewBody
 

@@ -1,6 +1,7 @@
 """Every call of the client answers a typed value: mypy --strict on a script using the
-client passes, and catches a misspelt field of an intent's, a setpoint's or the parameters'
-answer (the answers stay indexable as JSON, as scripts used them)."""
+client passes, and catches a misspelt field of a command's, an intent's, a setpoint's, the
+parameters', the health's, the sticks', the stream's, the control's or the audit's answer
+(the answers stay indexable as JSON, as scripts used them)."""
 
 from __future__ import annotations
 
@@ -22,17 +23,33 @@ def fly(sky: SkyHelm) -> None:
     print(sent.model.type_mask, sent.model.setpoint)
     values: dict[str, float | int | None] = sky.params("MIS_TAKEOFF_ALT")
     print(values, sky.velocity(north_m_s=1.0, frame="ned").model.live)
+    print(sky.health().model.version, sky.arm().result_code)
+    print(sky.param_metadata().model.parameters["MIS_TAKEOFF_ALT"].units)
+    print(sky.fly_sticks(throttle=0.5).model.rate_hz, sky.sticks().model.stream.gaps)
+    print(sky.stream_stats().model.max_gap_ms, sky.control_status().model.holder)
+    print([entry.model.time_unix_s for entry in sky.audit(limit=5)])
+    print([vehicle.model.sysid for vehicle in sky.vehicles()])
 
 
 async def fly_async(sky: AsyncSkyHelm) -> None:
     moved = await sky.offset(north_m=5.0)
     print(moved.model.command)
     print((await sky.brake()).model.intent)
+    print((await sky.health()).model.read_only, (await sky.stop_sticks()).model.active)
+    print((await sky.stream_stats()).model.interval_p99_ms)
 '''
 MISSPELT = {
     "moved.model.via": "moved.model.vai",
     "sent.model.type_mask": "sent.model.typemask",
     "(await sky.brake()).model.intent": "(await sky.brake()).model.intnet",
+    "sky.health().model.version": "sky.health().model.versoin",
+    "sky.arm().result_code": "sky.arm().resultcode",
+    '["MIS_TAKEOFF_ALT"].units': '["MIS_TAKEOFF_ALT"].unit',
+    "model.rate_hz, sky.sticks()": "model.ratehz, sky.sticks()",
+    "sky.stream_stats().model.max_gap_ms": "sky.stream_stats().model.maxgap_ms",
+    "sky.control_status().model.holder": "sky.control_status().model.holdr",
+    "entry.model.time_unix_s": "entry.model.time_s",
+    "(await sky.stop_sticks()).model.active": "(await sky.stop_sticks()).model.activ",
 }
 
 
@@ -55,7 +72,8 @@ def test_mypy_strict_catches_a_misspelt_field(tmp_path: Path) -> None:
         text = text.replace(right, wrong)
     out, status = _mypy(tmp_path, text)
     assert status == 1, out
-    for attribute in ("vai", "typemask", "intnet"):
+    for attribute in ("vai", "typemask", "intnet", "versoin", "resultcode", "unit", "ratehz",
+                      "maxgap_ms", "holdr", "time_s", "activ"):  # fmt: skip
         assert f'has no attribute "{attribute}"' in out, out
 
 

@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from server.link.codec import snapshot
+from skyhelm_wire.state import VehicleStateOut
 from tools import gen_link_state
 
 
@@ -42,3 +43,16 @@ def test_a_stale_snapshot_is_found_and_rewritten(
     assert gen_link_state.main([]) == 0
     assert gen_link_state.main(["--check"]) == 0
     assert "    hdop: float | None\n" in stale.read_text()
+
+
+def test_a_name_the_api_shows_is_spelt_in_the_wire_model_only(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    info = VehicleStateOut.model_fields["global_"]
+    assert gen_link_state.api_names() == snapshot.API_NAMES
+    assert snapshot.API_NAMES["global_position"] == info.alias == "global"
+    assert snapshot.API_NAMES["mav_type"] == "type"
+    # the wire's alias renamed: the API's name for the snapshot's field follows
+    monkeypatch.setattr(info, "alias", "position_global")
+    monkeypatch.setattr(info, "serialization_alias", "position_global")
+    assert gen_link_state.api_names()["global_position"] == "position_global"

@@ -4,14 +4,16 @@ from __future__ import annotations
 
 import asyncio
 import json
-from collections.abc import AsyncGenerator, Coroutine
-from typing import Any
+from collections.abc import AsyncGenerator
+from typing import Any, TypeVar
 
 import httpx
+from pydantic import BaseModel
 from websockets.asyncio.client import connect
 
-from skyhelm_client.calls import Call, Calls, Waiting
+from skyhelm_client.calls import Call, Waiting, json_body
 from skyhelm_client.errors import SkyHelmError
+from skyhelm_client.generated import AsyncCalls
 from skyhelm_client.models import (
     Answer,
     CommandResult,
@@ -25,22 +27,10 @@ from skyhelm_client.urls import ws_url
 from skyhelm_wire.intents import IntentOut
 from skyhelm_wire.setpoints import SentSetpointOut
 
-_Co = Coroutine[Any, Any, Any]
+_M = TypeVar("_M", bound=BaseModel)
 
 
-class AsyncSkyHelm(
-    Calls[
-        Coroutine[Any, Any, CommandResult],
-        Coroutine[Any, Any, Lease],
-        Coroutine[Any, Any, State],
-        _Co,
-        Coroutine[Any, Any, float],
-        Coroutine[Any, Any, None],
-        Coroutine[Any, Any, Answer[IntentOut]],
-        Coroutine[Any, Any, Answer[SentSetpointOut]],
-        Coroutine[Any, Any, ParamValues],
-    ]
-):
+class AsyncSkyHelm(AsyncCalls):
     """One vehicle of a SkyHelm server, for asyncio::
 
         async with AsyncSkyHelm("http://127.0.0.1:8000/?token=...") as sky:
@@ -76,8 +66,7 @@ class AsyncSkyHelm(
             response = await self._http.request(**self._request(call))
         except httpx.HTTPError as exc:
             raise SkyHelmError(0, f"{call.method} {call.path}: {exc}") from exc
-        body = response.json() if response.content else None
-        return response.status_code, self._answer(call, response.status_code, body)
+        return response.status_code, self._answer(call, response.status_code, json_body(response))
 
     async def _command(self, call: Call) -> CommandResult:
         status, body = await self._send(call)
@@ -89,8 +78,17 @@ class AsyncSkyHelm(
     async def _state(self, call: Call) -> State:
         return State((await self._send(call))[1])
 
+    async def _typed(self, call: Call, model: type[_M]) -> Answer[_M]:
+        return Answer((await self._send(call))[1], model)
+
+    async def _typed_list(self, call: Call, model: type[_M]) -> list[Answer[_M]]:
+        return [Answer(item, model) for item in (await self._send(call))[1]]
+
     async def _json(self, call: Call) -> Any:
         return (await self._send(call))[1]
+
+    async def _bytes(self, call: Call) -> bytes:
+        return bytes((await self._send(call))[1])
 
     async def _value(self, call: Call) -> float:
         return float((await self._send(call))[1])

@@ -1,10 +1,13 @@
-"""Every call the client makes, defined once for the blocking and the asyncio client.
+"""The calls the client writes by hand (their arguments and answers shaped for scripts),
+defined once for the blocking and the asyncio client.
 
-An operation builds a :class:`Call` (method, path, body) and hands it to one of the
-client's senders, chosen by what the answer becomes (a command result, the lease, the
-state, JSON, a parameter value, nothing). :class:`SkyHelm` sends and returns the value;
-:class:`AsyncSkyHelm` returns an awaitable of it: the type parameters of :class:`Calls`
-say which, so both clients are typed from this one list.
+An operation builds a :class:`Call` (the method and path of the wire's table, the body)
+and hands it to one of the client's senders, chosen by what the answer becomes (a command
+result, the lease, the state, a parameter value, nothing). :class:`SkyHelm` sends and
+returns the value; :class:`AsyncSkyHelm` returns an awaitable of it: the type parameters of
+:class:`Calls` say which, so both clients are typed from this one list. Every other call of
+the table is a method written by ``python -m tools.gen_client`` (``generated.py``),
+answering the table's model.
 """
 
 from __future__ import annotations
@@ -14,7 +17,10 @@ import os
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, Generic, Literal, TypeVar
+from typing import Any, ClassVar, Generic, Literal, TypeVar
+from urllib.parse import quote
+
+import httpx
 
 from skyhelm_client import exit_release
 from skyhelm_client.errors import NoLease, error_for, timed_out
@@ -26,7 +32,6 @@ from skyhelm_wire.setpoint_kinds import SetpointKind, describe
 _Cmd = TypeVar("_Cmd")
 _Lease = TypeVar("_Lease")
 _State = TypeVar("_State")
-_Json = TypeVar("_Json")
 _Value = TypeVar("_Value")
 _None = TypeVar("_None")
 _Intent = TypeVar("_Intent")
@@ -43,7 +48,8 @@ LeaseEffect = Literal["keep", "grant", "drop"]
 @dataclass(frozen=True)
 class Call:
     """One HTTP request. ``control`` calls carry the lease id; ``lease`` says what the
-    answer does to the lease the client holds; ``pick`` takes one key of the answer."""
+    answer does to the lease the client holds; ``pick`` takes one key of the answer, once
+    the whole answer is validated with ``model`` (the table's answer model)."""
 
     method: str
     path: str
@@ -52,6 +58,7 @@ class Call:
     control: bool = False
     lease: LeaseEffect = "keep"
     pick: str | None = None
+    model: Any = None
 
 
 def setpoint_json(setpoint: SetpointKind | Mapping[str, Any]) -> dict[str, Any]:
@@ -60,14 +67,35 @@ def setpoint_json(setpoint: SetpointKind | Mapping[str, Any]) -> dict[str, Any]:
     return {key: value for key, value in body.items() if value is not None}
 
 
-def _given(**values: Any) -> dict[str, Any]:
+def given(**values: Any) -> dict[str, Any]:
+    """The arguments that were given (not None), as the JSON body named after them."""
     return {key: value for key, value in values.items() if value is not None}
+
+
+def query(**values: Any) -> dict[str, str]:
+    """The query parameters that were given, as the server reads them (``true``)."""
+    return {key: json_text(value) for key, value in values.items() if value is not None}
+
+
+def json_body(response: httpx.Response) -> Any:
+    """The answer's JSON; its bytes when it is not JSON (a map tile); None when empty."""
+    if not response.content:
+        return None
+    if response.headers.get("content-type", "").startswith("application/json"):
+        return response.json()
+    return response.content
+
+
+def json_text(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return str(value)
 
 
 def _arguments(values: dict[str, Any]) -> dict[str, Any]:
     """A method's arguments (its ``locals()`` on entry) that were given, as the JSON body
     whose fields they are named after."""
-    return _given(**{key: value for key, value in values.items() if key != "self"})
+    return given(**{key: value for key, value in values.items() if key != "self"})
 
 
 @dataclass
@@ -88,9 +116,21 @@ class Waiting:
         return False
 
 
-class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None, _Intent, _Sent, _Params]):
+class Calls(ABC, Generic[_Cmd, _Lease, _State, _Value, _None, _Intent, _Sent, _Params]):
     """The API of one vehicle (and the server's shared reads), for a client that sends each
     kind of answer through its own sender."""
+
+    # the calls of the wire's table written here by hand; tools.gen_client writes the others
+    BY_HAND: ClassVar[frozenset[str]] = frozenset({
+        "state", "acquire", "renew", "release", "set_setpoint", "params", "param", "set_param",
+        "arm", "disarm", "takeoff", "land", "rtl", "hold", "mode", "reposition",
+        "vtol_transition", "origin", "home", "offboard_start", "offboard_stop", "brake",
+        "velocity", "offset", "goto",
+    })  # fmt: skip
+    # a call's method when it is not the call's name
+    METHOD_NAMES: ClassVar[dict[str, str]] = {
+        "mode": "set_mode", "origin": "set_origin", "home": "set_home", "stream": "stream_stats",
+    }  # fmt: skip
 
     def __init__(
         self,
@@ -113,7 +153,6 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None, _Intent, _S
     _command: Callable[[Call], _Cmd]
     _lease: Callable[[Call], _Lease]
     _state: Callable[[Call], _State]
-    _json: Callable[[Call], _Json]
     _value: Callable[[Call], _Value]
     _none: Callable[[Call], _None]
     _intent: Callable[[Call], _Intent]  # an Answer[IntentOut]
@@ -160,7 +199,11 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None, _Intent, _S
             self._lease_gone()
         if call.control and self.lease is not None:
             self._renewed_at = self._now()
-        return body[call.pick] if call.pick is not None else body
+        if call.pick is None:
+            return body
+        if call.model is not None:
+            call.model.model_validate(body)
+        return body[call.pick]
 
     def _lease_gone(self) -> None:
         self.lease = None
@@ -169,9 +212,6 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None, _Intent, _S
     def _renew_due(self) -> bool:
         """A wait renews a held lease at a third of its TTL, so waiting never loses it."""
         return self.lease is not None and self._now() - self._renewed_at > self.lease.ttl_s / 3
-
-    def _vehicle(self, path: str = "") -> str:
-        return f"/vehicles/{self.vehicle_id}{path}"
 
     def _named(
         self,
@@ -183,24 +223,18 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None, _Intent, _S
         lease: LeaseEffect = "keep",
         pick: str | None = None,
     ) -> Call:
-        """The call ``name`` of the wire's table (its method and path), on this vehicle;
-        the pilot's and the control calls carry the lease id."""
+        """The call ``name`` of the wire's table (its method and path; a vehicle's on this
+        vehicle); the pilot's and the control calls carry the lease id."""
         spec = CALL[name]
-        where = spec.path.format(**path) if path else spec.path
+        values = {key: quote(value, safe="") for key, value in (path or {}).items()}
+        where = spec.route.format(**{"vehicle_id": str(self.vehicle_id), **values})
         return Call(
-            spec.method, self._vehicle(f"/{where}" if where else ""), body, params or {},
+            spec.method, where, body, params or {},
             control=spec.access in ("pilot", "control"), lease=lease, pick=pick,
+            model=spec.answer if pick is not None else None,
         )  # fmt: skip
 
     # -- reads ------------------------------------------------------------------------
-
-    def health(self) -> _Json:
-        return self._json(Call("GET", "/health"))
-
-    def vehicles(self) -> _Json:
-        """Every vehicle served: ``[{id, sysid, type, autopilot, connected, mode, armed,
-        link}]``."""
-        return self._json(Call("GET", "/vehicles"))
 
     def state(self) -> _State:
         return self._state(self._named("state"))
@@ -218,9 +252,6 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None, _Intent, _S
         after ``timeout_s``."""
         waiting = Waiting(predicate, self._now() + timeout_s, f"{what} ({timeout_s} s)", self._now)
         return self._wait(waiting, poll_s)
-
-    def stream_stats(self) -> _Json:
-        return self._json(self._named("stream"))
 
     # -- control ----------------------------------------------------------------------
 
@@ -248,25 +279,11 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None, _Intent, _S
         label."""
         return self._control("PUT", _arguments(locals()) or None)
 
-    def control_status(self) -> _Json:
-        """Who holds control: ``{holder, session, since_s, expires_in_s, ttl_s, request}``;
-        ``request`` is a pending takeover (``request_id``, ``by``) the holder may answer."""
-        return self._json(self._named("control_status"))
-
     def _release_call(self) -> Call:
         return self._named("release", lease="drop")
 
     def release(self) -> _None:
         return self._none(self._release_call())
-
-    def answer_takeover(self, request_id: str, *, grant: bool) -> _Json:
-        """The holder's answer to a ``takeover_requested`` control event."""
-        call = self._named("answer_takeover", {"grant": grant}, path={"request_id": request_id})
-        return self._json(call)
-
-    def audit(self, *, limit: int = 100) -> _Json:
-        params = {"vehicle": str(self.vehicle_id), "limit": str(limit)}
-        return self._json(Call("GET", "/control/audit", params=params))
 
     # -- commands ---------------------------------------------------------------------
 
@@ -278,7 +295,7 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Json, _Value, _None, _Intent, _S
 
     def takeoff(self, *, altitude_m: float | None = None) -> _Cmd:
         """Climb to ``altitude_m`` above home (default: the vehicle's MIS_TAKEOFF_ALT)."""
-        return self._command(self._named("takeoff", _given(altitude_m=altitude_m)))
+        return self._command(self._named("takeoff", given(altitude_m=altitude_m)))
 
     def land(self) -> _Cmd:
         return self._command(self._named("land"))

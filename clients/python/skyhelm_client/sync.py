@@ -5,13 +5,15 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable, Generator
-from typing import Any
+from typing import Any, TypeVar
 
 import httpx
+from pydantic import BaseModel
 from websockets.sync.client import connect
 
-from skyhelm_client.calls import Call, Calls, Waiting
+from skyhelm_client.calls import Call, Waiting, json_body
 from skyhelm_client.errors import SkyHelmError
+from skyhelm_client.generated import SyncCalls
 from skyhelm_client.models import (
     Answer,
     CommandResult,
@@ -25,13 +27,10 @@ from skyhelm_client.urls import ws_url
 from skyhelm_wire.intents import IntentOut
 from skyhelm_wire.setpoints import SentSetpointOut
 
+_M = TypeVar("_M", bound=BaseModel)
 
-class SkyHelm(
-    Calls[
-        CommandResult, Lease, State, Any, float, None,
-        Answer[IntentOut], Answer[SentSetpointOut], ParamValues,
-    ]
-):  # fmt: skip
+
+class SkyHelm(SyncCalls):
     """One vehicle of a SkyHelm server, over REST (and the telemetry WebSocket)::
 
         with SkyHelm("http://127.0.0.1:8000/?token=...") as sky:
@@ -69,8 +68,7 @@ class SkyHelm(
             response = self._http.request(**self._request(call))
         except httpx.HTTPError as exc:
             raise SkyHelmError(0, f"{call.method} {call.path}: {exc}") from exc
-        body = response.json() if response.content else None
-        return response.status_code, self._answer(call, response.status_code, body)
+        return response.status_code, self._answer(call, response.status_code, json_body(response))
 
     def _command(self, call: Call) -> CommandResult:
         status, body = self._send(call)
@@ -82,8 +80,17 @@ class SkyHelm(
     def _state(self, call: Call) -> State:
         return State(self._send(call)[1])
 
+    def _typed(self, call: Call, model: type[_M]) -> Answer[_M]:
+        return Answer(self._send(call)[1], model)
+
+    def _typed_list(self, call: Call, model: type[_M]) -> list[Answer[_M]]:
+        return [Answer(item, model) for item in self._send(call)[1]]
+
     def _json(self, call: Call) -> Any:
         return self._send(call)[1]
+
+    def _bytes(self, call: Call) -> bytes:
+        return bytes(self._send(call)[1])
 
     def _value(self, call: Call) -> float:
         return float(self._send(call)[1])

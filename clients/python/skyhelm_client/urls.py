@@ -4,7 +4,9 @@ from __future__ import annotations
 
 from urllib.parse import parse_qs, urlencode, urlsplit
 
-API_PREFIX = "/api/v1"
+from skyhelm_wire.calls import API_PREFIX
+
+__all__ = ["API_PREFIX", "split_url", "ws_url"]
 
 
 def split_url(url: str, token: str | None) -> tuple[str, str]:

@@ -19,14 +19,11 @@ from server.control.operations import OPERATIONS, run_command
 from server.http.deps import ControlledVehicle
 from server.http.error_handlers import command_response
 from server.http.errors import COMMAND_RESPONSES
+from server.http.routing import route_options
 from server.link import Vehicle
 from skyhelm_wire.calls import CALL
 
-router = APIRouter(
-    prefix="/vehicles/{vehicle_id}",
-    tags=["commands"],
-    responses=COMMAND_RESPONSES,
-)
+router = APIRouter(tags=["commands"], responses=COMMAND_RESPONSES)
 
 async def run_operation(name: str, vehicle: Vehicle, body: BaseModel | None) -> JSONResponse:
     return command_response(await run_command(name, vehicle, body))
@@ -76,9 +73,7 @@ def _add_routes() -> None:
     for name, operation in OPERATIONS.items():
         call = CALL[name]
         endpoint = _endpoint(name, operation.run.__name__, operation.run.__doc__)
-        router.add_api_route(
-            f"/{call.path}", endpoint, methods=[call.method], response_model=call.answer
-        )
+        router.add_api_route(call.route, endpoint, **route_options(call, {}))
 
 
 _add_routes()

@@ -13,10 +13,11 @@ from server.control import lease_ops
 from server.http.context import ApiContext
 from server.http.deps import Context, KnownVehicle, LeaseIdHeader, Pilot, Reader
 from server.http.errors import CONTROL_RESPONSES, READ_RESPONSES
+from server.http.routing import route
 from server.http.schemas import ErrorOut
 from server.link import Vehicle
+from skyhelm_wire.calls import AUDIT_LIMIT_MAX, CALL
 from skyhelm_wire.control import (
-    AuditEntryOut,
     ControlBody,
     ControlStatusOut,
     LeaseOut,
@@ -26,9 +27,6 @@ from skyhelm_wire.control import (
 )
 
 router = APIRouter(tags=["control"])
-_lease_router = APIRouter(prefix="/vehicles/{vehicle_id}/control")
-
-AUDIT_LIMIT_MAX = 1000
 DISCONNECT_POLL_S = 0.1
 _REFUSED: dict[int | str, dict[str, Any]] = {
     409: {"model": ErrorOut, "description": "held by another, or the takeover refused"}
@@ -61,7 +59,19 @@ async def _request_gone(request: Request) -> None:
         await asyncio.sleep(DISCONNECT_POLL_S)
 
 
-@_lease_router.post("", response_model=LeaseOut, responses={**CONTROL_RESPONSES, **_REFUSED})
+@route(router, CALL["audit"], responses=READ_RESPONSES)
+async def control_audit(
+    context: Context,
+    _: Reader,
+    vehicle: Annotated[int | None, Query(ge=0, le=255, description="one vehicle's only")] = None,
+    limit: Annotated[int, Query(ge=1, le=AUDIT_LIMIT_MAX)] = 100,
+) -> list[dict[str, Any]]:
+    """The newest control and deadman events, oldest first; kept across restarts in
+    `<log_dir>/control-audit.jsonl`."""
+    return context.audit.entries(vehicle, limit)
+
+
+@route(router, CALL["acquire"], responses={**CONTROL_RESPONSES, **_REFUSED})
 async def acquire_control(
     request: Request, call: LeaseCall, body: Annotated[ControlBody | None, Body()] = None
 ) -> LeaseOut:
@@ -78,7 +88,7 @@ async def acquire_control(
     )
 
 
-@_lease_router.put("", response_model=LeaseOut, responses=CONTROL_RESPONSES)
+@route(router, CALL["renew"], responses=CONTROL_RESPONSES)
 async def renew_control(
     call: LeaseCall, body: Annotated[RenewBody | None, Body()] = None
 ) -> LeaseOut:
@@ -90,22 +100,23 @@ async def renew_control(
     )
 
 
-@_lease_router.get("", response_model=ControlStatusOut, responses=READ_RESPONSES)
+@route(router, CALL["control_status"], responses=READ_RESPONSES)
 async def control_status(vehicle: KnownVehicle, context: Context, _: Reader) -> ControlStatusOut:
     """Who holds control, since when, until when, and a pending takeover request."""
     return lease_ops.status(context.leases, vehicle.sysid)
 
 
-@_lease_router.delete("", status_code=204, response_class=Response, responses=CONTROL_RESPONSES)
+@route(router, CALL["release"], status_code=204, response_class=Response,
+       responses=CONTROL_RESPONSES)
 async def release_control(call: LeaseCall) -> Response:
     """Give control back. While the streamer runs, this applies on_operator_loss."""
     lease_ops.release(call.context.leases, call.vehicle, call.lease_id)
     return Response(status_code=204)
 
 
-@_lease_router.post(
-    "/requests/{request_id}",
-    response_model=TakeoverAnswerOut,
+@route(
+    router,
+    CALL["answer_takeover"],
     responses={**CONTROL_RESPONSES, 404: {"model": ErrorOut, "description": "no such request"}},
 )
 async def answer_takeover(
@@ -115,18 +126,3 @@ async def answer_takeover(
     return lease_ops.answer_takeover(
         call.context.leases, call.vehicle, call.lease_id, request_id, body
     )
-
-
-@router.get("/control/audit", response_model=list[AuditEntryOut], responses=READ_RESPONSES)
-async def control_audit(
-    context: Context,
-    _: Reader,
-    vehicle: Annotated[int | None, Query(ge=0, le=255, description="one vehicle's only")] = None,
-    limit: Annotated[int, Query(ge=1, le=AUDIT_LIMIT_MAX)] = 100,
-) -> list[dict[str, Any]]:
-    """The newest control and deadman events, oldest first; kept across restarts in
-    `<log_dir>/control-audit.jsonl`."""
-    return context.audit.entries(vehicle, limit)
-
-
-router.include_router(_lease_router)

@@ -9,8 +9,10 @@ from typing import Any
 from fastapi import APIRouter, Request
 
 from server.http.deps import Context
+from server.http.routing import route
 from server.http.schemas import ChildProcessOut, HealthOut
 from server.link.stream.stream_channel import sender_status
+from skyhelm_wire.calls import CALL
 
 router = APIRouter(tags=["health"])
 
@@ -23,7 +25,7 @@ def _version() -> str:
         return "0+unknown"
 
 
-@router.get("/health", response_model=HealthOut)
+@route(router, CALL["health"])
 async def health(context: Context, request: Request) -> HealthOut:
     processes: list[dict[str, Any]] = []
     sender = sender_status()

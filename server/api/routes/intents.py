@@ -14,19 +14,12 @@ from pydantic import BaseModel
 from server.control import operations
 from server.http.deps import Context, ControlledVehicle
 from server.http.errors import COMMAND_RESPONSES, command_status
+from server.http.routing import route
 from server.link import Vehicle
-from skyhelm_wire.intents import (
-    GotoIntentBody,
-    IntentOut,
-    OffsetIntentBody,
-    VelocityIntentBody,
-)
+from skyhelm_wire.calls import CALL
+from skyhelm_wire.intents import GotoIntentBody, OffsetIntentBody, VelocityIntentBody
 
-router = APIRouter(
-    prefix="/vehicles/{vehicle_id}/intents",
-    tags=["intents"],
-    responses=COMMAND_RESPONSES,
-)
+router = APIRouter(tags=["intents"], responses=COMMAND_RESPONSES)
 
 
 async def answer_intent(
@@ -36,7 +29,7 @@ async def answer_intent(
     return JSONResponse(answer.body, status_code=command_status(answer.outcome))
 
 
-@router.post("/brake", response_model=IntentOut)
+@route(router, CALL["brake"])
 async def brake(vehicle: ControlledVehicle, context: Context) -> JSONResponse:
     """Stop and hold where the vehicle stops. Streaming setpoints: a zero velocity, then a
     position hold once it is slow (events `intent` braking / holding). Otherwise HOLD mode,
@@ -44,7 +37,7 @@ async def brake(vehicle: ControlledVehicle, context: Context) -> JSONResponse:
     return await answer_intent(context, vehicle, "brake", None)
 
 
-@router.put("/velocity", response_model=IntentOut)
+@route(router, CALL["velocity"])
 async def velocity(
     vehicle: ControlledVehicle, context: Context, body: VelocityIntentBody
 ) -> JSONResponse:
@@ -55,7 +48,7 @@ async def velocity(
     return await answer_intent(context, vehicle, "velocity", body)
 
 
-@router.post("/offset", response_model=IntentOut)
+@route(router, CALL["offset"])
 async def offset(
     vehicle: ControlledVehicle, context: Context, body: OffsetIntentBody
 ) -> JSONResponse:
@@ -64,7 +57,7 @@ async def offset(
     return await answer_intent(context, vehicle, "offset", body)
 
 
-@router.post("/goto", response_model=IntentOut)
+@route(router, CALL["goto"])
 async def goto(vehicle: ControlledVehicle, context: Context, body: GotoIntentBody) -> JSONResponse:
     """Go to lat_deg/lon_deg at alt_rel_m above home (default: the current altitude). In
     OFFBOARD as a global position setpoint; in any other mode as MAV_CMD_DO_REPOSITION."""

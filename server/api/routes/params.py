@@ -9,10 +9,11 @@ from fastapi import APIRouter, Path, Query
 from server.control import vehicle_ops
 from server.http.deps import ConnectedVehicle, ControlledVehicle
 from server.http.errors import CONTROL_RESPONSES, READ_RESPONSES, Responses
+from server.http.routing import route
 from server.http.schemas import ErrorOut, ParamMetadataOut, ParamOut, ParamsOut, ParamValueBody
-from skyhelm_wire.calls import PARAM_NAME_LENGTH, PARAM_NAME_PATTERN, PARAM_NAMES_PATTERN
+from skyhelm_wire.calls import CALL, PARAM_NAME_LENGTH, PARAM_NAME_PATTERN, PARAM_NAMES_PATTERN
 
-router = APIRouter(prefix="/vehicles/{vehicle_id}/params", tags=["params"])
+router = APIRouter(tags=["params"])
 
 ParamName = Annotated[
     str,
@@ -40,7 +41,7 @@ _LOST: Responses = {503: {"model": ErrorOut, "description": "the vehicle is not 
 _READ: Responses = {**READ_RESPONSES, **_LOST, **_NO_ANSWER, **_REFUSED}
 
 
-@router.get("", response_model=ParamsOut, responses=_READ)
+@route(router, CALL["params"], responses=_READ)
 async def get_params(
     vehicle: ConnectedVehicle,
     names: ParamNames = None,
@@ -48,21 +49,19 @@ async def get_params(
     return await vehicle_ops.get_params(vehicle, names)
 
 
-@router.get("/metadata", response_model=ParamMetadataOut, responses=READ_RESPONSES)
+@route(router, CALL["param_metadata"], responses=READ_RESPONSES)
 async def get_param_metadata(vehicle: ConnectedVehicle) -> ParamMetadataOut:
     """What each parameter is (group, descriptions, units, range, default), from the
     component metadata the vehicle serves (PX4's parameters.json, read once over MAVLink FTP)."""
     return await vehicle_ops.get_param_metadata(vehicle)
 
 
-@router.get("/{name}", response_model=ParamOut, responses=_READ)
+@route(router, CALL["param"], responses=_READ)
 async def get_param(vehicle: ConnectedVehicle, name: ParamName) -> ParamOut:
     return await vehicle_ops.get_param(vehicle, name)
 
 
-@router.put(
-    "/{name}", response_model=ParamOut, responses={**CONTROL_RESPONSES, **_NO_ANSWER, **_REFUSED}
-)
+@route(router, CALL["set_param"], responses={**CONTROL_RESPONSES, **_NO_ANSWER, **_REFUSED})
 async def set_param(vehicle: ControlledVehicle, name: ParamName, body: ParamValueBody) -> ParamOut:
     """Set it and check the vehicle's echo. A value outside the range of the vehicle's
     metadata is 422 (field ``value``, ``minimum``, ``maximum``, ``units``, ``description``)

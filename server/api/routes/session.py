@@ -5,20 +5,18 @@ header) for an HttpOnly, SameSite=Strict cookie, which its WebSockets and the 3D
 from __future__ import annotations
 
 from fastapi import APIRouter, Request, Response
-from pydantic import BaseModel
 
 from server.control.auth import TOKEN_COOKIE, token_from
 from server.http.deps import Reader
 from server.http.errors import AUTH_RESPONSES
+from server.http.routing import route
+from skyhelm_wire.calls import CALL
+from skyhelm_wire.page import SessionOut
 
 router = APIRouter(tags=["session"])
 
 
-class SessionOut(BaseModel):
-    role: str
-
-
-@router.post("/session", response_model=SessionOut, responses=AUTH_RESPONSES)
+@route(router, CALL["open_session"], responses=AUTH_RESPONSES)
 async def open_session(request: Request, response: Response, role: Reader) -> SessionOut:
     """Set the session cookie to the token this call carries (HttpOnly, SameSite=Strict,
     Secure over https); the page's sockets and the scene then need no token in their URL."""
@@ -35,7 +33,7 @@ async def open_session(request: Request, response: Response, role: Reader) -> Se
     return SessionOut(role=role.value)
 
 
-@router.delete("/session", status_code=204, responses=AUTH_RESPONSES)
+@route(router, CALL["close_session"], status_code=204, responses=AUTH_RESPONSES)
 async def close_session(_: Reader) -> Response:
     """Forget the session cookie."""
     response = Response(status_code=204)

@@ -10,12 +10,14 @@ from server.control.deadman import LIVE_DESCRIPTION
 from server.control.vehicle_ops import put_setpoint as put_setpoint_of
 from server.http.deps import Context, ControlledVehicle
 from server.http.errors import CONTROL_RESPONSES
+from server.http.routing import route
 from server.http.schemas import SentSetpointOut, SetpointBody
+from skyhelm_wire.calls import CALL
 
-router = APIRouter(prefix="/vehicles/{vehicle_id}", tags=["setpoint"])
+router = APIRouter(tags=["setpoint"])
 
 
-@router.put("/setpoint", response_model=SentSetpointOut, responses=CONTROL_RESPONSES)
+@route(router, CALL["set_setpoint"], responses=CONTROL_RESPONSES)
 async def put_setpoint(
     vehicle: ControlledVehicle,
     context: Context,

@@ -15,9 +15,11 @@ from fastapi import APIRouter, Request
 
 from server.http.deps import Context, Pilot, Reader
 from server.http.errors import AUTH_RESPONSES, ApiError
+from server.http.routing import route
 from server.link import Link
 from server.link.codec.signing_keys import SigningKeyStore, new_key
 from server.link.codec.signing_provision import ProvisionError, provision
+from skyhelm_wire.calls import CALL
 from skyhelm_wire.common import ErrorOut
 from skyhelm_wire.signing import (
     LinkSigningOut,
@@ -26,7 +28,7 @@ from skyhelm_wire.signing import (
     SigningStatusOut,
 )
 
-router = APIRouter(prefix="/signing", tags=["signing"])
+router = APIRouter(tags=["signing"])
 
 _RESPONSES: dict[int | str, dict[str, object]] = {
     **AUTH_RESPONSES,
@@ -61,12 +63,12 @@ def _status(context: Context, store: SigningKeyStore | None) -> SigningStatusOut
     )
 
 
-@router.get("", response_model=SigningStatusOut, responses=AUTH_RESPONSES)
+@route(router, CALL["signing_status"], responses=AUTH_RESPONSES)
 async def signing_status(request: Request, context: Context, _: Reader) -> SigningStatusOut:
     return _status(context, _store(request))
 
 
-@router.post("", response_model=SigningStatusOut, responses=_RESPONSES)
+@route(router, CALL["set_signing"], responses=_RESPONSES)
 async def set_signing(
     request: Request, body: SigningBody, context: Context, _: Pilot
 ) -> SigningStatusOut:

@@ -15,7 +15,9 @@ from fastapi import APIRouter, Header, Path, Response
 
 from server.http.deps import Context, Reader
 from server.http.errors import AUTH_RESPONSES, ApiError
+from server.http.routing import route
 from server.http.tile_archive import MAX_ZOOM, MEDIA_TYPES
+from skyhelm_wire.calls import CALL
 
 router = APIRouter(tags=["map"])
 
@@ -39,8 +41,9 @@ def _matches(if_none_match: str | None, etag: str) -> bool:
     return etag in tags or "*" in tags
 
 
-@router.get(
-    "/tiles/{z}/{x}/{y}.{ext}",
+@route(
+    router,
+    CALL["tile"],
     response_class=Response,
     responses=_TILE_RESPONSES,
     summary="A tile of the offline map's archive (map_tiles)",

@@ -11,17 +11,19 @@ from server.control.vehicle_ops import state_json, stream_out
 from server.control.views import summary_dict
 from server.http.deps import Context, KnownVehicle, Reader
 from server.http.errors import AUTH_RESPONSES, READ_RESPONSES
-from server.http.schemas import StreamOut, VehicleStateOut, VehicleSummaryOut
+from server.http.routing import route
+from server.http.schemas import StreamOut
+from skyhelm_wire.calls import CALL
 
 router = APIRouter(tags=["vehicles"])
 
 
-@router.get("/vehicles", response_model=list[VehicleSummaryOut], responses=AUTH_RESPONSES)
+@route(router, CALL["vehicles"], responses=AUTH_RESPONSES)
 async def list_vehicles(context: Context, _: Reader) -> list[dict[str, Any]]:
     return [summary_dict(vehicle.snapshot()) for vehicle in context.registry.all()]
 
 
-@router.get("/vehicles/{vehicle_id}", response_model=VehicleStateOut, responses=READ_RESPONSES)
+@route(router, CALL["state"], responses=READ_RESPONSES)
 async def get_vehicle_state(vehicle: KnownVehicle, request: Request) -> Response:
     """The state publisher's latest encoding (the one the telemetry sockets send), with
     the lease as it is now."""
@@ -29,7 +31,7 @@ async def get_vehicle_state(vehicle: KnownVehicle, request: Request) -> Response
     return Response(state_json(publishers, vehicle), media_type="application/json")
 
 
-@router.get("/vehicles/{vehicle_id}/stream", response_model=StreamOut, responses=READ_RESPONSES)
+@route(router, CALL["stream"], responses=READ_RESPONSES)
 async def get_stream_stats(vehicle: KnownVehicle) -> StreamOut:
     """Setpoint streamer figures, measured since the stream last started."""
     return stream_out(vehicle)

@@ -284,7 +284,16 @@ class VehicleState:
     telemetry_refused: tuple[str, ...] = ()
 
 
+# VehicleState's fields the API writes under the wire's name for them (its alias or
+# its field name), where the snapshot's differs
+API_NAMES: dict[str, str] = {
+    "mav_type": "type",
+    "global_position": "global",
+}
+
+
 __all__ = [
+    "API_NAMES",
     "ArmingCheck",
     "ArmingChecksState",
     "AttitudeState",
