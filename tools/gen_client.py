@@ -35,7 +35,7 @@ COMMAND = "python -m tools.gen_client"
 # the type arguments of Calls for each client (calls.py: what each sender returns)
 SYNC_ARGS = (
     "CommandResult", "Lease", "State", "float", "None", "Answer[IntentOut]",
-    "Answer[SentSetpointOut]", "ParamValues",
+    "Answer[SentSetpointOut]", "ParamValues", "list[Answer[AuditEntryOut]]",
 )  # fmt: skip
 
 
@@ -184,7 +184,8 @@ def generate() -> str:
     for name in ("Answer", "CommandResult", "Lease", "ParamValues", "State"):
         imports.names.add(("skyhelm_client.models", name))
     imports.names |= {("skyhelm_wire.intents", "IntentOut"),
-                      ("skyhelm_wire.setpoints", "SentSetpointOut")}  # fmt: skip
+                      ("skyhelm_wire.setpoints", "SentSetpointOut"),
+                      ("skyhelm_wire.control", "AuditEntryOut")}  # fmt: skip
     sync = _client("SyncCalls", SYNC_ARGS, False, imports)
     asynchronous = _client("AsyncCalls", SYNC_ARGS, True, imports)
     by_module: dict[str, list[str]] = {}

@@ -12,7 +12,7 @@ import pytest
 from pydantic import ValidationError
 
 from skyhelm_client import AsyncSkyHelm, CommandResult, SkyHelm
-from skyhelm_client.calls import Calls
+from skyhelm_client.calls import Call, Calls
 from skyhelm_client.models import Answer
 from skyhelm_wire.calls import CALLS
 from skyhelm_wire.commands import CommandResultOut
@@ -95,6 +95,15 @@ def test_the_table_made_calls_answer_validated_models(served: Served) -> None:
         assert entries
         assert all(entry.model.vehicle == 1 for entry in entries)
         assert entries[-1].model.kind == "control"
+        assert [entry.model for entry in sky.audit(limit=5)] == [e.model for e in entries]
+    # a client of another vehicle reads that vehicle's audit (none here), unless it asks for all
+    with SkyHelm(pilot_url(served), vehicle=2) as other:
+        assert other.audit() == []
+        everyone = other.audit(all_vehicles=True, limit=5)
+        assert everyone
+        assert all(entry.model.vehicle == 1 for entry in everyone)
+        assert everyone[-1].model.data["action"] == "released"  # the first client's lease
+        assert other.audit(vehicle=1, limit=5) == everyone
 
     async def read() -> None:
         async with AsyncSkyHelm(pilot_url(served)) as sky:
@@ -103,6 +112,24 @@ def test_the_table_made_calls_answer_validated_models(served: Served) -> None:
             assert [entry.model.kind for entry in await sky.audit(limit=1)]
 
     asyncio.run(read())
+
+
+def test_audit_reads_the_clients_own_vehicle_unless_asked_for_all(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    sent: list[Call] = []
+    monkeypatch.setattr(SkyHelm, "_send", lambda self, call: (sent.append(call), (200, []))[1])
+    with SkyHelm("http://127.0.0.1:9/?token=t", vehicle=3) as sky:  # nothing is sent
+        sky.audit()
+        sky.audit(limit=7, all_vehicles=True)
+        sky.audit(vehicle=4)
+        with pytest.raises(ValueError, match="not both"):
+            sky.audit(vehicle=4, all_vehicles=True)
+    assert [(call.path, call.params) for call in sent] == [
+        ("/control/audit", {"vehicle": "3", "limit": "100"}),
+        ("/control/audit", {"limit": "7"}),
+        ("/control/audit", {"vehicle": "4", "limit": "100"}),
+    ]
 
 
 def test_a_picked_answer_is_validated_whole_with_the_tables_model() -> None:

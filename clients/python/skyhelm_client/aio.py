@@ -24,6 +24,7 @@ from skyhelm_client.models import (
     param_values,
 )
 from skyhelm_client.urls import ws_url
+from skyhelm_wire.control import AuditEntryOut
 from skyhelm_wire.intents import IntentOut
 from skyhelm_wire.setpoints import SentSetpointOut
 
@@ -104,6 +105,9 @@ class AsyncSkyHelm(AsyncCalls):
 
     async def _params(self, call: Call) -> ParamValues:
         return param_values((await self._send(call))[1])
+
+    async def _audit(self, call: Call) -> list[Answer[AuditEntryOut]]:
+        return await self._typed_list(call, AuditEntryOut)
 
     def _now(self) -> float:
         return asyncio.get_running_loop().time()

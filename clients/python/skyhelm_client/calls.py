@@ -37,6 +37,7 @@ _None = TypeVar("_None")
 _Intent = TypeVar("_Intent")
 _Sent = TypeVar("_Sent")
 _Params = TypeVar("_Params")
+_Audit = TypeVar("_Audit")
 
 # Long enough for a takeover the holder is asked about (takeover_ask_s, 10 s by default)
 # and for a mode switch the vehicle confirms.
@@ -116,7 +117,7 @@ class Waiting:
         return False
 
 
-class Calls(ABC, Generic[_Cmd, _Lease, _State, _Value, _None, _Intent, _Sent, _Params]):
+class Calls(ABC, Generic[_Cmd, _Lease, _State, _Value, _None, _Intent, _Sent, _Params, _Audit]):
     """The API of one vehicle (and the server's shared reads), for a client that sends each
     kind of answer through its own sender."""
 
@@ -125,7 +126,7 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Value, _None, _Intent, _Sent, _P
         "state", "acquire", "renew", "release", "set_setpoint", "params", "param", "set_param",
         "arm", "disarm", "takeoff", "land", "rtl", "hold", "mode", "reposition",
         "vtol_transition", "origin", "home", "offboard_start", "offboard_stop", "brake",
-        "velocity", "offset", "goto",
+        "velocity", "offset", "goto", "audit",
     })  # fmt: skip
     # a call's method when it is not the call's name
     METHOD_NAMES: ClassVar[dict[str, str]] = {
@@ -158,6 +159,7 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Value, _None, _Intent, _Sent, _P
     _intent: Callable[[Call], _Intent]  # an Answer[IntentOut]
     _sent: Callable[[Call], _Sent]  # an Answer[SentSetpointOut]
     _params: Callable[[Call], _Params]  # {name: value}
+    _audit: Callable[[Call], _Audit]  # a list[Answer[AuditEntryOut]]
     # reads the state (renewing a held lease) until the wait is over, pausing between reads
     _wait: Callable[[Waiting, float], _State]
 
@@ -252,6 +254,18 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Value, _None, _Intent, _Sent, _P
         after ``timeout_s``."""
         waiting = Waiting(predicate, self._now() + timeout_s, f"{what} ({timeout_s} s)", self._now)
         return self._wait(waiting, poll_s)
+
+    def audit(
+        self, *, limit: int = 100, vehicle: int | None = None, all_vehicles: bool = False
+    ) -> _Audit:
+        """The newest ``limit`` control and deadman events of the audit log, oldest first:
+        this client's vehicle's (``vehicle``: another one's; ``all_vehicles=True``: every
+        vehicle's, as ``GET /control/audit`` without ``vehicle``)."""
+        if all_vehicles and vehicle is not None:
+            raise ValueError("audit: give vehicle or all_vehicles=True, not both")
+        if not all_vehicles and vehicle is None:
+            vehicle = self.vehicle_id
+        return self._audit(self._named("audit", params=query(vehicle=vehicle, limit=limit)))
 
     # -- control ----------------------------------------------------------------------
 

@@ -11,7 +11,7 @@ from typing import Any, Literal, TypeVar
 
 from pydantic import BaseModel
 
-from skyhelm_client.calls import Call, Calls, given, query
+from skyhelm_client.calls import Call, Calls, given
 from skyhelm_client.models import Answer, CommandResult, Lease, ParamValues, State
 from skyhelm_wire.common import HealthOut
 from skyhelm_wire.control import AuditEntryOut, ControlStatusOut, TakeoverAnswerOut
@@ -37,6 +37,7 @@ class SyncCalls(
         Answer[IntentOut],
         Answer[SentSetpointOut],
         ParamValues,
+        list[Answer[AuditEntryOut]],
     ]
 ):
     """The table-made calls of the blocking client."""
@@ -120,19 +121,6 @@ class SyncCalls(
             "stream",
         )
         return self._typed(call, StreamOut)
-
-    def audit(
-        self,
-        *,
-        vehicle: int | None = None,
-        limit: int = 100,
-    ) -> list[Answer[AuditEntryOut]]:
-        """GET /api/v1/control/audit"""
-        call = self._named(
-            "audit",
-            params=query(vehicle=vehicle, limit=limit),
-        )
-        return self._typed_list(call, AuditEntryOut)
 
     def control_status(
         self,
@@ -261,6 +249,7 @@ class AsyncCalls(
         Coroutine[Any, Any, Answer[IntentOut]],
         Coroutine[Any, Any, Answer[SentSetpointOut]],
         Coroutine[Any, Any, ParamValues],
+        Coroutine[Any, Any, list[Answer[AuditEntryOut]]],
     ]
 ):
     """The table-made calls of the asyncio client."""
@@ -344,19 +333,6 @@ class AsyncCalls(
             "stream",
         )
         return self._typed(call, StreamOut)
-
-    def audit(
-        self,
-        *,
-        vehicle: int | None = None,
-        limit: int = 100,
-    ) -> Coroutine[Any, Any, list[Answer[AuditEntryOut]]]:
-        """GET /api/v1/control/audit"""
-        call = self._named(
-            "audit",
-            params=query(vehicle=vehicle, limit=limit),
-        )
-        return self._typed_list(call, AuditEntryOut)
 
     def control_status(
         self,

@@ -24,6 +24,7 @@ from skyhelm_client.models import (
     param_values,
 )
 from skyhelm_client.urls import ws_url
+from skyhelm_wire.control import AuditEntryOut
 from skyhelm_wire.intents import IntentOut
 from skyhelm_wire.setpoints import SentSetpointOut
 
@@ -106,6 +107,9 @@ class SkyHelm(SyncCalls):
 
     def _params(self, call: Call) -> ParamValues:
         return param_values(self._send(call)[1])
+
+    def _audit(self, call: Call) -> list[Answer[AuditEntryOut]]:
+        return self._typed_list(call, AuditEntryOut)
 
     def _now(self) -> float:
         return self.clock()
