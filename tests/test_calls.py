@@ -5,6 +5,7 @@ python -m tools.gen_calls_js)."""
 
 from __future__ import annotations
 
+import inspect
 from pathlib import Path
 from typing import Any, get_origin
 
@@ -149,6 +150,21 @@ def test_the_control_socket_takes_the_tables_commands_with_their_bodies() -> Non
     for call in COMMAND_CALLS:
         operation = operations.OPERATIONS.get(call.name) or operations.INTENTS[call.name]
         assert operation.body is call.body or not operation.body.model_fields, call.name
+
+
+def test_each_command_and_intent_route_is_its_operations() -> None:
+    """The command and intent routes follow from the operations: one each, at the row's
+    method and path, named and described by the operation's function, taking the row's
+    body (an intent is added with no route of its own)."""
+    document = create_app(make_settings(None)).openapi()
+    for call in COMMAND_CALLS:
+        operation = operations.OPERATIONS.get(call.name) or operations.INTENTS[call.name]
+        documented = document["paths"][API_PREFIX + call.route][call.method.lower()]
+        assert documented["operationId"].startswith(f"{operation.run.__name__}_api_v1_")
+        assert documented.get("description") == inspect.getdoc(operation.run), call.name
+        assert _route_models(documented)[:2] == (_model_name(call.body), call.body_required)
+        assert documented["tags"] == ["intents" if call.name in operations.INTENTS
+                                      else "commands"]  # fmt: skip
 
 
 def test_an_operation_off_the_table_fails_at_import(monkeypatch: pytest.MonkeyPatch) -> None:

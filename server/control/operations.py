@@ -51,6 +51,9 @@ class Operation:
 
 @dataclass(frozen=True)
 class Intent:
+    """An intent: its body and its function, whose name and docstring its REST route takes
+    (they name and describe it in OpenAPI)."""
+
     body: type[BaseModel]
     run: Callable[[Vehicle, Any], Awaitable[IntentResult]]
 
@@ -188,11 +191,18 @@ async def run_command(name: str, vehicle: Vehicle, body: BaseModel | None) -> Co
 
 @intent("brake")
 async def brake(vehicle: Vehicle, _: BrakeBody) -> IntentResult:
+    """Stop and hold where the vehicle stops. Streaming setpoints: a zero velocity, then a
+    position hold once it is slow (events `intent` braking / holding). Otherwise HOLD mode,
+    in which PX4 brakes and holds by itself."""
     return await intents.brake(vehicle)
 
 
 @intent("velocity")
 async def velocity(vehicle: Vehicle, body: VelocityIntentBody) -> IntentResult:
+    """Fly at a velocity (body: forward/right, ned: north/east; up_m_s; yaw_rate_deg_s),
+    streamed as an offboard setpoint. Live unless `live` is false: without a new call within
+    the deadman timeout the vehicle brakes and holds. With hold_altitude the altitude of the
+    first such call is held instead of a vertical speed."""
     x_m_s, y_m_s = body.xy_m_s()
     return await intents.velocity(
         vehicle,
@@ -207,6 +217,8 @@ async def velocity(vehicle: Vehicle, body: VelocityIntentBody) -> IntentResult:
 
 @intent("offset")
 async def offset(vehicle: Vehicle, body: OffsetIntentBody) -> IntentResult:
+    """Go by north_m/east_m/up_m from where the vehicle is (the point computed on WGS-84).
+    In OFFBOARD as a position setpoint; in any other mode as MAV_CMD_DO_REPOSITION."""
     return await intents.offset(
         vehicle, north_m=body.north_m, east_m=body.east_m, up_m=body.up_m, yaw_deg=body.yaw_deg
     )
@@ -214,6 +226,8 @@ async def offset(vehicle: Vehicle, body: OffsetIntentBody) -> IntentResult:
 
 @intent("goto")
 async def goto(vehicle: Vehicle, body: GotoIntentBody) -> IntentResult:
+    """Go to lat_deg/lon_deg at alt_rel_m above home (default: the current altitude). In
+    OFFBOARD as a global position setpoint; in any other mode as MAV_CMD_DO_REPOSITION."""
     return await intents.goto(
         vehicle,
         lat_deg=body.lat_deg,

@@ -3,10 +3,11 @@ write each route's handler and its documented answers, never its method or path.
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable
-from typing import Any, TypeVar
+from typing import Annotated, Any, TypeVar
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Body
 
 from skyhelm_wire.calls import CallSpec
 
@@ -29,3 +30,19 @@ def route(router: APIRouter, call: CallSpec, **options: Any) -> Callable[[_F], _
         return handler
 
     return register
+
+
+def body_parameter(call: CallSpec) -> inspect.Parameter | None:
+    """A table-made route's body parameter, as the table says: none (``body`` None), the
+    body's model (``body_required``), or one that may be left out (every field has a
+    default)."""
+    if call.body is None:
+        return None
+    if call.body_required:
+        return inspect.Parameter("body", inspect.Parameter.KEYWORD_ONLY, annotation=call.body)
+    return inspect.Parameter(
+        "body",
+        inspect.Parameter.KEYWORD_ONLY,
+        annotation=Annotated[call.body | None, Body()],
+        default=None,
+    )

@@ -9,9 +9,8 @@ from __future__ import annotations
 
 import inspect
 from collections.abc import Awaitable, Callable
-from typing import Annotated
 
-from fastapi import APIRouter, Body
+from fastapi import APIRouter
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel
 
@@ -19,7 +18,7 @@ from server.control.operations import OPERATIONS, run_command
 from server.http.deps import ControlledVehicle
 from server.http.error_handlers import command_response
 from server.http.errors import COMMAND_RESPONSES
-from server.http.routing import route_options
+from server.http.routing import body_parameter, route_options
 from server.link import Vehicle
 from skyhelm_wire.calls import CALL
 
@@ -27,20 +26,6 @@ router = APIRouter(tags=["commands"], responses=COMMAND_RESPONSES)
 
 async def run_operation(name: str, vehicle: Vehicle, body: BaseModel | None) -> JSONResponse:
     return command_response(await run_command(name, vehicle, body))
-
-
-def _body_parameter(model: type[BaseModel]) -> inspect.Parameter | None:
-    """The route's body: none for an empty model, optional when every field has a default."""
-    if not model.model_fields:
-        return None
-    if any(field.is_required() for field in model.model_fields.values()):
-        return inspect.Parameter("body", inspect.Parameter.KEYWORD_ONLY, annotation=model)
-    return inspect.Parameter(
-        "body",
-        inspect.Parameter.KEYWORD_ONLY,
-        annotation=Annotated[model | None, Body()],
-        default=None,
-    )
 
 
 _Endpoint = Callable[..., Awaitable[JSONResponse]]
@@ -55,7 +40,7 @@ def _endpoint(name: str, route_name: str, doc: str | None) -> _Endpoint:
             "vehicle", inspect.Parameter.POSITIONAL_OR_KEYWORD, annotation=ControlledVehicle
         )
     ]
-    body = _body_parameter(OPERATIONS[name].body)
+    body = body_parameter(CALL[name])
     if body is not None:
         parameters.append(body)
     # FastAPI reads a route's parameters from its signature: this one is built from the table.

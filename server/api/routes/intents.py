@@ -3,62 +3,74 @@ the page, scripts and the control socket fly the same way and meet the same chec
 
 Each answers ``IntentOut``: the setpoint it streams, or the vehicle's answer to the command
 it sent (then with that command's status: 409 refused, 504 no answer). Moves outside the
-envelope are a 422 naming the input and the limit, before anything is sent."""
+envelope are a 422 naming the input and the limit, before anything is sent.
+
+There is one route per intent of :data:`server.control.operations.INTENTS`, at the wire's
+method and path, taking the table's body, named and described by the intent's function:
+adding an intent touches the wire's table (and its body) and the operation, not this
+module."""
 
 from __future__ import annotations
+
+import inspect
+from collections.abc import Awaitable, Callable
 
 from fastapi import APIRouter
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel
 
 from server.control import operations
+from server.http.context import ApiContext
 from server.http.deps import Context, ControlledVehicle
 from server.http.errors import COMMAND_RESPONSES, command_status
-from server.http.routing import route
+from server.http.routing import body_parameter, route_options
 from server.link import Vehicle
 from skyhelm_wire.calls import CALL
-from skyhelm_wire.intents import GotoIntentBody, OffsetIntentBody, VelocityIntentBody
 
 router = APIRouter(tags=["intents"], responses=COMMAND_RESPONSES)
 
 
 async def answer_intent(
-    context: Context, vehicle: Vehicle, name: str, body: BaseModel | None
+    context: ApiContext, vehicle: Vehicle, name: str, body: BaseModel | None
 ) -> JSONResponse:
     answer = await operations.answer_intent(context.deadman, vehicle, name, body)
     return JSONResponse(answer.body, status_code=command_status(answer.outcome))
 
 
-@route(router, CALL["brake"])
-async def brake(vehicle: ControlledVehicle, context: Context) -> JSONResponse:
-    """Stop and hold where the vehicle stops. Streaming setpoints: a zero velocity, then a
-    position hold once it is slow (events `intent` braking / holding). Otherwise HOLD mode,
-    in which PX4 brakes and holds by itself."""
-    return await answer_intent(context, vehicle, "brake", None)
+_Endpoint = Callable[..., Awaitable[JSONResponse]]
 
 
-@route(router, CALL["velocity"])
-async def velocity(
-    vehicle: ControlledVehicle, context: Context, body: VelocityIntentBody
-) -> JSONResponse:
-    """Fly at a velocity (body: forward/right, ned: north/east; up_m_s; yaw_rate_deg_s),
-    streamed as an offboard setpoint. Live unless `live` is false: without a new call within
-    the deadman timeout the vehicle brakes and holds. With hold_altitude the altitude of the
-    first such call is held instead of a vertical speed."""
-    return await answer_intent(context, vehicle, "velocity", body)
+def _endpoint(name: str) -> _Endpoint:
+    """The route of the intent ``name``: its parameters the controlled vehicle, the API's
+    context and the table's body; its name and description the intent function's."""
+
+    async def endpoint(
+        vehicle: Vehicle, context: ApiContext, body: BaseModel | None = None
+    ) -> JSONResponse:
+        return await answer_intent(context, vehicle, name, body)
+
+    keyword = inspect.Parameter.POSITIONAL_OR_KEYWORD
+    parameters = [
+        inspect.Parameter("vehicle", keyword, annotation=ControlledVehicle),
+        inspect.Parameter("context", keyword, annotation=Context),
+    ]
+    body = body_parameter(CALL[name])
+    if body is not None:
+        parameters.append(body)
+    # FastAPI reads a route's parameters from its signature: this one is built from the table.
+    endpoint.__signature__ = inspect.Signature(  # type: ignore[attr-defined]
+        parameters, return_annotation=JSONResponse
+    )
+    run = operations.INTENTS[name].run
+    endpoint.__name__ = endpoint.__qualname__ = run.__name__
+    endpoint.__doc__ = run.__doc__
+    return endpoint
 
 
-@route(router, CALL["offset"])
-async def offset(
-    vehicle: ControlledVehicle, context: Context, body: OffsetIntentBody
-) -> JSONResponse:
-    """Go by north_m/east_m/up_m from where the vehicle is (the point computed on WGS-84).
-    In OFFBOARD as a position setpoint; in any other mode as MAV_CMD_DO_REPOSITION."""
-    return await answer_intent(context, vehicle, "offset", body)
+def _add_routes() -> None:
+    for name in operations.INTENTS:
+        call = CALL[name]
+        router.add_api_route(call.route, _endpoint(name), **route_options(call, {}))
 
 
-@route(router, CALL["goto"])
-async def goto(vehicle: ControlledVehicle, context: Context, body: GotoIntentBody) -> JSONResponse:
-    """Go to lat_deg/lon_deg at alt_rel_m above home (default: the current altitude). In
-    OFFBOARD as a global position setpoint; in any other mode as MAV_CMD_DO_REPOSITION."""
-    return await answer_intent(context, vehicle, "goto", body)
+_add_routes()
