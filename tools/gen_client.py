@@ -34,7 +34,7 @@ OUT = CLIENT / "generated.py"
 COMMAND = "python -m tools.gen_client"
 # the type arguments of Calls for each client (calls.py: what each sender returns)
 SYNC_ARGS = (
-    "CommandResult", "Lease", "State", "float", "None", "Answer[IntentOut]",
+    "CommandResult", "Lease", "State", "float | None", "None", "Answer[IntentOut]",
     "Answer[SentSetpointOut]", "ParamValues", "list[Answer[AuditEntryOut]]",
 )  # fmt: skip
 

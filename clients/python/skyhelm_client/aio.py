@@ -21,6 +21,7 @@ from skyhelm_client.models import (
     Message,
     ParamValues,
     State,
+    param_value,
     param_values,
 )
 from skyhelm_client.urls import ws_url
@@ -91,8 +92,8 @@ class AsyncSkyHelm(AsyncCalls):
     async def _bytes(self, call: Call) -> bytes:
         return bytes((await self._send(call))[1])
 
-    async def _value(self, call: Call) -> float:
-        return float((await self._send(call))[1])
+    async def _value(self, call: Call) -> float | None:
+        return param_value((await self._send(call))[1])
 
     async def _none(self, call: Call) -> None:
         await self._send(call)

@@ -154,7 +154,7 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Value, _None, _Intent, _Sent, _P
     _command: Callable[[Call], _Cmd]
     _lease: Callable[[Call], _Lease]
     _state: Callable[[Call], _State]
-    _value: Callable[[Call], _Value]
+    _value: Callable[[Call], _Value]  # a parameter's value: float, None when not finite
     _none: Callable[[Call], _None]
     _intent: Callable[[Call], _Intent]  # an Answer[IntentOut]
     _sent: Callable[[Call], _Sent]  # an Answer[SentSetpointOut]
@@ -428,6 +428,7 @@ class Calls(ABC, Generic[_Cmd, _Lease, _State, _Value, _None, _Intent, _Sent, _P
         return self._params(self._named("params", params=params, pick="params"))
 
     def param(self, name: str) -> _Value:
+        """A parameter's value (None: not a finite number)."""
         return self._value(self._named("param", path={"name": name}, pick="value"))
 
     def set_param(self, name: str, value: float, *, force: bool = False) -> _Value:

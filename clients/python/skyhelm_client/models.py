@@ -93,9 +93,11 @@ class State(Mapping[str, Any]):
     message). Every field of the JSON is there by key (``state["battery"]``), all of them
     typed in ``model``; the ones a script reads most are properties."""
 
+    model: VehicleStateOut
+
     def __init__(self, data: Mapping[str, Any]) -> None:
         self._data = dict(data)
-        self.model: VehicleStateOut = (
+        self.model = (
             StateMessage if self._data.get("type") == "state" else VehicleStateOut
         ).model_validate(self._data)
 
@@ -178,9 +180,11 @@ class Answer(Mapping[str, Any], Generic[_M]):
     same answer typed with the wire's model the server answers with (``answer.model.via``),
     so a field the server renames fails here and a misspelt one in a script fails mypy."""
 
+    model: _M
+
     def __init__(self, data: Mapping[str, Any], model_type: type[_M]) -> None:
         self._data = dict(data)
-        self.model: _M = model_type.model_validate(self._data)
+        self.model = model_type.model_validate(self._data)
 
     def __getitem__(self, key: str) -> Any:
         return self._data[key]
@@ -198,3 +202,9 @@ class Answer(Mapping[str, Any], Generic[_M]):
 def param_values(data: Any) -> ParamValues:
     """``{name: value}`` as GET /params answers it (null: not a finite number)."""
     return _PARAM_VALUES.validate_python(data)
+
+
+def param_value(value: Any) -> float | None:
+    """A parameter's value as GET /params/{name} answers it, as a float (None: not a finite
+    number)."""
+    return None if value is None else float(value)

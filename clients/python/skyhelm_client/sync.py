@@ -21,6 +21,7 @@ from skyhelm_client.models import (
     Message,
     ParamValues,
     State,
+    param_value,
     param_values,
 )
 from skyhelm_client.urls import ws_url
@@ -93,8 +94,8 @@ class SkyHelm(SyncCalls):
     def _bytes(self, call: Call) -> bytes:
         return bytes(self._send(call)[1])
 
-    def _value(self, call: Call) -> float:
-        return float(self._send(call)[1])
+    def _value(self, call: Call) -> float | None:
+        return param_value(self._send(call)[1])
 
     def _none(self, call: Call) -> None:
         self._send(call)
