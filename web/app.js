@@ -98,9 +98,10 @@ function onEvent(message) {
   }
 }
 
-/** "control taken_over: Chrome tab 7f3a (was pilot · Firefox tab 01ab)". */
+/** "control taken_over: Chrome tab 7f3a (was pilot · Firefox tab 01ab)", "control released:
+ * nobody holds it (was pilot · script)". */
 function controlText(data) {
-  const who = data.holder || data.by || "";
+  const who = data.holder || data.by || "nobody holds it";
   const was = data.previous_holder ? ` (was ${data.previous_holder})` : "";
   const by = data.by && data.by !== who ? ` by ${data.by}` : "";
   const reason = data.reason ? ` — ${data.reason}` : "";
@@ -406,6 +407,7 @@ async function main() {
   if (new URLSearchParams(location.search).get("scene") === "off") $("scene-enable").checked = false;
   wireConfirm();
   document.addEventListener("skyhelm-control-taken", (e) => alerts.controlTaken(e.detail.by));
+  document.addEventListener("skyhelm-control-regained", () => alerts.clear("control"));
   wire();
   wireLayout(map);
   watchSceneNotices($("scene"));

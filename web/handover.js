@@ -17,6 +17,9 @@ const TAKEN_BANNER_MS = 10000; // then the note beside the holder keeps saying i
 // next visit) and a short id of this tab (two tabs of one browser differ by it).
 const TAB_ID = Math.floor(Math.random() * 0x10000).toString(16).padStart(4, "0");
 
+// the banner this tab showed when it lost control, until it holds control again
+let takenBanner = "";
+
 const hooks = { onGained: () => {}, onLost: () => {}, onChange: () => {} };
 
 /** Lets the flying side hear of control gained (with the lease answer) and lost, and of
@@ -92,6 +95,11 @@ export function takeControl(how = "take") {
     onLease: (lease) => {
       retakeAttempt = 0;
       showNote("");
+      // in control again: "Control taken by …: this tab no longer sends anything" is no
+      // longer so, in the banner nor in the alert area
+      if ($("banner").textContent === takenBanner) banner("");
+      takenBanner = "";
+      document.dispatchEvent(new CustomEvent("skyhelm-control-regained"));
       log("NOTICE", `control taken as ${lease.holder}${how === "force" ? " (forced)" : ""}`);
       hooks.onGained(lease);
       updateControls();
@@ -119,6 +127,7 @@ function closed(session, info) {
     document.dispatchEvent(new CustomEvent("skyhelm-control-taken", { detail: { by: takenBy } }));
     showNote(`${text} at ${new Date().toTimeString().slice(0, 8)}`, "bad");
     const told = `${text}: this tab no longer sends anything`;
+    takenBanner = told;
     banner(told);
     setTimeout(() => { if ($("banner").textContent === told) banner(""); }, TAKEN_BANNER_MS);
     log("WARNING", text);
