@@ -85,6 +85,9 @@ function onEvent(message) {
     log("NOTICE", controlText(data));
   } else if (message.kind === "lease") {
     return; // the same changes as the control events, in the older shape
+  } else if (message.kind === "params" && data.name) {
+    params.vehicleSaid(data.name, data.value);
+    log("INFO", `params: ${data.text}`);
   } else if (message.kind === "deadman") {
     const text = deadmanText(data, { vehicleSilentS: freshness.freshestS(), vehicle: message.vehicle ?? page.vehicleId });
     log("WARNING", text);
