@@ -19,6 +19,8 @@ const TAB_ID = Math.floor(Math.random() * 0x10000).toString(16).padStart(4, "0")
 
 // the banner this tab showed when it lost control, until it holds control again
 let takenBanner = "";
+// this tab answered Hand over: the lease it loses next was given, not taken
+let handingOver = false;
 
 const hooks = { onGained: () => {}, onLost: () => {}, onChange: () => {} };
 
@@ -119,8 +121,20 @@ function closed(session, info) {
   if (page.control === session) page.control = null;
   hooks.onLost();
   const takenBy = info.ended?.by || (info.ended?.state === "taken_over" ? "another pilot" : null);
+  const handedOver = handingOver;
+  handingOver = false;
   if (info.byUs) {
     log("NOTICE", "control released");
+  } else if (takenBy && handedOver) {
+    // the pilot answered Hand over: no takeover to warn of, but this tab sends nothing now
+    page.wantControl = false;
+    const text = `Control handed over to ${takenBy}`;
+    showNote(`${text} at ${new Date().toTimeString().slice(0, 8)}`);
+    const told = `${text}: this tab no longer sends anything`;
+    takenBanner = told;
+    banner(told);
+    setTimeout(() => { if ($("banner").textContent === told) banner(""); }, TAKEN_BANNER_MS);
+    log("NOTICE", text);
   } else if (takenBy) {
     page.wantControl = false;
     const text = `Control taken by ${takenBy}`;
@@ -237,9 +251,13 @@ export async function answerPrompt(grant) {
   if (!prompt || !page.control) return;
   const { requestId } = prompt;
   hidePrompt();
+  handingOver = grant;
   const answer = await page.control.answerTakeover(requestId, grant);
   if (answer.ok) log("NOTICE", grant ? "control handed over" : "request for control denied");
-  else log("WARNING", `answer not taken: ${describeError(answer.status, answer.body)}`);
+  else {
+    handingOver = false;
+    log("WARNING", `answer not taken: ${describeError(answer.status, answer.body)}`);
+  }
 }
 
 // ---- who controls ---------------------------------------------------------------------------
