@@ -85,6 +85,9 @@ function onEvent(message) {
     log("NOTICE", controlText(data));
   } else if (message.kind === "lease") {
     return; // the same changes as the control events, in the older shape
+  } else if (message.kind === "params" && data.name) {
+    params.vehicleSaid(data.name, data.value);
+    log("INFO", `params: ${data.text}`);
   } else if (message.kind === "deadman") {
     const text = deadmanText(data, { vehicleSilentS: freshness.freshestS(), vehicle: message.vehicle ?? page.vehicleId });
     log("WARNING", text);
@@ -98,9 +101,10 @@ function onEvent(message) {
   }
 }
 
-/** "control taken_over: Chrome tab 7f3a (was pilot · Firefox tab 01ab)". */
+/** "control taken_over: Chrome tab 7f3a (was pilot · Firefox tab 01ab)", "control released:
+ * nobody holds it (was pilot · script)". */
 function controlText(data) {
-  const who = data.holder || data.by || "";
+  const who = data.holder || data.by || "nobody holds it";
   const was = data.previous_holder ? ` (was ${data.previous_holder})` : "";
   const by = data.by && data.by !== who ? ` by ${data.by}` : "";
   const reason = data.reason ? ` — ${data.reason}` : "";
@@ -406,6 +410,7 @@ async function main() {
   if (new URLSearchParams(location.search).get("scene") === "off") $("scene-enable").checked = false;
   wireConfirm();
   document.addEventListener("skyhelm-control-taken", (e) => alerts.controlTaken(e.detail.by));
+  document.addEventListener("skyhelm-control-regained", () => alerts.clear("control"));
   wire();
   wireLayout(map);
   watchSceneNotices($("scene"));

@@ -17,6 +17,11 @@ const TAKEN_BANNER_MS = 10000; // then the note beside the holder keeps saying i
 // next visit) and a short id of this tab (two tabs of one browser differ by it).
 const TAB_ID = Math.floor(Math.random() * 0x10000).toString(16).padStart(4, "0");
 
+// the banner this tab showed when it lost control, until it holds control again
+let takenBanner = "";
+// this tab answered Hand over: the lease it loses next was given, not taken
+let handingOver = false;
+
 const hooks = { onGained: () => {}, onLost: () => {}, onChange: () => {} };
 
 /** Lets the flying side hear of control gained (with the lease answer) and lost, and of
@@ -94,6 +99,11 @@ export function takeControl(how = "take") {
     onLease: (lease) => {
       retakeAttempt = 0;
       showNote("");
+      // in control again: "Control taken by …: this tab no longer sends anything" is no
+      // longer so, in the banner nor in the alert area
+      if ($("banner").textContent === takenBanner) banner("");
+      takenBanner = "";
+      document.dispatchEvent(new CustomEvent("skyhelm-control-regained"));
       log("NOTICE", `control taken as ${lease.holder}${how === "force" ? " (forced)" : ""}`);
       hooks.onGained(lease);
       updateControls();
@@ -113,14 +123,27 @@ function closed(session, info) {
   if (page.control === session) page.control = null;
   hooks.onLost();
   const takenBy = info.ended?.by || (info.ended?.state === "taken_over" ? "another pilot" : null);
+  const handedOver = handingOver;
+  handingOver = false;
   if (info.byUs) {
     log("NOTICE", "control released");
+  } else if (takenBy && handedOver) {
+    // the pilot answered Hand over: no takeover to warn of, but this tab sends nothing now
+    page.wantControl = false;
+    const text = `Control handed over to ${takenBy}`;
+    showNote(`${text} at ${new Date().toTimeString().slice(0, 8)}`);
+    const told = `${text}: this tab no longer sends anything`;
+    takenBanner = told;
+    banner(told);
+    setTimeout(() => { if ($("banner").textContent === told) banner(""); }, TAKEN_BANNER_MS);
+    log("NOTICE", text);
   } else if (takenBy) {
     page.wantControl = false;
     const text = `Control taken by ${takenBy}`;
     document.dispatchEvent(new CustomEvent("skyhelm-control-taken", { detail: { by: takenBy } }));
     showNote(`${text} at ${new Date().toTimeString().slice(0, 8)}`, "bad");
     const told = `${text}: this tab no longer sends anything`;
+    takenBanner = told;
     banner(told);
     setTimeout(() => { if ($("banner").textContent === told) banner(""); }, TAKEN_BANNER_MS);
     log("WARNING", text);
@@ -230,9 +253,13 @@ export async function answerPrompt(grant) {
   if (!prompt || !page.control) return;
   const { requestId } = prompt;
   hidePrompt();
+  handingOver = grant;
   const answer = await page.control.answerTakeover(requestId, grant);
   if (answer.ok) log("NOTICE", grant ? "control handed over" : "request for control denied");
-  else log("WARNING", `answer not taken: ${describeError(answer.status, answer.body)}`);
+  else {
+    handingOver = false;
+    log("WARNING", `answer not taken: ${describeError(answer.status, answer.body)}`);
+  }
 }
 
 // ---- who controls ---------------------------------------------------------------------------

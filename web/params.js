@@ -261,6 +261,20 @@ export class ParamEditor {
     updateControls(); // the new controls follow who is in control
   }
 
+  /** The vehicle reports a parameter at a new value (another ground station, a script or the
+   * vehicle itself set it): its row and detail show it; a value being typed is kept. */
+  vehicleSaid(name, value) {
+    if (!(name in this.values) || this.values[name] === value) return;
+    const input = this.selected === name ? document.getElementById("param-input") : null;
+    const focused = input !== null && document.activeElement === input;
+    const typed = input && input.value !== String(this.values[name] ?? "") ? input.value : null;
+    this.values[name] = value;
+    this.render();
+    const again = document.getElementById("param-input");
+    if (again && typed !== null) again.value = typed;
+    if (again && focused) again.focus();
+  }
+
   say(text, cls) {
     this.answer.textContent = text;
     this.answer.className = `result params-answer ${cls}`;

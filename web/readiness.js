@@ -146,7 +146,11 @@ export class Readiness {
       parts.push(p);
     } else {
       const verdict = checks.ready === null ? "not told" : checks.ready ? "can arm" : "cannot arm";
-      parts.push(section(`In ${checks.mode} (flown): ${verdict}`, checks.reasons, false, "No check fails."));
+      // PX4 may say it cannot arm (SYS_STATUS's pre-arm bit) before its reasons can be read
+      const none = checks.ready !== false ? "No check fails."
+        : checks.source === "events" ? `PX4 reports it cannot arm in ${checks.mode} without naming a check.`
+          : `PX4 reports it cannot arm in ${checks.mode} (SYS_STATUS's pre-arm check); its reasons come with its arming-check report, once its events are read.`;
+      parts.push(section(`In ${checks.mode} (flown): ${verdict}`, checks.reasons, false, none));
       if (checks.verdict === "arm_switches_mode") {
         parts.push(hint(`SkyHelm's Arm (and Takeoff) switch to ${checks.arm_switches_to} first, where PX4 would arm.`));
       }

@@ -77,7 +77,7 @@ class Vehicle(VehicleOperations):
         core.on_connection(self._connection_changed)
         for kind, handler in self.telemetry.handlers.items():
             core.on_message(kind, handler)
-        self.params = ParamClient(core.requests)
+        self.params = ParamClient(core.requests, on_change=self._param_changed)
         core.on_message("PARAM_VALUE", self.params.handle_param_value)
         self.action = Action(core, self.telemetry)
         self.offboard = Offboard(core, self.telemetry, self.action, stream_rate_hz=stream_rate_hz)
@@ -125,6 +125,13 @@ class Vehicle(VehicleOperations):
             self._reread_params(), name=f"params-reread:{self.sysid}"
         )
         self.core.changed()
+
+    def _param_changed(self, name: str, before: float | int, now: float | int) -> None:
+        """The vehicle reports a parameter at another value than before, whoever set it."""
+        self.core.publish_event("params", {
+            "name": name, "value": now, "previous": before,
+            "text": f"{name} is now {now:g} (was {before:g})",
+        })  # fmt: skip
 
     async def _reread_params(self) -> None:
         try:

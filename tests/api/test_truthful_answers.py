@@ -101,3 +101,14 @@ async def test_takeoff_after_px4_disarmed_itself_arms_and_climbs(api: Api) -> No
     assert response.status_code == 200, response.text
     assert response.json()["result"] == "ACCEPTED"
     await api.wait_state(lambda s: s["armed"] and s["global"]["alt_rel_m"] > 1.0, 20.0, "climbing")
+
+
+async def test_an_accepted_arm_or_disarm_is_the_state_when_it_is_answered(api: Api) -> None:
+    """PX4 reports arming in its HEARTBEAT, once a second: an ACCEPTED arm answered before
+    one came left `armed` false for up to a second (the page's badge said DISARMED under
+    "Arm: ACCEPTED"). The answer waits for the vehicle to report it."""
+    for path, armed in (("arm", True), ("disarm", False), ("arm", True), ("disarm", False)):
+        answer = await api.control(path)
+        assert answer.status_code == 200, answer.text
+        assert answer.json()["result"] == "ACCEPTED"
+        assert (await api.state())["armed"] is armed, path

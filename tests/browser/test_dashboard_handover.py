@@ -7,6 +7,7 @@ vehicle first, so they run in any order."""
 from __future__ import annotations
 
 import math
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import httpx
@@ -165,6 +166,66 @@ def test_force_takes_control_only_after_a_confirmation(
         timeout=10_000,
     )
     assert "Control taken by" in (page.text_content("#banner") or "")
+
+
+TAKEN_SHOWN = """() => [document.getElementById('banner').textContent,
+  ...Array.from(document.querySelectorAll('#alerts .alert[data-kind="control"]'),
+                (e) => e.textContent)].filter((t) => t.includes('Control taken by'))"""
+
+
+def test_a_tab_that_takes_control_back_no_longer_says_it_was_taken(
+    page: Any, api: httpx.Client
+) -> None:
+    """A script forces control from the tab, then gives it back; the tab takes control again
+    and sends: it no longer says "Control taken by the script: this tab no longer sends
+    anything", neither in its banner nor in the alert area."""
+    flows.settle_vehicle(api, flying=False)
+    flows.take_control(page)
+    taken = api.post("/vehicles/1/control",
+                     json={"client_name": "script", "takeover": True, "force": True})
+    assert taken.status_code == 200, taken.text
+    _not_in_control(page)
+    page.wait_for_function(f"({TAKEN_SHOWN})().length === 2", timeout=10_000)
+    api.delete("/vehicles/1/control", headers={"X-Lease-Id": taken.json()["lease_id"]})
+    _wait_holder(page, "nobody")
+    page.wait_for_function(
+        "Array.from(document.getElementById('log').children, (e) => e.textContent).some("
+        "(t) => t.endsWith('control released: nobody holds it (was pilot · script)'))",
+        timeout=10_000,
+    )
+
+    flows.take_control(page)
+    assert page.evaluate(TAKEN_SHOWN) == []
+    assert page.locator("#btn-arm").is_enabled()
+
+
+def test_a_tab_that_hands_over_says_it_handed_over_not_that_control_was_taken(
+    page: Any, api: httpx.Client
+) -> None:
+    """The pilot answers a script's request with Hand over: the tab says it handed control
+    over (and sends nothing more), never the warning "Control taken by …" of a takeover."""
+    flows.settle_vehicle(api, flying=False)
+    flows.take_control(page)
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        asked = pool.submit(
+            api.post, "/vehicles/1/control",
+            json={"client_name": "asking script", "takeover": True}, timeout=30.0,
+        )  # fmt: skip
+        page.wait_for_selector("#takeover-prompt:not(.hidden)", timeout=10_000)
+        page.click("#grant-control")
+        answer = asked.result()
+    assert answer.status_code == 200, answer.text
+    _not_in_control(page)
+    page.wait_for_function(
+        "document.getElementById('control-note').textContent"
+        ".startsWith('Control handed over to pilot · asking script')",
+        timeout=10_000,
+    )
+    assert page.evaluate(TAKEN_SHOWN) == []
+    assert not [a for a in page.evaluate("window.skyhelm.alertLog")
+                if a["text"].startswith("Control taken by")]  # fmt: skip
+    assert (page.text_content("#banner") or "").endswith("this tab no longer sends anything")
+    api.delete("/vehicles/1/control", headers={"X-Lease-Id": answer.json()["lease_id"]})
 
 
 def test_every_tab_shows_who_controls_and_the_label_is_editable(

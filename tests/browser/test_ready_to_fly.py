@@ -125,3 +125,35 @@ def test_picked_modes_px4_will_not_arm_in_say_so(page: Any, api: httpx.Client) -
         )  # fmt: skip
         assert "Mode not suitable for arming" in (page.text_content("#ready-popover") or "")
     page.keyboard.press("Escape")
+
+
+# PX4 v1.16 in RTL on the ground, as a server that has not read PX4's events metadata yet
+# (the first seconds after it connects) reports it: SYS_STATUS's pre-arm bit clear, no
+# sensor unhealthy, so no reason in PX4's words yet.
+SYS_STATUS_ONLY = {
+    "armed": False,
+    "arming_checks": {
+        "ready": False, "mode": "RTL", "source": "sys_status", "can_arm_modes": [],
+        "reasons": [], "other_reasons": [], "verdict": "not_ready", "arm_switches_to": None,
+        "waiting_for": [],
+    },
+}
+
+
+def test_not_ready_from_sys_status_alone_never_says_no_check_fails(page: Any) -> None:
+    """PX4 says it cannot arm (SYS_STATUS's pre-arm bit) before its reasons can be read: the
+    popover says so, not "No check fails" under "cannot arm"."""
+    text = page.evaluate(
+        """async (state) => {
+          const { readiness } = await import('./readiness.js');
+          readiness.toggle(true);
+          readiness.show(state);  // at once, before the next state from the server
+          const text = document.getElementById('ready-popover').textContent;
+          readiness.toggle(false);
+          return text;
+        }""",
+        SYS_STATUS_ONLY,
+    )
+    assert "In RTL (flown): cannot arm" in text
+    assert "No check fails" not in text
+    assert "PX4 reports it cannot arm in RTL (SYS_STATUS's pre-arm check)" in text

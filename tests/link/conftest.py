@@ -55,10 +55,14 @@ class ScriptedPeer(asyncio.DatagramProtocol):
         # every frame sent or scheduled so far, so a test can wait until the link has them
         self.frames_promised = 0
         self._seq: dict[tuple[int, int], int] = {}
+        self._arm_asked: bool | None = None  # the last ARM_DISARM's arm (True) or disarm
 
     def datagram_received(self, data: bytes, addr: Any) -> None:
         for msg in self.decoder.parse_buffer(data) or []:
             self.received.append((time.monotonic(), msg))
+            if (msg.get_type() == "COMMAND_LONG"
+                    and msg.command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM):  # fmt: skip
+                self._arm_asked = msg.param1 == 1
             if msg.get_type() in ("COMMAND_LONG", "COMMAND_INT") and self.on_command:
                 self.on_command(msg)
             elif self.on_message is not None:
@@ -98,6 +102,17 @@ class ScriptedPeer(asyncio.DatagramProtocol):
     ) -> None:
         msg = mavlink.MAVLink_command_ack_message(command, result, progress, 0, target_system, 190)
         self.send_later(delay_s, msg, sysid=sysid, compid=compid)
+        if (command == mavlink.MAV_CMD_COMPONENT_ARM_DISARM
+                and result == mavlink.MAV_RESULT_ACCEPTED and self._arm_asked is not None):
+            # as PX4: armed (disarmed) when it acks, and its next HEARTBEAT says so
+            asyncio.get_running_loop().call_later(
+                delay_s, self._report_armed, self._arm_asked, sysid
+            )  # fmt: skip
+
+    def _report_armed(self, armed: bool, sysid: int) -> None:
+        armed_flag = mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+        self.base_mode = self.base_mode | armed_flag if armed else self.base_mode & ~armed_flag
+        self.heartbeat(sysid=sysid)
 
     def accept_commands(self, *, mode_report_delay_s: float = 0.0) -> None:
         """Answer every command ACCEPTED; DO_SET_MODE also changes the reported mode (in

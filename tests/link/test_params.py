@@ -3,16 +3,19 @@
 from __future__ import annotations
 
 import struct
+from typing import cast
 
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
+from server.link.core.requests import Requester
 from server.link.plugins.params import (
     MAV_PARAM_TYPE_INT8,
     MAV_PARAM_TYPE_INT32,
     MAV_PARAM_TYPE_REAL32,
     MAV_PARAM_TYPE_UINT8,
     MAV_PARAM_TYPE_UINT16,
+    ParamClient,
     ParamError,
     ParamUnknown,
     decode_param_value,
@@ -171,3 +174,24 @@ async def test_set_whose_echo_differs_is_an_error(scripted: ScriptedSession) -> 
 
     with pytest.raises(ParamError, match="kept 20"):
         await scripted.vehicle.set_param("MPC_XY_CRUISE", 50.0)
+
+
+def test_a_value_the_vehicle_changes_unasked_is_told_once_with_its_previous() -> None:
+    """PX4 sends a parameter changed by another ground station (or its shell) unasked: the
+    first value heard is no change, a new value is told with the one before, a repeat is not."""
+    told: list[tuple[str, float | int, float | int]] = []
+    client = ParamClient(cast(Requester, None), on_change=lambda *change: told.append(change))
+
+    def heard(name: str, value: float | int, param_type: int) -> None:
+        client.handle_param_value(mavlink.MAVLink_param_value_message(
+            name.encode(), encode_param_value(value, param_type), param_type, 900, 3))
+
+    heard("MPC_XY_VEL_MAX", 12.0, MAV_PARAM_TYPE_REAL32)
+    heard("COM_RC_IN_MODE", 3, MAV_PARAM_TYPE_INT32)
+    heard("MPC_XY_VEL_MAX", 12.0, MAV_PARAM_TYPE_REAL32)
+    assert told == []
+    heard("MPC_XY_VEL_MAX", 11.0, MAV_PARAM_TYPE_REAL32)
+    heard("COM_RC_IN_MODE", 4, MAV_PARAM_TYPE_INT32)
+    heard("COM_RC_IN_MODE", 4, MAV_PARAM_TYPE_INT32)
+    assert told == [("MPC_XY_VEL_MAX", 12.0, 11.0), ("COM_RC_IN_MODE", 3, 4)]
+    assert client.cache["MPC_XY_VEL_MAX"].value == 11.0

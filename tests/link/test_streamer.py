@@ -154,6 +154,24 @@ async def test_stop_ends_the_stream(monkeypatch: pytest.MonkeyPatch) -> None:
     assert streamer.streaming_for_s() == 0.0
 
 
+async def test_a_stopped_stream_reports_no_rate(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Stopped, nothing leaves: its rate is 0, not the last second's 20 Hz of a minute ago;
+    the figures since it started (sent, percentiles, largest gap) stay for the record."""
+    rec = _Recorder(monkeypatch)
+    streamer = SetpointStreamer(rec, rate_hz=20)
+    streamer.stream(_msg(1))
+    await asyncio.sleep(1.02)
+    assert streamer.stats().rate_hz == pytest.approx(20, rel=1e-6)
+    streamer.stop()
+    await asyncio.sleep(60.0)
+
+    stats = streamer.stats()
+    assert not stats.active
+    assert stats.rate_hz == 0.0
+    assert stats.sent == 21
+    assert stats.interval_p99_ms == pytest.approx(50, rel=1e-6)
+
+
 @pytest.mark.parametrize("rate_hz", [1.0, 101.0])
 def test_rate_outside_2_to_100_hz_is_refused(rate_hz: float) -> None:
     with pytest.raises(ValueError, match=r"2\.\.100"):
@@ -185,9 +203,9 @@ async def test_reported_rate_follows_a_rate_change(monkeypatch: pytest.MonkeyPat
     assert streamer.stats().rate_hz == pytest.approx(10, rel=1e-9)
     streamer.rate_hz = 50
     await asyncio.sleep(1.3)
-    streamer.stop()
 
     assert streamer.stats().rate_hz == pytest.approx(50, rel=1e-9)
+    streamer.stop()
 
 
 async def test_statistics_restart_with_the_stream(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -105,3 +105,14 @@ def test_px4_refusal_in_the_pilots_own_mode_stays_409(pilot: _Pilot) -> None:
     assert refused.json()["reason"].startswith("Arming denied")
     assert pilot.state()["mode"] == "MISSION"
     assert pilot.post("/mode", {"mode": "HOLD"}).status_code == 200
+
+
+def test_px4_an_accepted_arm_or_disarm_is_the_state_when_it_is_answered(pilot: _Pilot) -> None:
+    """PX4 says it is armed in HEARTBEAT, once a second on this link: the answer waits for
+    it (asked for at once), so the state read right after says what PX4 does."""
+    pilot.disarmed_in("HOLD")
+    for path, armed in (("/arm", True), ("/disarm", False), ("/arm", True), ("/disarm", False)):
+        answer = pilot.post(path)
+        assert answer.status_code == 200, answer.text
+        assert pilot.state()["armed"] is armed, path
+        assert answer.json()["elapsed_ms"] < 500  # the heartbeat asked for, not the next one

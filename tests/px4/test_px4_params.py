@@ -5,6 +5,7 @@ echo and the value as changed from the default, and puts the default back."""
 
 from __future__ import annotations
 
+import subprocess
 from collections.abc import Iterator
 
 import httpx
@@ -12,7 +13,7 @@ import pytest
 
 from tests.browser.flows import open_dashboard, take_control
 from tests.browser.harness import chromium_context
-from tests.browser.param_editing import NAME, WORDS, refuse_edit_and_reset
+from tests.browser.param_editing import NAME, WORDS, pick, refuse_edit_and_reset
 from tests.px4.conftest import Px4Sitl
 from tests.serve_process import Served
 from tests.waiting import wait_for_blocking
@@ -71,3 +72,37 @@ def test_px4_editor_refuses_sets_and_shows_the_change_from_default(
         page = open_dashboard(context, dashboard, scene=False)
         take_control(page)
         refuse_edit_and_reset(page, lambda: float(http.get(url).json()["value"]))
+
+
+def _px4_shell_sets(px4: Px4Sitl, value: float) -> None:
+    """`param set` in the instance's own shell, as someone at the vehicle would."""
+    shell = px4.sitl_dir / "build" / "px4_sitl_default" / "bin" / "px4-param"
+    subprocess.run([str(shell), "--instance", str(px4.instance), "set", NAME, f"{value:g}"],
+                   check=True, capture_output=True, timeout=10)  # fmt: skip
+
+
+def test_px4_a_value_set_in_its_shell_shows_in_the_editor(
+    px4: Px4Sitl, served_px4: Served, http: httpx.Client
+) -> None:
+    """PX4 sends a parameter changed on board unasked: the page's editor, which read 12
+    before, shows 9 without a refresh, then 12 again."""
+    url = f"/vehicles/{px4.sysid}/params/{NAME}"
+    with chromium_context() as context:
+        page = open_dashboard(context, f"{served_px4.base_url}/?token={served_px4.pilot_token}",
+                              scene=False)  # fmt: skip
+        pick(page, NAME)
+        before = float(http.get(url).json()["value"])
+        new = 9.0 if before != 9.0 else 10.0
+        try:
+            _px4_shell_sets(px4, new)
+            page.wait_for_function(
+                "([name, text]) => document.getElementById(`param-value-${name}`).textContent"
+                " === text", arg=[NAME, f"{new:.1f} m/s"], timeout=10_000,
+            )  # fmt: skip
+            assert page.text_content("#param-detail-value") == f"{new:.1f} m/s"
+        finally:
+            _px4_shell_sets(px4, before)
+        page.wait_for_function(
+            "([name, text]) => document.getElementById(`param-value-${name}`).textContent"
+            " === text", arg=[NAME, f"{before:.1f} m/s"], timeout=10_000,
+        )  # fmt: skip

@@ -29,6 +29,7 @@ MAV_CMD_DO_SET_MODE = 176
 MAV_CMD_DO_SET_HOME = 179
 MAV_CMD_DO_REPOSITION = 192
 MAV_CMD_COMPONENT_ARM_DISARM = 400
+MAV_CMD_REQUEST_MESSAGE = 512
 MAV_CMD_DO_VTOL_TRANSITION = 3000
 MAV_DO_REPOSITION_FLAGS_CHANGE_MODE = 1
 MAV_FRAME_GLOBAL = 0
@@ -63,6 +64,9 @@ class Action:
     """Commands and mode changes for one vehicle."""
 
     mode_confirm_timeout_s = 3.0
+    # PX4 reports arming in HEARTBEAT, once a second: asked for one at once, it comes in
+    # milliseconds; without an answer to that request, the next periodic one is awaited
+    arm_confirm_timeout_s = 1.5
     origin_timeout_s = 0.5  # per try of SET_GPS_GLOBAL_ORIGIN
 
     def __init__(self, core: VehicleCore, telemetry: Telemetry) -> None:
@@ -101,11 +105,30 @@ class Action:
         result = await self.command_long(
             MAV_CMD_COMPONENT_ARM_DISARM, 1 if arm else 0, PX4_ARM_DISARM_FORCE if force else 0
         )
+        if result.ok and self._telemetry.armed != arm:
+            result = await self._reported_armed(arm, result)
         if result.ok and arm:
             self._arm_accepted_s = self._core.now()
         elif result.ok:
             self._disarm_accepted_s = self._core.now()
         return result
+
+    async def _reported_armed(self, arm: bool, accepted: CommandResult) -> CommandResult:
+        """ACCEPTED once the vehicle reports it armed (disarmed), so the state a client reads
+        after the answer says so; NOT_CONFIRMED when it never does."""
+        started_s = self._core.now()
+        await self.command_long(MAV_CMD_REQUEST_MESSAGE, mavlink.MAVLINK_MSG_ID_HEARTBEAT)
+        reported = await self._core.requests.wait_until(
+            lambda: self._telemetry.armed == arm, self.arm_confirm_timeout_s
+        )
+        elapsed_ms = accepted.elapsed_ms + (self._core.now() - started_s) * 1e3
+        if reported:
+            return dataclasses.replace(accepted, elapsed_ms=elapsed_ms)
+        state = "disarmed" if arm else "armed"
+        return dataclasses.replace(
+            accepted, outcome=CommandOutcome.NOT_CONFIRMED, elapsed_ms=elapsed_ms,
+            reason=f"accepted, but the vehicle still reports {state}",
+        )  # fmt: skip
 
     async def takeoff(self, altitude_rel_m: float | None = None) -> CommandResult:
         """Climb to altitude_rel_m above home (None: PX4's MIS_TAKEOFF_ALT). Above the

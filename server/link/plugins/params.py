@@ -9,7 +9,7 @@ from __future__ import annotations
 import asyncio
 import math
 import struct
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import development as mavlink
@@ -92,8 +92,17 @@ class ParamClient:
     list_quiet_s = 0.5  # a list is complete, or has gaps, once it has been quiet this long
     list_rounds = 8  # of asking for the gaps by index in a row with no answer
 
-    def __init__(self, requests: Requester) -> None:
+    def __init__(
+        self,
+        requests: Requester,
+        on_change: Callable[[str, float | int, float | int], None] | None = None,
+    ) -> None:
         self._requests = requests
+        # told (name, before, now) when the vehicle reports another value than it did before:
+        # a set by this server, by another ground station or on the vehicle itself (PX4 sends
+        # every changed parameter unasked)
+        self._on_change = on_change
+        self._last_values: dict[str, float | int] = {}
         self.cache: dict[str, ParamEntry] = {}
         self._by_index: dict[int, str] = {}
         self._count: int | None = None
@@ -109,6 +118,15 @@ class ParamClient:
             msg.param_count,
         )
         self.cache[name] = entry
+        before = self._last_values.get(name)
+        self._last_values[name] = entry.value
+        if (
+            self._on_change is not None
+            and before is not None
+            and before != entry.value
+            and not (math.isnan(before) and math.isnan(entry.value))
+        ):
+            self._on_change(name, before, entry.value)
         if 0 <= msg.param_index < 0xFFFF:
             self._by_index[msg.param_index] = name
         self._count = msg.param_count

@@ -413,15 +413,18 @@ class SetpointStreamer:
             return StreamStats(active=self._frames_leaving(), sent=self._sent,
                                since_last_ms=since_last_ms, sender=self.sender,
                                sender_restarts=restarts, sender_fault=fault)
-        # the rate over the last ~1 s, so it follows a rate change; percentiles use the window
+        # the rate over the last ~1 s, so it follows a rate change; percentiles use the window.
+        # No frame leaves a stopped stream (or a stuck sender): its rate is 0, not the last
+        # second's before it stopped.
+        leaving = self._frames_leaving()
         recent = self._recent(max(2, round(self.rate_hz)))
         if self._percentiles is None or self._percentiles[0] != self._sent:
             ordered = sorted(self._intervals[: self._ring_len])
             self._percentiles = (self._sent, _percentile(ordered, 0.50), _percentile(ordered, 0.99))
         _, p50_s, p99_s = self._percentiles
         return StreamStats(
-            active=self._frames_leaving(),
-            rate_hz=len(recent) / sum(recent) if sum(recent) > 0 else 0.0,
+            active=leaving,
+            rate_hz=len(recent) / sum(recent) if leaving and sum(recent) > 0 else 0.0,
             interval_p50_ms=p50_s * 1000.0,
             interval_p99_ms=p99_s * 1000.0,
             max_gap_ms=self._max_interval_s * 1000.0,
