@@ -5,6 +5,7 @@ through the core's requester; where PX4 acks before it acts, the reported state 
 
 from __future__ import annotations
 
+import asyncio
 import dataclasses
 import math
 import time
@@ -13,6 +14,7 @@ from collections.abc import Callable
 from pymavlink.dialects.v20 import development as mavlink
 
 from server.link.codec import modes
+from server.link.codec.aio import cancel_and_wait
 from server.link.codec.commands import CommandInt, CommandOutcome, CommandResult, not_sent
 from server.link.codec.envelope import Envelope, check_reposition, check_takeoff_altitude
 from server.link.core.requests import Confirmation
@@ -65,8 +67,9 @@ class Action:
 
     mode_confirm_timeout_s = 3.0
     # PX4 reports arming in HEARTBEAT, once a second: asked for one at once, it comes in
-    # milliseconds; without an answer to that request, the next periodic one is awaited
-    arm_confirm_timeout_s = 1.5
+    # milliseconds; when that request or its answer is lost (a lossy radio), the periodic
+    # ones are awaited as long as a mode change's
+    arm_confirm_timeout_s = 3.0
     origin_timeout_s = 0.5  # per try of SET_GPS_GLOBAL_ORIGIN
 
     def __init__(self, core: VehicleCore, telemetry: Telemetry) -> None:
@@ -117,10 +120,17 @@ class Action:
         """ACCEPTED once the vehicle reports it armed (disarmed), so the state a client reads
         after the answer says so; NOT_CONFIRMED when it never does."""
         started_s = self._core.now()
-        await self.command_long(MAV_CMD_REQUEST_MESSAGE, mavlink.MAVLINK_MSG_ID_HEARTBEAT)
-        reported = await self._core.requests.wait_until(
-            lambda: self._telemetry.armed == arm, self.arm_confirm_timeout_s
+        # the request runs beside the wait: a lost request (or its lost answer, retried) must
+        # not hold the answer back when a periodic HEARTBEAT already says so
+        asked = asyncio.ensure_future(
+            self.command_long(MAV_CMD_REQUEST_MESSAGE, mavlink.MAVLINK_MSG_ID_HEARTBEAT)
         )
+        try:
+            reported = await self._core.requests.wait_until(
+                lambda: self._telemetry.armed == arm, self.arm_confirm_timeout_s
+            )
+        finally:
+            await cancel_and_wait(asked)
         elapsed_ms = accepted.elapsed_ms + (self._core.now() - started_s) * 1e3
         if reported:
             return dataclasses.replace(accepted, elapsed_ms=elapsed_ms)
