@@ -2,7 +2,7 @@
 // socket and the pilot's control socket, both reconnecting by themselves.
 
 // every call's method and path: the wire's table (python -m tools.gen_calls_js)
-import { API_PREFIX as API, route } from "./calls.js";
+import { API_PREFIX as API, SOCKETS, route } from "./calls.js";
 
 const TOKEN_KEY = "skyhelm.token";
 
@@ -127,7 +127,10 @@ if (token) {
   try { await ensureSession(); } catch (err) { console.warn(err.message); }
 }
 
-export function socketUrl(path, params) {
+/** The URL of the wire's socket `name` ("telemetry", "control", "fleet") with `params`. */
+export function socketUrl(name, params) {
+  const path = SOCKETS[name];
+  if (!path) throw new Error(`no socket ${name} in the wire's table`);
   const scheme = location.protocol === "https:" ? "wss:" : "ws:";
   const query = new URLSearchParams(params);
   return `${scheme}//${location.host}${API}${path}?${query}`;
@@ -205,7 +208,7 @@ export class TelemetrySocket {
     if (this.closed || rejected) return;
     const params = { rate_hz: this.rateHz };
     if (this.vehicleId !== null) params.vehicle = this.vehicleId;
-    const ws = new WebSocket(socketUrl("/ws/telemetry", params));
+    const ws = new WebSocket(socketUrl("telemetry", params));
     this.ws = ws;
     let heard = false;
     ws.onmessage = (event) => {
@@ -291,7 +294,7 @@ export class ControlSession extends LeaseSession {
     this.worker = new Worker(new URL("./control-worker.js", import.meta.url), { type: "module" });
     this.worker.onmessage = (event) => this.fromWorker(event.data);
     ensureSession().then(
-      () => this.worker.postMessage({ op: "open", url: socketUrl("/ws/control", params) }),
+      () => this.worker.postMessage({ op: "open", url: socketUrl("control", params) }),
       (err) => this.closedWith({ code: 1006, reason: err.message }),
     );
     this.alive = setInterval(() => this.worker.postMessage({ op: "alive" }), 1000);

@@ -79,7 +79,7 @@ export class FleetView {
   }
 
   open() {
-    const ws = new WebSocket(socketUrl("/fleet/ws", { rate_hz: SOCKET_RATE_HZ }));
+    const ws = new WebSocket(socketUrl("fleet", { rate_hz: SOCKET_RATE_HZ }));
     this.socket = ws;
     ws.onmessage = (event) => {
       this.attempt = 0;

@@ -47,6 +47,7 @@ from server.http.ws_common import (
 from server.link import Vehicle
 from skyhelm_wire.calls import CALL, COMMAND_CALLS, CallSpec
 from skyhelm_wire.intents import IntentOut
+from skyhelm_wire.sockets import SOCKET
 
 log = logging.getLogger(__name__)
 
@@ -71,7 +72,7 @@ _setpoint_adapter = _body_adapter("set_setpoint")
 _sticks_adapter = _body_adapter("fly_sticks")
 
 
-@router.websocket("/ws/control")
+@router.websocket(SOCKET["control"].route)
 async def control(
     websocket: WebSocket,
     vehicle: int,
@@ -82,7 +83,7 @@ async def control(
 ) -> None:
     """The pilot session: holds the control lease while open and not silent for ttl_s.
     With takeover the holder is asked first (unless force); the first message is the lease."""
-    context = await admit(websocket, Role.PILOT)
+    context = await admit(websocket, SOCKET["control"])
     if context is None:
         return
     target = context.registry.get(vehicle)

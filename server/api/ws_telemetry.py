@@ -13,7 +13,6 @@ from collections.abc import AsyncIterator
 
 from fastapi import APIRouter, WebSocket
 
-from server.control.auth import Role
 from server.control.publisher import StatePublisher
 from server.control.publishers import StatePublishers
 from server.control.registry import VehicleRegistry
@@ -28,6 +27,7 @@ from server.http.ws_common import (
     run_until_disconnect,
 )
 from server.link import Link, Vehicle
+from skyhelm_wire.sockets import SOCKET
 
 MIN_RATE_HZ = 0.1
 # MAVLink system ids a vehicle can have; another id can never appear.
@@ -41,7 +41,7 @@ def publishers_of(websocket: WebSocket) -> StatePublishers:
     return publishers
 
 
-@router.websocket("/ws/telemetry")
+@router.websocket(SOCKET["telemetry"].route)
 async def telemetry(
     websocket: WebSocket, vehicle: int | None = None, rate_hz: float = 10.0
 ) -> None:
@@ -49,7 +49,7 @@ async def telemetry(
     `{type: "statustext"}` and `{type: "event"}` as they happen; for the page also
     `{type: "vehicles"}` (the vehicle list: at once, then on every change) and
     `{type: "scene_click"}` (where a click in the 3D scene met the ground)."""
-    context = await admit(websocket, Role.OBSERVER)
+    context = await admit(websocket, SOCKET["telemetry"])
     if context is None:
         return
     if vehicle is not None and vehicle not in SYSID_RANGE:

@@ -9,19 +9,19 @@ import asyncio
 
 from fastapi import APIRouter, WebSocket
 
-from server.control.auth import Role
 from server.fleet.view import FleetView, Watcher
 from server.fleet.view_service import FleetService
 from server.http.ws_common import Sender, admit, run_until_disconnect
+from skyhelm_wire.sockets import SOCKET
 
 MIN_RATE_HZ = 0.1
 
 router = APIRouter()
 
 
-@router.websocket("/fleet/ws")
+@router.websocket(SOCKET["fleet"].route)
 async def fleet_socket(websocket: WebSocket, rate_hz: float = 10.0) -> None:
-    context = await admit(websocket, Role.OBSERVER)
+    context = await admit(websocket, SOCKET["fleet"])
     if context is None:
         return
     if not rate_hz > 0:  # also refuses NaN

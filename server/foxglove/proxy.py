@@ -19,12 +19,13 @@ from websockets.typing import Subprotocol
 
 from server.control.auth import token_from
 from server.scene.proxy import LoopbackSocketProxy
+from skyhelm_wire.sockets import SOCKET
 
 SUBPROTOCOL = "foxglove.websocket.v1"
 SDK_SUBPROTOCOL = "foxglove.sdk.v1"
 # what a client may offer, in the order this route prefers them
 ACCEPTED = (SDK_SUBPROTOCOL, SUBPROTOCOL)
-PATH = "/api/v1/foxglove"
+PATH = SOCKET["foxglove"].url_path  # /api/v1/foxglove
 WS_CLOSE_UNAUTHORIZED = 4401
 
 

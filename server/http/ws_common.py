@@ -30,6 +30,7 @@ from server.control.auth import Role, token_from
 from server.control.slots import EVENT_BACKLOG as EVENT_BACKLOG
 from server.http.context import READ_ONLY_REASON, ApiContext
 from server.http.security import origin_allowed
+from skyhelm_wire.sockets import SocketSpec
 
 SEND_TIMEOUT_S = 5.0
 CLOSE_UNAUTHORIZED = 4401
@@ -104,9 +105,11 @@ async def close_socket(websocket: WebSocket, code: int, reason: str = "") -> Non
             await websocket.close(code, reason)
 
 
-async def admit(websocket: WebSocket, need: Role) -> ApiContext | None:
-    """Accept the socket, then close it with the right code if it may not stay."""
+async def admit(websocket: WebSocket, socket: SocketSpec) -> ApiContext | None:
+    """Accept the socket, then close it with the right code if it may not stay (the token
+    its ``access`` asks for)."""
     context: ApiContext = websocket.app.state.api
+    need = Role.PILOT if socket.access == "pilot" else Role.OBSERVER
     await websocket.accept()
     role = context.tokens.role_of(
         token_from(websocket.headers, websocket.query_params, websocket.cookies)

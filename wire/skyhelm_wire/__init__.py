@@ -8,6 +8,7 @@ imports the server, pymavlink, FastAPI or numpy: pydantic is the one dependency.
 
 Modules: ``setpoint_kinds`` (the kinds, with units and limits), ``setpoints`` (their request
 bodies), ``state`` (a vehicle's state), ``commands`` (a command's result), ``control`` (the
-lease), ``messages`` (the WebSockets' messages: states, events, control), ``signing``,
-``common`` (errors, health, the number types).
+lease), ``messages`` (the WebSockets' messages: states, events, control), ``sockets`` (the
+WebSockets' paths and who may open them), ``signing``, ``common`` (errors, health, the
+number types).
 """

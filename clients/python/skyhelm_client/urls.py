@@ -1,12 +1,14 @@
-"""Where the server is: the URL ``skyhelm serve`` prints, and the telemetry socket's."""
+"""Where the server is: the URL ``skyhelm serve`` prints, and its sockets' (each socket's
+path is the wire's, ``skyhelm_wire.sockets``)."""
 
 from __future__ import annotations
 
 from urllib.parse import parse_qs, urlencode, urlsplit
 
 from skyhelm_wire.calls import API_PREFIX
+from skyhelm_wire.sockets import SOCKET
 
-__all__ = ["API_PREFIX", "split_url", "ws_url"]
+__all__ = ["API_PREFIX", "socket_url", "split_url", "ws_url"]
 
 
 def split_url(url: str, token: str | None) -> tuple[str, str]:
@@ -22,9 +24,17 @@ def split_url(url: str, token: str | None) -> tuple[str, str]:
     return f"{parts.scheme}://{parts.netloc}", token
 
 
-def ws_url(base_url: str, token: str, vehicle: int | None, rate_hz: float) -> str:
+def socket_url(base_url: str, name: str, query: dict[str, object]) -> str:
+    """The URL of the socket ``name`` of the wire's table (``SOCKET``) with ``query``: ws://
+    for an http:// server, wss:// for https://."""
     scheme = "wss" if base_url.startswith("https") else "ws"
+    path = SOCKET[name].url_path
+    return f"{scheme}://{base_url.split('://', 1)[1]}{path}?{urlencode(query)}"
+
+
+def ws_url(base_url: str, token: str, vehicle: int | None, rate_hz: float) -> str:
+    """The telemetry socket's URL: one vehicle's (or every vehicle's) at ``rate_hz``."""
     query: dict[str, object] = {"rate_hz": rate_hz, "token": token}
     if vehicle is not None:
         query["vehicle"] = vehicle
-    return f"{scheme}://{base_url.split('://', 1)[1]}{API_PREFIX}/ws/telemetry?{urlencode(query)}"
+    return socket_url(base_url, "telemetry", query)
