@@ -9,13 +9,24 @@ import httpx
 import pytest
 
 from .flows import open_dashboard
-from .harness import Serve, chromium_context
+from .harness import Serve, SharedChromium, shared_chromium_context
+
+# Chromium for the browser modules one worker runs one after another (one per set of
+# arguments), closed when the worker goes on to other tests or ends.
+SHARED_CHROMIUM = SharedChromium()
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     for item in items:
         if "tests/browser" in str(item.fspath):
             item.add_marker(pytest.mark.browser)
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_teardown(item: pytest.Item, nextitem: pytest.Item | None) -> Iterator[None]:
+    yield
+    if nextitem is None or "tests/browser" not in str(nextitem.fspath):
+        SHARED_CHROMIUM.close()
 
 
 @pytest.hookimpl(hookwrapper=True)
@@ -44,7 +55,8 @@ def browser(request: pytest.FixtureRequest) -> Iterator[Any]:
     """Chromium; it ignores the server's Content-Security-Policy (which forbids the eval that
     Playwright's string predicates use) unless the module sets ENFORCE_CSP (test_csp.py).
     A module's BROWSER_ARGS add to Chromium's arguments, its VIEWPORT sets the window."""
-    with chromium_context(
+    with shared_chromium_context(
+        SHARED_CHROMIUM,
         bypass_csp=not getattr(request.module, "ENFORCE_CSP", False),
         extra_args=getattr(request.module, "BROWSER_ARGS", ()),
         viewport=getattr(request.module, "VIEWPORT", None),
