@@ -7,8 +7,6 @@ from typing import Any
 
 import httpx
 
-from server.link.codec.arming_checks import MODES_PREVENTING_ARMING
-
 from .harness import altitude_m, speed_m_s, vehicle_state, wait_for
 
 RESULT_TIMEOUT_S = 30.0
@@ -168,8 +166,9 @@ def settle_vehicle(api: httpx.Client, *, flying: bool, altitude: float = 5.0) ->
             pilot.command("land")
             pilot.wait("landed and disarmed", _landed, 60.0)
         if flying:
-            # PX4 never arms in LAND or RTL, where a landing leaves it: HOLD first, as a pilot does
-            if vehicle_state(api)["mode"] in MODES_PREVENTING_ARMING:
+            # PX4 never arms in LAND or RTL, where a landing leaves it, nor in a manual mode
+            # (POSCTL) with no sticks coming: HOLD first, as a pilot does
+            if vehicle_state(api)["mode"] != "HOLD":
                 pilot.command("mode", {"mode": "HOLD"})
             pilot.command("arm")
             pilot.command("takeoff", {"altitude_m": altitude})
