@@ -38,12 +38,6 @@ from server.link.transports.base import (
 
 log = logging.getLogger(__name__)
 
-# What the kernel may queue for a link while the server is not reading (a busy machine, a
-# collection): the default (about 200 kB, a few hundred datagrams of kernel memory) holds
-# under a second of a vehicle's telemetry, and a frame it cannot queue is lost, a command's
-# answer among them. The kernel caps it at net.core.rmem_max.
-RECEIVE_BUFFER_BYTES = 4 * 1024 * 1024
-
 # Broadcast frames (HEARTBEAT, untargeted) go to every UDP peer heard from this recently.
 UDP_PEER_EXPIRY_S = 10.0
 # A system heard from one address is not taken from another until the first is this quiet.
@@ -89,10 +83,6 @@ class _UdpTransport(Transport):
         )
         self._endpoint = endpoint
         sock = endpoint.get_extra_info("socket")
-        try:
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER_BYTES)
-        except OSError as exc:  # the default buffer still works, only less of a stall is held
-            log.debug("%s: receive buffer left at the default: %s", self.address.url, exc)
         self._thread_socket = socket.socket(
             sock.family, sock.type, sock.proto, fileno=os.dup(sock.fileno()))
 
