@@ -135,9 +135,19 @@ async def test_silent_sticks_are_centred_then_no_longer_sent(sticks_api: Api) ->
     assert (last.pitch, last.roll, last.throttle, last.yaw) == (0.0, 0.0, 0.0, 0.0)
     await next_event(events, "manual_control", active=False)
     await next_event(events, "deadman", action="stop_sticks")
-    count = len(arrivals)
+    # what went out before the stop may still be on its way: the sim shares this test's
+    # event loop, which a busy machine makes late (the sender reports its count every 50 ms)
+    control = api.vehicle().manual_control
+    await asyncio.sleep(0.1)
+
+    async def all_arrived() -> bool:
+        return len(arrivals) >= control.stats().sent
+
+    await eventually(all_arrived, 2.0, "every MANUAL_CONTROL sent at the sim")
+    count, sent = len(arrivals), control.stats().sent
     await asyncio.sleep(0.3)
     assert len(arrivals) == count  # nothing more is sent
+    assert control.stats().sent == sent
     assert not api.vehicle().manual_control.active
 
 
