@@ -46,9 +46,7 @@ SHARED_SERVE = _SharedServe()
 
 
 def _family(item: pytest.Item | None) -> str | None:
-    if item is None or "serve" not in getattr(item, "fixturenames", ()):
-        return None
-    return FAMILY_OF.get(item.nodeid.split("::", 1)[0])
+    return None if item is None else FAMILY_OF.get(item.nodeid.split("::", 1)[0])
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
