@@ -104,8 +104,12 @@ async def test_sticks_arrive_at_25_hz_at_the_sim_whatever_the_pilots_rate(
         # machine (late ticks are skipped, not bunched); the precise figures are a bench.
         # Counted and spaced as sent: the sim's arrival times share this test's event loop
         # and bunch whenever a loaded machine makes it late.
+        # The count comes from the sender's reports (every 50 ms, read when this loop gets to
+        # them): on a loaded machine the first can be later than the second and the count over
+        # the window too high, so the ceiling is the sender's own rate, timed as it sent.
         rate_hz = (stats.sent - sent0) / elapsed_s
-        assert 15.0 <= rate_hz <= 27.0, (pilot_rate_hz, rate_hz)
+        assert rate_hz >= 15.0, (pilot_rate_hz, rate_hz)
+        assert stats.rate_hz <= 27.0, (pilot_rate_hz, stats)
         assert stats.interval_p50_ms == pytest.approx(40.0, abs=8.0), (pilot_rate_hz, stats)
     # every one sent reached the sim (the sender process reports its ticks a moment late)
     sent = control.stats().sent
