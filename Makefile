@@ -65,12 +65,16 @@ audit: $(TSTAMP)
 ## TEST_WORKERS=0 runs everything in one process.
 TEST_WORKERS ?= 4
 
-## Set-up runs two at a time: the packages beside Debian's chromium, then the linters beside
-## the audit (neither pair shares anything), so a fresh clone starts testing sooner.
+## Set-up runs two at a time: the packages beside Debian's chromium. The linters and the audit
+## (a few seconds of CPU, the rest waiting on the vulnerability service) then run beside the
+## tests, their output shown after them; any of the three failing fails the target.
 test:
 	@$(MAKE) --no-print-directory -j2 --output-sync=target $(TSTAMP) chromium
-	@$(MAKE) --no-print-directory -j2 --output-sync=target lint audit
-	$(VENV)/bin/pytest -q -p no:cacheprovider -n $(TEST_WORKERS)
+	@$(MAKE) --no-print-directory -j2 --output-sync=target lint audit >$(VENV)/checks.log 2>&1 & \
+	checks=$$!; \
+	$(VENV)/bin/pytest -q -p no:cacheprovider -n $(TEST_WORKERS); tests=$$?; \
+	wait $$checks; checked=$$?; cat $(VENV)/checks.log; \
+	test $$tests = 0 && test $$checked = 0
 
 ## The whole chain of documented flows (README and docs/api.md curl sessions, the examples,
 ## a page flight, scripts killed half-way) on the simulated quad at real speed, default

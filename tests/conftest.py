@@ -3,7 +3,9 @@
 - A test module stays on one worker, in order: module fixtures such as a served vehicle are
   made once, and the REST flight's stages run in sequence.
 - The browser tests are split into ``BROWSER_GROUPS`` groups, each on one worker: a browser
-  rendering WebGL in software takes a core, so no more than that run at once.
+  rendering WebGL in software takes a core, so no more than that run at once. The modules of
+  one family of tests/browser/sharing.py go to one group, one after another: they share a
+  server.
 - The longest modules start first (longest processing time first): a 90 s module started
   last would leave the other workers idle while it runs. ``MODULE_SECONDS`` holds what each
   took in a run with ``--durations=0``; a module not listed counts as ``UNLISTED_S`` and
@@ -19,6 +21,8 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+
+from tests.browser.sharing import FAMILY_OF
 
 _BROWSER_TESTS = "tests/browser/"
 BROWSER_GROUPS = 2
@@ -95,13 +99,22 @@ def _module(nodeid: str) -> str:
 
 
 def browser_groups(modules: list[str]) -> dict[str, str]:
-    """Each browser module's group, the longest first into the group with least so far."""
+    """Each browser module's group: the longest family (or module alone) first into the group
+    with least so far."""
+    units: dict[str, list[str]] = {}
+    for module in modules:
+        units.setdefault(FAMILY_OF.get(module, module), []).append(module)
+
+    def unit_s(unit: str) -> float:
+        return sum(MODULE_SECONDS.get(m, UNLISTED_S) for m in units[unit])
+
     totals = [0.0] * BROWSER_GROUPS
     group_of: dict[str, str] = {}
-    for module in sorted(modules, key=lambda m: (-MODULE_SECONDS.get(m, UNLISTED_S), m)):
+    for unit in sorted(units, key=lambda u: (-unit_s(u), u)):
         least = totals.index(min(totals))
-        totals[least] += MODULE_SECONDS.get(module, UNLISTED_S)
-        group_of[module] = f"{_BROWSER_TESTS}group-{least}"
+        totals[least] += unit_s(unit)
+        for module in units[unit]:
+            group_of[module] = f"{_BROWSER_TESTS}group-{least}"
     return group_of
 
 
@@ -124,10 +137,17 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     for index, item in enumerate(items):
         first_seen.setdefault(groups.get(_module(item.nodeid), _module(item.nodeid)), index)
 
-    def order(pair: tuple[int, pytest.Item]) -> tuple[float, int, int]:
+    # within a browser group, a family's modules one after another (where its first one was)
+    unit_seen: dict[str, int] = {}
+    for index, item in enumerate(items):
+        unit_seen.setdefault(FAMILY_OF.get(_module(item.nodeid), _module(item.nodeid)), index)
+
+    def order(pair: tuple[int, pytest.Item]) -> tuple[float, int, int, int]:
         index, item = pair
-        scope = groups.get(_module(item.nodeid), _module(item.nodeid))
-        return (-seconds[scope], first_seen[scope], index)
+        module = _module(item.nodeid)
+        scope = groups.get(module, module)
+        return (-seconds[scope], first_seen[scope], unit_seen[FAMILY_OF.get(module, module)],
+                index)
 
     items[:] = [item for _, item in sorted(enumerate(items), key=order)]
 

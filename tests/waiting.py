@@ -8,8 +8,9 @@ often the condition is looked at, not how long anything takes.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import time
-from collections.abc import Awaitable, Callable
+from collections.abc import AsyncIterator, Awaitable, Callable
 from typing import TypeVar
 
 T = TypeVar("T")
@@ -92,3 +93,27 @@ def holds_for_blocking(
         if time.monotonic() >= end:
             return
         time.sleep(min(every_s, max(0.0, end - time.monotonic())))
+
+
+@contextlib.asynccontextmanager
+async def loop_stalls() -> AsyncIterator[list[float]]:
+    """How late this process's event loop wakes from 10 ms sleeps, again and again, while the
+    block runs (the list fills as it goes). The longest is a time a busy machine did not run
+    this process: a bound on how soon something in this process happens does not hold that
+    against it."""
+    lags_s: list[float] = []
+
+    async def probe() -> None:
+        loop = asyncio.get_running_loop()
+        while True:
+            due = loop.time() + 0.01
+            await asyncio.sleep(0.01)
+            lags_s.append(loop.time() - due)
+
+    task = asyncio.get_running_loop().create_task(probe())
+    try:
+        yield lags_s
+    finally:
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await task

@@ -104,8 +104,12 @@ async def test_sticks_arrive_at_25_hz_at_the_sim_whatever_the_pilots_rate(
         # machine (late ticks are skipped, not bunched); the precise figures are a bench.
         # Counted and spaced as sent: the sim's arrival times share this test's event loop
         # and bunch whenever a loaded machine makes it late.
+        # The count comes from the sender's reports (every 50 ms, read when this loop gets to
+        # them): on a loaded machine the first can be later than the second and the count over
+        # the window too high, so the ceiling is the sender's own rate, timed as it sent.
         rate_hz = (stats.sent - sent0) / elapsed_s
-        assert 15.0 <= rate_hz <= 27.0, (pilot_rate_hz, rate_hz)
+        assert rate_hz >= 15.0, (pilot_rate_hz, rate_hz)
+        assert stats.rate_hz <= 27.0, (pilot_rate_hz, stats)
         assert stats.interval_p50_ms == pytest.approx(40.0, abs=8.0), (pilot_rate_hz, stats)
     # every one sent reached the sim (the sender process reports its ticks a moment late)
     sent = control.stats().sent
@@ -135,9 +139,19 @@ async def test_silent_sticks_are_centred_then_no_longer_sent(sticks_api: Api) ->
     assert (last.pitch, last.roll, last.throttle, last.yaw) == (0.0, 0.0, 0.0, 0.0)
     await next_event(events, "manual_control", active=False)
     await next_event(events, "deadman", action="stop_sticks")
-    count = len(arrivals)
+    # what went out before the stop may still be on its way: the sim shares this test's
+    # event loop, which a busy machine makes late (the sender reports its count every 50 ms)
+    control = api.vehicle().manual_control
+    await asyncio.sleep(0.1)
+
+    async def all_arrived() -> bool:
+        return len(arrivals) >= control.stats().sent
+
+    await eventually(all_arrived, 2.0, "every MANUAL_CONTROL sent at the sim")
+    count, sent = len(arrivals), control.stats().sent
     await asyncio.sleep(0.3)
     assert len(arrivals) == count  # nothing more is sent
+    assert control.stats().sent == sent
     assert not api.vehicle().manual_control.active
 
 
@@ -189,8 +203,14 @@ async def test_posctl_flies_where_the_stick_points(fast_sticks_api: Api) -> None
     mode = await api.control("mode", {"mode": "POSCTL"})
     assert mode.status_code == 200, mode.text
     start = (await api.state())["position_ned"]
-    await feed(api, 1.5, 10.0, pitch=1.0)  # full forward, facing north
-    moved = (await api.state())["position_ned"]
+    # full forward, facing north, until 3 m flown: how long that takes is the sim's pace
+    # (slower than real time on a busy machine), not what is tested here
+    moved = start
+    loop = asyncio.get_running_loop()
+    end = loop.time() + 20.0
+    while moved["north_m"] - start["north_m"] <= 3.0 and loop.time() < end:
+        await feed(api, 0.1, 10.0, pitch=1.0)
+        moved = (await api.state())["position_ned"]
     assert moved["north_m"] - start["north_m"] > 3.0
     assert abs(moved["east_m"] - start["east_m"]) < 1.5
     assert (await api.state())["mode"] == "POSCTL"

@@ -9,13 +9,59 @@ import httpx
 import pytest
 
 from .flows import open_dashboard
-from .harness import Serve, chromium_context
+from .harness import Serve, SharedChromium, shared_chromium_context
+from .sharing import FAMILY_OF
+
+# Chromium for the browser modules one worker runs one after another (one per set of
+# arguments), closed when the worker goes on to other tests or ends.
+SHARED_CHROMIUM = SharedChromium()
+
+
+class _SharedServe:
+    """The running server of one family of tests/browser/sharing.py."""
+
+    def __init__(self) -> None:
+        self.key: tuple[str, tuple[str, ...]] | None = None
+        self.server: Serve | None = None
+
+    def get(self, family: str, args: list[str]) -> Serve:
+        key = (family, tuple(args))
+        server = self.server
+        if key != self.key or server is None or server._process is None \
+                or server._process.poll() is not None:
+            self.close()
+            server = Serve(extra_args=list(args))
+            server.start()
+            self.key, self.server = key, server
+        return server
+
+    def close(self) -> None:
+        server, self.server, self.key = self.server, None, None
+        if server is not None:
+            server.stop()
+            server.discard_log()
+
+
+SHARED_SERVE = _SharedServe()
+
+
+def _family(item: pytest.Item | None) -> str | None:
+    return None if item is None else FAMILY_OF.get(item.nodeid.split("::", 1)[0])
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     for item in items:
         if "tests/browser" in str(item.fspath):
             item.add_marker(pytest.mark.browser)
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_teardown(item: pytest.Item, nextitem: pytest.Item | None) -> Iterator[None]:
+    yield
+    if nextitem is None or "tests/browser" not in str(nextitem.fspath):
+        SHARED_CHROMIUM.close()
+    if _family(nextitem) is None or _family(nextitem) != _family(item):
+        SHARED_SERVE.close()
 
 
 @pytest.hookimpl(hookwrapper=True)
@@ -44,7 +90,8 @@ def browser(request: pytest.FixtureRequest) -> Iterator[Any]:
     """Chromium; it ignores the server's Content-Security-Policy (which forbids the eval that
     Playwright's string predicates use) unless the module sets ENFORCE_CSP (test_csp.py).
     A module's BROWSER_ARGS add to Chromium's arguments, its VIEWPORT sets the window."""
-    with chromium_context(
+    with shared_chromium_context(
+        SHARED_CHROMIUM,
         bypass_csp=not getattr(request.module, "ENFORCE_CSP", False),
         extra_args=getattr(request.module, "BROWSER_ARGS", ()),
         viewport=getattr(request.module, "VIEWPORT", None),
@@ -57,10 +104,15 @@ def serve(
     request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
 ) -> Iterator[Serve]:
     """One `skyhelm serve` per test module, with the module's SERVE_ARGS (a list, or a
-    function of a fresh directory that gives the list: files the server is to read)."""
+    function of a fresh directory that gives the list: files the server is to read), or the
+    one its family shares (tests/browser/sharing.py)."""
     args = getattr(request.module, "SERVE_ARGS", [])
     if callable(args):
         args = args(tmp_path_factory.mktemp("serve"))
+    family = FAMILY_OF.get(request.node.nodeid.split("::", 1)[0])
+    if family is not None:  # stopped when the worker goes on to another family (above)
+        yield SHARED_SERVE.get(family, list(args))
+        return
     with Serve(extra_args=list(args)).running() as server:
         yield server
 

@@ -166,6 +166,10 @@ def settle_vehicle(api: httpx.Client, *, flying: bool, altitude: float = 5.0) ->
             pilot.command("land")
             pilot.wait("landed and disarmed", _landed, 60.0)
         if flying:
+            # PX4 never arms in LAND or RTL, where a landing leaves it, nor in a manual mode
+            # (POSCTL) with no sticks coming: HOLD first, as a pilot does
+            if vehicle_state(api)["mode"] != "HOLD":
+                pilot.command("mode", {"mode": "HOLD"})
             pilot.command("arm")
             pilot.command("takeoff", {"altitude_m": altitude})
             pilot.wait(

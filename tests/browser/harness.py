@@ -233,3 +233,58 @@ def chromium_context(
             yield context
         finally:
             context.close()
+
+
+class SharedChromium:
+    """One Chromium per set of arguments for a run of browser modules on one worker: launching
+    it costs a second of CPU, a fresh context per module (its own cookies, storage and
+    settings) costs little. Closed when the worker leaves the browser modules."""
+
+    def __init__(self) -> None:
+        self._playwright: Any = None
+        self._manager: Any = None
+        self._browsers: dict[tuple[str, ...], Any] = {}
+
+    def browser(self, extra_args: Sequence[str] = ()) -> Any:
+        import pytest
+
+        if not CHROMIUM.exists():
+            pytest.skip("/usr/bin/chromium is not installed (make chromium, as root)")
+        sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
+        if self._playwright is None:
+            self._manager = sync_api.sync_playwright()
+            self._playwright = self._manager.__enter__()
+        key = tuple(extra_args)
+        browser = self._browsers.get(key)
+        if browser is None or not browser.is_connected():
+            browser = self._playwright.chromium.launch(
+                executable_path=str(CHROMIUM), args=[*CHROMIUM_ARGS, *extra_args], headless=True
+            )
+            self._browsers[key] = browser
+        return browser
+
+    def close(self) -> None:
+        browsers, self._browsers = self._browsers, {}
+        for browser in browsers.values():
+            with contextlib.suppress(Exception):  # a crashed browser is gone already
+                browser.close()
+        manager, self._manager, self._playwright = self._manager, None, None
+        if manager is not None:
+            manager.__exit__(None, None, None)
+
+
+@contextlib.contextmanager
+def shared_chromium_context(
+    shared: SharedChromium,
+    bypass_csp: bool = True,
+    extra_args: Sequence[str] = (),
+    viewport: dict[str, int] | None = None,
+) -> Iterator[Any]:
+    """A fresh context of the shared Chromium, as chromium_context() gives one."""
+    context = shared.browser(extra_args).new_context(
+        viewport=viewport or {"width": 1600, "height": 1000}, bypass_csp=bypass_csp
+    )
+    try:
+        yield context
+    finally:
+        context.close()

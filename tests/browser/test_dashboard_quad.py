@@ -216,7 +216,9 @@ def test_start_offboard_then_altitude_slider_moves_the_vehicle(
         30.0,
     )
     assert page.text_content("#stream-active") == "streaming"
-    assert page.text_content("#stream-sender") == "process"  # the sender process sends
+    # the sender process sends ("process", then the restarts over the server's life, which a
+    # busy machine or an earlier module of the family can have caused)
+    assert (page.text_content("#stream-sender") or "").split(",")[0] == "process"
     assert "Hz" in (page.text_content("#stream-rate") or "")
     assert "ms" in (page.text_content("#stream-p99") or "")
 

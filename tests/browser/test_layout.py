@@ -37,7 +37,7 @@ from .flows import (
     start_offboard_here,
     take_control,
 )
-from .harness import CHROMIUM, Serve, vehicle_state, wait_for
+from .harness import Serve, vehicle_state, wait_for
 
 SERVE_ARGS = QUAD_SERVE_ARGS
 # Records every scroll but the message log's own (it follows its newest line).
@@ -52,21 +52,11 @@ document.addEventListener("scroll", (e) => {
 
 
 @pytest.fixture(scope="module")
-def chromium() -> Iterator[Any]:
+def chromium() -> Any:
     """A plain browser: each test opens its own context with its size and colour scheme."""
-    if not CHROMIUM.exists():
-        pytest.skip("/usr/bin/chromium is not installed (make chromium, as root)")
-    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
-    from .harness import CHROMIUM_ARGS
+    from .conftest import SHARED_CHROMIUM
 
-    with sync_api.sync_playwright() as playwright:
-        browser = playwright.chromium.launch(
-            executable_path=str(CHROMIUM), args=CHROMIUM_ARGS, headless=True
-        )
-        try:
-            yield browser
-        finally:
-            browser.close()
+    return SHARED_CHROMIUM.browser()
 
 
 @pytest.fixture(scope="module")

@@ -44,10 +44,11 @@ def test_map_shows_the_vehicle_with_its_heading_home_grid_scale_and_north(
 ) -> None:
     settle_vehicle(api, flying=False)
     _map_ready(page)
+    # the page was open while the vehicle landed: it draws the disarm when the state comes
+    page.wait_for_selector('.map-vehicle[data-category="disarmed"]', timeout=10_000)
     heading = vehicle_state(api)["heading_deg"]
     shown = float(page.get_attribute(".map-vehicle", "data-heading-deg") or "nan")
     assert abs((shown - heading + 180.0) % 360.0 - 180.0) < 5.0
-    assert page.get_attribute(".map-vehicle", "data-category") == "disarmed"
     # the arrow turns the short way across north (359° -> 1° is +2°, not a spin back)
     turned = page.evaluate(
         "() => { const l = window.skyhelm.map.layers.get(1); const kept = l.arrowDeg;"

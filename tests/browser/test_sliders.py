@@ -105,8 +105,11 @@ def test_the_window_follows_the_setpoint_flown_and_a_value_near_an_end(
             headers=lease,
         )
         assert streamed.status_code == 200, streamed.text
+        # the fields follow the state as it is drawn, not necessarily in one frame
         small_page.wait_for_function(
-            "document.getElementById('sp-north_m').value === '140'", timeout=15_000
+            "document.getElementById('sp-north_m').value === '140'"
+            " && document.getElementById('sp-east_m').value === '-60'",
+            timeout=15_000,
         )
         north = _slider(small_page, "north_m")
         assert (north["min"], north["max"], north["value"]) == (115, 165, 140)

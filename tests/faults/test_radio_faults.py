@@ -116,15 +116,19 @@ async def test_heartbeats_alone_lost_for_3_6_s_warn_but_never_lose_the_vehicle(
 ) -> None:
     await flight.hovering()
     warnings_before = len(flight.log.events("link_quality"))
+    sim_start_s = flight.sim.now_s
     flight.rig.proxy.drop_messages({MAVLINK_MSG_ID_HEARTBEAT}, HEARTBEAT_DROP_S, "to_server")
-    await flight.holds_flying(HEARTBEAT_DROP_S + 1.5, "HEARTBEATs dropped")
+    await flight.holds_flying(HEARTBEAT_DROP_S, "HEARTBEATs dropped")
+    # the sim sends one HEARTBEAT a second of its own time, which a busy machine slows
+    sim_drop_s = flight.sim.now_s - sim_start_s
+    await flight.holds_flying(1.5, "HEARTBEATs back")
     quality = flight.log.events("link_quality")[warnings_before:]
     # the warning before any verdict: the HEARTBEAT late while other frames arrive...
     assert any("heartbeat" in e["causes"] for e in quality), quality
     # ...and over when they come back
     await wait_for(lambda: "heartbeat" not in flight.log.events("link_quality")[-1]["causes"],
                    5.0, "the heartbeat warning over")
-    assert flight.rig.proxy.counters()["to_server"].filtered >= 3
+    assert flight.rig.proxy.counters()["to_server"].filtered >= min(3, int(sim_drop_s)), sim_drop_s
 
 
 RADIO_FAULTS: list[tuple[str, Faults, DirectionChoice]] = [
