@@ -10,6 +10,10 @@ Headless Chromium with software rendering (as on a laptop without a usable GPU),
 Run: .venv/bin/python -m bench.page_cost [--seconds 20] [--only landed,hovering]
      .venv/bin/python -m bench.page_cost --heap-minutes 30    # JS heap growth over 30 min
      .venv/bin/python -m bench.page_cost --before earlier.json  # a change's figures beside
+     .venv/bin/python -m bench.page_cost --before /tmp/base     # the same, measured now
+The last form measures another tree's server and page (e.g. `git archive main | tar -x -C
+/tmp/base`) with this bench, each of its scenarios just before the same one here, so both
+see the same machine.
 Writes bench/results/page_cost.json.
 """
 
@@ -189,17 +193,40 @@ def measure_window(page: Any, seconds: float, during: Callable[[], None] | None)
     }
 
 
-def scenario(name: str, seconds: float) -> dict[str, Any]:
-    """One scenario: its own server and browser, settled, then measured."""
+def start_server(serve: Serve, tree: Path | None) -> None:
+    """``serve`` started from this tree's server and page, or from those of ``tree``."""
+    if tree is None:
+        serve.start()
+        return
+    before = os.environ.get("PYTHONPATH")
+    os.environ["PYTHONPATH"] = str(tree.resolve())  # the server's process imports from it
+    try:
+        serve.start()
+    finally:
+        if before is None:
+            del os.environ["PYTHONPATH"]
+        else:
+            os.environ["PYTHONPATH"] = before
+
+
+def ready_to_fly(api: httpx.Client) -> bool:
+    state = vehicle_state(api)
+    return state["home"] is not None and bool(state["ready_to_arm"])
+
+
+def scenario(name: str, seconds: float, tree: Path | None = None) -> dict[str, Any]:
+    """One scenario: its own server and browser, settled, then measured (the server and
+    page of ``tree`` if given)."""
     vehicles = 4 if name.startswith("four_vehicles") else 1
     scene = not name.endswith("_no3d")
     serve = Serve(extra_args=["--sim-count", str(vehicles)] if vehicles > 1 else [])
-    serve.start()
+    start_server(serve, tree)
     load_before = os.getloadavg()
     try:
         with serve.client() as api:
             wait_for("the vehicle", lambda: api.get("/vehicles").json(), 30.0)
-            wait_for("a home position", lambda: vehicle_state(api)["home"] is not None, 60.0)
+            # a home position and the arming checks passed (the estimator's own start)
+            wait_for("ready to fly", lambda: ready_to_fly(api), 60.0)
             pilot: Pilot | None = None
             during: Callable[[], None] | None = None
             if name.startswith(("hovering", "square", "background")):
@@ -244,7 +271,7 @@ def heap_growth(minutes: float) -> dict[str, Any]:
     samples: list[tuple[float, float]] = []
     try:
         with serve.client() as api:
-            wait_for("a home position", lambda: vehicle_state(api).get("home") is not None, 60.0)
+            wait_for("ready to fly", lambda: ready_to_fly(api), 60.0)
             settle_vehicle(api, flying=True, altitude=ALTITUDE_M)
             pilot = Pilot(api)
             pilot.hover_in_offboard()
@@ -273,7 +300,9 @@ def main() -> int:
                         help="also sample the JS heap of a page over this many minutes")
     parser.add_argument("--before", type=Path, default=None,
                         help="an earlier page_cost.json (another version of the page, measured "
-                             "just before): its figures are kept beside these as 'before'")
+                             "just before): its figures are kept beside these as 'before'; or "
+                             "another tree (a directory), whose server and page are measured "
+                             "now, each scenario just before this tree's")
     args = parser.parse_args()
     if not CHROMIUM.exists():
         print("no /usr/bin/chromium: run `make chromium` as root", file=sys.stderr)
@@ -281,15 +310,23 @@ def main() -> int:
     names = [n for n in args.only.split(",") if n] or (
         ["landed_no3d", "hovering_no3d"] if args.quick else SCENARIOS)
     seconds = 8.0 if args.quick else args.seconds
-    rows = []
+    tree = args.before if args.before is not None and args.before.is_dir() else None
+    rows: list[dict[str, Any]] = []
+    before_rows: list[dict[str, Any]] = []
     for name in names:
-        row = scenario(name, seconds)
-        rows.append(row)
-        print(f"{name:>20}: page {row['page_cpu_pct']:5.1f} % of a core, server+sim "
-              f"{row['server_and_sim_cpu_pct']:5.1f} %, JS heap {row['js_heap_mb']} MB "
-              f"({row['visibility']}, {row['window_s']} s)", flush=True)
+        for kept, root, label in ([(before_rows, tree, "before")] if tree else []) + [
+                (rows, None, "")]:
+            row = scenario(name, seconds, root)
+            kept.append(row)
+            print(f"{label:>6} {name:>20}: page {row['page_cpu_pct']:5.1f} % of a core, "
+                  f"server+sim {row['server_and_sim_cpu_pct']:5.1f} %, JS heap "
+                  f"{row['js_heap_mb']} MB ({row['visibility']}, {row['window_s']} s, load "
+                  f"{row['machine']['load_average_before'][0]:.2f})", flush=True)
     result: dict[str, Any] = {"scenarios": rows, "machine": machine_info()}
-    if args.before is not None:
+    if tree is not None:
+        result["before"] = before_rows
+        result["before_tree"] = str(tree)
+    elif args.before is not None:
         result["before"] = json.loads(args.before.read_text())["scenarios"]
     if args.heap_minutes > 0:
         result["heap"] = heap_growth(args.heap_minutes)
