@@ -19,7 +19,7 @@
   const SETTLE_MS = 400;
   const INTERACTION_MS = 1500;
   const IDLE_FRAME_MS = 10000;
-  const START_MS = 10000; // the client starting (its textures, fonts, first frames): unpaced
+  const START_MS = 3000; // the client starting (its first frames): unpaced
   const TIMES_KEPT = 200;
 
   const w = window;
