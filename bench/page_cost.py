@@ -8,7 +8,8 @@ over the same window), so what the page costs is not mixed with what it watches.
 Headless Chromium with software rendering (as on a laptop without a usable GPU), 1280x800.
 
 Run: .venv/bin/python -m bench.page_cost [--seconds 20] [--only landed,hovering]
-     .venv/bin/python -m bench.page_cost --heap-minutes 30    # JS heap growth over 30 min
+     .venv/bin/python -m bench.page_cost --heap-minutes 30    # JS heap growth over 30 min,
+                                                              # added to the last scenarios
      .venv/bin/python -m bench.page_cost --before earlier.json  # a change's figures beside
      .venv/bin/python -m bench.page_cost --before /tmp/base     # the same, measured now
 The last form measures another tree's server and page (e.g. `git archive main | tar -x -C
@@ -33,7 +34,7 @@ import httpx
 
 from bench._markdown import table
 from bench._report import Section
-from bench._results import machine_info, write_results
+from bench._results import RESULTS_DIR, machine_info, write_results
 from bench._serve import cpu_seconds
 from tests.browser.flows import open_dashboard, settle_vehicle
 from tests.browser.harness import CHROMIUM, CHROMIUM_ARGS, Serve, altitude_m, vehicle_state
@@ -309,6 +310,11 @@ def main() -> int:
         return 1
     names = [n for n in args.only.split(",") if n] or (
         ["landed_no3d", "hovering_no3d"] if args.quick else SCENARIOS)
+    # the heap alone (`--heap-minutes N` without --only or --quick): added to the scenarios
+    # measured last, in the same file
+    heap_only = args.heap_minutes > 0 and not args.only and not args.quick
+    if heap_only:
+        names = []
     seconds = 8.0 if args.quick else args.seconds
     tree = args.before if args.before is not None and args.before.is_dir() else None
     rows: list[dict[str, Any]] = []
@@ -323,6 +329,10 @@ def main() -> int:
                   f"{row['js_heap_mb']} MB ({row['visibility']}, {row['window_s']} s, load "
                   f"{row['machine']['load_average_before'][0]:.2f})", flush=True)
     result: dict[str, Any] = {"scenarios": rows, "machine": machine_info()}
+    earlier = RESULTS_DIR / "page_cost.json"
+    if heap_only and earlier.exists():
+        result = {key: value for key, value in json.loads(earlier.read_text()).items()
+                  if key != "written_at"}
     if tree is not None:
         result["before"] = before_rows
         result["before_tree"] = str(tree)
@@ -340,38 +350,52 @@ if __name__ == "__main__":
     raise SystemExit(main())
 
 
+def _load(row: dict[str, Any]) -> str:
+    return f"{row['machine']['load_average_before'][0]:.1f}"
+
+
 def report(result: dict[str, Any]) -> Section | None:
     """The page's CPU and heap by scenario, against its targets (and the version before)."""
     before = {row["scenario"]: row for row in result.get("before", [])}
-    headers = ["scenario", "page CPU % of one core", "target", "server + sim %", "JS heap MB",
-               "page says"]
+    headers = ["scenario", "page CPU % of one core", "load", "target", "server + sim %",
+               "JS heap MB", "page says"]
     if before:
-        headers[1:1] = ["before: page CPU %"]
+        headers[1:1] = ["before: page CPU %", "load"]
     rows = []
     for row in result["scenarios"]:
         name = row["scenario"]
-        cells: list[Any] = [f"`{name}`", row["page_cpu_pct"],
+        cells: list[Any] = [f"`{name}`", row["page_cpu_pct"], _load(row),
                             f"≤ {TARGET_PCT[name]:g}" if name in TARGET_PCT else "",
                             row["server_and_sim_cpu_pct"], row["js_heap_mb"], row["visibility"]]
         if before:
-            cells[1:1] = [before[name]["page_cpu_pct"] if name in before else ""]
+            old = before.get(name)
+            cells[1:1] = [old["page_cpu_pct"], _load(old)] if old else ["", ""]
         rows.append(cells)
     window = result["scenarios"][0]["window_s"] if result["scenarios"] else 0
+    measured_now = "before_tree" in result
     text = (
         "CPU time of Chromium's whole process tree (headless, software rendering, 1280×800) "
         f"over {window:.0f} s per scenario, each on its own server with one simulated quad "
-        "(`_no3d`: the 3D view off). `background_no3d` is the page told it is hidden (the "
-        "`visibilityState` property and the `visibilitychange` event, as a browser tells a "
-        "background tab: headless Chromium keeps every page visible, and a real browser also "
+        "(`_no3d`: the 3D view off); 'load' is the machine's 1-minute load average as the "
+        "scenario started (2 CPUs, shared). `background_no3d` is the page told it is hidden "
+        "(the `visibilityState` property and the `visibilitychange` event, as a browser tells "
+        "a background tab: headless Chromium keeps every page visible, and a real browser also "
         "throttles a background tab's timers). "
-        + ("'before' is the previous version of the page (and of the scene), measured just "
-           "before on the same machine. " if before else "")
-        + "With the 3D view on, viser redraws for 250 ms after every change it is sent and "
-        "once a second when idle (its client's constants): only a vehicle that moves by more "
-        "than a pixel of the view is sent.\n\n"
+        + (("'before' is the previous version of the server and page (`--before "
+            f"{result['before_tree']}`), each scenario measured just before the same one of "
+            "this version, in the same run. ") if measured_now else
+           ("'before' is the previous version of the page (and of the scene), measured just "
+            "before on the same machine. ") if before else "")
+        + "With the 3D view on, viser's client draws for 250 ms after every change it is sent "
+        "and once a second when idle; the page it is served in paces it (server/scene/pace.js): "
+        "every frame while the pilot drives the view, at most 30 a second for 400 ms after a "
+        "scene message, else a frame asked for waits up to 10 s. The page asks its telemetry "
+        "on change (`on_change=true`, docs/api.md): a landed vehicle's page gets 2–3 states a "
+        "second instead of 10.\n\n"
         + table(headers, rows))
     heap = result.get("heap")
     if heap:
         text += (f"\n\nJS heap over {heap['minutes']:g} min: last / at 5 min = "
-                 f"{heap['growth_after_5_min']}.")
+                 f"{heap['growth_after_5_min']} (samples, minute and MB: "
+                 f"{heap['samples_min_mb']}).")
     return Section("What the page costs the machine it runs on", 76, text)
