@@ -4,7 +4,7 @@
 // each frame is software-rendered, which is most of what the 3D view costs. This script runs
 // in the scene's document before viser's own (the server puts it in the page it serves) and
 // holds the document's animation frames to what a pilot can see change:
-// - while the pilot drives the view (pointer, wheel, keys, a resize) and for INTERACTION_MS
+// - while the pilot drives the view (pointer, click, wheel, keys, a resize) and INTERACTION_MS
 //   after, every frame the client asks for, as without this script;
 // - for SETTLE_MS after anything reached the client (a scene message from its socket's
 //   worker, a fetch done), frames at most every FRAME_GAP_MS (the rate the scene is sent at);
@@ -91,8 +91,10 @@
     interactUntil = performance.now() + INTERACTION_MS;
     if (native === null) plan();
   };
-  for (const type of ["pointerdown", "pointermove", "pointerup", "wheel", "keydown", "keyup",
-    "touchstart", "touchmove", "resize", "focus"]) {
+  // a click too (the page closes viser's WebGL notices with their own button: the notice's
+  // exit transition runs on animation frames)
+  for (const type of ["pointerdown", "pointermove", "pointerup", "click", "wheel", "keydown",
+    "keyup", "touchstart", "touchmove", "resize", "focus"]) {
     w.addEventListener(type, interacted, { capture: true, passive: true });
   }
   document.addEventListener("visibilitychange", interacted);
