@@ -419,6 +419,12 @@ def report(result: dict[str, Any]) -> Section | None:
         "on change (`on_change=true`, docs/api.md): a landed vehicle's page gets 2–3 states a "
         "second instead of 10.\n\n"
         + table(headers, rows))
+    names = ",".join(row["scenario"] for row in result["scenarios"])
+    command = f".venv/bin/python -m bench.page_cost --only {names} --seconds {window:.0f}"
+    if measured_now:
+        text += ("\n\nMeasured with `git archive main | tar -x -C "
+                 f"{result['before_tree']}` (the version before) and `{command} --before "
+                 f"{result['before_tree']}`.")
     heap = result.get("heap")
     if heap:
         text += (f"\n\nJS heap over {heap['minutes']:g} min: last / at 5 min = "
