@@ -8,8 +8,13 @@ over the same window), so what the page costs is not mixed with what it watches.
 Headless Chromium with software rendering (as on a laptop without a usable GPU), 1280x800.
 
 Run: .venv/bin/python -m bench.page_cost [--seconds 20] [--only landed,hovering]
-     .venv/bin/python -m bench.page_cost --heap-minutes 30    # JS heap growth over 30 min
+     .venv/bin/python -m bench.page_cost --heap-minutes 30    # JS heap growth over 30 min,
+                                                              # added to the last scenarios
      .venv/bin/python -m bench.page_cost --before earlier.json  # a change's figures beside
+     .venv/bin/python -m bench.page_cost --before /tmp/base     # the same, measured now
+The last form measures another tree's server and page (e.g. `git archive main | tar -x -C
+/tmp/base`) with this bench, each of its scenarios just before the same one here, so both
+see the same machine.
 Writes bench/results/page_cost.json.
 """
 
@@ -29,7 +34,7 @@ import httpx
 
 from bench._markdown import table
 from bench._report import Section
-from bench._results import machine_info, write_results
+from bench._results import RESULTS_DIR, machine_info, write_results
 from bench._serve import cpu_seconds
 from tests.browser.flows import open_dashboard, settle_vehicle
 from tests.browser.harness import CHROMIUM, CHROMIUM_ARGS, Serve, altitude_m, vehicle_state
@@ -189,17 +194,64 @@ def measure_window(page: Any, seconds: float, during: Callable[[], None] | None)
     }
 
 
-def scenario(name: str, seconds: float) -> dict[str, Any]:
-    """One scenario: its own server and browser, settled, then measured."""
+def start_server(serve: Serve, tree: Path | None) -> None:
+    """``serve`` started from this tree's server and page, or from those of ``tree``."""
+    if tree is None:
+        serve.start()
+        return
+    before = os.environ.get("PYTHONPATH")
+    os.environ["PYTHONPATH"] = str(tree.resolve())  # the server's process imports from it
+    try:
+        serve.start()
+    finally:
+        if before is None:
+            del os.environ["PYTHONPATH"]
+        else:
+            os.environ["PYTHONPATH"] = before
+
+
+def ready_to_fly(api: httpx.Client) -> bool:
+    state = vehicle_state(api)
+    return state["home"] is not None and bool(state["ready_to_arm"])
+
+
+# After viser's canvas shows, software WebGL goes on starting the client in the GPU process
+# (its shaders, the environment map's prefiltering) for 10-20 s on a shared 2-core machine,
+# at 25-30 % of a core: once per page, not what a page costs while it is open, so not counted.
+SCENE_START_S = 20.0
+# A 1-pixel read of the scene's canvas: returns once the GPU process has run every command
+# queued before it.
+GL_ROUND_TRIP = """
+(canvas) => {
+  const gl = canvas.getContext("webgl2") || canvas.getContext("webgl");
+  if (!gl) return false;
+  gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, new Uint8Array(4));
+  return true;
+}
+"""
+
+
+def scene_started(page: Any) -> None:
+    """Waits for viser's canvas, its start-up in the GPU process, and anything queued."""
+    canvas = page.frame_locator("#scene").locator("canvas").first
+    canvas.wait_for(timeout=60_000)
+    time.sleep(SCENE_START_S)  # not a wait for a condition: the start-up's CPU is not counted
+    canvas.evaluate(GL_ROUND_TRIP)
+
+
+def scenario(name: str, seconds: float, tree: Path | None = None) -> dict[str, Any]:
+    """One scenario: its own server and browser, settled, then measured (the server and
+    page of ``tree`` if given)."""
     vehicles = 4 if name.startswith("four_vehicles") else 1
     scene = not name.endswith("_no3d")
     serve = Serve(extra_args=["--sim-count", str(vehicles)] if vehicles > 1 else [])
-    serve.start()
+    start_server(serve, tree)
     load_before = os.getloadavg()
     try:
         with serve.client() as api:
             wait_for("the vehicle", lambda: api.get("/vehicles").json(), 30.0)
-            wait_for("a home position", lambda: vehicle_state(api)["home"] is not None, 60.0)
+            # a home position and the arming checks passed (the estimator's own start)
+            wait_for("ready to fly", lambda: ready_to_fly(api), 60.0)
             pilot: Pilot | None = None
             during: Callable[[], None] | None = None
             if name.startswith(("hovering", "square", "background")):
@@ -214,8 +266,7 @@ def scenario(name: str, seconds: float) -> dict[str, Any]:
                 if name.startswith("background"):
                     page.evaluate(HIDE_PAGE)
                 if scene:  # software WebGL takes seconds to start viser's client: not counted
-                    page.frame_locator("#scene").locator("canvas").first.wait_for(
-                        timeout=60_000)
+                    scene_started(page)
                 time.sleep(3.0)  # the page's start-up (scripts, first states, scene) settles
                 if pilot is not None:
                     wait_for("still hovering",
@@ -244,7 +295,7 @@ def heap_growth(minutes: float) -> dict[str, Any]:
     samples: list[tuple[float, float]] = []
     try:
         with serve.client() as api:
-            wait_for("a home position", lambda: vehicle_state(api).get("home") is not None, 60.0)
+            wait_for("ready to fly", lambda: ready_to_fly(api), 60.0)
             settle_vehicle(api, flying=True, altitude=ALTITUDE_M)
             pilot = Pilot(api)
             pilot.hover_in_offboard()
@@ -273,23 +324,42 @@ def main() -> int:
                         help="also sample the JS heap of a page over this many minutes")
     parser.add_argument("--before", type=Path, default=None,
                         help="an earlier page_cost.json (another version of the page, measured "
-                             "just before): its figures are kept beside these as 'before'")
+                             "just before): its figures are kept beside these as 'before'; or "
+                             "another tree (a directory), whose server and page are measured "
+                             "now, each scenario just before this tree's")
     args = parser.parse_args()
     if not CHROMIUM.exists():
         print("no /usr/bin/chromium: run `make chromium` as root", file=sys.stderr)
         return 1
     names = [n for n in args.only.split(",") if n] or (
         ["landed_no3d", "hovering_no3d"] if args.quick else SCENARIOS)
+    # the heap alone (`--heap-minutes N` without --only or --quick): added to the scenarios
+    # measured last, in the same file
+    heap_only = args.heap_minutes > 0 and not args.only and not args.quick
+    if heap_only:
+        names = []
     seconds = 8.0 if args.quick else args.seconds
-    rows = []
+    tree = args.before if args.before is not None and args.before.is_dir() else None
+    rows: list[dict[str, Any]] = []
+    before_rows: list[dict[str, Any]] = []
     for name in names:
-        row = scenario(name, seconds)
-        rows.append(row)
-        print(f"{name:>20}: page {row['page_cpu_pct']:5.1f} % of a core, server+sim "
-              f"{row['server_and_sim_cpu_pct']:5.1f} %, JS heap {row['js_heap_mb']} MB "
-              f"({row['visibility']}, {row['window_s']} s)", flush=True)
+        for kept, root, label in ([(before_rows, tree, "before")] if tree else []) + [
+                (rows, None, "")]:
+            row = scenario(name, seconds, root)
+            kept.append(row)
+            print(f"{label:>6} {name:>20}: page {row['page_cpu_pct']:5.1f} % of a core, "
+                  f"server+sim {row['server_and_sim_cpu_pct']:5.1f} %, JS heap "
+                  f"{row['js_heap_mb']} MB ({row['visibility']}, {row['window_s']} s, load "
+                  f"{row['machine']['load_average_before'][0]:.2f})", flush=True)
     result: dict[str, Any] = {"scenarios": rows, "machine": machine_info()}
-    if args.before is not None:
+    earlier = RESULTS_DIR / "page_cost.json"
+    if heap_only and earlier.exists():
+        result = {key: value for key, value in json.loads(earlier.read_text()).items()
+                  if key != "written_at"}
+    if tree is not None:
+        result["before"] = before_rows
+        result["before_tree"] = str(tree)
+    elif args.before is not None:
         result["before"] = json.loads(args.before.read_text())["scenarios"]
     if args.heap_minutes > 0:
         result["heap"] = heap_growth(args.heap_minutes)
@@ -303,38 +373,61 @@ if __name__ == "__main__":
     raise SystemExit(main())
 
 
+def _load(row: dict[str, Any]) -> str:
+    return f"{row['machine']['load_average_before'][0]:.1f}"
+
+
 def report(result: dict[str, Any]) -> Section | None:
     """The page's CPU and heap by scenario, against its targets (and the version before)."""
     before = {row["scenario"]: row for row in result.get("before", [])}
-    headers = ["scenario", "page CPU % of one core", "target", "server + sim %", "JS heap MB",
-               "page says"]
+    headers = ["scenario", "page CPU % of one core", "load", "target", "server + sim %",
+               "JS heap MB", "page says"]
     if before:
-        headers[1:1] = ["before: page CPU %"]
+        headers[1:1] = ["before: page CPU %", "load"]
     rows = []
     for row in result["scenarios"]:
         name = row["scenario"]
-        cells: list[Any] = [f"`{name}`", row["page_cpu_pct"],
+        cells: list[Any] = [f"`{name}`", row["page_cpu_pct"], _load(row),
                             f"≤ {TARGET_PCT[name]:g}" if name in TARGET_PCT else "",
                             row["server_and_sim_cpu_pct"], row["js_heap_mb"], row["visibility"]]
         if before:
-            cells[1:1] = [before[name]["page_cpu_pct"] if name in before else ""]
+            old = before.get(name)
+            cells[1:1] = [old["page_cpu_pct"], _load(old)] if old else ["", ""]
         rows.append(cells)
     window = result["scenarios"][0]["window_s"] if result["scenarios"] else 0
+    measured_now = "before_tree" in result
     text = (
         "CPU time of Chromium's whole process tree (headless, software rendering, 1280×800) "
         f"over {window:.0f} s per scenario, each on its own server with one simulated quad "
-        "(`_no3d`: the 3D view off). `background_no3d` is the page told it is hidden (the "
-        "`visibilityState` property and the `visibilitychange` event, as a browser tells a "
-        "background tab: headless Chromium keeps every page visible, and a real browser also "
+        "(`_no3d`: the 3D view off); 'load' is the machine's 1-minute load average as the "
+        "scenario started (2 CPUs, shared). `background_no3d` is the page told it is hidden "
+        "(the `visibilityState` property and the `visibilitychange` event, as a browser tells "
+        "a background tab: headless Chromium keeps every page visible, and a real browser also "
         "throttles a background tab's timers). "
-        + ("'before' is the previous version of the page (and of the scene), measured just "
-           "before on the same machine. " if before else "")
-        + "With the 3D view on, viser redraws for 250 ms after every change it is sent and "
-        "once a second when idle (its client's constants): only a vehicle that moves by more "
-        "than a pixel of the view is sent.\n\n"
+        + (("'before' is the previous version of the server and page (`--before "
+            f"{result['before_tree']}`), each scenario measured just before the same one of "
+            "this version, in the same run. ") if measured_now else
+           ("'before' is the previous version of the page (and of the scene), measured just "
+            "before on the same machine. ") if before else "")
+        + f"With the 3D view on, the window starts {SCENE_START_S:.0f} s after viser's canvas "
+        "shows (software WebGL's start-up in the GPU process, 25–30 % of a core for 10–20 s "
+        "once per page, is not counted). "
+        "Viser's client draws for 250 ms after every change it is sent "
+        "and once a second when idle; the page it is served in paces it (server/scene/pace.js): "
+        "every frame while the pilot drives the view, at most 30 a second for 400 ms after a "
+        "scene message, else a frame asked for waits up to 10 s. The page asks its telemetry "
+        "on change (`on_change=true`, docs/api.md): a landed vehicle's page gets 2–3 states a "
+        "second instead of 10.\n\n"
         + table(headers, rows))
+    names = ",".join(row["scenario"] for row in result["scenarios"])
+    command = f".venv/bin/python -m bench.page_cost --only {names} --seconds {window:.0f}"
+    if measured_now:
+        text += ("\n\nMeasured with `git archive main | tar -x -C "
+                 f"{result['before_tree']}` (the version before) and `{command} --before "
+                 f"{result['before_tree']}`.")
     heap = result.get("heap")
     if heap:
         text += (f"\n\nJS heap over {heap['minutes']:g} min: last / at 5 min = "
-                 f"{heap['growth_after_5_min']}.")
+                 f"{heap['growth_after_5_min']} (samples, minute and MB: "
+                 f"{heap['samples_min_mb']}).")
     return Section("What the page costs the machine it runs on", 76, text)

@@ -164,8 +164,12 @@ export function reconnectDelayMs(attempt, random = Math.random) {
  * at once (no such vehicle yet, a server still starting) keeps backing off.
  */
 export class TelemetrySocket {
-  constructor(vehicleId, { onMessage, onStatus, rateHz = 10 }) {
+  constructor(vehicleId, { onMessage, onStatus, rateHz = 10, onChange = true }) {
     this.vehicleId = vehicleId;
+    // on_change: the server sends a state when it tells something new (not only that time
+    // passed) and twice a second whatever: a landed vehicle's page gets a few states a
+    // second instead of ten, and draws, plots and ages them as before (docs/api.md)
+    this.onChange = onChange;
     this.onMessage = onMessage;
     this.onStatus = onStatus;
     this.visibleRateHz = rateHz;
@@ -207,6 +211,7 @@ export class TelemetrySocket {
   connect(whenHeard = null) {
     if (this.closed || rejected) return;
     const params = { rate_hz: this.rateHz };
+    if (this.onChange) params.on_change = "true";
     if (this.vehicleId !== null) params.vehicle = this.vehicleId;
     const ws = new WebSocket(socketUrl("telemetry", params));
     this.ws = ws;

@@ -393,10 +393,14 @@ export class SetpointPanel {
   /** Takes values from the vehicle or the setpoint it flies (the fields follow it again);
    * the windows centre on them. */
   set(values) {
+    const before = { ...this.values };
     Object.assign(this.values, values);
     for (const [key, value] of Object.entries(values)) {
       const [slider, number] = this.inputs[key] || [];
       if (!slider) continue;
+      // shown already (the setpoint flown, given again with every state): no DOM write, so
+      // an observer's page redraws nothing while the vehicle flies the same setpoint
+      if (before[key] === value && !this.edited.has(key) && number.value === String(value)) continue;
       this.markEdited(key, false);
       number.value = value;
       this.recentre(this.fields[key], true);

@@ -164,6 +164,23 @@ function firstGamepad() {
   return null;
 }
 
+// A page listening for gamepads makes the browser poll for them (Chromium: a thread in the
+// browser process, about 1 % of a core, for as long as any page listens). A hidden page gets
+// no gamepad events anyway (the API serves the visible page only), so it stops listening
+// while hidden and listens again when shown.
+const connected = (e) => log("INFO", `gamepad connected: ${e.gamepad.id}`);
+const disconnected = (e) => log("WARNING", `gamepad disconnected: ${e.gamepad.id}`);
+
+function listenForGamepads() {
+  const follow = () => {
+    const listen = document.visibilityState !== "hidden" ? window.addEventListener : window.removeEventListener;
+    listen.call(window, "gamepadconnected", connected);
+    listen.call(window, "gamepaddisconnected", disconnected);
+  };
+  follow();
+  document.addEventListener("visibilitychange", follow);
+}
+
 function gamepadAxis(pad, mapping) {
   const raw = pad.axes[mapping.axis] ?? 0;
   const v = Math.abs(raw) < GAMEPAD_DEADZONE ? 0 : raw;
@@ -210,8 +227,7 @@ export class StickPilot {
     buildMapping(this.settings, () => saveSettings(this.settings));
     $("sticks-enable").addEventListener("change", (e) => this.setEnabled(e.target.checked));
     $("sticks-posctl").addEventListener("click", () => this.positionMode());
-    window.addEventListener("gamepadconnected", (e) => log("INFO", `gamepad connected: ${e.gamepad.id}`));
-    window.addEventListener("gamepaddisconnected", (e) => log("WARNING", `gamepad disconnected: ${e.gamepad.id}`));
+    listenForGamepads();
   }
 
   /** What the pilot's hands say now: the gamepad when one is connected, else the screen. */

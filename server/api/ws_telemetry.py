@@ -9,6 +9,7 @@ reboot), so its socket goes on."""
 from __future__ import annotations
 
 import asyncio
+import math
 from collections.abc import AsyncIterator
 
 from fastapi import APIRouter, WebSocket
@@ -27,9 +28,13 @@ from server.http.ws_common import (
     run_until_disconnect,
 )
 from server.link import Link, Vehicle
+from server.link.codec.aio import loop_time_s
 from skyhelm_wire.sockets import SOCKET
 
 MIN_RATE_HZ = 0.1
+# With on_change, a state at least this often whatever changed: a client that adds the time
+# since the last state to its ages (the page's link box turns late past 1 s) stays true.
+ON_CHANGE_KEEPALIVE_S = 0.5
 # MAVLink system ids a vehicle can have; another id can never appear.
 SYSID_RANGE = range(1, 256)
 
@@ -43,12 +48,15 @@ def publishers_of(websocket: WebSocket) -> StatePublishers:
 
 @router.websocket(SOCKET["telemetry"].route)
 async def telemetry(
-    websocket: WebSocket, vehicle: int | None = None, rate_hz: float = 10.0
+    websocket: WebSocket, vehicle: int | None = None, rate_hz: float = 10.0,
+    on_change: bool = False,
 ) -> None:
     """`{type: "state"}` snapshots of one vehicle (or all) at rate_hz (capped), plus
     `{type: "statustext"}` and `{type: "event"}` as they happen; for the page also
     `{type: "vehicles"}` (the vehicle list: at once, then on every change) and
-    `{type: "scene_click"}` (where a click in the 3D scene met the ground)."""
+    `{type: "scene_click"}` (where a click in the 3D scene met the ground). With
+    `on_change`, a tick's state is sent only when it tells something the last one sent did
+    not (Published.steady) or ON_CHANGE_KEEPALIVE_S have passed since."""
     context = await admit(websocket, SOCKET["telemetry"])
     if context is None:
         return
@@ -64,13 +72,14 @@ async def telemetry(
         _pump_topic(publishers.vehicle_list, sender, publishers.vehicle_list_message()),
         _pump_topic(publishers.scene_clicks, sender, None),
     ]
-    jobs.append(_follow_vehicles(context.registry, vehicle, publishers, sender, rate_hz))
+    jobs.append(_follow_vehicles(context.registry, vehicle, publishers, sender, rate_hz,
+                                 on_change))
     await run_until_disconnect(websocket, *jobs)
 
 
 async def _follow_vehicles(
     registry: VehicleRegistry, wanted: int | None, publishers: StatePublishers, sender: Sender,
-    rate_hz: float,
+    rate_hz: float, on_change: bool = False,
 ) -> None:
     """Pump the states and events of every vehicle (or the one wanted) known now or found
     later; ends with the first pump that fails (the client went away or was too slow)."""
@@ -92,7 +101,8 @@ async def _follow_vehicles(
             for task in pumps.pop(vehicle.sysid, (vehicle, []))[1]:
                 task.cancel()
             running = [
-                asyncio.create_task(_pump_states(publishers.for_vehicle(vehicle), sender, rate_hz)),
+                asyncio.create_task(_pump_states(publishers.for_vehicle(vehicle), sender, rate_hz,
+                                                 on_change)),
                 asyncio.create_task(_pump_events(vehicle, sender)),
             ]
             for task in running:
@@ -127,11 +137,19 @@ async def _vehicles_as_they_come(registry: VehicleRegistry) -> AsyncIterator[Veh
         await asyncio.gather(*forwarders, return_exceptions=True)
 
 
-async def _pump_states(publisher: StatePublisher, sender: Sender, rate_hz: float) -> None:
+async def _pump_states(publisher: StatePublisher, sender: Sender, rate_hz: float,
+                       on_change: bool = False) -> None:
     # Every socket of this vehicle sends the same text, encoded once per tick.
     slot = publisher.subscribe(rate_hz)
+    sent: tuple[str | None, bytes] | None = None
+    sent_s = -math.inf
     try:
         async for published in slot:
+            if on_change:
+                now_s = loop_time_s()
+                if published.steady == sent and now_s - sent_s < ON_CHANGE_KEEPALIVE_S:
+                    continue
+                sent, sent_s = published.steady, now_s
             await sender.send_text(published.message)
     finally:
         publisher.unsubscribe(slot)

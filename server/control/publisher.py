@@ -35,7 +35,13 @@ from functools import cached_property
 from typing import Protocol
 
 from server.control.slots import Slot
-from server.control.views import LeaseStatus, encode_state, state_json, state_message
+from server.control.views import (
+    LeaseStatus,
+    encode_state,
+    encode_steady_state,
+    state_json,
+    state_message,
+)
 from server.link import VehicleState
 from server.link.codec.aio import cancel_and_wait, loop_time_s
 from server.link.core.state import WAKE_BATCH, RateGrid, StateSubscription
@@ -79,6 +85,12 @@ class Published:
     @cached_property
     def body(self) -> bytes:
         return self.encode(self.state)
+
+    @cached_property
+    def steady(self) -> tuple[str | None, bytes]:
+        """What the tick tells apart from the time passing (views.encode_steady_state) and
+        who holds the lease: equal for two ticks of a vehicle where nothing else changed."""
+        return self.lease[0], encode_steady_state(self.state)
 
     @cached_property
     def message(self) -> str:

@@ -46,6 +46,26 @@ def encode_state(state: VehicleState) -> bytes:
     return _STATE_JSON.dump_json(state, exclude=_WRITTEN_AROUND)
 
 
+# What changes with every message from a vehicle without saying anything new about it: the
+# time (the newest message's clock, the ages), the link's traffic counters and its measured
+# rate. A telemetry socket that asks for states on change sends one when anything else did.
+CLOCK_FIELDS: dict[str, Any] = {
+    "updated_s": True, "last_heartbeat_age_s": True, "message_ages_s": True,
+    "link": {"frames_in": True, "frames_out": True, "bytes_in": True, "bytes_out": True,
+             "last_heartbeat_age_s": True,
+             "signing": {"signed_in": True, "unsigned_in": True}},
+    "link_quality": {"silent_s": True, "rate_hz": True, "heartbeat_age_s": True},
+    "stream": {"since_last_ms": True},
+}
+
+
+def encode_steady_state(state: VehicleState) -> bytes:
+    """The snapshot without the fields that change with the time alone (CLOCK_FIELDS): two
+    snapshots that encode alike tell the same, however much later the second was taken."""
+    exclude: dict[str, Any] = {name: True for name in _WRITTEN_AROUND} | CLOCK_FIELDS
+    return _STATE_JSON.dump_json(state, exclude=exclude)
+
+
 LeaseStatus = tuple[str | None, float | None]
 _json_string: Callable[[str], str] = json.encoder.encode_basestring_ascii
 # the REST state's key for the vehicle's type (the wire's name for the snapshot's mav_type)

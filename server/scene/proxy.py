@@ -5,6 +5,8 @@ from __future__ import annotations
 import asyncio
 import contextlib
 from collections.abc import Callable
+from functools import cache
+from pathlib import Path
 
 import websockets
 from fastapi import FastAPI, Request, WebSocket
@@ -19,6 +21,23 @@ WS_CLOSE_UNAUTHORIZED = 4401
 WS_CLOSE_FORBIDDEN_ORIGIN = 4403
 _UPSTREAM_TIMEOUT_S = 10.0
 _PASSED_HEADERS = ("content-type", "content-encoding", "cache-control")
+# The script that paces the client's frames (pace.js: why and how), put first in the
+# <head> of viser's page so it runs before viser's own scripts.
+_HEAD = b"<head>"
+
+
+@cache
+def pace_script() -> bytes:
+    return b"<script>" + Path(__file__).with_name("pace.js").read_bytes() + b"</script>"
+
+
+def with_pace_script(body: bytes) -> bytes:
+    """viser's page with pace.js first in its head (the page as it was without a head)."""
+    at = body.find(_HEAD)
+    if at < 0:
+        return body
+    at += len(_HEAD)
+    return body[:at] + pace_script() + body[at:]
 
 
 async def fetch_upstream(
@@ -109,10 +128,15 @@ class SceneProxy(LoopbackSocketProxy):
         if not self.authorised(request):
             return Response("missing or wrong token", status_code=401)
         asset = str(request.path_params.get("asset", ""))
+        # the client's page itself is asked for plain, to put the pacing script in it
+        is_page = asset in ("", "index.html")
         status, headers, body = await fetch_upstream(
-            self._upstream_port(), "/" + asset, request.headers.get("accept-encoding")
+            self._upstream_port(), "/" + asset,
+            None if is_page else request.headers.get("accept-encoding"),
         )
         passed = {k: v for k, v in headers.items() if k in _PASSED_HEADERS}
+        if is_page and status == 200 and headers.get("content-encoding", "identity") == "identity":
+            body = with_pace_script(body)
         passed["cache-control"] = "no-store"
         response = Response(body, status_code=status, headers=passed)
         token = request.query_params.get("token")

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import itertools
 import json
 import math
 import time
@@ -16,6 +17,8 @@ import pytest
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 
+from server.api.ws_telemetry import ON_CHANGE_KEEPALIVE_S
+from server.control.views import CLOCK_FIELDS
 from server.link.core.events import VehicleEvent
 from tests.api.conftest import (
     OBSERVER,
@@ -375,3 +378,44 @@ async def test_deadman_continue_policy_keeps_flying_and_says_so() -> None:
         state = await s.api.state()
         assert state["mode"] == "OFFBOARD"
         assert _speed(state) > 1.5
+
+
+def _steady(value: Any, clock: Any) -> Any:
+    """A state message without the fields views.CLOCK_FIELDS names (nor the lease's expiry)."""
+    if not isinstance(value, dict):
+        return value
+    return {key: _steady(item, clock.get(key, {})) for key, item in value.items()
+            if clock.get(key) is not True}
+
+
+async def test_telemetry_on_change_skips_only_states_that_tell_nothing_new(quad: Served) -> None:
+    clock = {**CLOCK_FIELDS, "lease": {"expires_in_s": True}}
+    window_s = 3.0
+    async with (
+        connect(quad.url("telemetry", token=OBSERVER, vehicle=1, rate_hz=10,
+                         on_change="true")) as changed,
+        connect(quad.url("telemetry", token=OBSERVER, vehicle=1, rate_hz=10)) as every,
+    ):
+        await receive_until(changed, {"type": "state"})
+        await receive_until(every, {"type": "state"})
+        until = time.monotonic() + window_s
+        sent, all_ticks = await asyncio.gather(_state_texts(changed, until),
+                                               _state_texts(every, until))
+    sent_states = [json.loads(text) for text in sent]
+    ticks = [json.loads(text) for text in all_ticks]
+    # a landed vehicle, nothing changing but the time: fewer states than ticks...
+    assert len(sent_states) <= 0.6 * len(ticks), (len(sent_states), len(ticks))
+    # ... yet one once ON_CHANGE_KEEPALIVE_S have passed since the last: no tick of the socket
+    # at the full rate came a tick or more after that between two states sent (by the server's
+    # clock, updated_s: a stalled loop delays both sockets alike) ...
+    tick_s = 0.1
+    times = [s["updated_s"] for s in sent_states]
+    for a, b in itertools.pairwise(times):
+        overdue = [t["updated_s"] for t in ticks
+                   if a + ON_CHANGE_KEEPALIVE_S + tick_s <= t["updated_s"] < b - tick_s / 2]
+        assert overdue == [], (a, b, overdue)
+    # ... and none of the ticks skipped told anything new
+    for tick in ticks:
+        before = [s for s in sent_states if s["updated_s"] <= tick["updated_s"]]
+        if before:
+            assert _steady(before[-1], clock) == _steady(tick, clock), tick["updated_s"]

@@ -16,6 +16,7 @@ from websockets.asyncio.client import connect
 from websockets.typing import Subprotocol
 
 from server.scene import SceneHub
+from server.scene.proxy import pace_script
 from skyhelm_wire.messages import SceneClickMessage
 from tests.api.state_fakes import PushingVehicle, pushing, scene_fed_by
 from tests.serving import uvicorn_serving
@@ -161,3 +162,17 @@ async def test_click_endpoint_reports_the_ground_point_with_lat_lon(served: Serv
     # what the telemetry socket sends of it is the wire's scene_click message
     message = {"type": "scene_click", **click}
     assert SceneClickMessage.model_validate(message).model_dump() == message
+
+
+async def test_the_scene_page_carries_the_pacing_script_first_and_assets_pass_as_asked(
+        served: Served) -> None:
+    async with httpx.AsyncClient(base_url=f"http://{served.base}") as client:
+        page = await client.get("/scene/", params={"token": TOKEN},
+                                headers={"Accept-Encoding": "gzip"})
+        assert page.status_code == 200
+        head = page.text.lower().split("<head>", 1)[1]
+        assert head.startswith("<script>")
+        assert head.index("skyhelmscenepace") < head.index("</script>")
+        # the only change: viser's page without the script is byte for byte viser's own
+        upstream = await client.get(f"http://127.0.0.1:{served.hub.port}/")
+        assert page.content.replace(pace_script(), b"") == upstream.content
