@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import struct
 from typing import cast
 
@@ -174,6 +175,28 @@ async def test_set_whose_echo_differs_is_an_error(scripted: ScriptedSession) -> 
 
     with pytest.raises(ParamError, match="kept 20"):
         await scripted.vehicle.set_param("MPC_XY_CRUISE", 50.0)
+
+
+async def test_an_older_value_arriving_before_the_echo_is_not_the_answer(
+    scripted: ScriptedSession,
+) -> None:
+    """A PARAM_VALUE still on its way when the set goes out (a read's answer, the list, the
+    vehicle's report of an earlier change) carries the old value: the set is not refused for
+    it, and the value the vehicle echoes is the answer."""
+    server = _px4_params(scripted.peer)
+    echo = server.handle
+
+    def stale_first(msg: mavlink.MAVLink_message) -> None:
+        if msg.get_type() == "PARAM_SET" and not scripted.peer.messages("PARAM_SET")[1:]:
+            server.send_value(msg.param_id)  # the old value, still on its way
+            asyncio.get_running_loop().call_later(0.05, echo, msg)
+            return
+        echo(msg)
+
+    scripted.peer.on_message = stale_first
+    assert await scripted.vehicle.set_param("MIS_TAKEOFF_ALT", 3.5) == 3.5
+    assert server.params["MIS_TAKEOFF_ALT"] == (3.5, MAV_PARAM_TYPE_REAL32)
+    assert scripted.vehicle.params.cache["MIS_TAKEOFF_ALT"].value == 3.5
 
 
 def test_a_value_the_vehicle_changes_unasked_is_told_once_with_its_previous() -> None:

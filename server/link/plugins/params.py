@@ -243,12 +243,19 @@ class ParamClient:
                     requests.mav.param_set_encode(*requests.target, wire_name, wire, param_type)
                 )
 
-            if not await requests.until(request, lambda: name in self.cache, self.timeout_s):
-                raise TimeoutError(f"no echo for parameter {name}")
-            echoed = self.cache[name].value
-            if not same_value(echoed, value, param_type):
-                raise ParamError(f"{name}: asked for {value!r}, vehicle kept {echoed!r}")
-            return echoed
+            def echoed_as_asked() -> bool:
+                entry = self.cache.get(name)
+                return entry is not None and same_value(entry.value, value, param_type)
+
+            # a PARAM_VALUE with another value may be an older one still on its way (a read,
+            # the list, the vehicle's own report of a change), not the echo: the set is sent
+            # again until its value comes back; only the last value heard is the vehicle's
+            if not await requests.until(request, echoed_as_asked, self.timeout_s):
+                last = self.cache.get(name)
+                if last is None:
+                    raise TimeoutError(f"no echo for parameter {name}")
+                raise ParamError(f"{name}: asked for {value!r}, vehicle kept {last.value!r}")
+            return self.cache[name].value
 
 
 def _param_name(param_id: str | bytes) -> str:
