@@ -236,22 +236,29 @@ class Link:
         if self._closed:
             self.frames_dropped_out += 1
             return
-        handed = self._handover.send(msg, target_system)
-        if handed is not None:
-            self.frames_dropped_out += not handed
-            return
         on_loop = threading.get_ident() == self._loop_thread
-        with self._send_lock:
-            frame = bytes(msg.pack(self.mav))
-            self.mav.seq = (self.mav.seq + 1) % 256
-            if self._closed or not (
-                self._transport.write(frame, target_system) if on_loop
-                else self._write_off_loop(frame, target_system)
-            ):
-                self.frames_dropped_out += 1
+        while True:
+            handed = self._handover.send(msg, target_system)
+            if handed is not None:
+                self.frames_dropped_out += not handed
                 return
-            self._frames_out += 1
-            self._bytes_out += len(frame)
+            with self._send_lock:
+                if self._handover.out is not None:
+                    # handed over to the sender process between the look and the lock: the
+                    # process numbers frames on from the sequence it was given, so a frame
+                    # written here now would repeat a number; it goes through the process
+                    continue
+                frame = bytes(msg.pack(self.mav))
+                self.mav.seq = (self.mav.seq + 1) % 256
+                if self._closed or not (
+                    self._transport.write(frame, target_system) if on_loop
+                    else self._write_off_loop(frame, target_system)
+                ):
+                    self.frames_dropped_out += 1
+                    return
+                self._frames_out += 1
+                self._bytes_out += len(frame)
+                break
         if self._record.active and msg.get_msgId() != MAVLINK_MSG_ID_SETUP_SIGNING:
             if on_loop:
                 self._record_sent(msg, frame, time.time())  # a key is never recorded

@@ -292,3 +292,32 @@ async def test_a_port_already_taken_fails_open_and_leaves_no_tlog(tmp_path: Path
         with pytest.raises(OSError, match="in use"):
             await Link.open(taken, log_dir=tmp_path)
     assert os.listdir(tmp_path) == []
+
+
+async def test_a_frame_racing_a_handover_to_the_sender_process_goes_through_it() -> None:
+    """A frame whose sender looked before the link was handed to the sender process, and
+    took the send lock after, is not written by the link with a sequence number the process
+    was given too (a repeated number reads as 255 frames lost at PX4): it goes through the
+    process."""
+    async with _udpin_link() as link:
+        handover = cast(Any, link)._handover
+        real_send = handover.send
+        through_process: list[mavlink.MAVLink_message] = []
+
+        def racing_send(msg: mavlink.MAVLink_message, target: int | None) -> bool | None:
+            if handover.out is None and not through_process:
+                handover.out = object()  # the hand-over lands between the look and the lock
+                through_process.append(msg)
+                return None  # this look still saw no process
+            if handover.out is not None:
+                through_process.append(msg)
+                return True
+            return cast(bool | None, real_send(msg, target))
+
+        handover.send = racing_send
+        seq_before, frames_before = link.mav.seq, cast(Any, link)._frames_out
+        link.send(_statustext("racing"))
+        assert link.mav.seq == seq_before, "the link numbered a frame the process numbers"
+        assert cast(Any, link)._frames_out == frames_before
+        assert len(through_process) == 2  # looked once before the hand-over, sent after it
+        handover.out = None
