@@ -309,8 +309,9 @@ async def test_deadman_holds_position_when_the_pilot_socket_closes(quad: Served)
 
 async def test_deadman_holds_when_rest_renewals_stop(quad: Served) -> None:
     api = quad.api
-    await api.take_control(ttl_s=TTL_S)
-    # every step renews the lease: control calls hold it, wait_state renews on each poll
+    # the flight up to the test under the server's lease TTL (a busy machine can space two
+    # renewals by more than a second); the short TTL under test from the last renewal on
+    await api.take_control()
     assert (await api.control("arm")).status_code == 200
     assert (await api.control("takeoff", {"altitude_m": 4.0})).status_code == 200
     await api.wait_state(lambda s: s["position_ned"]["down_m"] < -3.0, 20.0, "climb")
@@ -318,6 +319,9 @@ async def test_deadman_holds_when_rest_renewals_stop(quad: Served) -> None:
     assert (await api.control("offboard/start", {"setpoint": north})).status_code == 200
     await api.wait_state(lambda s: _speed(s) > 1.8, 10.0, "2 m/s")
     events = api.app.state.api.registry.get(1).subscribe_events()
+    renewed = await api.client.put("/api/v1/vehicles/1/control", json={"ttl_s": TTL_S},
+                                   headers=api.lease_headers)
+    assert renewed.status_code == 200, renewed.text
     async with loop_stalls() as stalls_s:
         last_renewal = time.time()
         # the server's own clock says when the deadman acted; the brake itself is physics,
