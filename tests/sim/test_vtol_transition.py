@@ -180,12 +180,18 @@ def test_pusher_ramps_at_vt_psher_slew_up_to_vt_f_trans_thr() -> None:
     assert logic.pusher_throttle == pytest.approx(0.8)
 
 
-def test_back_transition_ends_after_vt_b_trans_dur_if_still_fast() -> None:
-    params = default_params("vtol")
-    params.values["VT_B_TRANS_DUR"] = 1.5
+def _back_transition(params: StaticParams) -> VtolTransition:
+    """A VTOL in fixed-wing flight that has just been asked back to multicopter."""
     logic = VtolTransition(params)
     logic.request(to_fixed_wing=True, immediate=True, airborne=True)
     logic.request(to_fixed_wing=False, immediate=False, airborne=True)
+    return logic
+
+
+def test_back_transition_ends_after_vt_b_trans_dur_if_still_fast() -> None:
+    params = default_params("vtol")
+    params.values["VT_B_TRANS_DUR"] = 1.5
+    logic = _back_transition(params)
     elapsed = 0.0
     while logic.update(0.01, airspeed_m_s=15.0, forward_speed_m_s=15.0) != VtolState.MC:
         elapsed += 0.01
@@ -248,9 +254,7 @@ def test_back_transition_ends_on_the_first_tick_below_mpc_xy_cruise() -> None:
 
 def test_back_transition_ends_at_once_when_disarmed_or_landed() -> None:
     # PX4 can_transition_on_ground(): !armed || landed, whatever the speed and the time
-    logic = VtolTransition(default_params("vtol"))
-    logic.request(to_fixed_wing=True, immediate=True, airborne=True)
-    logic.request(to_fixed_wing=False, immediate=False, airborne=True)
+    logic = _back_transition(default_params("vtol"))
     fast = {"airspeed_m_s": 15.0, "forward_speed_m_s": 15.0}
     assert logic.update(0.01, **fast) == VtolState.TRANSITION_TO_MC
     assert logic.update(0.01, **fast, disarmed_or_landed=True) == VtolState.MC
@@ -259,9 +263,7 @@ def test_back_transition_ends_at_once_when_disarmed_or_landed() -> None:
 def test_back_transition_time_limit_is_strictly_after_vt_b_trans_dur() -> None:
     params = default_params("vtol")
     params.values["VT_B_TRANS_DUR"] = 0.5
-    logic = VtolTransition(params)
-    logic.request(to_fixed_wing=True, immediate=True, airborne=True)
-    logic.request(to_fixed_wing=False, immediate=False, airborne=True)
+    logic = _back_transition(params)
     fast = {"airspeed_m_s": 15.0, "forward_speed_m_s": 15.0}
     assert logic.update(0.5, **fast) == VtolState.TRANSITION_TO_MC
     assert logic.update(0.01, **fast) == VtolState.MC
