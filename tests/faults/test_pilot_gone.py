@@ -61,7 +61,9 @@ async def quad() -> AsyncIterator[Served]:
 async def _hover_in_offboard(s: Served) -> None:
     """A script arms, climbs, enters OFFBOARD holding, then gives control back."""
     api = s.api
-    await api.take_control()
+    # the set-up's own lease outlives a busy machine's gaps between its calls (the server's
+    # 1 s TTL is for the pilots under test)
+    await api.take_control(ttl_s=60.0)
     assert (await api.control("arm")).status_code == 200
     assert (await api.control("takeoff", {"altitude_m": 4.0})).status_code == 200
     await api.wait_state(lambda st: st["position_ned"]["down_m"] < -3.0, 20.0, "climb")
