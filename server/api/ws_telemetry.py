@@ -56,7 +56,8 @@ async def telemetry(
     `{type: "vehicles"}` (the vehicle list: at once, then on every change) and
     `{type: "scene_click"}` (where a click in the 3D scene met the ground). With
     `on_change`, a tick's state is sent only when it tells something the last one sent did
-    not (Published.steady) or ON_CHANGE_KEEPALIVE_S have passed since."""
+    not (Published.steady) or ON_CHANGE_KEEPALIVE_S have passed since (by the server's
+    clock or the state's own updated_s)."""
     context = await admit(websocket, SOCKET["telemetry"])
     if context is None:
         return
@@ -143,13 +144,17 @@ async def _pump_states(publisher: StatePublisher, sender: Sender, rate_hz: float
     slot = publisher.subscribe(rate_hz)
     sent: tuple[str | None, bytes] | None = None
     sent_s = -math.inf
+    sent_updated_s = -math.inf
     try:
         async for published in slot:
             if on_change:
-                now_s = loop_time_s()
-                if published.steady == sent and now_s - sent_s < ON_CHANGE_KEEPALIVE_S:
+                # the keepalive by the server's clock (a stalled link still says it is) and
+                # by the state's own (a link that caught up after a stall is shown as soon)
+                now_s, updated_s = loop_time_s(), published.state.updated_s
+                if (published.steady == sent and now_s - sent_s < ON_CHANGE_KEEPALIVE_S
+                        and updated_s - sent_updated_s < ON_CHANGE_KEEPALIVE_S):
                     continue
-                sent, sent_s = published.steady, now_s
+                sent, sent_s, sent_updated_s = published.steady, now_s, updated_s
             await sender.send_text(published.message)
     finally:
         publisher.unsubscribe(slot)
