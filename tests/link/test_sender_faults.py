@@ -11,6 +11,7 @@ import contextlib
 import itertools
 import mmap
 import os
+import re
 import resource
 import secrets
 import signal
@@ -200,6 +201,11 @@ async def test_a_stopped_sender_is_killed_and_the_thread_takes_over(
     receiver.close()
     assert stats.sender_fault is not None
     assert "stopped answering" in stats.sender_fault
+    # a stopped process neither ran nor waited for a CPU: the fault says it was not starved
+    ran = re.search(r"it ran (\d+) ms and waited (\d+) ms for a CPU", stats.sender_fault)
+    assert ran is not None, stats.sender_fault
+    assert int(ran[1]) <= 5, stats.sender_fault
+    assert int(ran[2]) <= 5, stats.sender_fault
     assert supervisor.faults == 1
     _check_wire(flight, STOP_GAP_S)
     xs = [m.x for _, m in flight.decoded() if m.get_msgId() == SETPOINT_ID]

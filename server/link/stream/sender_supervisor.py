@@ -236,6 +236,7 @@ class SenderSupervisor:
             self._watchdog.start()
 
     def _watch(self) -> None:
+        answering: tuple[int | None, tuple[float, float] | None] = (None, None)
         while True:
             time.sleep(WATCH_PERIOD_S)
             process = self.current()
@@ -243,14 +244,18 @@ class SenderSupervisor:
                 continue
             age_s = process.heartbeat_age_s()
             if age_s is None or age_s < STUCK_AFTER_S:
+                # what the process had run and waited for a CPU when last seen answering
+                answering = (process.pid, cpu_times_s(process.pid))
                 continue
             if not any(member.streams_in(process) for member in list(self._members)):
                 continue  # idle: nothing waits on it (it reports once a stream starts)
             state = run_state(process.pid)
             if state == "R" and age_s < STARVED_AFTER_S:
                 continue
+            since = answering[1] if answering[0] == process.pid else None
             process.kill(f"stopped answering: no heartbeat for {age_s * 1000:.0f} ms "
-                         f"(process state {state or '?'})")
+                         f"(process state {state or '?'}"
+                         f"{cpu_since(since, cpu_times_s(process.pid))})")
 
 
 def run_state(pid: int | None) -> str | None:
@@ -262,3 +267,24 @@ def run_state(pid: int | None) -> str | None:
     except OSError:
         return None
     return stat.rsplit(")", 1)[1].split()[0]
+
+
+def cpu_times_s(pid: int | None) -> tuple[float, float] | None:
+    """(time run on a CPU, time waited on a run queue) of the process, from
+    /proc/PID/schedstat; None where the kernel does not keep them."""
+    if pid is None:
+        return None
+    try:
+        ran_ns, waited_ns = Path(f"/proc/{pid}/schedstat").read_text().split()[:2]
+    except (OSError, ValueError):
+        return None
+    return int(ran_ns) / 1e9, int(waited_ns) / 1e9
+
+
+def cpu_since(before: tuple[float, float] | None, now: tuple[float, float] | None) -> str:
+    """What the process did since it last answered: ran (a loop that never comes round)
+    or waited for a CPU (a machine that does not run it)."""
+    if before is None or now is None:
+        return ""
+    return (f"; since it last answered it ran {(now[0] - before[0]) * 1000:.0f} ms and "
+            f"waited {(now[1] - before[1]) * 1000:.0f} ms for a CPU")
