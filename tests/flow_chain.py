@@ -119,6 +119,7 @@ class Chain:
     workdir: Path
     vehicle: int = 1
     flows: int = 0
+    server_log: Path | None = None  # its tail goes with a failed flow's output
 
     @property
     def url(self) -> str:
@@ -231,7 +232,7 @@ class Chain:
         process = self._start_example(name)
         output, _ = process.communicate(timeout=FLIGHT_TIMEOUT_S)
         self._log(name, output)
-        assert process.returncode == 0, output[-3000:]
+        assert process.returncode == 0, output[-3000:] + self._server_side()
         assert output.count("at north") == 4, output[-3000:]
         assert "landed" in output
         self.after_a_flight()
@@ -317,6 +318,15 @@ class Chain:
             command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
             cwd=self.workdir, env={**os.environ, "PYTHONUNBUFFERED": "1"},
         )  # fmt: skip
+
+    def _server_side(self) -> str:
+        """What the server saw of a failed flow: its stream's figures and its log's tail."""
+        try:
+            stream = json.dumps(self.state().get("stream"))
+        except httpx.HTTPError as exc:
+            stream = f"(no state: {exc})"
+        log = self.server_log.read_text()[-4000:] if self.server_log is not None else ""
+        return f"\n--- the stream now: {stream}\n--- the server's log:\n{log}"
 
     def _log(self, name: str, output: str) -> None:
         (self.workdir / f"{self.flows:02d}-{name}.log").write_text(output)

@@ -13,14 +13,33 @@ from pathlib import Path
 
 import pytest
 
+from skyhelm_client import SkyHelm
+from tests.client.conftest import SIM_SPEED, pilot_url
 from tests.flow_chain import API_DOC, README, Chain
 from tests.serve_process import Served
 
 pytestmark = pytest.mark.skipif(shutil.which("curl") is None, reason="needs curl")
 
 
+def keep_real_times_proof_of_life(served: Served) -> None:
+    """PX4's offboard proof of life (COM_OF_LOSS_T, 1 s) in the sim's time is 1/8 s of wall
+    time at 8x: a machine that does not run the setpoint sender for that long (a process
+    starved, or killed as stuck and taken over by the server's thread) would end OFFBOARD,
+    where at real speed the stream holds with seven eighths to spare. The chain keeps real
+    time's margin, 1 s of wall time; a stream that stops is failed by tests/faults and
+    tests/link at their own clocks, and the chain at real speed is `make test-chain`."""
+    with SkyHelm(pilot_url(served)) as sky:
+        sky.wait_until(lambda s: s["global"] is not None, timeout_s=60, what="the vehicle")
+        sky.acquire(client_name="chain set-up")
+        try:
+            sky.set_param("COM_OF_LOSS_T", float(SIM_SPEED))
+        finally:
+            sky.release()
+
+
 def test_the_documented_flows_fly_one_after_another(served: Served, tmp_path: Path) -> None:
-    chain = Chain(served.base_url, served.pilot_token, tmp_path)
+    keep_real_times_proof_of_life(served)
+    chain = Chain(served.base_url, served.pilot_token, tmp_path, server_log=served.stderr_path)
 
     chain.flight_ending_away()  # position_ned then reads 10.5 m north before the session
     chain.curl_session(README)  # which flies its leg from there

@@ -24,6 +24,7 @@ pytestmark = [
 def test_px4_every_documented_flow_runs_again_and_again(
     px4: Px4Sitl, served_px4: Served, tmp_path: Path
 ) -> None:
-    chain = Chain(served_px4.base_url, served_px4.pilot_token, tmp_path, vehicle=px4.sysid)
+    chain = Chain(served_px4.base_url, served_px4.pilot_token, tmp_path, vehicle=px4.sysid,
+                  server_log=served_px4.stderr_path)
     with chromium_context() as context:
         full_chain(chain, context)
