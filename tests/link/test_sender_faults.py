@@ -347,3 +347,33 @@ def test_a_start_slower_than_its_timeout_leaves_no_process_and_no_closed_descrip
     assert errors == [], "the descriptors passed were closed before the fork"
     assert len(started) == 1
     assert started[0].wait(5.0) == -signal.SIGKILL  # killed: nobody owns it
+
+
+class _ReadThenWait:
+    """The heartbeat's layout, whose reader is kept waiting after it read (a thread of a
+    busy server that loses its turn between two lines)."""
+
+    def __init__(self, wait_s: float) -> None:
+        self.wait_s = wait_s
+        self.layout = stream_process.STATE_HEARTBEAT
+
+    def unpack_from(self, page: Any, offset: int) -> tuple[float]:
+        beat = cast(tuple[float], self.layout.unpack_from(page, offset))
+        time.sleep(self.wait_s)
+        return beat
+
+
+def test_a_reader_kept_waiting_does_not_age_the_heartbeat(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    process = stream_channel.SenderProcess()
+    try:
+        assert process.wait_ready(5.0)
+        monkeypatch.setattr(stream_channel.stream_process, "STATE_HEARTBEAT",
+                            _ReadThenWait(0.3), raising=True)
+        age_s = process.heartbeat_age_s()
+        monkeypatch.undo()
+        assert age_s is not None
+        assert age_s < 0.15  # the process went round every report period meanwhile
+    finally:
+        process.kill("the test ends")

@@ -127,6 +127,26 @@ def test_a_stuck_process_is_killed_only_while_it_carries_a_stream() -> None:
     wait_for_blocking("the members told", lambda: member.lost == [process], 2.0, 0.005)
 
 
+def test_a_silence_the_watchdog_only_thought_it_saw_kills_nothing() -> None:
+    """A watchdog kept waiting after it read the heartbeat (a busy server) sees an age the
+    process never had; it looks again before it kills, and the process went round."""
+    sup, _ = _supervisor()
+    member = Member()
+    sup.watch(member)
+    process = sup.process()
+    assert isinstance(process, FakeProcess)
+    member.streaming_in = process
+    readings: list[float] = []
+
+    def age_once_stale() -> float | None:
+        readings.append(time.monotonic())
+        return 10.0 if len(readings) == 1 else 0.0
+
+    process.heartbeat_age_s = age_once_stale  # type: ignore[method-assign]
+    wait_for_blocking("the watchdog's second look", lambda: len(readings) >= 3, 2.0, 0.005)
+    assert process.killed is None
+
+
 def test_a_restart_waits_until_the_new_process_runs(monkeypatch: pytest.MonkeyPatch) -> None:
     sup, started = _supervisor()
     member = Member()

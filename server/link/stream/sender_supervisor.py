@@ -252,6 +252,8 @@ class SenderSupervisor:
             state = run_state(process.pid)
             if state == "R" and age_s < STARVED_AFTER_S:
                 continue
+            if (process.heartbeat_age_s() or 0.0) < STUCK_AFTER_S:
+                continue  # it went round meanwhile: this thread was the one kept waiting
             since = answering[1] if answering[0] == process.pid else None
             process.kill(f"stopped answering: no heartbeat for {age_s * 1000:.0f} ms "
                          f"(process state {state or '?'}"

@@ -253,9 +253,12 @@ class SenderProcess:
         """Seconds since the process last went round its loop (None once it ended)."""
         if not self.alive:
             return None
+        # the time first, then the beat: a thread of a busy server can wait long for its
+        # turn between two lines, and a beat read before that wait is not this one's age
+        now_s = time.monotonic()
         (beat_s,) = stream_process.STATE_HEARTBEAT.unpack_from(self._state, 0)
         # never older than the process itself: a beat not yet written is no silence
-        return max(0.0, time.monotonic() - max(float(beat_s), self.started_s))
+        return max(0.0, now_s - max(float(beat_s), self.started_s))
 
     def kill(self, why: str) -> None:
         """End it for a fault (its end of file then reports ``why``)."""
