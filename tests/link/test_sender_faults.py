@@ -32,7 +32,7 @@ from server.link.stream import stream_channel, stream_process
 from server.link.stream.sender_supervisor import ProcessGone, SenderSupervisor
 from server.link.stream.streamer import SetpointStreamer
 from tests.link.test_stream_process import Receiver
-from tests.waiting import wait_for
+from tests.waiting import wait_for, wait_for_blocking
 
 MAV = mavlink.MAVLink(None)
 RATE_HZ = 20.0
@@ -238,6 +238,56 @@ def test_a_full_control_channel_is_a_fault_not_a_blocked_caller(
         time.sleep(0.01)
     assert supervisor.last_fault is not None
     assert "control channel is full" in supervisor.last_fault  # killed for it, and said so
+
+
+def test_a_writer_thread_kept_waiting_does_not_fill_the_outbox(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The server's writer thread may wait long for its turn on a busy machine: the callers
+    write what waits themselves, so the outbox holds only what the process has not read."""
+    monkeypatch.setattr(stream_channel.SenderProcess, "_write_outbox", lambda self: None)
+    process = stream_channel.SenderProcess()
+    try:
+        assert process.wait_ready(5.0)
+        assert process.pid is not None
+        os.kill(process.pid, signal.SIGSTOP)  # a moment without reading: some wait...
+        for _ in range(10_000):
+            process.post(("send", 1, b"x" * 200, 0, None))  # no such link: read, ignored
+            if process._outbox:
+                break
+        os.kill(process.pid, signal.SIGCONT)  # ... and it reads again
+        for i in range(3 * stream_channel.MAX_OUTBOX):
+            process.post(("send", 1, b"x" * 200, 0, None))
+            if i % 8 == 0:
+                time.sleep(0.001)  # the process reads at its pace
+        assert process.alive
+        assert process.fault is None
+    finally:
+        process.kill("the test ends")
+
+
+def test_frames_left_in_the_outbox_of_a_lost_process_are_counted_dropped() -> None:
+    process = stream_channel.SenderProcess()
+    dropped: list[int] = []
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        assert process.wait_ready(5.0)
+        process.attach(7, sock, 0, None, lambda records, n, _ts: dropped.append(n))
+        assert process.pid is not None
+        os.kill(process.pid, signal.SIGSTOP)
+        for _ in range(10_000):  # until the control socket holds no more: some wait
+            process.post(("send", 7, b"x" * 200, 0, [("127.0.0.1", 9)]))
+            if len(process._outbox) >= 5:
+                break
+        waiting = len(process._outbox)
+        assert waiting > 0
+        process.kill("the test stops it")
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(process.pid, signal.SIGCONT)
+        wait_for_blocking("the loss", lambda: sum(dropped) >= waiting, 5.0, 0.01)
+        assert sum(dropped) == waiting
+    finally:
+        sock.close()
 
 
 async def test_streams_work_above_descriptor_1023(

@@ -28,7 +28,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections import deque
+from collections import Counter, deque
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Protocol
@@ -158,15 +158,19 @@ class SenderProcess:
         with self._post_lock:
             if not self.alive:
                 raise ProcessGone("the setpoint sender process has ended")
-            if not self._outbox:
-                try:
+            try:
+                # what waits goes first, as far as the socket takes it now: the outbox grows
+                # only while the process does not read, not while the writer thread waits
+                # for its turn on a busy server
+                self._flush_locked()
+                if not self._outbox:
                     self._send_now(message, fds)
                     return
-                except BlockingIOError:
-                    pass
-                except OSError as exc:
-                    self.alive = False
-                    raise ProcessGone(f"the setpoint sender process has ended ({exc})") from exc
+            except BlockingIOError:
+                pass
+            except OSError as exc:
+                self.alive = False
+                raise ProcessGone(f"the setpoint sender process has ended ({exc})") from exc
             if key is not None:
                 for entry in self._outbox:
                     if entry[0] == key:
@@ -200,14 +204,19 @@ class SenderProcess:
             poller.poll(50)
             with self._post_lock:
                 try:
-                    while self._outbox and self.alive:
-                        _, message, fds = self._outbox[0]
-                        self._send_now(message, fds)
-                        self._outbox.popleft()
+                    self._flush_locked()
                 except BlockingIOError:
                     continue
                 except OSError:
                     return  # the reader sees the end of file
+
+    def _flush_locked(self) -> None:
+        """Write the queued messages in order until the socket takes no more
+        (BlockingIOError); the caller holds the post lock."""
+        while self._outbox and self.alive:
+            _, message, fds = self._outbox[0]
+            self._send_now(message, fds)
+            self._outbox.popleft()
 
     def attach(self, key: int, sock: socket.socket, seq: int, signing: Signing,
                reports: LinkReports) -> int:
@@ -332,8 +341,14 @@ class SenderProcess:
             return
         with self._post_lock:
             self.alive = False
+            unwritten = Counter(message[1] for _, message, _ in self._outbox
+                                if message[0] == "send")
             self._outbox.clear()
             self._wake.notify_all()
+        for key, frames in unwritten.items():  # never written: dropped, and counted
+            reports = self._links.get(key)
+            if reports is not None:
+                reports([], frames, 0)
         for done in list(self._unlinked.values()):
             done.set()
         if self._on_gone is not None:
