@@ -5,7 +5,8 @@ dark: every visible control and panel lies inside the window or inside the colum
 scrolls it, nothing is clipped by a box that hides its overflow, no two controls overlap, no
 button's label is cut, the top bar keeps one row, the alert area never covers the views, the
 primary flight controls are in sight at 1280x800 without scrolling, and the command buttons
-stay where they are whatever the state. The standard flight is flown from the page at
+stay where they are whatever the state. The link's widest loss figures are read whole at
+every size, on the quad and the VTOL. The standard flight is flown from the page at
 1280x800 without anything scrolling. Also: the shortcut list opens with '?'; the theme
 follows the system and the pilot's choice is kept for the next visit."""
 
@@ -49,6 +50,27 @@ document.addEventListener("scroll", (e) => {
   if (t.id !== "log") window.__scrolls.push(String(what));
 }, true);
 """
+# The link's loss figures as the test sets them (window.__linkLoss, [in, out] in %, null for
+# not known) in every state the page's telemetry socket brings: the page draws them itself.
+LINK_LOSS = """
+window.__linkLoss = null;
+const PageSocket = window.WebSocket;
+window.WebSocket = class extends PageSocket {
+  set onmessage(handler) {
+    super.onmessage = (event) => {
+      const message = JSON.parse(event.data);
+      if (window.__linkLoss && message.type === "state" && message.link_quality) {
+        [message.link_quality.loss_in_pct, message.link_quality.loss_out_pct] = window.__linkLoss;
+        event = new MessageEvent("message", { data: JSON.stringify(message) });
+      }
+      handler(event);
+    };
+  }
+  get onmessage() { return super.onmessage; }
+};
+"""
+# The widest figures the page can write (three digits each way), and the unknown ones.
+WORST_LINK_LOSS = {(100.0, 100.0): "↓100% ↑100%", (None, None): "↓? ↑?"}
 
 
 @pytest.fixture(scope="module")
@@ -124,6 +146,33 @@ def test_a_vtol_in_fixed_wing_flight_keeps_the_layout(chromium: Any, vtol_serve:
     walk = walk_vtol(chromium, vtol_serve, Walk)
     assert not walk.problems, "\n".join(walk.problems)
     assert not walk.moved(), "\n".join(walk.moved())
+
+
+@pytest.mark.parametrize("cockpit", ["quad", "vtol"])
+def test_the_link_slot_shows_the_widest_loss_whole_at_every_size(
+    chromium: Any, request: pytest.FixtureRequest, cockpit: str
+) -> None:
+    server: Serve = request.getfixturevalue("serve" if cockpit == "quad" else "vtol_serve")
+    page = open_dashboard(new_context(chromium), server.url, scene=False, init_script=LINK_LOSS)
+    walk = Walk(page, [])
+    try:
+        page.wait_for_selector(".map-vehicle", timeout=30_000)
+        if cockpit == "vtol":
+            page.wait_for_selector("#vtol-panel:not(.hidden)", timeout=30_000)
+        for (loss_in, loss_out), text in WORST_LINK_LOSS.items():
+            page.evaluate("(loss) => { window.__linkLoss = loss; }", [loss_in, loss_out])
+            page.wait_for_function(
+                "(text) => document.getElementById('link-loss').textContent === text",
+                arg=text, timeout=10_000,
+            )
+            walk.probe(f"link loss {text}", record=False)
+            # the tooltip says them too
+            title = page.get_attribute("#link-slot", "title") or ""
+            shown = [f"{v:.0f}%" if v is not None else "?" for v in (loss_in, loss_out)]
+            assert f"frames lost from it {shown[0]} and to it {shown[1]}" in title, title
+        assert not walk.problems, "\n".join(walk.problems)
+    finally:
+        page.context.close()
 
 
 @pytest.mark.parametrize("size", [(1024, 768), (1280, 800), (1920, 1080)], ids=str)
