@@ -116,7 +116,12 @@ export function render(state) {
   setText("landed", (state.landed_state || "–").replace("_", " "), landedCls);
   const vtol = Boolean(state.vtol_state && state.vtol_state !== "UNDEFINED");
   toggle($("vtol-state"), "hidden", !vtol);
-  if (vtol) setText("vtol-state", state.vtol_state.replaceAll("_", " "), state.vtol_state.startsWith("TRANSITION") ? "warn" : "info");
+  if (vtol) {
+    // a transition as the VTOL panel says it ("→ FW"), so the badge holds it whole
+    const transition = /^TRANSITION_TO_(\w+)$/.exec(state.vtol_state);
+    setText("vtol-state", transition ? `→ ${transition[1]}` : state.vtol_state.replaceAll("_", " "), transition ? "warn" : "info");
+    setAttr($("vtol-state"), "title", transition ? `in transition to ${transition[1] === "FW" ? "fixed-wing" : "multicopter"} flight` : "");
+  }
 
   renderSigning(state);
   renderTelemetry(state);
