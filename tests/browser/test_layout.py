@@ -76,8 +76,9 @@ WORST_LINK_LOSS = {(100.0, 100.0): "↓100% ↑100%", (None, None): "↓? ↑?"}
 # The widest text the page writes in each slot of the top bar, in every state and vehicle list
 # the page's telemetry socket brings (the page draws them itself): a link lost for 59 min
 # with 100 % lost each way, the longest mode name of modes.js flown and wanted, ON GROUND,
-# Ready to fly, three-digit vehicle ids; and, once window.__offline is set, the socket
-# refused, so the page says it is reconnecting (its sockets are in window.__telemetry).
+# Ready to fly, three-digit vehicle ids, a VTOL's transition; and, once window.__offline is
+# set, the socket refused, so the page says it is reconnecting (its sockets are in
+# window.__telemetry).
 WORST_TEXTS = """
 window.__offline = false;
 window.__telemetry = [];
@@ -96,6 +97,10 @@ window.WebSocket = class extends PageSocket {
           connected: false, armed: false, mode: "FOLLOW_TARGET", user_mode: "FOLLOW_TARGET",
           landed_state: "ON_GROUND",
         });
+        // a VTOL in its longest state, a transition
+        if (message.vtol_state && message.vtol_state !== "UNDEFINED") {
+          message.vtol_state = "TRANSITION_TO_FW";
+        }
         const ages = message.message_ages_s || {};
         for (const kind of Object.keys(ages)) ages[kind] = 3540;
         Object.assign(message.link_quality || {}, { loss_in_pct: 100, loss_out_pct: 100 });
@@ -112,12 +117,13 @@ window.WebSocket = class extends PageSocket {
   get onmessage() { return super.onmessage; }
 };
 """
-WORST_DRAWN = """() => {
+WORST_DRAWN = """(cockpit) => {
   const text = (id) => document.getElementById(id).textContent;
   return text("link-health") === "LOST · 59 min" && text("link-loss") === "↓100% ↑100%"
     && text("mode") === "FOLLOW_TARGET" && text("user-mode") === "FOLLOW_TARGET"
     && text("landed") === "ON GROUND" && text("ready-to-fly") === "Ready to fly"
-    && document.querySelector("#vehicle-select option[value='255']") !== null;
+    && document.querySelector("#vehicle-select option[value='255']") !== null
+    && (cockpit !== "vtol" || text("vtol-state") === "→ FW");
 }"""
 # Every width from 1024 to 1920 px: every 32 px, and each side of the top bar's breakpoints.
 BAR_WIDTHS = sorted({*range(1024, 1921, 32), 1180, 1181, 1440, 1441, 1920})
@@ -238,11 +244,12 @@ def test_the_top_bar_holds_its_widest_texts_at_every_width(
         if cockpit == "vtol":
             page.wait_for_selector("#vtol-panel:not(.hidden)", timeout=30_000)
         try:
-            page.wait_for_function(WORST_DRAWN, timeout=30_000)
+            page.wait_for_function(WORST_DRAWN, arg=cockpit, timeout=30_000)
         except Exception as e:
             shown = page.evaluate(
                 "['link-health', 'link-loss', 'mode', 'user-mode', 'landed', 'ready-to-fly',"
-                " 'vehicle-select'].map((id) => document.getElementById(id).textContent)"
+                " 'vehicle-select', 'vtol-state']"
+                ".map((id) => document.getElementById(id).textContent)"
             )
             raise AssertionError(f"the widest texts were not drawn: {shown}") from e
         # the widest name in the vehicle menu shown (as the pilot would see it picked)
