@@ -406,7 +406,8 @@ export class Instruments {
     const isVtol = /VTOL/.test(state.vehicle_type || "") || (vs && vs !== "UNDEFINED");
     if (this.vtol.box.classList.contains("hidden") === isVtol) this.vtol.box.classList.toggle("hidden", !isVtol);
     if (!isVtol) return;
-    const names = { MC: "Multicopter", FW: "Fixed wing", TRANSITION_TO_FW: "→ Fixed wing", TRANSITION_TO_MC: "→ Multicopter" };
+    // in transition the tile says where to, as the VTOL panel does ("→ FW"), so it holds it whole
+    const names = { MC: "Multicopter", FW: "Fixed wing", TRANSITION_TO_FW: "→ FW", TRANSITION_TO_MC: "→ MC" };
     put(this.vtol.big, names[vs] || UNKNOWN);
     put(this.vtol.sub, vs?.startsWith("TRANSITION") ? "transition" : words(state.landed_state || ""));
     level(this.vtol.box, vs?.startsWith("TRANSITION") ? "warn" : "good");

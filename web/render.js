@@ -25,6 +25,14 @@ freshness.onRefresh(renderLink);
 // verdict says it is lost (red).
 const LINK_LATE_S = 1.0;
 
+/** A lost link's age as the LINK box says it: to the second for a minute, then in whole
+ * minutes ("LOST · 59 min"), then in whole hours: a pilot needs minutes by then, and the box
+ * keeps its width (the tooltip says the age whole). */
+export function lostAge(seconds) {
+  if (typeof seconds !== "number" || !Number.isFinite(seconds) || seconds < 60) return age(seconds);
+  return seconds < 3600 ? `${Math.floor(seconds / 60)} min` : `${Math.floor(seconds / 3600)} h`;
+}
+
 /** The LINK box: the server's link to the vehicle, apart from this page's link to the server
  * (SERVER). Its age keeps growing between states, so a silent server shows too: then what
  * the link does is not known (grey). */
@@ -37,13 +45,14 @@ function renderLink() {
   setText("link-loss", quality ? `↓${pct(quality.loss_in_pct)} ↑${pct(quality.loss_out_pct)}` : "");
   const late = silentS !== null && silentS > LINK_LATE_S;
   // on time it says so; the age to the tenth once late (a live link's age flickers below 1 s)
-  let text = silentS !== null && !late ? `< ${num(LINK_LATE_S, 0)} s` : age(silentS);
+  const ageText = silentS !== null && !late ? `< ${num(LINK_LATE_S, 0)} s` : age(silentS);
+  let text = ageText;
   let cls = late || quality?.degraded ? "warn" : "ok";
   if (state.connected === false) {
-    text = `LOST · ${age(silentS)}`;
+    text = `LOST · ${lostAge(silentS)}`;
     cls = "bad";
   } else if (!page.connected) {
-    text = `? · ${age(silentS)}`;
+    text = `? · ${lostAge(silentS)}`;
     cls = "";
   }
   setText("link-health", text, cls);
@@ -51,7 +60,7 @@ function renderLink() {
   // the ages in the tooltip as in the box: under a second is on time
   const heartbeatS = state.last_heartbeat_age_s;
   const heartbeat = Number.isFinite(heartbeatS) && heartbeatS <= LINK_LATE_S ? `< ${num(LINK_LATE_S, 0)} s` : age(heartbeatS);
-  setAttr($("link-slot"), "title", `the server's link to vehicle ${state.vehicle ?? ""}: its freshest message ${text.replace(/^LOST · |^\? · /, "")} old`
+  setAttr($("link-slot"), "title", `the server's link to vehicle ${state.vehicle ?? ""}: its freshest message ${ageText} old`
     + ` (heartbeat ${heartbeat}), frames lost from it ${pct(quality?.loss_in_pct)}`
     + ` and to it ${pct(quality?.loss_out_pct)}${warnings}`
     + (page.connected ? "" : "; this page has lost the server, so the link's state is not known"));
@@ -107,7 +116,12 @@ export function render(state) {
   setText("landed", (state.landed_state || "–").replace("_", " "), landedCls);
   const vtol = Boolean(state.vtol_state && state.vtol_state !== "UNDEFINED");
   toggle($("vtol-state"), "hidden", !vtol);
-  if (vtol) setText("vtol-state", state.vtol_state.replaceAll("_", " "), state.vtol_state.startsWith("TRANSITION") ? "warn" : "info");
+  if (vtol) {
+    // a transition as the VTOL panel says it ("→ FW"), so the badge holds it whole
+    const transition = /^TRANSITION_TO_(\w+)$/.exec(state.vtol_state);
+    setText("vtol-state", transition ? `→ ${transition[1]}` : state.vtol_state.replaceAll("_", " "), transition ? "warn" : "info");
+    setAttr($("vtol-state"), "title", transition ? `in transition to ${transition[1] === "FW" ? "fixed-wing" : "multicopter"} flight` : "");
+  }
 
   renderSigning(state);
   renderTelemetry(state);

@@ -91,8 +91,10 @@ class Walk:
         self.problems: list[str] = []
         self.boxes: dict[str, dict[str, dict[str, list[int] | None]]] = {}
 
-    def probe(self, state: str, *, record: bool = True) -> None:
-        for width, height in SIZES:
+    def probe(
+        self, state: str, *, record: bool = True, sizes: list[tuple[int, int]] = SIZES
+    ) -> None:
+        for width, height in sizes:
             self.page.set_viewport_size({"width": width, "height": height})
             for scheme in THEMES:
                 self.page.emulate_media(color_scheme=scheme)

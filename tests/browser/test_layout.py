@@ -5,7 +5,10 @@ dark: every visible control and panel lies inside the window or inside the colum
 scrolls it, nothing is clipped by a box that hides its overflow, no two controls overlap, no
 button's label is cut, the top bar keeps one row, the alert area never covers the views, the
 primary flight controls are in sight at 1280x800 without scrolling, and the command buttons
-stay where they are whatever the state. The standard flight is flown from the page at
+stay where they are whatever the state. The link's widest loss figures are read whole at
+every size, on the quad and the VTOL; the top bar holds the widest text of each of its slots
+(drawn by the page from its own state messages) at every width from 1024 to 1920 px, with
+the server there and lost. The standard flight is flown from the page at
 1280x800 without anything scrolling. Also: the shortcut list opens with '?'; the theme
 follows the system and the pilot's choice is kept for the next visit."""
 
@@ -49,6 +52,81 @@ document.addEventListener("scroll", (e) => {
   if (t.id !== "log") window.__scrolls.push(String(what));
 }, true);
 """
+# The link's loss figures as the test sets them (window.__linkLoss, [in, out] in %, null for
+# not known) in every state the page's telemetry socket brings: the page draws them itself.
+LINK_LOSS = """
+window.__linkLoss = null;
+const PageSocket = window.WebSocket;
+window.WebSocket = class extends PageSocket {
+  set onmessage(handler) {
+    super.onmessage = (event) => {
+      const message = JSON.parse(event.data);
+      if (window.__linkLoss && message.type === "state" && message.link_quality) {
+        [message.link_quality.loss_in_pct, message.link_quality.loss_out_pct] = window.__linkLoss;
+        event = new MessageEvent("message", { data: JSON.stringify(message) });
+      }
+      handler(event);
+    };
+  }
+  get onmessage() { return super.onmessage; }
+};
+"""
+# The widest figures the page can write (three digits each way), and the unknown ones.
+WORST_LINK_LOSS = {(100.0, 100.0): "↓100% ↑100%", (None, None): "↓? ↑?"}
+# The widest text the page writes in each slot of the top bar, in every state and vehicle list
+# the page's telemetry socket brings (the page draws them itself): a link lost for 59 min
+# with 100 % lost each way, the longest mode name of modes.js flown and wanted, ON GROUND,
+# Ready to fly, three-digit vehicle ids, a VTOL's transition; and, once window.__offline is
+# set, the socket refused, so the page says it is reconnecting (its sockets are in
+# window.__telemetry).
+WORST_TEXTS = """
+window.__offline = false;
+window.__telemetry = [];
+const PageSocket = window.WebSocket;
+window.WebSocket = class extends PageSocket {
+  constructor(url, ...rest) {
+    const telemetry = String(url).includes("telemetry");
+    super(telemetry && window.__offline ? "ws://127.0.0.1:9/" : url, ...rest);
+    if (telemetry) window.__telemetry.push(this);
+  }
+  set onmessage(handler) {
+    super.onmessage = (event) => {
+      const message = JSON.parse(event.data);
+      if (message.type === "state") {
+        Object.assign(message, {
+          connected: false, armed: false, mode: "FOLLOW_TARGET", user_mode: "FOLLOW_TARGET",
+          landed_state: "ON_GROUND",
+        });
+        // a VTOL in its longest state, a transition
+        if (message.vtol_state && message.vtol_state !== "UNDEFINED") {
+          message.vtol_state = "TRANSITION_TO_FW";
+        }
+        const ages = message.message_ages_s || {};
+        for (const kind of Object.keys(ages)) ages[kind] = 3540;
+        Object.assign(message.link_quality || {}, { loss_in_pct: 100, loss_out_pct: 100 });
+        Object.assign(message.arming_checks || {}, { verdict: "ready", ready: true });
+      } else if (message.type === "vehicles" && message.vehicles.length) {
+        const first = message.vehicles[0];
+        message.vehicles.push(
+          { ...first, id: 254, type: "VTOL_TILTROTOR" }, { ...first, id: 255, type: "FIXED_WING" },
+        );
+      }
+      handler(new MessageEvent("message", { data: JSON.stringify(message) }));
+    };
+  }
+  get onmessage() { return super.onmessage; }
+};
+"""
+WORST_DRAWN = """(cockpit) => {
+  const text = (id) => document.getElementById(id).textContent;
+  return text("link-health") === "LOST · 59 min" && text("link-loss") === "↓100% ↑100%"
+    && text("mode") === "FOLLOW_TARGET" && text("user-mode") === "FOLLOW_TARGET"
+    && text("landed") === "ON GROUND" && text("ready-to-fly") === "Ready to fly"
+    && document.querySelector("#vehicle-select option[value='255']") !== null
+    && (cockpit !== "vtol" || text("vtol-state") === "→ FW");
+}"""
+# Every width from 1024 to 1920 px: every 32 px, and each side of the top bar's breakpoints.
+BAR_WIDTHS = sorted({*range(1024, 1921, 32), 1180, 1181, 1440, 1441, 1920})
 
 
 @pytest.fixture(scope="module")
@@ -124,6 +202,71 @@ def test_a_vtol_in_fixed_wing_flight_keeps_the_layout(chromium: Any, vtol_serve:
     walk = walk_vtol(chromium, vtol_serve, Walk)
     assert not walk.problems, "\n".join(walk.problems)
     assert not walk.moved(), "\n".join(walk.moved())
+
+
+@pytest.mark.parametrize("cockpit", ["quad", "vtol"])
+def test_the_link_slot_shows_the_widest_loss_whole_at_every_size(
+    chromium: Any, request: pytest.FixtureRequest, cockpit: str
+) -> None:
+    server: Serve = request.getfixturevalue("serve" if cockpit == "quad" else "vtol_serve")
+    page = open_dashboard(new_context(chromium), server.url, scene=False, init_script=LINK_LOSS)
+    walk = Walk(page, [])
+    try:
+        page.wait_for_selector(".map-vehicle", timeout=30_000)
+        if cockpit == "vtol":
+            page.wait_for_selector("#vtol-panel:not(.hidden)", timeout=30_000)
+        for (loss_in, loss_out), text in WORST_LINK_LOSS.items():
+            page.evaluate("(loss) => { window.__linkLoss = loss; }", [loss_in, loss_out])
+            page.wait_for_function(
+                "(text) => document.getElementById('link-loss').textContent === text",
+                arg=text, timeout=10_000,
+            )
+            walk.probe(f"link loss {text}", record=False)
+            # the tooltip says them too
+            title = page.get_attribute("#link-slot", "title") or ""
+            shown = [f"{v:.0f}%" if v is not None else "?" for v in (loss_in, loss_out)]
+            assert f"frames lost from it {shown[0]} and to it {shown[1]}" in title, title
+        assert not walk.problems, "\n".join(walk.problems)
+    finally:
+        page.context.close()
+
+
+@pytest.mark.parametrize("cockpit", ["quad", "vtol"])
+def test_the_top_bar_holds_its_widest_texts_at_every_width(
+    chromium: Any, request: pytest.FixtureRequest, cockpit: str
+) -> None:
+    server: Serve = request.getfixturevalue("serve" if cockpit == "quad" else "vtol_serve")
+    page = open_dashboard(new_context(chromium), server.url, scene=False, init_script=WORST_TEXTS)
+    walk = Walk(page, [])
+    sizes = [(width, 800) for width in BAR_WIDTHS]
+    try:
+        page.wait_for_selector(".map-vehicle", timeout=30_000)
+        if cockpit == "vtol":
+            page.wait_for_selector("#vtol-panel:not(.hidden)", timeout=30_000)
+        try:
+            page.wait_for_function(WORST_DRAWN, arg=cockpit, timeout=30_000)
+        except Exception as e:
+            shown = page.evaluate(
+                "['link-health', 'link-loss', 'mode', 'user-mode', 'landed', 'ready-to-fly',"
+                " 'vehicle-select', 'vtol-state']"
+                ".map((id) => document.getElementById(id).textContent)"
+            )
+            raise AssertionError(f"the widest texts were not drawn: {shown}") from e
+        # the widest name in the vehicle menu shown (as the pilot would see it picked)
+        page.evaluate("document.getElementById('vehicle-select').value = '255'")
+        picked = "document.getElementById('vehicle-select').selectedOptions[0].textContent"
+        assert page.evaluate(picked) == "255 · plane"
+        walk.probe("widest texts", record=False, sizes=sizes)
+        # the server lost: the SERVER box says the page is reconnecting
+        page.evaluate("window.__offline = true; window.__telemetry.forEach((s) => s.close())")
+        page.wait_for_function(
+            "document.getElementById('conn-status').textContent === 'reconnecting…'",
+            timeout=10_000,
+        )
+        walk.probe("widest texts, the server lost", record=False, sizes=sizes)
+        assert not walk.problems, "\n".join(walk.problems)
+    finally:
+        page.context.close()
 
 
 @pytest.mark.parametrize("size", [(1024, 768), (1280, 800), (1920, 1080)], ids=str)
