@@ -161,7 +161,7 @@ def serve_command(
     log_dir: Path, pilot: str, observer: str, *args: str
 ) -> list[str]:
     return [
-        str(SKYHELM), "serve", "--port", "0", "--token", pilot, f"--observer-token={observer}",
+        str(SKYHELM), "serve", "--port", "0", f"--token={pilot}", f"--observer-token={observer}",
         "--log-dir", str(log_dir), "--no-scene", "--fleet-name", FLEET,
         "--no-zenoh-multicast-scouting", *args,
     ]
