@@ -158,3 +158,45 @@ def test_a_hidden_page_draws_nothing_and_catches_up_at_once_when_shown(
         page.wait_for_function(f"window.__arrivals.length >= {came + 8}", timeout=PAGE_TIMEOUT_MS)
     finally:
         page.close()
+
+
+# The setpoint stream's running counters (web/render.js): at most twice a second while on time.
+STREAM_COUNTERS_HZ = 2
+HOVER_ALTITUDE_M = 5.0
+
+
+def test_the_streams_running_counters_are_drawn_at_their_own_pace_while_it_is_on_time(
+    api: httpx.Client, serve: Serve, browser: Any
+) -> None:
+    settle_vehicle(api, flying=True, altitude=HOVER_ALTITUDE_M)
+    taken = api.post("/vehicles/1/control", json={"takeover": True, "force": True})
+    taken.raise_for_status()
+    headers = {"X-Lease-Id": taken.json()["lease_id"]}
+    page = None
+    try:
+        started = api.post("/vehicles/1/offboard/start", json={}, headers=headers)
+        assert started.status_code == 200, started.text
+        page = _open(browser, serve)
+        page.wait_for_function(
+            "document.getElementById('stream-active').textContent === 'streaming'",
+            timeout=PAGE_TIMEOUT_MS)
+        page.evaluate(WATCH_MUTATIONS)
+        came = _arrivals(page)
+        drawn = page.evaluate("window.skyhelm.draws.state")
+        time.sleep(QUIET_WINDOW_S)  # the window watched, not a wait for a condition
+        api.put("/vehicles/1/control", headers=headers).raise_for_status()  # renewed
+        mutations: list[str] = page.evaluate("window.__mutations")
+        states = _arrivals(page) - came
+        # states kept coming and were drawn (the stream's figures change in every one)
+        assert states >= 4 * QUIET_WINDOW_S * STREAM_COUNTERS_HZ, states
+        assert page.evaluate("window.skyhelm.draws.state") - drawn >= states // 2
+        sent = [m for m in mutations if m.startswith("stream-sent ")]
+        # the count still follows the stream, at its own pace (+1: a draw at each end)
+        assert 1 <= len(sent) <= QUIET_WINDOW_S * STREAM_COUNTERS_HZ + 1, (states, sent)
+        assert sum(m.startswith("stream-since ") for m in mutations) <= (
+            QUIET_WINDOW_S * STREAM_COUNTERS_HZ + 1)
+    finally:
+        if page is not None:
+            page.close()
+        api.post("/vehicles/1/offboard/stop", json={"then_mode": "HOLD"}, headers=headers)
+        api.delete("/vehicles/1/control", headers=headers)
