@@ -2,7 +2,7 @@
 // VTOL progress and the strip charts.
 
 import { followFlown } from "./control.js";
-import { Painter, setAttr, setStyle } from "./draw.js";
+import { Painter, SLOW_BEAT_MS, setAttr, setStyle } from "./draw.js";
 import { age, millis } from "./format.js";
 import { Instruments } from "./instruments.js";
 import { flownText } from "./offboard.js";
@@ -167,12 +167,12 @@ function renderStream(s) {
 }
 
 // The stream's running counters (frames sent, time since the last frame) change with every
-// state while it streams, a number read rather than watched: drawn at most twice a second
-// while the stream is on time (its last frame at most STREAM_LATE_MS ago); at every state
-// while it is stopped or late.
+// state while it streams, a number read rather than watched: drawn at most twice a second,
+// on the plots' beat, while the stream is on time (its last frame at most STREAM_LATE_MS
+// ago); at every state while it is stopped or late.
 const STREAM_LATE_MS = 100;
 const streamCounters = new Painter("stream-counters",
-  () => drawStreamCounters(page.state?.stream || {}), { minGapMs: 500 });
+  () => drawStreamCounters(page.state?.stream || {}), { minGapMs: SLOW_BEAT_MS, beatMs: SLOW_BEAT_MS });
 
 function drawStreamCounters(s) {
   setText("stream-since", millis(s.since_last_ms));
