@@ -3,6 +3,8 @@
 // within `minGapMs` (a change that comes sooner is drawn when that time is up), never while
 // the page is hidden (document.visibilityState) or the part itself is hidden, and at once
 // when it shows again.
+// Parts drawn at a slower pace (the plots, running counters) keep one beat
+// (SLOW_BEAT_MS), so they change in the same frames.
 // The parts due together are drawn in one task, by a timer: no requestAnimationFrame at all
 // (each one asks the browser for a frame, which costs even when nothing changed, and a
 // window the browser gives few frames, headless Chromium's second page, would lag); what a
@@ -12,6 +14,7 @@
 // when (performance.now(), the last DRAW_TIMES_KEPT) it drew, for the browser tests and the
 // console.
 
+export const SLOW_BEAT_MS = 500;
 export const draws = {};
 export const drawTimes = {};
 const DRAW_TIMES_KEPT = 100;
@@ -31,11 +34,15 @@ function drawDue() {
 }
 
 export class Painter {
-  /** `draw()` draws the part; `shown()` says whether the part can be seen now. */
-  constructor(name, draw, { minGapMs = 100, shown = () => true } = {}) {
+  /** `draw()` draws the part; `shown()` says whether the part can be seen now. With `beatMs`,
+   * a draw that has to wait waits for the next multiple of it on the page's clock, so the
+   * parts drawn at the same pace change in the same frame (each frame that changes anything
+   * is laid out, painted and composited as a whole). */
+  constructor(name, draw, { minGapMs = 100, shown = () => true, beatMs = 0 } = {}) {
     this.name = name;
     this.draw = draw;
     this.minGapMs = minGapMs;
+    this.beatMs = beatMs;
     this.shown = shown;
     this.dirty = false;
     this.lastMs = -Infinity;
@@ -54,19 +61,23 @@ export class Painter {
   plan() {
     if (!this.dirty || this.timer !== null || due.has(this)) return;
     if (pageHidden() || !this.shown()) return; // drawn when shown again (wake())
-    const waitMs = this.lastMs + this.minGapMs - performance.now();
+    let atMs = this.lastMs + this.minGapMs;
+    if (this.beatMs > 0 && Number.isFinite(atMs)) atMs = Math.ceil(atMs / this.beatMs) * this.beatMs;
+    const waitMs = atMs - performance.now();
     if (waitMs > 0) {
-      this.timer = setTimeout(() => { this.timer = null; this.run(performance.now()); }, waitMs);
+      // on a beat, the beat counts as the time drawn (a timer fires a little late)
+      const beat = this.beatMs > 0 ? atMs : undefined;
+      this.timer = setTimeout(() => { this.timer = null; this.run(performance.now(), beat); }, waitMs);
       return;
     }
     due.add(this);
     if (task === null) task = setTimeout(drawDue, 0);
   }
 
-  run(now) {
+  run(now, beatMs = now) {
     if (!this.dirty || pageHidden() || !this.shown()) return;
     this.dirty = false;
-    this.lastMs = now;
+    this.lastMs = beatMs;
     draws[this.name] += 1;
     const times = drawTimes[this.name];
     times.push(now);
@@ -90,6 +101,21 @@ export function wakeAll() {
 }
 
 document.addEventListener("visibilitychange", () => { if (!pageHidden()) wakeAll(); });
+
+/** Whether `element` can be seen: it has a box (neither it nor a parent is display: none).
+ * Kept by a ResizeObserver, so asking reads no layout (Element.checkVisibility() brings style
+ * and layout up to date: asked at every state, after the state's text was written, a layout
+ * of the whole page in the middle of a task). `onShown()` runs when it gets its box again. */
+export function boxShown(element, onShown = () => {}) {
+  let shown = true; // until the first observation, in the next frame
+  new ResizeObserver((entries) => {
+    const { width, height } = entries.at(-1).contentRect;
+    const was = shown;
+    shown = width > 0 || height > 0;
+    if (shown && !was) onShown();
+  }).observe(element);
+  return () => shown;
+}
 
 /** Sets an attribute only when its value changes (every set is a DOM mutation). */
 export function setAttr(el, name, value) {

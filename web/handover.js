@@ -284,7 +284,7 @@ export function renderHolder(lease = page.state?.lease) {
   // the slot shows a short name ("you", "Firefox tab 01ab"); its tooltip the whole one
   setText("holder", mine ? "you" : shortHolder(holder), mine ? "mine" : holder ? "other" : "");
   if ($("holder").title !== name) $("holder").title = name;
-  const time = new Date(shownHolder.since).toTimeString();
+  const time = holder || mine ? clockAt(shownHolder.since) : "";
   const since = holder || mine ? `since ${time.slice(0, 8)}` : "";
   const session = lease?.session || shownHolder.session;
   setText("holder-since", holder || mine ? `· ${time.slice(0, 5)}` : "");
@@ -305,6 +305,14 @@ export function renderHolder(lease = page.state?.lease) {
   setAttr($("force-control"), "title", page.connected
     ? "take control at once, without asking the holder" : "the server is not connected");
   $("release").classList.toggle("hidden", !mine);
+}
+
+// The clock time the holder took control, formatted once (Date's toTimeString looks up the
+// time zone: costly at every state).
+let clock = { ms: NaN, text: "" };
+function clockAt(ms) {
+  if (clock.ms !== ms) clock = { ms, text: new Date(ms).toTimeString() };
+  return clock.text;
 }
 
 /** "pilot · Chrome (headless) tab 7f3a" -> "Chrome 7f3a": the browser and the tab's id. */

@@ -6,7 +6,7 @@
 
 import { TelemetrySocket, callApi } from "./api.js";
 import { altitudeAllowed, runCommand } from "./control.js";
-import { Painter, setAttr, setStyle } from "./draw.js";
+import { Painter, boxShown, setAttr, setStyle } from "./draw.js";
 import { inControl } from "./handover.js";
 import { page } from "./page.js";
 import { $, num } from "./ui.js";
@@ -315,7 +315,7 @@ export class VehicleMap {
     // states are kept as they come and drawn at most ten times a second while the map shows
     this.pending = new Map();
     this.painter = new Painter("map", () => this.drawPending(), {
-      shown: () => this.container.checkVisibility?.() ?? true,
+      shown: boxShown(container),
     });
     this.setFollow(true);
     this.map.on("dragstart", () => this.setFollow(false));

@@ -5,12 +5,12 @@
 // out, not while the page or the plots are hidden, and not when the picture would not
 // change (a flat line across the whole window).
 
-import { Painter } from "./draw.js";
+import { Painter, SLOW_BEAT_MS, boxShown } from "./draw.js";
 import { num } from "./format.js";
 
 const WINDOW_S = 60;
 const SAMPLE_EVERY_S = 0.1;
-const DRAW_EVERY_MS = 500;
+const DRAW_EVERY_MS = SLOW_BEAT_MS;
 const SKIP = new Set(["id", "vehicle", "sysid", "compid", "updated_s"]);
 const SKIP_PREFIX = ["statustext", "lease", "telemetry_refused"];
 const COLOURS = { value: "#5dade2", setpoint: "#f5b041" };
@@ -150,7 +150,8 @@ export class Plots {
     this.samples = []; // [time_s, {field: value}]
     this.known = new Set(Object.keys(derived));
     this.painter = new Painter("plots", () => this.draw(performance.now() / 1000), {
-      minGapMs: DRAW_EVERY_MS, shown: () => container.checkVisibility?.() ?? true,
+      minGapMs: DRAW_EVERY_MS, beatMs: SLOW_BEAT_MS,
+      shown: boxShown(container, () => this.painter.wake()),
     });
     this.charts = fields.map((field, i) => {
       const box = document.createElement("div");

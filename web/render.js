@@ -2,7 +2,7 @@
 // VTOL progress and the strip charts.
 
 import { followFlown } from "./control.js";
-import { setAttr, setStyle } from "./draw.js";
+import { Painter, SLOW_BEAT_MS, setAttr, setStyle } from "./draw.js";
 import { age, millis } from "./format.js";
 import { Instruments } from "./instruments.js";
 import { flownText } from "./offboard.js";
@@ -168,8 +168,9 @@ function renderStream(s) {
   setText("stream-rate", s.rate_hz ? `${num(s.rate_hz, 1)} Hz` : "–");
   setText("stream-p99", Number.isFinite(s.interval_p99_ms) ? `${num(s.interval_p99_ms, 1)} ms` : "–");
   setText("stream-gap", Number.isFinite(s.max_gap_ms) ? `${num(s.max_gap_ms, 0)} ms` : "–");
-  setText("stream-since", millis(s.since_last_ms));
-  setText("stream-sent", `${s.sent ?? "–"}`);
+  // on time, its running counters at their own pace; a stream that stops or is late at once
+  if (s.active && s.since_last_ms <= STREAM_LATE_MS) streamCounters.request();
+  else drawStreamCounters(s);
   setStyle($("stream-gap"), "color", s.max_gap_ms > 500 ? "var(--bad)" : s.max_gap_ms > 100 ? "var(--warn)" : "");
   // who sends the frames (the sender process, or the thread after it failed), its restarts
   // and last fault (the stream went on; a "stream" event in the log told when)
@@ -177,6 +178,19 @@ function renderStream(s) {
   setText("stream-sender", s.sender ? `${s.sender}${restarts}` : "–");
   setAttr($("stream-sender"), "title", s.sender_fault ? `last fault: ${s.sender_fault}` : "");
   setStyle($("stream-sender"), "color", s.sender_fault && s.sender !== "process" ? "var(--warn)" : "");
+}
+
+// The stream's running counters (frames sent, time since the last frame) change with every
+// state while it streams, a number read rather than watched: drawn at most twice a second,
+// on the plots' beat, while the stream is on time (its last frame at most STREAM_LATE_MS
+// ago); at every state while it is stopped or late.
+const STREAM_LATE_MS = 100;
+const streamCounters = new Painter("stream-counters",
+  () => drawStreamCounters(page.state?.stream || {}), { minGapMs: SLOW_BEAT_MS, beatMs: SLOW_BEAT_MS });
+
+function drawStreamCounters(s) {
+  setText("stream-since", millis(s.since_last_ms));
+  setText("stream-sent", `${s.sent ?? "–"}`);
 }
 
 const TRANSITION_GUESS_S = { TRANSITION_TO_FW: 3.5, TRANSITION_TO_MC: 1.5 };

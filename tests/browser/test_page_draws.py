@@ -158,3 +158,82 @@ def test_a_hidden_page_draws_nothing_and_catches_up_at_once_when_shown(
         page.wait_for_function(f"window.__arrivals.length >= {came + 8}", timeout=PAGE_TIMEOUT_MS)
     finally:
         page.close()
+
+
+# The setpoint stream's running counters (web/render.js): at most twice a second while on time.
+STREAM_COUNTERS_HZ = 2
+# Two parts drawn on the same beat are drawn one task after the other (two timers due at the
+# same time): apart by the first one's draw.
+SAME_BEAT_MS = 25.0
+HOVER_ALTITUDE_M = 5.0
+
+
+def test_the_streams_running_counters_are_drawn_at_their_own_pace_while_it_is_on_time(
+    api: httpx.Client, serve: Serve, browser: Any
+) -> None:
+    settle_vehicle(api, flying=True, altitude=HOVER_ALTITUDE_M)
+    taken = api.post("/vehicles/1/control", json={"takeover": True, "force": True})
+    taken.raise_for_status()
+    headers = {"X-Lease-Id": taken.json()["lease_id"]}
+    page = None
+    try:
+        started = api.post("/vehicles/1/offboard/start", json={}, headers=headers)
+        assert started.status_code == 200, started.text
+        page = _open(browser, serve)
+        page.wait_for_function(
+            "document.getElementById('stream-active').textContent === 'streaming'",
+            timeout=PAGE_TIMEOUT_MS)
+        page.evaluate(WATCH_MUTATIONS)
+        came = _arrivals(page)
+        drawn = page.evaluate("window.skyhelm.draws.state")
+        time.sleep(QUIET_WINDOW_S)  # the window watched, not a wait for a condition
+        api.put("/vehicles/1/control", headers=headers).raise_for_status()  # renewed
+        mutations: list[str] = page.evaluate("window.__mutations")
+        states = _arrivals(page) - came
+        # states kept coming and were drawn (the stream's figures change in every one)
+        assert states >= 4 * QUIET_WINDOW_S * STREAM_COUNTERS_HZ, states
+        assert page.evaluate("window.skyhelm.draws.state") - drawn >= states // 2
+        sent = [m for m in mutations if m.startswith("stream-sent ")]
+        # the count still follows the stream, at its own pace (+1: a draw at each end)
+        assert 1 <= len(sent) <= QUIET_WINDOW_S * STREAM_COUNTERS_HZ + 1, (states, sent)
+        assert sum(m.startswith("stream-since ") for m in mutations) <= (
+            QUIET_WINDOW_S * STREAM_COUNTERS_HZ + 1)
+        # on the plots' beat: both change in the same frames (the median, as a busy machine
+        # may hold one task back; on their own the two would be apart by 0-250 ms)
+        times: dict[str, list[float]] = page.evaluate(
+            "({counters: window.skyhelm.drawTimes['stream-counters'],"
+            " plots: window.skyhelm.drawTimes.plots})")
+        apart = sorted(min(abs(t - p) for p in times["plots"]) for t in times["counters"])
+        assert len(apart) >= 4
+        assert apart[(len(apart) - 1) // 2] <= SAME_BEAT_MS, apart
+    finally:
+        if page is not None:
+            page.close()
+        api.post("/vehicles/1/offboard/stop", json={"then_mode": "HOLD"}, headers=headers)
+        api.delete("/vehicles/1/control", headers=headers)
+
+
+def test_the_map_unticked_draws_nothing_and_is_drawn_at_once_when_ticked_again(
+    api: httpx.Client, serve: Serve, browser: Any
+) -> None:
+    settle_vehicle(api, flying=False)
+    page = _open(browser, serve)
+    try:
+        page.wait_for_function("window.skyhelm.draws.map >= 2", timeout=PAGE_TIMEOUT_MS)
+        page.uncheck("#map-enable")
+        page.wait_for_function("getComputedStyle(document.getElementById('map')).display"
+                               " === 'none'", timeout=PAGE_TIMEOUT_MS)
+        came = _arrivals(page) + 1
+        page.wait_for_function(f"window.__arrivals.length >= {came}", timeout=PAGE_TIMEOUT_MS)
+        drawn = page.evaluate("window.skyhelm.draws.map")  # the draw of a state on its way
+        came = _arrivals(page)
+        page.wait_for_function(f"window.__arrivals.length >= {came + 3}",
+                               timeout=PAGE_TIMEOUT_MS)
+        assert page.evaluate("window.skyhelm.draws.map") == drawn, "drawn while unticked"
+        shown_at: float = page.evaluate(
+            "() => { document.getElementById('map-enable').click(); return performance.now(); }")
+        page.wait_for_function(f"window.skyhelm.draws.map > {drawn}", timeout=PAGE_TIMEOUT_MS)
+        first = min(t for t in page.evaluate("window.skyhelm.drawTimes.map") if t >= shown_at)
+        assert first - shown_at <= DRAWN_WITHIN_MS
+    finally:
+        page.close()
