@@ -5,18 +5,13 @@ and every response matches the documented status codes, content type and schema.
 generated up front (fixed seed: derandomized hypothesis) and then sent through the ASGI
 transport on the test's own event loop, where the app and the simulated vehicle run.
 
-Against a live `skyhelm serve` (the schemathesis command as a user runs it, the phases the
-in-process run leaves out: examples, coverage of every bound and the stateful links, with
-every check): no failure, and no traceback in the server's log. tests/api/schemathesis.toml
-is that run's configuration."""
+The schemathesis command as a user runs it, against a live `skyhelm serve`, is
+tests/api/test_schemathesis_cli.py (a module of its own: the two run side by side)."""
 
 from __future__ import annotations
 
 import asyncio
-import subprocess
-import sys
 import time
-from pathlib import Path
 from typing import Any
 
 import httpx
@@ -33,7 +28,6 @@ from schemathesis.specs.openapi.checks import (
 
 from server.app import create_app
 from tests.api.conftest import PILOT, api_for, eventually, make_settings, sim_cluster
-from tests.serve_process import skyhelm_serve
 
 CASES_PER_OPERATION = 36
 # Cases sent side by side.
@@ -197,36 +191,3 @@ async def test_openapi_fuzz_finds_no_5xx_and_no_schema_violation() -> None:
         f"schemathesis: {len(cases)} cases over {operations} operations in {elapsed_s:.1f} s "
         f"({generated_s:.1f} s generating)"
     )
-
-
-CLI_CONFIG = Path(__file__).with_name("schemathesis.toml")
-CLI_EXAMPLES = 10
-CLI_TIMEOUT_S = 400.0
-# the answer a call may take: a takeover ask waits for the holder (takeover_ask_s)
-RESPONSE_TIME_S = 30
-
-
-def test_schemathesis_every_phase_and_check_against_skyhelm_serve(tmp_path: Path) -> None:
-    unlimited = ["--lockout-free-failures", "10000", "--control-rate-per-s", "100000",
-                 "--control-burst", "100000"]  # fmt: skip
-    with skyhelm_serve(tmp_path, "--no-scene", *unlimited) as served:
-        schemathesis = Path(sys.executable).with_name("schemathesis")
-        command = [
-            str(schemathesis), "--config-file", str(CLI_CONFIG), "--no-color", "run",
-            f"{served.base_url}/openapi.json", "--checks", "all",
-            "--phases", "examples,coverage,stateful", "-n", str(CLI_EXAMPLES),
-            "-H", f"Authorization: Bearer {served.pilot_token}",
-            "--max-response-time", str(RESPONSE_TIME_S),
-            "--request-timeout", str(RESPONSE_TIME_S + 5), "--seed", "31",
-        ]  # fmt: skip
-        run = subprocess.run(
-            command, capture_output=True, text=True, timeout=CLI_TIMEOUT_S, check=False,
-            cwd=tmp_path,
-        )  # fmt: skip
-        log = served.stderr_path.read_text()
-    report = run.stdout + run.stderr
-    assert run.returncode == 0, report[-6000:]
-    summary = report.split("SUMMARY")[-1]
-    assert " passed" in summary, report[-3000:]
-    assert "failure" not in summary, report[-3000:]
-    assert "Traceback" not in log, log[-6000:]

@@ -1,0 +1,44 @@
+"""The schemathesis command as a user runs it, against a live `skyhelm serve` with its
+simulated quad: the phases the in-process run of tests/api/test_openapi_fuzz.py leaves out
+(examples, coverage of every bound and the stateful links), with every check. No failure, and
+no traceback in the server's log. tests/api/schemathesis.toml is that run's configuration."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+from tests.serve_process import skyhelm_serve
+
+CLI_CONFIG = Path(__file__).with_name("schemathesis.toml")
+CLI_EXAMPLES = 10
+CLI_TIMEOUT_S = 400.0
+# the answer a call may take: a takeover ask waits for the holder (takeover_ask_s)
+RESPONSE_TIME_S = 30
+
+
+def test_schemathesis_every_phase_and_check_against_skyhelm_serve(tmp_path: Path) -> None:
+    unlimited = ["--lockout-free-failures", "10000", "--control-rate-per-s", "100000",
+                 "--control-burst", "100000"]  # fmt: skip
+    with skyhelm_serve(tmp_path, "--no-scene", *unlimited) as served:
+        schemathesis = Path(sys.executable).with_name("schemathesis")
+        command = [
+            str(schemathesis), "--config-file", str(CLI_CONFIG), "--no-color", "run",
+            f"{served.base_url}/openapi.json", "--checks", "all",
+            "--phases", "examples,coverage,stateful", "-n", str(CLI_EXAMPLES),
+            "-H", f"Authorization: Bearer {served.pilot_token}",
+            "--max-response-time", str(RESPONSE_TIME_S),
+            "--request-timeout", str(RESPONSE_TIME_S + 5), "--seed", "31",
+        ]  # fmt: skip
+        run = subprocess.run(
+            command, capture_output=True, text=True, timeout=CLI_TIMEOUT_S, check=False,
+            cwd=tmp_path,
+        )  # fmt: skip
+        log = served.stderr_path.read_text()
+    report = run.stdout + run.stderr
+    assert run.returncode == 0, report[-6000:]
+    summary = report.split("SUMMARY")[-1]
+    assert " passed" in summary, report[-3000:]
+    assert "failure" not in summary, report[-3000:]
+    assert "Traceback" not in log, log[-6000:]
