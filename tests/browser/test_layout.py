@@ -14,6 +14,7 @@ follows the system and the pilot's choice is kept for the next visit."""
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Iterator
 from typing import Any
 
@@ -204,17 +205,27 @@ def test_a_vtol_in_fixed_wing_flight_keeps_the_layout(chromium: Any, vtol_serve:
     assert not walk.moved(), "\n".join(walk.moved())
 
 
-@pytest.mark.parametrize("cockpit", ["quad", "vtol"])
-def test_the_link_slot_shows_the_widest_loss_whole_at_every_size(
-    chromium: Any, request: pytest.FixtureRequest, cockpit: str
-) -> None:
+@contextlib.contextmanager
+def _cockpit(
+    chromium: Any, request: pytest.FixtureRequest, cockpit: str, init_script: str
+) -> Iterator[tuple[Any, Walk]]:
+    """A page of the quad's or the VTOL's server, with ``init_script``, its vehicle drawn."""
     server: Serve = request.getfixturevalue("serve" if cockpit == "quad" else "vtol_serve")
-    page = open_dashboard(new_context(chromium), server.url, scene=False, init_script=LINK_LOSS)
-    walk = Walk(page, [])
+    page = open_dashboard(new_context(chromium), server.url, scene=False, init_script=init_script)
     try:
         page.wait_for_selector(".map-vehicle", timeout=30_000)
         if cockpit == "vtol":
             page.wait_for_selector("#vtol-panel:not(.hidden)", timeout=30_000)
+        yield page, Walk(page, [])
+    finally:
+        page.context.close()
+
+
+@pytest.mark.parametrize("cockpit", ["quad", "vtol"])
+def test_the_link_slot_shows_the_widest_loss_whole_at_every_size(
+    chromium: Any, request: pytest.FixtureRequest, cockpit: str
+) -> None:
+    with _cockpit(chromium, request, cockpit, LINK_LOSS) as (page, walk):
         for (loss_in, loss_out), text in WORST_LINK_LOSS.items():
             page.evaluate("(loss) => { window.__linkLoss = loss; }", [loss_in, loss_out])
             page.wait_for_function(
@@ -227,22 +238,14 @@ def test_the_link_slot_shows_the_widest_loss_whole_at_every_size(
             shown = [f"{v:.0f}%" if v is not None else "?" for v in (loss_in, loss_out)]
             assert f"frames lost from it {shown[0]} and to it {shown[1]}" in title, title
         assert not walk.problems, "\n".join(walk.problems)
-    finally:
-        page.context.close()
 
 
 @pytest.mark.parametrize("cockpit", ["quad", "vtol"])
 def test_the_top_bar_holds_its_widest_texts_at_every_width(
     chromium: Any, request: pytest.FixtureRequest, cockpit: str
 ) -> None:
-    server: Serve = request.getfixturevalue("serve" if cockpit == "quad" else "vtol_serve")
-    page = open_dashboard(new_context(chromium), server.url, scene=False, init_script=WORST_TEXTS)
-    walk = Walk(page, [])
     sizes = [(width, 800) for width in BAR_WIDTHS]
-    try:
-        page.wait_for_selector(".map-vehicle", timeout=30_000)
-        if cockpit == "vtol":
-            page.wait_for_selector("#vtol-panel:not(.hidden)", timeout=30_000)
+    with _cockpit(chromium, request, cockpit, WORST_TEXTS) as (page, walk):
         try:
             page.wait_for_function(WORST_DRAWN, arg=cockpit, timeout=30_000)
         except Exception as e:
@@ -265,8 +268,6 @@ def test_the_top_bar_holds_its_widest_texts_at_every_width(
         )
         walk.probe("widest texts, the server lost", record=False, sizes=sizes)
         assert not walk.problems, "\n".join(walk.problems)
-    finally:
-        page.context.close()
 
 
 @pytest.mark.parametrize("size", [(1024, 768), (1280, 800), (1920, 1080)], ids=str)
