@@ -39,7 +39,7 @@ from server.link.codec.signing import LinkSigning
 from server.link.codec.signing_keys import signing_timestamp
 from server.link.stream import stream_process
 from server.link.stream.sender_supervisor import ProcessGone, SenderSupervisor
-from server.link.stream.stream_thread import PROCESS_RT_PRIORITY
+from server.link.stream.stream_thread import PROCESS_RT_PRIORITY, raise_priority
 
 log = logging.getLogger(__name__)
 
@@ -129,6 +129,7 @@ class SenderProcess:
                 proc.kill()  # started after the server stopped waiting for it
                 proc.wait()
                 return
+            raise_priority()  # after the fork: the exit it waits for hands the streams over
             proc.wait()
             self._gone(self._cause(proc.returncode))
 
@@ -293,6 +294,7 @@ class SenderProcess:
 
     # -- from the process --
     def _read_reports(self) -> None:
+        raise_priority()  # its end of file hands the streams to the thread: at once
         poller = select.poll()  # not select(): any descriptor number
         poller.register(self._control, select.POLLIN)
         while True:

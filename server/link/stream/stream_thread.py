@@ -99,7 +99,7 @@ class SenderThread:
         self._thread.start()
 
     def _run(self) -> None:
-        _raise_priority()
+        raise_priority()
         while True:
             with self._cond:
                 while not self._heap:
@@ -112,12 +112,13 @@ class SenderThread:
             self.run_due(self.clock())
 
 
-def _raise_priority() -> None:
+def raise_priority() -> None:
     """Ask the OS to run this thread (Linux: the calling thread only) before ordinary ones
     when its deadline comes (SCHED_FIFO at SENDER_RT_PRIORITY): on a machine whose cores
     are busy (the vehicles' simulators, other servers) a woken sender otherwise waits for a
     time slice. It sleeps between sends, so it takes little. Without the privilege
-    (CAP_SYS_NICE) it runs as an ordinary thread and says so once."""
+    (CAP_SYS_NICE) it runs as an ordinary thread and says so once. Also the threads that
+    notice a lost sender process, whose streams wait on them."""
     if SENDER_RT_PRIORITY <= 0 or not hasattr(os, "sched_setscheduler"):
         return
     try:
