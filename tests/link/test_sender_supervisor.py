@@ -147,6 +147,33 @@ def test_a_silence_the_watchdog_only_thought_it_saw_kills_nothing() -> None:
     assert process.killed is None
 
 
+@pytest.mark.parametrize(("ran_s", "waited_s", "killed"), [
+    (0.002, 0.4, False),  # runnable, waiting for a CPU: a busy machine, left alone
+    (0.5, 0.01, True),  # runnable and running: a loop that never comes round
+])
+def test_a_runnable_silent_process_is_killed_only_when_it_ran(
+    monkeypatch: pytest.MonkeyPatch, ran_s: float, waited_s: float, killed: bool
+) -> None:
+    cpu = [(1.0, 1.0)]  # (ran, waited for a CPU) in all, as /proc/PID/schedstat says
+    monkeypatch.setattr(sender_supervisor, "run_state", lambda pid: "R")
+    monkeypatch.setattr(sender_supervisor, "cpu_times_s", lambda pid: cpu[0])
+    sup, _ = _supervisor()
+    member = Member()
+    sup.watch(member)
+    process = sup.process()
+    assert isinstance(process, FakeProcess)
+    member.streaming_in = process
+    time.sleep(3 * sender_supervisor.WATCH_PERIOD_S)  # seen answering, then silent long
+    cpu[0] = (1.0 + ran_s, 1.0 + waited_s)
+    process.beat_s = time.monotonic() - 10.0
+    if killed:
+        wait_for_blocking("the kill", lambda: process.killed is not None, 2.0, 0.005)
+        assert "it ran 500 ms and waited 10 ms for a CPU" in str(process.killed)
+    else:
+        time.sleep(10 * sender_supervisor.WATCH_PERIOD_S)
+        assert process.killed is None
+
+
 def test_a_restart_waits_until_the_new_process_runs(monkeypatch: pytest.MonkeyPatch) -> None:
     sup, started = _supervisor()
     member = Member()

@@ -34,8 +34,9 @@ log = logging.getLogger(__name__)
 # The process writes its heartbeat at least every report period (50 ms). No movement for
 # this long while streams run is a stuck process (SIGSTOP, a blocked write)...
 STUCK_AFTER_S = 0.15
-# ...or for this long when the OS says it is runnable (a busy machine that has not run it
-# yet: the thread would wait for the same cores).
+# ...or for this long when the OS says it is runnable and it ran more than it waited for a
+# CPU (a loop that never comes round); one that waited more is starved by a busy machine,
+# not stuck, and is left alone (a thread of the server would wait for the same cores).
 STARVED_AFTER_S = 0.5
 WATCH_PERIOD_S = 0.025
 RESTART_BACKOFF_S = (0.25, 1.0, 4.0)
@@ -163,14 +164,15 @@ class SenderSupervisor:
             give_up = self.failed_in_row > MAX_FAILED_RESTARTS
             if give_up:
                 self.gave_up = True
-        log.error("setpoint sender process %s ended (%s): its links send themselves and its "
-                  "streams go on from the sender thread%s", process.pid, why,
-                  "; it failed too often and is not started again" if give_up else
-                  f"; restarting it in {self._backoff_s():g} s")
+        # the streams first, the words after: every step before the thread sends is a gap
         for handover in list(self._handovers):
             handover.sender_lost(process)
         for member in list(self._members):
             member.sender_lost(process)
+        log.error("setpoint sender process %s ended (%s): its links send themselves and its "
+                  "streams go on from the sender thread%s", process.pid, why,
+                  "; it failed too often and is not started again" if give_up else
+                  f"; restarting it in {self._backoff_s():g} s")
         self._tell()
         if not give_up:
             with self._lock:
@@ -250,14 +252,14 @@ class SenderSupervisor:
             if not any(member.streams_in(process) for member in list(self._members)):
                 continue  # idle: nothing waits on it (it reports once a stream starts)
             state = run_state(process.pid)
-            if state == "R" and age_s < STARVED_AFTER_S:
-                continue
+            since = answering[1] if answering[0] == process.pid else None
+            cpu_now = cpu_times_s(process.pid)
+            if state == "R" and (age_s < STARVED_AFTER_S or starved(since, cpu_now)):
+                continue  # a busy machine: a thread of the server would wait for a CPU too
             if (process.heartbeat_age_s() or 0.0) < STUCK_AFTER_S:
                 continue  # it went round meanwhile: this thread was the one kept waiting
-            since = answering[1] if answering[0] == process.pid else None
             process.kill(f"stopped answering: no heartbeat for {age_s * 1000:.0f} ms "
-                         f"(process state {state or '?'}"
-                         f"{cpu_since(since, cpu_times_s(process.pid))})")
+                         f"(process state {state or '?'}{cpu_since(since, cpu_now)})")
 
 
 def run_state(pid: int | None) -> str | None:
@@ -281,6 +283,14 @@ def cpu_times_s(pid: int | None) -> tuple[float, float] | None:
     except (OSError, ValueError):
         return None
     return int(ran_ns) / 1e9, int(waited_ns) / 1e9
+
+
+def starved(before: tuple[float, float] | None, now: tuple[float, float] | None) -> bool:
+    """Whether the process waited for a CPU longer than it ran since it last answered: the
+    machine did not run it (a process stuck in a loop runs all the while)."""
+    if before is None or now is None:
+        return False
+    return now[1] - before[1] > now[0] - before[0]
 
 
 def cpu_since(before: tuple[float, float] | None, now: tuple[float, float] | None) -> str:
