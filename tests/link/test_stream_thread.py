@@ -313,12 +313,22 @@ def test_the_sender_thread_runs_real_time_when_the_os_allows_it() -> None:
         return allowed[0]
 
     seen: list[int] = []
+    started: list[int] = []
+
+    def look(_now: float) -> None:
+        seen.append(os.sched_getscheduler(0) & ~os.SCHED_RESET_ON_FORK)
+        # a thread it starts runs at ordinary priority (reset on fork)
+        child = threading.Thread(target=lambda: started.append(os.sched_getscheduler(0)))
+        child.start()
+        child.join()
+
     sender = SenderThread()
-    sender.at(time.monotonic(), lambda _now: seen.append(os.sched_getscheduler(0)) or None)
+    sender.at(time.monotonic(), look)
     deadline_s = time.monotonic() + 5.0
-    while not seen and time.monotonic() < deadline_s:
+    while not started and time.monotonic() < deadline_s:
         time.sleep(0.01)
     expected = os.SCHED_FIFO if may_run_real_time() else os.SCHED_OTHER
     assert seen == [expected]
+    assert started == [os.SCHED_OTHER]
     # the calling thread keeps its ordinary scheduling
     assert os.sched_getscheduler(0) == os.SCHED_OTHER
