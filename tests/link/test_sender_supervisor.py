@@ -127,15 +127,22 @@ def test_a_stuck_process_is_killed_only_while_it_carries_a_stream() -> None:
     wait_for_blocking("the members told", lambda: member.lost == [process], 2.0, 0.005)
 
 
-def test_a_silence_the_watchdog_only_thought_it_saw_kills_nothing() -> None:
-    """A watchdog kept waiting after it read the heartbeat (a busy server) sees an age the
-    process never had; it looks again before it kills, and the process went round."""
+def _carrying_a_stream() -> tuple[FakeProcess, Member]:
+    """A watched process with a stream in it (what the watchdog looks after), and the stream
+    (keep it: the supervisor holds its members weakly)."""
     sup, _ = _supervisor()
     member = Member()
     sup.watch(member)
     process = sup.process()
     assert isinstance(process, FakeProcess)
     member.streaming_in = process
+    return process, member
+
+
+def test_a_silence_the_watchdog_only_thought_it_saw_kills_nothing() -> None:
+    """A watchdog kept waiting after it read the heartbeat (a busy server) sees an age the
+    process never had; it looks again before it kills, and the process went round."""
+    process, _member = _carrying_a_stream()
     readings: list[float] = []
 
     def age_once_stale() -> float | None:
@@ -157,12 +164,7 @@ def test_a_runnable_silent_process_is_killed_only_when_it_ran(
     cpu = [(1.0, 1.0)]  # (ran, waited for a CPU) in all, as /proc/PID/schedstat says
     monkeypatch.setattr(sender_supervisor, "run_state", lambda pid: "R")
     monkeypatch.setattr(sender_supervisor, "cpu_times_s", lambda pid: cpu[0])
-    sup, _ = _supervisor()
-    member = Member()
-    sup.watch(member)
-    process = sup.process()
-    assert isinstance(process, FakeProcess)
-    member.streaming_in = process
+    process, _member = _carrying_a_stream()
     time.sleep(3 * sender_supervisor.WATCH_PERIOD_S)  # seen answering, then silent long
     cpu[0] = (1.0 + ran_s, 1.0 + waited_s)
     process.beat_s = time.monotonic() - 10.0
