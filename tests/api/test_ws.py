@@ -106,7 +106,7 @@ async def test_telemetry_streams_states_at_the_asked_rate(quad: Served) -> None:
             start = time.monotonic()
             begun_s = asyncio.get_running_loop().time()
             texts = await asyncio.gather(
-                *(_state_texts(w, start + 2.5) for w in (ws, second, third))
+                *(_state_texts(w, start + 2.5, begun_s + 2.0) for w in (ws, second, third))
             )
     # 5 Hz for 2 s: about 10, never the sim's own telemetry rate. Counted by the server's
     # own time of each state (the test shares its loop clock), not by when this client read
@@ -125,9 +125,19 @@ async def test_telemetry_streams_states_at_the_asked_rate(quad: Served) -> None:
     assert 0 < publisher.encodes <= publisher.ticks
 
 
-async def _state_texts(ws: ClientConnection, until_s: float) -> list[str]:
-    texts = []
-    while time.monotonic() < until_s:
+async def _state_texts(ws: ClientConnection, until_s: float,
+                       through_updated_s: float | None = None) -> list[str]:
+    """The state texts read until ``until_s`` and, if given, until one taken at or after
+    ``through_updated_s`` by the server's clock came (a loaded machine delivers them late)."""
+    texts: list[str] = []
+    give_up_s = until_s + 10.0
+
+    def through() -> bool:
+        return through_updated_s is None or (bool(texts) and (
+            json.loads(texts[-1])["updated_s"] >= through_updated_s))
+
+    while time.monotonic() < until_s or not through():
+        assert time.monotonic() < give_up_s, "no state taken late enough came"
         text = await asyncio.wait_for(ws.recv(), 5.0)
         assert isinstance(text, str)  # a text frame, as before: the page reads strings
         if text.startswith('{"type":"state"'):
