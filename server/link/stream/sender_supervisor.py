@@ -252,14 +252,18 @@ class SenderSupervisor:
             if not any(member.streams_in(process) for member in list(self._members)):
                 continue  # idle: nothing waits on it (it reports once a stream starts)
             state = run_state(process.pid)
-            since = answering[1] if answering[0] == process.pid else None
-            cpu_now = cpu_times_s(process.pid)
-            if state == "R" and (age_s < STARVED_AFTER_S or starved(since, cpu_now)):
+            used = cpu_used_s(answering[1] if answering[0] == process.pid else None,
+                              cpu_times_s(process.pid))
+            starved = used is not None and used[1] > used[0]  # waited more than it ran
+            if state == "R" and (age_s < STARVED_AFTER_S or starved):
                 continue  # a busy machine: a thread of the server would wait for a CPU too
             if (process.heartbeat_age_s() or 0.0) < STUCK_AFTER_S:
                 continue  # it went round meanwhile: this thread was the one kept waiting
+            said = "" if used is None else (
+                f"; since it last answered it ran {used[0] * 1000:.0f} ms and waited "
+                f"{used[1] * 1000:.0f} ms for a CPU")
             process.kill(f"stopped answering: no heartbeat for {age_s * 1000:.0f} ms "
-                         f"(process state {state or '?'}{cpu_since(since, cpu_now)})")
+                         f"(process state {state or '?'}{said})")
 
 
 def run_state(pid: int | None) -> str | None:
@@ -285,18 +289,11 @@ def cpu_times_s(pid: int | None) -> tuple[float, float] | None:
     return int(ran_ns) / 1e9, int(waited_ns) / 1e9
 
 
-def starved(before: tuple[float, float] | None, now: tuple[float, float] | None) -> bool:
-    """Whether the process waited for a CPU longer than it ran since it last answered: the
-    machine did not run it (a process stuck in a loop runs all the while)."""
+def cpu_used_s(before: tuple[float, float] | None, now: tuple[float, float] | None
+               ) -> tuple[float, float] | None:
+    """(time run, time waited for a CPU) between two readings of cpu_times_s: what the
+    process did since it last answered (a loop that never comes round runs all the while; a
+    process the machine does not run waits)."""
     if before is None or now is None:
-        return False
-    return now[1] - before[1] > now[0] - before[0]
-
-
-def cpu_since(before: tuple[float, float] | None, now: tuple[float, float] | None) -> str:
-    """What the process did since it last answered: ran (a loop that never comes round)
-    or waited for a CPU (a machine that does not run it)."""
-    if before is None or now is None:
-        return ""
-    return (f"; since it last answered it ran {(now[0] - before[0]) * 1000:.0f} ms and "
-            f"waited {(now[1] - before[1]) * 1000:.0f} ms for a CPU")
+        return None
+    return now[0] - before[0], now[1] - before[1]
