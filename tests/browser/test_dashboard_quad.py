@@ -207,9 +207,13 @@ def test_start_offboard_then_altitude_slider_moves_the_vehicle(
     flying: None, page: Any, api: httpx.Client
 ) -> None:
     start_offboard_here(page, api)
-    target = drag_slider_to(page, "#sp-alt_m-slider", 9.0)
-    assert 8.0 <= target <= 10.0
+    # 2.5 m up: inside the page's 3 m altitude step, so the slider flies at once (a larger
+    # climb is asked about when the slider is let go: tests/browser/test_offboard_follow.py)
+    wanted = round(altitude_m(vehicle_state(api)) + 2.5, 1)
+    target = drag_slider_to(page, "#sp-alt_m-slider", wanted)
+    assert target == pytest.approx(wanted, abs=0.6)
     assert float(page.input_value("#sp-alt_m")) == pytest.approx(target)
+    assert not page.evaluate("document.getElementById('confirm-dialog').open")
     wait_for(
         f"altitude within 0.5 m of the slider's {target} m",
         lambda: abs(altitude_m(vehicle_state(api)) - target) < 0.5,
