@@ -27,9 +27,9 @@ from pymavlink.dialects.v20 import development as mavlink
 from server.link import VehicleEvent
 from server.link.stream import stream_channel
 from server.link.stream.sender_supervisor import SenderSupervisor
-from sim.process.runner import SimCluster
 from tests.api.conftest import Api, api_at
-from tests.faults.sender_relay import Heard, SenderRelay
+from tests.faults.sender_relay import Heard
+from tests.faults.vehicle_apart import Report, VehicleApart
 from tests.waiting import wait_for
 
 KILL_GAP_S = 0.150
@@ -59,35 +59,46 @@ def supervisor(monkeypatch: pytest.MonkeyPatch) -> Iterator[SenderSupervisor]:
 @dataclass
 class Flight:
     api: Api
-    relay: SenderRelay
-    sim: SimCluster
+    vehicle: VehicleApart
     events: asyncio.Queue[VehicleEvent]
+    # what the relay heard and the sim counted, taken when the flight ends
+    final: Report | None = None
+
+    async def mode_changes(self) -> int:
+        """The sim's count of its mode changes (every one, not only those a HEARTBEAT
+        shows)."""
+        return (await self.vehicle.report_async()).mode_changes
+
+    def ended(self) -> Report:
+        assert self.final is not None
+        return self.final
 
 
 @contextlib.asynccontextmanager
 async def flight(tmp_path: Path, *, signed: bool) -> AsyncIterator[Flight]:
-    """The sim in real time behind a relay, SkyHelm in front, the lease taken."""
-    sim_args: dict[str, Any] = {"signing_dir": tmp_path / "sim"} if signed else {}
-    async with SimCluster(airframe="quad", count=1, speed=1.0, **sim_args) as sim:
-        await sim.wait_ready(timeout_s=30.0)
-        relay = SenderRelay(("127.0.0.1", sim.instances[0].api_local_port))
-        overrides: dict[str, Any] = {}
-        if signed:
-            overrides["signing_key_file"] = tmp_path / "keys" / "signing.key"
-        try:
-            async with api_at(f"udpout:127.0.0.1:{relay.port}", sim, client_timeout_s=60.0,
-                              appear_within_s=20.0, **overrides) as api:
-                await api.wait_ready()
-                if signed:
-                    response = await api.client.post("/api/v1/signing",
-                                                     json={"action": "generate"})
-                    assert response.status_code == 200, response.text
-                    await api.wait_state(lambda s: s["link"]["signing"]["vehicles_signed"],
-                                         10.0, "the vehicle signed")
-                await api.take_control(ttl_s=60.0)
-                yield Flight(api, relay, sim, api.vehicle().subscribe_events())
-        finally:
-            relay.close()
+    """The sim in real time behind a relay (a process of their own: tests/faults/
+    vehicle_apart.py), SkyHelm in front, the lease taken."""
+    vehicle = await asyncio.to_thread(VehicleApart, tmp_path / "sim" if signed else None)
+    overrides: dict[str, Any] = {}
+    if signed:
+        overrides["signing_key_file"] = tmp_path / "keys" / "signing.key"
+    try:
+        async with api_at(f"udpout:127.0.0.1:{vehicle.relay_port}", None,
+                          client_timeout_s=60.0, appear_within_s=20.0, **overrides) as api:
+            await api.wait_ready()
+            if signed:
+                response = await api.client.post("/api/v1/signing", json={"action": "generate"})
+                assert response.status_code == 200, response.text
+                await api.wait_state(lambda s: s["link"]["signing"]["vehicles_signed"],
+                                     10.0, "the vehicle signed")
+            await api.take_control(ttl_s=60.0)
+            f = Flight(api, vehicle, api.vehicle().subscribe_events())
+            try:
+                yield f
+            finally:
+                f.final = await vehicle.report_async()
+    finally:
+        await asyncio.to_thread(vehicle.close)
 
 
 async def _hover_in_offboard(api: Api) -> None:
@@ -133,23 +144,18 @@ def _largest_gap_s(heard: list[Heard]) -> float:
     return max(b - a for a, b in itertools.pairwise(times))
 
 
-def _check_sequence(relay: SenderRelay, since_s: float) -> None:
+def _check_sequence(relay: Report, since_s: float) -> None:
     """Every frame of the server reached the relay in sequence (no jump back, no gap)."""
     seqs = [h.seq for h in relay.heard if h.unix_s >= since_s and h.sysid == GCS_SYSID]
     jumps = [(a, b) for a, b in itertools.pairwise(seqs) if (b - a) % 256 != 1]
     assert jumps == [], f"the sequence jumps at the vehicle: {jumps[:5]}"
 
 
-def _modes_since(relay: SenderRelay, since_s: float) -> set[int]:
+def _modes_since(relay: Report, since_s: float) -> set[int]:
     """The modes of the vehicle's HEARTBEATs (1 Hz) since ``since_s``."""
     modes = [mode for t, mode in relay.modes if t >= since_s]
     assert len(modes) >= 2, "too few HEARTBEATs to tell"
     return set(modes)
-
-
-def _mode_changes(f: Flight) -> int:
-    """The sim's count of its mode changes (every one, not only those a HEARTBEAT shows)."""
-    return int(f.sim.instances[0].vehicle.commander.mode_changes)
 
 
 async def _stream_events(queue: asyncio.Queue[VehicleEvent]) -> list[dict[str, Any]]:
@@ -169,9 +175,9 @@ async def test_kill_9_of_the_sender_while_hovering_in_offboard(
         api = f.api
         await _hover_in_offboard(api)
         assert (await api.client.get("/api/v1/vehicles/1/stream")).json()["sender"] == "process"
-        rejected = f.sim.instances[0].signing.rejected if signed else 0  # type: ignore[union-attr]
+        rejected = (await f.vehicle.report_async()).signing_rejected
         await asyncio.sleep(1.0)
-        changes = _mode_changes(f)
+        changes = await f.mode_changes()
         watched_s = time.time()
         os.kill(_sender_pid(supervisor), signal.SIGKILL)
         await wait_for(lambda: api.vehicle().stream_stats().sender == "thread", 1.0,
@@ -183,18 +189,16 @@ async def test_kill_9_of_the_sender_while_hovering_in_offboard(
         after = (await api.client.get("/api/v1/vehicles/1/stream")).json()
         state = await api.state()
         ended_s = time.time()
-        assert _mode_changes(f) == changes, "the vehicle changed mode"
+        assert await f.mode_changes() == changes, "the vehicle changed mode"
         events = await _stream_events(f.events)
-        if signed:
-            assert f.sim.instances[0].signing is not None
-            assert f.sim.instances[0].signing.rejected == rejected, "frames the vehicle refused"
-    setpoints = [h for h in f.relay.since(watched_s - 0.5, SETPOINT_ID) if h.unix_s <= ended_s]
+    setpoints = [h for h in f.ended().since(watched_s - 0.5, SETPOINT_ID) if h.unix_s <= ended_s]
     gap_s = _largest_gap_s(setpoints)
     print(f"kill -9 in OFFBOARD ({'signed' if signed else 'unsigned'}): largest setpoint gap "
           f"at the vehicle {gap_s * 1000:.1f} ms over {len(setpoints)} setpoints")
     assert gap_s <= KILL_GAP_S
-    _check_sequence(f.relay, watched_s - 0.5)
-    assert _modes_since(f.relay, watched_s - 1.0) == {OFFBOARD_MODE}
+    assert f.ended().signing_rejected == rejected, "frames the vehicle refused"
+    _check_sequence(f.ended(), watched_s - 0.5)
+    assert _modes_since(f.ended(), watched_s - 1.0) == {OFFBOARD_MODE}
     assert state["mode"] == "OFFBOARD"
     assert during["sender"] == "thread"
     assert during["active"] is True
@@ -236,7 +240,7 @@ async def test_a_3_s_sigstop_of_the_sender_with_setpoints_at_the_rate_limit(
                 await asyncio.sleep(0.01)
             return out
 
-        changes = _mode_changes(f)
+        changes = await f.mode_changes()
         scripted = asyncio.create_task(script())
         try:
             before = await rest_latencies_s(STOP_S)
@@ -256,8 +260,8 @@ async def test_a_3_s_sigstop_of_the_sender_with_setpoints_at_the_rate_limit(
         stats = (await api.client.get("/api/v1/vehicles/1/stream")).json()
         state = await api.state()
         ended_s = time.time()
-        assert _mode_changes(f) == changes, "the vehicle changed mode"
-    setpoints = [h for h in f.relay.since(watched_s - 0.5, SETPOINT_ID) if h.unix_s <= ended_s]
+        assert await f.mode_changes() == changes, "the vehicle changed mode"
+    setpoints = [h for h in f.ended().since(watched_s - 0.5, SETPOINT_ID) if h.unix_s <= ended_s]
     gap_s = _largest_gap_s(setpoints)
     p99_before, p99_during = _p99(before), _p99(during)
     print(f"SIGSTOP 3 s in OFFBOARD, setpoints at {SCRIPT_RATE_HZ:g}/s: largest setpoint gap at "
@@ -265,8 +269,8 @@ async def test_a_3_s_sigstop_of_the_sender_with_setpoints_at_the_rate_limit(
           f"{p99_during * 1000:.1f} ms during ({len(before)}, {len(during)} requests)")
     assert gap_s <= STOP_GAP_S
     assert p99_during <= 3 * p99_before
-    _check_sequence(f.relay, watched_s - 0.5)
-    assert _modes_since(f.relay, watched_s - 1.0) == {OFFBOARD_MODE}
+    _check_sequence(f.ended(), watched_s - 0.5)
+    assert _modes_since(f.ended(), watched_s - 1.0) == {OFFBOARD_MODE}
     assert state["mode"] == "OFFBOARD"
     assert "stopped answering" in stats["sender_fault"]
     assert stats["active"] is True
@@ -288,7 +292,7 @@ async def test_the_sender_killed_or_stopped_while_flying_sticks_in_posctl(
         try:
             await _fly_sticks_in_posctl(api, feeder)
             await asyncio.sleep(1.0)
-            changes = _mode_changes(f)
+            changes = await f.mode_changes()
             watched_s = time.time()
             pid = _sender_pid(supervisor)
             os.kill(pid, signal.SIGKILL if fault == "kill" else signal.SIGSTOP)
@@ -305,21 +309,21 @@ async def test_the_sender_killed_or_stopped_while_flying_sticks_in_posctl(
             after = (await api.client.get("/api/v1/vehicles/1/sticks")).json()
             state = await api.state()
             ended_s = time.time()
-            assert _mode_changes(f) == changes, "the vehicle changed mode"
+            assert await f.mode_changes() == changes, "the vehicle changed mode"
         finally:
             for task in feeder:
                 task.cancel()
                 with contextlib.suppress(asyncio.CancelledError):
                     await task
-    sticks = [h for h in f.relay.since(watched_s - 0.5, STICKS_ID) if h.unix_s <= ended_s]
+    sticks = [h for h in f.ended().since(watched_s - 0.5, STICKS_ID) if h.unix_s <= ended_s]
     gap_s = _largest_gap_s(sticks)
     rate_hz = (len(sticks) - 1) / (sticks[-1].unix_s - sticks[0].unix_s)
     print(f"{fault} of the sender in POSCTL: largest MANUAL_CONTROL gap at the vehicle "
           f"{gap_s * 1000:.1f} ms, {rate_hz:.1f} Hz over {len(sticks)} frames")
     assert gap_s <= bound_s
     assert 23.0 <= rate_hz <= 27.0
-    _check_sequence(f.relay, watched_s - 0.5)
-    assert _modes_since(f.relay, watched_s - 1.0) == {POSCTL_MODE}
+    _check_sequence(f.ended(), watched_s - 0.5)
+    assert _modes_since(f.ended(), watched_s - 1.0) == {POSCTL_MODE}
     assert state["mode"] == "POSCTL"
     assert during["stream"]["sender"] == "thread"
     assert ("SIGKILL" if fault == "kill" else "stopped answering") in \
