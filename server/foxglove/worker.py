@@ -54,6 +54,7 @@ class Worker:
         self.vehicles: list[tuple[int, foxglove.Channel, foxglove.Channel]] = []
         self.readers: frozenset[int] = frozenset()
         self.checked_s = 0.0
+        self.flushed_s = time.monotonic()
         self.failed = False
         # handle() and the flushing thread take turns with the writers
         self.lock = threading.Lock()
@@ -107,12 +108,23 @@ class Worker:
             self.readers = readers
             self.say({"readers": sorted(readers)})
 
+    def flush_when_due(self) -> None:
+        """Finishes the MCAP files' chunks when the last was finished MCAP_FLUSH_S ago; the
+        caller holds the lock."""
+        now_s = time.monotonic()
+        if now_s - self.flushed_s < MCAP_FLUSH_S:
+            return
+        self.flushed_s = now_s
+        for writer in self.writers:
+            writer.flush()
+
     def flush_periodically(self) -> None:
+        """For quiet times: while records come, serve() flushes between them, on time (a
+        thread waking to take the lock from a busy reader can wait out a whole backlog)."""
         while True:
-            time.sleep(MCAP_FLUSH_S)
+            time.sleep(MCAP_FLUSH_S / 5)
             with self.lock:
-                for writer in self.writers:
-                    writer.flush()
+                self.flush_when_due()
 
     def close(self) -> None:
         for writer in self.writers:
@@ -137,6 +149,7 @@ def serve(source: BinaryIO, worker: Worker) -> None:
         try:
             with worker.lock:
                 worker.handle(kind, link, argument, time_s, payload)
+                worker.flush_when_due()
         except Exception:  # one record it cannot show must not end the others
             if not worker.failed:
                 worker.failed = True
