@@ -144,6 +144,12 @@ def _largest_gap_s(heard: list[Heard]) -> float:
     return max(b - a for a, b in itertools.pairwise(times))
 
 
+def _gap_at(heard: list[Heard], fault_s: float) -> str:
+    """Where the largest gap lies, from the fault: for the failure's words."""
+    a, b = max(itertools.pairwise(h.unix_s for h in heard), key=lambda pair: pair[1] - pair[0])
+    return f"from {(a - fault_s) * 1000:+.0f} to {(b - fault_s) * 1000:+.0f} ms of the fault"
+
+
 def _check_sequence(relay: Report, since_s: float) -> None:
     """Every frame of the server reached the relay in sequence (no jump back, no gap)."""
     seqs = [h.seq for h in relay.heard if h.unix_s >= since_s and h.sysid == GCS_SYSID]
@@ -195,7 +201,7 @@ async def test_kill_9_of_the_sender_while_hovering_in_offboard(
     gap_s = _largest_gap_s(setpoints)
     print(f"kill -9 in OFFBOARD ({'signed' if signed else 'unsigned'}): largest setpoint gap "
           f"at the vehicle {gap_s * 1000:.1f} ms over {len(setpoints)} setpoints")
-    assert gap_s <= KILL_GAP_S
+    assert gap_s <= KILL_GAP_S, _gap_at(setpoints, watched_s)
     assert f.ended().signing_rejected == rejected, "frames the vehicle refused"
     _check_sequence(f.ended(), watched_s - 0.5)
     assert _modes_since(f.ended(), watched_s - 1.0) == {OFFBOARD_MODE}
@@ -267,7 +273,7 @@ async def test_a_3_s_sigstop_of_the_sender_with_setpoints_at_the_rate_limit(
     print(f"SIGSTOP 3 s in OFFBOARD, setpoints at {SCRIPT_RATE_HZ:g}/s: largest setpoint gap at "
           f"the vehicle {gap_s * 1000:.1f} ms; REST p99 {p99_before * 1000:.1f} ms before, "
           f"{p99_during * 1000:.1f} ms during ({len(before)}, {len(during)} requests)")
-    assert gap_s <= STOP_GAP_S
+    assert gap_s <= STOP_GAP_S, _gap_at(setpoints, watched_s)
     assert p99_during <= 3 * p99_before
     _check_sequence(f.ended(), watched_s - 0.5)
     assert _modes_since(f.ended(), watched_s - 1.0) == {OFFBOARD_MODE}
@@ -320,7 +326,7 @@ async def test_the_sender_killed_or_stopped_while_flying_sticks_in_posctl(
     rate_hz = (len(sticks) - 1) / (sticks[-1].unix_s - sticks[0].unix_s)
     print(f"{fault} of the sender in POSCTL: largest MANUAL_CONTROL gap at the vehicle "
           f"{gap_s * 1000:.1f} ms, {rate_hz:.1f} Hz over {len(sticks)} frames")
-    assert gap_s <= bound_s
+    assert gap_s <= bound_s, _gap_at(sticks, watched_s)
     assert 23.0 <= rate_hz <= 27.0
     _check_sequence(f.ended(), watched_s - 0.5)
     assert _modes_since(f.ended(), watched_s - 1.0) == {POSCTL_MODE}
