@@ -8,10 +8,13 @@ export function renderSigning(state) {
   } else if (s.vehicles_signed) {
     setText("signing", "SIGNED", "ok");
   } else {
-    // our key is set but the vehicle's frames do not verify: wrong key, or none on it
-    setText("signing", "SIGNING: NO ANSWER", "bad");
+    // our key is set but the vehicle's frames do not verify: wrong key, or none on it (a
+    // word that fits the badge whole at every width: test_layout.py)
+    setText("signing", "SIGN FAIL", "bad");
   }
   const el = document.getElementById("signing");
-  const title = `MAVLink 2 signing · rejected: ${s?.rejected_bad_signature} bad signature, ${s?.rejected_replay} replayed, ${s?.rejected_unsigned} unsigned`;
+  const failing = s?.enabled && !s.vehicles_signed
+    ? " · our key is set but the vehicle's frames do not verify: it has another key, or none" : "";
+  const title = `MAVLink 2 signing${failing} · rejected: ${s?.rejected_bad_signature} bad signature, ${s?.rejected_replay} replayed, ${s?.rejected_unsigned} unsigned`;
   if (el && s && el.title !== title) el.title = title;
 }

@@ -76,7 +76,7 @@ window.WebSocket = class extends PageSocket {
 WORST_LINK_LOSS = {(100.0, 100.0): "↓100% ↑100%", (None, None): "↓? ↑?"}
 # The widest text the page writes in each slot of the top bar, in every state and vehicle list
 # the page's telemetry socket brings (the page draws them itself): a link lost for 59 min
-# with 100 % lost each way, the longest mode name of modes.js flown and wanted, ON GROUND,
+# with 100 % lost each way, signing that fails, the longest mode name of modes.js flown and wanted, ON GROUND,
 # Ready to fly, three-digit vehicle ids, a VTOL's transition; and, once window.__offline is
 # set, the socket refused, so the page says it is reconnecting (its sockets are in
 # window.__telemetry).
@@ -106,6 +106,8 @@ window.WebSocket = class extends PageSocket {
         for (const kind of Object.keys(ages)) ages[kind] = 3540;
         Object.assign(message.link_quality || {}, { loss_in_pct: 100, loss_out_pct: 100 });
         Object.assign(message.arming_checks || {}, { verdict: "ready", ready: true });
+        // signing on, the vehicle's frames failing it
+        Object.assign((message.link || {}).signing || {}, { enabled: true, vehicles_signed: false });
       } else if (message.type === "vehicles" && message.vehicles.length) {
         const first = message.vehicles[0];
         message.vehicles.push(
@@ -123,6 +125,7 @@ WORST_DRAWN = """(cockpit) => {
   return text("link-health") === "LOST · 59 min" && text("link-loss") === "↓100% ↑100%"
     && text("mode") === "FOLLOW_TARGET" && text("user-mode") === "FOLLOW_TARGET"
     && text("landed") === "ON GROUND" && text("ready-to-fly") === "Ready to fly"
+    && text("signing") === "SIGN FAIL"
     && document.querySelector("#vehicle-select option[value='255']") !== null
     && (cockpit !== "vtol" || text("vtol-state") === "→ FW");
 }"""
@@ -251,7 +254,7 @@ def test_the_top_bar_holds_its_widest_texts_at_every_width(
         except Exception as e:
             shown = page.evaluate(
                 "['link-health', 'link-loss', 'mode', 'user-mode', 'landed', 'ready-to-fly',"
-                " 'vehicle-select', 'vtol-state']"
+                " 'vehicle-select', 'vtol-state', 'signing']"
                 ".map((id) => document.getElementById(id).textContent)"
             )
             raise AssertionError(f"the widest texts were not drawn: {shown}") from e
