@@ -303,7 +303,8 @@ export function renderHolder(lease = page.state?.lease) {
   $("force-control").classList.toggle("hidden", !otherHolds || page.readOnly);
   $("force-control").disabled = !page.connected;
   setAttr($("force-control"), "title", page.connected
-    ? "take control at once, without asking the holder" : "the server is not connected");
+    ? "take control at once, without asking the holder (a second click confirms)"
+    : "the server is not connected");
   $("release").classList.toggle("hidden", !mine);
 }
 

@@ -101,7 +101,7 @@ def test_a_tab_hears_that_its_control_was_taken_after_the_taker_confirmed(
         take_control(pilot)
         taker.wait_for_selector("#force-control:not(.hidden)", timeout=PAGE_TIMEOUT_MS)
         taker.click("#force-control")
-        assert taker.text_content("#force-control") == "Confirm: force"
+        assert taker.text_content("#force-control") == "Sure?"
         assert _events(pilot, "control") == []  # one click takes nothing
 
         taker.click("#force-control")

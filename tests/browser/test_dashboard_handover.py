@@ -147,12 +147,35 @@ def test_a_denied_request_says_so_in_the_asking_tab(
     assert not _holder(second_page).startswith("you")
 
 
+CONFIRM_FORCE = "Sure?"
+# The control slot's buttons whose label is cut, or that leave the slot or the window.
+CONTROL_SLOT_CUT = """() => {
+  const slot = document.getElementById('control-slot').getBoundingClientRect();
+  const cut = [];
+  for (const el of document.querySelectorAll('#control-slot button:not(.hidden)')) {
+    const r = el.getBoundingClientRect();
+    if (el.scrollWidth > el.clientWidth + 1) cut.push(`${el.id} label cut: ${el.textContent}`);
+    if (r.left < slot.left - 1 || r.right > slot.right + 1
+        || r.right > document.documentElement.clientWidth + 1) {
+      cut.push(`${el.id} "${el.textContent}" at ${Math.round(r.left)}..${Math.round(r.right)} px, `
+        + `its slot ${Math.round(slot.left)}..${Math.round(slot.right)} px`);
+    }
+  }
+  return cut;
+}"""
+
+
 def test_force_takes_control_only_after_a_confirmation(
     page: Any, second_page: Any, api: httpx.Client
 ) -> None:
     first_name = _first_tab_in_control(page, second_page, api)
     second_page.click("#force-control")
-    assert second_page.text_content("#force-control") == "Confirm: force"
+    assert second_page.text_content("#force-control") == CONFIRM_FORCE
+    # the question whole in the top bar, at the narrowest width and the others
+    for width, height in [(1024, 768), (1280, 800), (1920, 1080)]:
+        second_page.set_viewport_size({"width": width, "height": height})
+        assert second_page.evaluate(CONTROL_SLOT_CUT) == [], f"{width}x{height}"
+    second_page.set_viewport_size({"width": 1280, "height": 800})
     holds_for_blocking(
         "the first tab still in control",
         lambda: api.get("/vehicles/1/control").json()["holder"] == first_name,

@@ -76,10 +76,10 @@ window.WebSocket = class extends PageSocket {
 WORST_LINK_LOSS = {(100.0, 100.0): "↓100% ↑100%", (None, None): "↓? ↑?"}
 # The widest text the page writes in each slot of the top bar, in every state and vehicle list
 # the page's telemetry socket brings (the page draws them itself): a link lost for 59 min
-# with 100 % lost each way, signing that fails, the longest mode name of modes.js flown and wanted, ON GROUND,
-# Ready to fly, three-digit vehicle ids, a VTOL's transition; and, once window.__offline is
-# set, the socket refused, so the page says it is reconnecting (its sockets are in
-# window.__telemetry).
+# with 100 % lost each way, signing that fails, the longest mode name of modes.js flown and
+# wanted, ON GROUND, Ready to fly, three-digit vehicle ids, a VTOL's transition; and, once
+# window.__offline is set, the socket refused, so the page says it is reconnecting (its
+# sockets are in window.__telemetry).
 WORST_TEXTS = """
 window.__offline = false;
 window.__telemetry = [];
@@ -107,7 +107,8 @@ window.WebSocket = class extends PageSocket {
         Object.assign(message.link_quality || {}, { loss_in_pct: 100, loss_out_pct: 100 });
         Object.assign(message.arming_checks || {}, { verdict: "ready", ready: true });
         // signing on, the vehicle's frames failing it
-        Object.assign((message.link || {}).signing || {}, { enabled: true, vehicles_signed: false });
+        const signing = (message.link || {}).signing || {};
+        Object.assign(signing, { enabled: true, vehicles_signed: false });
       } else if (message.type === "vehicles" && message.vehicles.length) {
         const first = message.vehicles[0];
         message.vehicles.push(
