@@ -25,6 +25,7 @@ from server.link.codec.tlog import iter_tlog
 from server.link.link import Link
 from server.link.stream.stream_thread import Deadlines, SenderThread
 from server.link.stream.streamer import SetpointStreamer
+from tests.link.realtime import may_run_real_time
 from tests.waiting import wait_for
 
 MAV = mavlink.MAVLink(None)
@@ -297,21 +298,6 @@ def test_a_stream_nobody_stopped_ends_when_its_loop_closes() -> None:
 
 
 def test_the_sender_thread_runs_real_time_when_the_os_allows_it() -> None:
-    def may_run_real_time() -> bool:
-        allowed: list[bool] = []
-
-        def probe() -> None:
-            try:
-                os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))
-                allowed.append(True)
-            except OSError:
-                allowed.append(False)
-
-        thread = threading.Thread(target=probe)
-        thread.start()
-        thread.join()
-        return allowed[0]
-
     seen: list[int] = []
     started: list[int] = []
 
