@@ -1,0 +1,40 @@
+"""What the sender-fault tests check at the vehicle: the largest gap between two frames of a
+kind, the server's sequence, and the modes the vehicle's HEARTBEATs said (from what the
+relay in front of it heard: tests/faults/vehicle_apart.py)."""
+
+from __future__ import annotations
+
+import itertools
+
+from pymavlink.dialects.v20 import development as mavlink
+
+from tests.faults.sender_relay import Heard
+from tests.faults.vehicle_apart import Report
+
+KILL_GAP_S = 0.150
+STOP_GAP_S = 0.250  # the stuck watch (150 ms without a beat), then the kill and the handover
+OFFBOARD_MODE = 6 << 16  # PX4's custom_mode: main mode in bits 16..23
+POSCTL_MODE = 3 << 16
+SETPOINT_ID = mavlink.MAVLINK_MSG_ID_SET_POSITION_TARGET_LOCAL_NED
+STICKS_ID = mavlink.MAVLINK_MSG_ID_MANUAL_CONTROL
+GCS_SYSID = 255
+
+
+def largest_gap(heard: list[Heard], fault_s: float) -> tuple[float, str]:
+    """The largest gap between two frames (s), and where it lies from the fault."""
+    a, b = max(itertools.pairwise(h.unix_s for h in heard), key=lambda pair: pair[1] - pair[0])
+    return b - a, f"from {(a - fault_s) * 1000:+.0f} to {(b - fault_s) * 1000:+.0f} ms of the fault"
+
+
+def check_sequence(report: Report, since_s: float) -> None:
+    """Every frame of the server reached the relay in sequence (no jump back, no gap)."""
+    seqs = [h.seq for h in report.heard if h.unix_s >= since_s and h.sysid == GCS_SYSID]
+    jumps = [(a, b) for a, b in itertools.pairwise(seqs) if (b - a) % 256 != 1]
+    assert jumps == [], f"the sequence jumps at the vehicle: {jumps[:5]}"
+
+
+def modes_since(report: Report, since_s: float) -> set[int]:
+    """The modes of the vehicle's HEARTBEATs (1 Hz) since ``since_s``."""
+    modes = [mode for t, mode in report.modes if t >= since_s]
+    assert len(modes) >= 2, "too few HEARTBEATs to tell"
+    return set(modes)

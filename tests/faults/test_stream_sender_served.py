@@ -1,0 +1,273 @@
+"""The setpoint sender process stopped (SIGSTOP, 3 s) mid-flight, with `skyhelm serve` in a
+process of its own, as it runs in the field.
+
+While the sender process is stopped, the server's own sender thread carries the streams; it
+needs the server's interpreter lock. In a test that hosts the app in its own process, that
+lock is shared with the test's HTTP client, its setpoint script and its latency probe (all
+Python, where a real client is another program), and on a busy machine the thread waited
+behind them: what the test measured then was its own weight, not the server's. So here the
+server is `skyhelm serve`, the simulated vehicle and the relay in front of it another
+process (tests/faults/vehicle_apart.py), and the test talks HTTP like any script.
+
+The vehicle never leaves its mode (hovering in OFFBOARD, flying sticks in POSCTL); the
+largest gap between two setpoints (MANUAL_CONTROL) as the relay receives them (kernel
+receive times) stays under 250 ms: the watchdog's 150 ms without a heartbeat, then the kill
+and the handover; the server's sequence reaches it contiguous; the API says the fault, the
+thread, then a restarted process; REST answers as fast as before while it is stopped, also
+with a script changing the setpoint at the rate limit. (The kill -9 cases, and what the
+server's own objects say, are in test_stream_sender.py.)"""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+import math
+import os
+import signal
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import httpx
+
+from tests.faults.sender_checks import (
+    OFFBOARD_MODE,
+    POSCTL_MODE,
+    SETPOINT_ID,
+    STICKS_ID,
+    STOP_GAP_S,
+    check_sequence,
+    largest_gap,
+    modes_since,
+)
+from tests.faults.vehicle_apart import VehicleApart
+from tests.serve_process import Served, skyhelm_serve
+from tests.waiting import wait_for_blocking
+
+STOP_S = 3.0
+# the setpoint script's rate: the REST control rate limit (control_rate_per_s)
+SCRIPT_RATE_HZ = 100.0
+Json = dict[str, Any]
+
+
+class Pilot:
+    """A script's HTTP session with the served vehicle, holding its lease."""
+
+    def __init__(self, served: Served) -> None:
+        self.served = served
+        self.vehicle_url = f"{served.api}/vehicles/1"  # the state (no trailing slash)
+        self.http = httpx.Client(base_url=f"{served.api}/vehicles/1/", timeout=30.0,
+                                 headers={"Authorization": f"Bearer {served.pilot_token}"})
+        self.lease: dict[str, str] = {}
+
+    def call(self, method: str, path: str, body: Json | None = None) -> httpx.Response:
+        return self.http.request(method, path, json=body, headers=self.lease)
+
+    def ok(self, method: str, path: str, body: Json | None = None) -> Json:
+        response = self.call(method, path, body)
+        assert response.status_code == 200, f"{method} {path}: {response.text}"
+        answer: Json = response.json() if response.content else {}
+        return answer
+
+    def state(self) -> Json:
+        return self.ok("GET", self.vehicle_url)
+
+    def wait(self, what: str, check: Callable[[Json], object], timeout_s: float) -> Json:
+        def renewed() -> Json:
+            self.call("PUT", "control")
+            state = self.state()
+            return state if check(state) else {}
+
+        found: Json = wait_for_blocking(what, renewed, timeout_s)
+        return found
+
+    def take_control(self) -> None:
+        taken = self.ok("POST", "control", {"ttl_s": 60.0})
+        self.lease = {"X-Lease-Id": taken["lease_id"]}
+
+    def sender_pid(self) -> int:
+        health = httpx.get(f"{self.served.api}/health", headers=self.http.headers).json()
+        sender = next(p for p in health["processes"] if p["name"] == "setpoint sender")
+        assert sender["running"] is True, sender
+        pid: int = sender["pid"]
+        return pid
+
+
+@contextlib.contextmanager
+def served_flight(tmp_path: Path) -> Iterator[tuple[Pilot, VehicleApart]]:
+    """The sim behind its relay, `skyhelm serve` in front, the lease taken."""
+    with (
+        VehicleApart() as vehicle,
+        skyhelm_serve(tmp_path, "--connect", f"udpout:127.0.0.1:{vehicle.relay_port}",
+                      "--no-scene") as served,
+    ):
+        pilot = Pilot(served)
+        try:
+            wait_for_blocking("the vehicle",
+                              lambda: pilot.http.get(pilot.vehicle_url).status_code == 200, 30.0)
+            pilot.wait("position and home",
+                       lambda s: s["global"] is not None and s["home"] is not None, 30.0)
+            pilot.take_control()
+            yield pilot, vehicle
+        finally:
+            pilot.http.close()
+
+
+
+
+
+
+
+
+def _p99(samples: list[float]) -> float:
+    ordered = sorted(samples)
+    return ordered[max(1, math.ceil(0.99 * len(ordered))) - 1]
+
+
+def _rest_latencies_s(pilot: Pilot, seconds: float) -> list[float]:
+    out = []
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        began = time.perf_counter()
+        assert pilot.http.get(pilot.vehicle_url).status_code == 200
+        out.append(time.perf_counter() - began)
+        time.sleep(0.01)
+    return out
+
+
+def _stop_for(pid: int, seconds: float) -> None:
+    os.kill(pid, signal.SIGSTOP)
+    try:
+        time.sleep(seconds)
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGCONT)
+
+
+def test_a_3_s_sigstop_of_the_sender_with_setpoints_at_the_rate_limit(tmp_path: Path) -> None:
+    with served_flight(tmp_path) as (pilot, vehicle):
+        pilot.ok("POST", "arm")
+        pilot.ok("POST", "takeoff", {"altitude_m": 3.0})
+        here = pilot.wait("climb to 2.5 m", lambda s: s["position_ned"]["down_m"] < -2.5,
+                          30.0)["position_ned"]
+        pilot.ok("POST", "offboard/start", {"setpoint": {
+            "type": "position_ned", "north_m": here["north_m"], "east_m": here["east_m"],
+            "down_m": -3.0}})
+        pilot.wait("OFFBOARD", lambda s: s["mode"] == "OFFBOARD", 10.0)
+        done = threading.Event()
+        refused: list[str] = []
+
+        def script() -> None:  # a new setpoint each time, at the rate limit
+            with httpx.Client(base_url=str(pilot.http.base_url), timeout=30.0,
+                              headers={**pilot.http.headers, **pilot.lease}) as http:
+                for i in itertools.count():
+                    if done.is_set():
+                        return
+                    response = http.put("setpoint", json={
+                        "type": "position_ned", "north_m": here["north_m"] + 0.01 * (i % 10),
+                        "east_m": here["east_m"], "down_m": -3.0})
+                    if response.status_code != 200:
+                        refused.append(response.text)
+                    time.sleep(1.0 / SCRIPT_RATE_HZ)
+
+        changes = vehicle.report().mode_changes
+        scripted = threading.Thread(target=script, daemon=True)
+        scripted.start()
+        try:
+            before = _rest_latencies_s(pilot, STOP_S)
+            pid = pilot.sender_pid()
+            fault_s = time.time()
+            stopper = threading.Thread(target=_stop_for, args=(pid, STOP_S))
+            stopper.start()
+            during = _rest_latencies_s(pilot, STOP_S)
+            stopper.join()
+        finally:
+            done.set()
+            scripted.join(10.0)
+        pilot.wait("a restarted sender process streams",
+                   lambda s: s["stream"]["sender"] == "process"
+                   and s["stream"]["sender_restarts"] >= 1, 10.0)
+        time.sleep(1.0)
+        stats = pilot.ok("GET", "stream")
+        state = pilot.state()
+        ended_s = time.time()
+        report = vehicle.report()
+    setpoints = [h for h in report.since(fault_s - 0.5, SETPOINT_ID) if h.unix_s <= ended_s]
+    gap_s, where = largest_gap(setpoints, fault_s)
+    p99_before, p99_during = _p99(before), _p99(during)
+    print(f"served, SIGSTOP 3 s in OFFBOARD, setpoints at {SCRIPT_RATE_HZ:g}/s: largest setpoint "
+          f"gap at the vehicle {gap_s * 1000:.1f} ms ({where}); REST p99 "
+          f"{p99_before * 1000:.1f} ms before, {p99_during * 1000:.1f} ms during "
+          f"({len(before)}, {len(during)} requests)")
+    assert refused == []
+    assert report.mode_changes == changes, "the vehicle changed mode"
+    assert gap_s <= STOP_GAP_S, where
+    assert p99_during <= 3 * p99_before
+    check_sequence(report, fault_s - 0.5)
+    assert modes_since(report, fault_s - 1.0) == {OFFBOARD_MODE}
+    assert state["mode"] == "OFFBOARD"
+    assert "stopped answering" in stats["sender_fault"]
+    assert stats["active"] is True
+    assert stats["sender"] == "process"
+    assert stats["sender_restarts"] == 1, stats["sender_fault"]
+
+
+def test_the_sender_stopped_while_flying_sticks_in_posctl(tmp_path: Path) -> None:
+    with served_flight(tmp_path) as (pilot, vehicle):
+        pilot.ok("POST", "arm")
+        pilot.ok("POST", "takeoff", {"altitude_m": 3.0})
+        pilot.wait("takeoff done", lambda s: s["mode"] == "HOLD", 30.0)
+        done = threading.Event()
+
+        def feed() -> None:  # the pilot's sticks at 10 Hz, a hover
+            with httpx.Client(base_url=str(pilot.http.base_url), timeout=30.0,
+                              headers={**pilot.http.headers, **pilot.lease}) as http:
+                while not done.wait(0.1):
+                    http.put("sticks", json={"throttle": 0.5})
+
+        feeder = threading.Thread(target=feed, daemon=True)
+        feeder.start()
+        try:
+            # PX4 takes POSCTL only with manual control coming in
+            wait_for_blocking("the sticks streaming",
+                              lambda: pilot.ok("GET", "sticks")["stream"]["sent"] >= 10, 10.0)
+            pilot.ok("POST", "mode", {"mode": "POSCTL"})
+            pilot.wait("POSCTL", lambda s: s["mode"] == "POSCTL", 10.0)
+            time.sleep(1.0)
+            changes = vehicle.report().mode_changes
+            pid = pilot.sender_pid()
+            fault_s = time.time()
+            stopper = threading.Thread(target=_stop_for, args=(pid, STOP_S))
+            stopper.start()
+            during = wait_for_blocking(
+                "the thread takes over",
+                lambda: (s := pilot.ok("GET", "sticks"))["stream"]["sender"] == "thread" and s,
+                2.0, 0.02)
+            stopper.join()
+            wait_for_blocking(
+                "a restarted process takes over",
+                lambda: pilot.ok("GET", "sticks")["stream"]["sender"] == "process", 10.0)
+            time.sleep(1.0)
+            after = pilot.ok("GET", "sticks")
+            state = pilot.state()
+            ended_s = time.time()
+            report = vehicle.report()
+        finally:
+            done.set()
+            feeder.join(10.0)
+    sticks = [h for h in report.since(fault_s - 0.5, STICKS_ID) if h.unix_s <= ended_s]
+    gap_s, where = largest_gap(sticks, fault_s)
+    rate_hz = (len(sticks) - 1) / (sticks[-1].unix_s - sticks[0].unix_s)
+    print(f"served, SIGSTOP of the sender in POSCTL: largest MANUAL_CONTROL gap at the vehicle "
+          f"{gap_s * 1000:.1f} ms ({where}), {rate_hz:.1f} Hz over {len(sticks)} frames")
+    assert report.mode_changes == changes, "the vehicle changed mode"
+    assert gap_s <= STOP_GAP_S, where
+    assert 23.0 <= rate_hz <= 27.0
+    check_sequence(report, fault_s - 0.5)
+    assert modes_since(report, fault_s - 1.0) == {POSCTL_MODE}
+    assert state["mode"] == "POSCTL"
+    assert "stopped answering" in during["stream"]["sender_fault"]
+    assert after["stream"]["sender"] == "process"
+    assert after["stream"]["sender_restarts"] == 1, after["stream"]["sender_fault"]
