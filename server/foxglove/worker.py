@@ -54,7 +54,8 @@ class Worker:
         self.vehicles: list[tuple[int, foxglove.Channel, foxglove.Channel]] = []
         self.readers: frozenset[int] = frozenset()
         self.checked_s = 0.0
-        self.flushed_s = time.monotonic()
+        self.clock = time.monotonic  # the flushes' clock
+        self.flushed_s = self.clock()
         self.failed = False
         # handle() and the flushing thread take turns with the writers
         self.lock = threading.Lock()
@@ -111,7 +112,7 @@ class Worker:
     def flush_when_due(self) -> None:
         """Finishes the MCAP files' chunks when the last was finished MCAP_FLUSH_S ago; the
         caller holds the lock."""
-        now_s = time.monotonic()
+        now_s = self.clock()
         if now_s - self.flushed_s < MCAP_FLUSH_S:
             return
         self.flushed_s = now_s
