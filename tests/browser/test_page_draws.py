@@ -7,9 +7,11 @@ draws nothing and catches up at once when shown again."""
 from __future__ import annotations
 
 import time
+from collections.abc import Iterator
 from typing import Any
 
 import httpx
+import pytest
 
 from .flows import settle_vehicle
 from .harness import Serve
@@ -80,84 +82,79 @@ def _open(browser: Any, serve: Serve) -> Any:
     return page
 
 
+@pytest.fixture
+def landed_page(api: httpx.Client, serve: Serve, browser: Any) -> Iterator[Any]:
+    """A page of its own on the landed vehicle (whatever an earlier test left), closed after."""
+    settle_vehicle(api, flying=False)
+    page = _open(browser, serve)
+    try:
+        yield page
+    finally:
+        page.close()
+
+
 def _arrivals(page: Any) -> int:
     count: int = page.evaluate("window.__arrivals.length")
     return count
 
 
 def test_a_landed_vehicle_whose_state_does_not_change_writes_nothing_to_the_page(
-    api: httpx.Client, serve: Serve, browser: Any
+    landed_page: Any,
 ) -> None:
-    settle_vehicle(api, flying=False)
-    page = _open(browser, serve)
-    try:
-        # the first states drawn, the ages settled
-        page.wait_for_function("window.skyhelm.draws.state >= 10", timeout=PAGE_TIMEOUT_MS)
-        page.evaluate(WATCH_MUTATIONS)
-        came = _arrivals(page)
-        time.sleep(QUIET_WINDOW_S)  # the window watched, not a wait for a condition
-        mutations: list[str] = page.evaluate("window.__mutations")
-        assert _arrivals(page) - came >= QUIET_WINDOW_STATES, "states kept coming over the window"
-        # the link's measured frame loss is the one thing that may change on its own (a
-        # frame lost on a busy machine): only then may the LINK box change
-        qualities = set(page.evaluate(f"window.__linkQualities.slice({came - 1})"))
-        if len(qualities) > 1:
-            mutations = [m for m in mutations if not m.startswith(("link-loss ", "link-slot "))]
-        assert mutations == [], mutations
-    finally:
-        page.close()
+    page = landed_page
+    # the first states drawn, the ages settled
+    page.wait_for_function("window.skyhelm.draws.state >= 10", timeout=PAGE_TIMEOUT_MS)
+    page.evaluate(WATCH_MUTATIONS)
+    came = _arrivals(page)
+    time.sleep(QUIET_WINDOW_S)  # the window watched, not a wait for a condition
+    mutations: list[str] = page.evaluate("window.__mutations")
+    assert _arrivals(page) - came >= QUIET_WINDOW_STATES, "states kept coming over the window"
+    # the link's measured frame loss is the one thing that may change on its own (a
+    # frame lost on a busy machine): only then may the LINK box change
+    qualities = set(page.evaluate(f"window.__linkQualities.slice({came - 1})"))
+    if len(qualities) > 1:
+        mutations = [m for m in mutations if not m.startswith(("link-loss ", "link-slot "))]
+    assert mutations == [], mutations
 
 
-def test_every_state_is_drawn_within_100_ms_of_its_arrival(
-    api: httpx.Client, serve: Serve, browser: Any
-) -> None:
-    settle_vehicle(api, flying=False)
-    page = _open(browser, serve)
-    try:
-        page.wait_for_function("window.__arrivals.length >= 20", timeout=PAGE_TIMEOUT_MS)
-        arrivals: list[float] = page.evaluate("window.__arrivals.slice(-18, -1)")
-        drawn: list[float] = page.evaluate("window.skyhelm.drawTimes.state")
-        late = []
-        for arrived in arrivals:
-            after = [t for t in drawn if t >= arrived]
-            assert after, f"the state that came at {arrived:.0f} ms was never drawn"
-            if after[0] - arrived > DRAWN_WITHIN_MS:
-                late.append(round(after[0] - arrived))
-        assert late == [], f"drawn later than {DRAWN_WITHIN_MS} ms after arrival: {late}"
-    finally:
-        page.close()
+def test_every_state_is_drawn_within_100_ms_of_its_arrival(landed_page: Any) -> None:
+    page = landed_page
+    page.wait_for_function("window.__arrivals.length >= 20", timeout=PAGE_TIMEOUT_MS)
+    arrivals: list[float] = page.evaluate("window.__arrivals.slice(-18, -1)")
+    drawn: list[float] = page.evaluate("window.skyhelm.drawTimes.state")
+    late = []
+    for arrived in arrivals:
+        after = [t for t in drawn if t >= arrived]
+        assert after, f"the state that came at {arrived:.0f} ms was never drawn"
+        if after[0] - arrived > DRAWN_WITHIN_MS:
+            late.append(round(after[0] - arrived))
+    assert late == [], f"drawn later than {DRAWN_WITHIN_MS} ms after arrival: {late}"
 
 
-def test_a_hidden_page_draws_nothing_and_catches_up_at_once_when_shown(
-    api: httpx.Client, serve: Serve, browser: Any
-) -> None:
-    settle_vehicle(api, flying=False)
-    page = _open(browser, serve)
-    try:
-        page.wait_for_function("window.skyhelm.draws.state >= 5", timeout=PAGE_TIMEOUT_MS)
-        page.evaluate(SET_VISIBILITY, "hidden")
-        page.evaluate(WATCH_MUTATIONS)
-        draws: dict[str, int] = page.evaluate("({...window.skyhelm.draws})")
-        came = _arrivals(page)
-        time.sleep(QUIET_WINDOW_S)  # the window watched while hidden
-        # a hidden page asks for a state a second (and both sockets speak at the switch)
-        assert 1 <= _arrivals(page) - came <= QUIET_WINDOW_S * HIDDEN_RATE_HZ + 2
-        assert page.evaluate("({...window.skyhelm.draws})") == draws
-        assert page.evaluate("window.__mutations") == []
-        # shown again: the newest state is drawn at once, before the next one comes
-        shown_at: float = page.evaluate(
-            f"() => {{ ({SET_VISIBILITY})('visible'); return performance.now(); }}"
-        )
-        page.wait_for_function(
-            f"window.skyhelm.draws.state > {draws['state']}", timeout=PAGE_TIMEOUT_MS
-        )
-        first = min(t for t in page.evaluate("window.skyhelm.drawTimes.state") if t >= shown_at)
-        assert first - shown_at <= DRAWN_WITHIN_MS
-        # and states come at the visible page's rate again (on change, twice a second at least)
-        came = _arrivals(page)
-        page.wait_for_function(f"window.__arrivals.length >= {came + 8}", timeout=PAGE_TIMEOUT_MS)
-    finally:
-        page.close()
+def test_a_hidden_page_draws_nothing_and_catches_up_at_once_when_shown(landed_page: Any) -> None:
+    page = landed_page
+    page.wait_for_function("window.skyhelm.draws.state >= 5", timeout=PAGE_TIMEOUT_MS)
+    page.evaluate(SET_VISIBILITY, "hidden")
+    page.evaluate(WATCH_MUTATIONS)
+    draws: dict[str, int] = page.evaluate("({...window.skyhelm.draws})")
+    came = _arrivals(page)
+    time.sleep(QUIET_WINDOW_S)  # the window watched while hidden
+    # a hidden page asks for a state a second (and both sockets speak at the switch)
+    assert 1 <= _arrivals(page) - came <= QUIET_WINDOW_S * HIDDEN_RATE_HZ + 2
+    assert page.evaluate("({...window.skyhelm.draws})") == draws
+    assert page.evaluate("window.__mutations") == []
+    # shown again: the newest state is drawn at once, before the next one comes
+    shown_at: float = page.evaluate(
+        f"() => {{ ({SET_VISIBILITY})('visible'); return performance.now(); }}"
+    )
+    page.wait_for_function(
+        f"window.skyhelm.draws.state > {draws['state']}", timeout=PAGE_TIMEOUT_MS
+    )
+    first = min(t for t in page.evaluate("window.skyhelm.drawTimes.state") if t >= shown_at)
+    assert first - shown_at <= DRAWN_WITHIN_MS
+    # and states come at the visible page's rate again (on change, twice a second at least)
+    came = _arrivals(page)
+    page.wait_for_function(f"window.__arrivals.length >= {came + 8}", timeout=PAGE_TIMEOUT_MS)
 
 
 # The setpoint stream's running counters (web/render.js): at most twice a second while on time.
@@ -214,26 +211,22 @@ def test_the_streams_running_counters_are_drawn_at_their_own_pace_while_it_is_on
 
 
 def test_the_map_unticked_draws_nothing_and_is_drawn_at_once_when_ticked_again(
-    api: httpx.Client, serve: Serve, browser: Any
+    landed_page: Any,
 ) -> None:
-    settle_vehicle(api, flying=False)
-    page = _open(browser, serve)
-    try:
-        page.wait_for_function("window.skyhelm.draws.map >= 2", timeout=PAGE_TIMEOUT_MS)
-        page.uncheck("#map-enable")
-        page.wait_for_function("getComputedStyle(document.getElementById('map')).display"
-                               " === 'none'", timeout=PAGE_TIMEOUT_MS)
-        came = _arrivals(page) + 1
-        page.wait_for_function(f"window.__arrivals.length >= {came}", timeout=PAGE_TIMEOUT_MS)
-        drawn = page.evaluate("window.skyhelm.draws.map")  # the draw of a state on its way
-        came = _arrivals(page)
-        page.wait_for_function(f"window.__arrivals.length >= {came + 3}",
-                               timeout=PAGE_TIMEOUT_MS)
-        assert page.evaluate("window.skyhelm.draws.map") == drawn, "drawn while unticked"
-        shown_at: float = page.evaluate(
-            "() => { document.getElementById('map-enable').click(); return performance.now(); }")
-        page.wait_for_function(f"window.skyhelm.draws.map > {drawn}", timeout=PAGE_TIMEOUT_MS)
-        first = min(t for t in page.evaluate("window.skyhelm.drawTimes.map") if t >= shown_at)
-        assert first - shown_at <= DRAWN_WITHIN_MS
-    finally:
-        page.close()
+    page = landed_page
+    page.wait_for_function("window.skyhelm.draws.map >= 2", timeout=PAGE_TIMEOUT_MS)
+    page.uncheck("#map-enable")
+    page.wait_for_function("getComputedStyle(document.getElementById('map')).display"
+                           " === 'none'", timeout=PAGE_TIMEOUT_MS)
+    came = _arrivals(page) + 1
+    page.wait_for_function(f"window.__arrivals.length >= {came}", timeout=PAGE_TIMEOUT_MS)
+    drawn = page.evaluate("window.skyhelm.draws.map")  # the draw of a state on its way
+    came = _arrivals(page)
+    page.wait_for_function(f"window.__arrivals.length >= {came + 3}",
+                           timeout=PAGE_TIMEOUT_MS)
+    assert page.evaluate("window.skyhelm.draws.map") == drawn, "drawn while unticked"
+    shown_at: float = page.evaluate(
+        "() => { document.getElementById('map-enable').click(); return performance.now(); }")
+    page.wait_for_function(f"window.skyhelm.draws.map > {drawn}", timeout=PAGE_TIMEOUT_MS)
+    first = min(t for t in page.evaluate("window.skyhelm.drawTimes.map") if t >= shown_at)
+    assert first - shown_at <= DRAWN_WITHIN_MS
