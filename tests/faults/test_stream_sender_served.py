@@ -43,7 +43,8 @@ from tests.faults.sender_checks import (
     modes_since,
 )
 from tests.faults.vehicle_apart import VehicleApart
-from tests.serve_process import Served, skyhelm_serve
+from tests.rest_flight import RestFlight
+from tests.serve_process import skyhelm_serve
 from tests.waiting import wait_for_blocking
 
 STOP_S = 3.0
@@ -52,47 +53,31 @@ SCRIPT_RATE_HZ = 100.0
 Json = dict[str, Any]
 
 
-class Pilot:
-    """A script's HTTP session with the served vehicle, holding its lease."""
-
-    def __init__(self, served: Served) -> None:
-        self.served = served
-        self.vehicle_url = f"{served.api}/vehicles/1"  # the state (no trailing slash)
-        self.http = httpx.Client(base_url=f"{served.api}/vehicles/1/", timeout=30.0,
-                                 headers={"Authorization": f"Bearer {served.pilot_token}"})
-        self.lease: dict[str, str] = {}
-
-    def call(self, method: str, path: str, body: Json | None = None) -> httpx.Response:
-        return self.http.request(method, path, json=body, headers=self.lease)
+class Pilot(RestFlight):
+    """A script's REST session (tests/rest_flight.py) that renews its lease while it waits."""
 
     def ok(self, method: str, path: str, body: Json | None = None) -> Json:
-        response = self.call(method, path, body)
-        assert response.status_code == 200, f"{method} {path}: {response.text}"
-        answer: Json = response.json() if response.content else {}
+        answer: Json = self.expect(self.call(method, path, body), 200, f"{method} {path}")
         return answer
 
-    def state(self) -> Json:
-        return self.ok("GET", self.vehicle_url)
-
     def wait(self, what: str, check: Callable[[Json], object], timeout_s: float) -> Json:
-        def renewed() -> Json:
+        def renewed(state: Json) -> object:
             self.call("PUT", "control")
-            state = self.state()
-            return state if check(state) else {}
+            return check(state)
 
-        found: Json = wait_for_blocking(what, renewed, timeout_s)
-        return found
-
-    def take_control(self) -> None:
-        taken = self.ok("POST", "control", {"ttl_s": 60.0})
-        self.lease = {"X-Lease-Id": taken["lease_id"]}
+        return self.wait_state(what, renewed, timeout_s)
 
     def sender_pid(self) -> int:
-        health = httpx.get(f"{self.served.api}/health", headers=self.http.headers).json()
+        health = self.ok("GET", "/health")
         sender = next(p for p in health["processes"] if p["name"] == "setpoint sender")
         assert sender["running"] is True, sender
         pid: int = sender["pid"]
         return pid
+
+    def client(self) -> httpx.Client:
+        """A client of its own for a thread, with the lease, under the vehicle's path."""
+        return httpx.Client(base_url=f"{self.served.api}/vehicles/{self.vehicle_id}/",
+                            headers=self.headers(), timeout=30.0)
 
 
 @contextlib.contextmanager
@@ -103,22 +88,16 @@ def served_flight(tmp_path: Path) -> Iterator[tuple[Pilot, VehicleApart]]:
         skyhelm_serve(tmp_path, "--connect", f"udpout:127.0.0.1:{vehicle.relay_port}",
                       "--no-scene") as served,
     ):
-        pilot = Pilot(served)
+        pilot = Pilot(served, vehicle_id=1)
         try:
             wait_for_blocking("the vehicle",
-                              lambda: pilot.http.get(pilot.vehicle_url).status_code == 200, 30.0)
+                              lambda: pilot.call("GET", "", lease=False).status_code == 200, 30.0)
             pilot.wait("position and home",
                        lambda s: s["global"] is not None and s["home"] is not None, 30.0)
-            pilot.take_control()
+            pilot.lease_id = pilot.ok("POST", "control", {"ttl_s": 60.0})["lease_id"]
             yield pilot, vehicle
         finally:
             pilot.http.close()
-
-
-
-
-
-
 
 
 def _p99(samples: list[float]) -> float:
@@ -131,7 +110,7 @@ def _rest_latencies_s(pilot: Pilot, seconds: float) -> list[float]:
     end = time.monotonic() + seconds
     while time.monotonic() < end:
         began = time.perf_counter()
-        assert pilot.http.get(pilot.vehicle_url).status_code == 200
+        assert pilot.http.get("/vehicles/1", headers=pilot.headers(lease=False)).status_code == 200
         out.append(time.perf_counter() - began)
         time.sleep(0.01)
     return out
@@ -160,8 +139,7 @@ def test_a_3_s_sigstop_of_the_sender_with_setpoints_at_the_rate_limit(tmp_path: 
         refused: list[str] = []
 
         def script() -> None:  # a new setpoint each time, at the rate limit
-            with httpx.Client(base_url=str(pilot.http.base_url), timeout=30.0,
-                              headers={**pilot.http.headers, **pilot.lease}) as http:
+            with pilot.client() as http:
                 for i in itertools.count():
                     if done.is_set():
                         return
@@ -222,8 +200,7 @@ def test_the_sender_stopped_while_flying_sticks_in_posctl(tmp_path: Path) -> Non
         done = threading.Event()
 
         def feed() -> None:  # the pilot's sticks at 10 Hz, a hover
-            with httpx.Client(base_url=str(pilot.http.base_url), timeout=30.0,
-                              headers={**pilot.http.headers, **pilot.lease}) as http:
+            with pilot.client() as http:
                 while not done.wait(0.1):
                     http.put("sticks", json={"throttle": 0.5})
 
