@@ -139,14 +139,6 @@ def _sender_pid(supervisor: SenderSupervisor) -> int:
     return process.pid
 
 
-
-
-
-
-
-
-
-
 async def _stream_events(queue: asyncio.Queue[VehicleEvent]) -> list[dict[str, Any]]:
     found = []
     while not queue.empty():
