@@ -71,6 +71,11 @@ async def _all_kinds(client: FoxgloveClient) -> Received | None:
     return received if all(received.messages.get(topic) for topic in EXPECTED) else None
 
 
+async def _logged(client: FoxgloveClient, word: str) -> bool:
+    """Whether a log message with ``word`` came."""
+    return any(word in log.message for log in client.received.messages.get(f"{PREFIX}/log", []))
+
+
 async def _subscribed_to_log(client: FoxgloveClient) -> bool:
     await client.subscribe(lambda channel: True)
     return f"{PREFIX}/log" in client.received.topics()
@@ -87,6 +92,8 @@ async def test_a_foxglove_client_gets_every_channel_kind_with_valid_schemas(
         await eventually(lambda: _subscribed_to_log(client), 10.0, "the log advertised")
         await fly_offboard(flight.api)
         received = await eventually(lambda: _all_kinds(client), 20.0, "every channel kind")
+        # the arming's event may come after the first message of every kind (1 Hz HEARTBEAT)
+        await eventually(lambda: _logged(client, "armed"), 10.0, "the arming in the log")
         assert publisher.consumers == 1
     await eventually(lambda: _no_consumer(publisher), 5.0, "the state read no more")
     assert received.server_info is not None
