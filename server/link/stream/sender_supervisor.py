@@ -8,7 +8,9 @@ supervisor at once:
 - takes every link back (each link sends itself again, from the sequence number and signing
   timestamp the process last wrote: the frames go on contiguous and never replayed);
 - moves every stream to the sender thread (server.link.stream.stream_thread), with its
-  current setpoint and schedule;
+  current setpoint and schedule, and runs this server's ordinary threads real-time until a
+  new process takes the streams (server.link.stream.fallback_priority): the thread needs
+  the interpreter lock, and an ordinary thread holding it must not wait for a core;
 - logs the fault once with its cause and tells its listeners (the streams' ``stream``
   events, the state).
 
@@ -29,6 +31,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
 
+from server.link.stream.fallback_priority import FallbackPriority
 from server.link.stream.stream_thread import raise_priority
 
 log = logging.getLogger(__name__)
@@ -92,8 +95,11 @@ class SenderStatus:
 class SenderSupervisor:
     """Starts the sender process when first asked, watches it, replaces it after a fault."""
 
-    def __init__(self, start: Callable[[Callable[[Process, str], None]], Process]) -> None:
+    def __init__(self, start: Callable[[Callable[[Process, str], None]], Process],
+                 priority: FallbackPriority | None = None) -> None:
         self._start = start  # starts a process that calls its argument when it is gone
+        # this server's threads, real-time while the sender thread carries the streams
+        self.priority = priority if priority is not None else FallbackPriority()
         self._lock = threading.RLock()
         self._process: Process | None = None
         # the process whose loss was handled last (held, so no later process can share its id)
@@ -163,10 +169,11 @@ class SenderSupervisor:
             stable = time.monotonic() - process.started_s >= STABLE_AFTER_S
             self.failed_in_row = 1 if stable else self.failed_in_row + 1
             self._fault(why)
-            give_up = self.failed_in_row > MAX_FAILED_RESTARTS
-            if give_up:
-                self.gave_up = True
+            give_up = self.gave_up or self.failed_in_row > MAX_FAILED_RESTARTS
+            self.gave_up = give_up
         # the streams first, the words after: every step before the thread sends is a gap
+        if not give_up:
+            self.priority.raise_threads()
         for handover in list(self._handovers):
             handover.sender_lost(process)
         for member in list(self._members):
@@ -175,6 +182,8 @@ class SenderSupervisor:
                   "streams go on from the sender thread%s", process.pid, why,
                   "; it failed too often and is not started again" if give_up else
                   f"; restarting it in {self._backoff_s():g} s")
+        if give_up:
+            self.priority.restore()  # the thread sends from now on: not at the others' cost
         self._tell()
         if not give_up:
             with self._lock:
@@ -193,8 +202,10 @@ class SenderSupervisor:
     def _restart(self) -> None:
         # under the lock, so its loss (reported from its reader thread) waits until it is the
         # current process; starting is a fork and exec, milliseconds
+        self.priority.raise_spawner()
         with self._lock:
             if self.gave_up:
+                self.priority.restore()
                 return
             try:
                 process = self._process = self._start(self.lost)
@@ -207,6 +218,8 @@ class SenderSupervisor:
                     self._restart_timer = threading.Timer(self._backoff_s(), self._restart)
                     self._restart_timer.daemon = True
                     self._restart_timer.start()
+                else:
+                    self.priority.restore()
                 self._tell()
                 return
             self.restarts += 1
@@ -218,10 +231,13 @@ class SenderSupervisor:
             return  # it died at once: its loss was handled
         log.warning("setpoint sender process restarted (pid %s): streams move back to it",
                     process.pid)
-        for handover in list(self._handovers):
-            handover.sender_back()
-        for member in list(self._members):
-            member.sender_back()
+        try:
+            for handover in list(self._handovers):
+                handover.sender_back()
+            for member in list(self._members):
+                member.sender_back()
+        finally:
+            self.priority.restore()
         self._tell()
 
     def _tell(self) -> None:
