@@ -4,7 +4,9 @@ relay in front of it heard: tests/faults/vehicle_apart.py)."""
 
 from __future__ import annotations
 
+import datetime
 import itertools
+import re
 
 from pymavlink.dialects.v20 import development as mavlink
 
@@ -22,8 +24,39 @@ GCS_SYSID = 255
 
 def largest_gap(heard: list[Heard], fault_s: float) -> tuple[float, str]:
     """The largest gap between two frames (s), and where it lies from the fault."""
-    a, b = max(itertools.pairwise(h.unix_s for h in heard), key=lambda pair: pair[1] - pair[0])
+    a, b = gap_between(heard)
     return b - a, f"from {(a - fault_s) * 1000:+.0f} to {(b - fault_s) * 1000:+.0f} ms of the fault"
+
+
+def gap_between(heard: list[Heard]) -> tuple[float, float]:
+    """The times of the two frames with the largest gap between them."""
+    return max(itertools.pairwise(h.unix_s for h in heard), key=lambda pair: pair[1] - pair[0])
+
+
+def gap_account(report: Report, fault_s: float, gap: tuple[float, float],
+                sender_log: list[tuple[float, str]]) -> str:
+    """What else reached the vehicle from the server during a gap (every frame kind), and the
+    server's sender log lines, each with its time from the fault: a failure's account."""
+    a, b = gap
+    inside = [h for h in report.heard if a < h.unix_s < b and h.sysid == GCS_SYSID]
+    kinds = sorted({h.msg_id for h in inside})
+    lines = [f"{(t - fault_s) * 1000:+.0f} ms {text}" for t, text in sender_log]
+    return (f"; {len(inside)} other frames of the server in the gap (ids {kinds}); "
+            f"the server's sender log: {lines}")
+
+
+_ASCTIME = re.compile(r"^(\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d{3}) .*?(setpoint sender.*)$")
+
+
+def sender_log_lines(log_text: str) -> list[tuple[float, str]]:
+    """(unix s, text) of each sender line of a `skyhelm serve` log (asctime, local time)."""
+    found = []
+    for line in log_text.splitlines():
+        match = _ASCTIME.match(line)
+        if match:
+            when = datetime.datetime.strptime(match.group(1), "%Y-%m-%d %H:%M:%S,%f")
+            found.append((when.timestamp(), match.group(2)[:160]))
+    return found
 
 
 def check_sequence(report: Report, since_s: float) -> None:

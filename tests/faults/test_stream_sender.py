@@ -36,6 +36,8 @@ from tests.faults.sender_checks import (
     SETPOINT_ID,
     STICKS_ID,
     check_sequence,
+    gap_account,
+    gap_between,
     largest_gap,
     modes_since,
 )
@@ -139,6 +141,11 @@ def _sender_pid(supervisor: SenderSupervisor) -> int:
     return process.pid
 
 
+def _sender_log(caplog: pytest.LogCaptureFixture) -> list[tuple[float, str]]:
+    return [(r.created, r.getMessage()[:160]) for r in caplog.records
+            if "setpoint sender" in r.getMessage()]
+
+
 async def _stream_events(queue: asyncio.Queue[VehicleEvent]) -> list[dict[str, Any]]:
     found = []
     while not queue.empty():
@@ -150,7 +157,7 @@ async def _stream_events(queue: asyncio.Queue[VehicleEvent]) -> list[dict[str, A
 
 @pytest.mark.parametrize("signed", [False, True], ids=["unsigned", "signed"])
 async def test_kill_9_of_the_sender_while_hovering_in_offboard(
-    tmp_path: Path, supervisor: SenderSupervisor, signed: bool
+    tmp_path: Path, supervisor: SenderSupervisor, signed: bool, caplog: pytest.LogCaptureFixture
 ) -> None:
     async with flight(tmp_path, signed=signed) as f:
         api = f.api
@@ -174,6 +181,7 @@ async def test_kill_9_of_the_sender_while_hovering_in_offboard(
         events = await _stream_events(f.events)
     setpoints = [h for h in f.ended().since(watched_s - 0.5, SETPOINT_ID) if h.unix_s <= ended_s]
     gap_s, where = largest_gap(setpoints, watched_s)
+    where += gap_account(f.ended(), watched_s, gap_between(setpoints), _sender_log(caplog))
     print(f"kill -9 in OFFBOARD ({'signed' if signed else 'unsigned'}): largest setpoint gap "
           f"at the vehicle {gap_s * 1000:.1f} ms over {len(setpoints)} setpoints")
     assert gap_s <= KILL_GAP_S, where
@@ -194,7 +202,7 @@ async def test_kill_9_of_the_sender_while_hovering_in_offboard(
 
 
 async def test_the_sender_killed_while_flying_sticks_in_posctl(
-    tmp_path: Path, supervisor: SenderSupervisor
+    tmp_path: Path, supervisor: SenderSupervisor, caplog: pytest.LogCaptureFixture
 ) -> None:
     feeder: list[asyncio.Task[None]] = []
     async with flight(tmp_path, signed=False) as f:
@@ -222,6 +230,7 @@ async def test_the_sender_killed_while_flying_sticks_in_posctl(
                     await task
     sticks = [h for h in f.ended().since(watched_s - 0.5, STICKS_ID) if h.unix_s <= ended_s]
     gap_s, where = largest_gap(sticks, watched_s)
+    where += gap_account(f.ended(), watched_s, gap_between(sticks), _sender_log(caplog))
     rate_hz = (len(sticks) - 1) / (sticks[-1].unix_s - sticks[0].unix_s)
     print(f"kill of the sender in POSCTL: largest MANUAL_CONTROL gap at the vehicle "
           f"{gap_s * 1000:.1f} ms, {rate_hz:.1f} Hz over {len(sticks)} frames")

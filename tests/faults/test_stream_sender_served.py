@@ -14,8 +14,11 @@ largest gap between two setpoints (MANUAL_CONTROL) as the relay receives them (k
 receive times) stays under 250 ms: the watchdog's 150 ms without a heartbeat, then the kill
 and the handover; the server's sequence reaches it contiguous; the API says the fault, the
 thread, then a restarted process; REST answers as fast as before while it is stopped, also
-with a script changing the setpoint at the rate limit. (The kill -9 cases, and what the
-server's own objects say, are in test_stream_sender.py.)"""
+with a script changing the setpoint at the rate limit: the median as before (within 2x and
+10 ms), and no call waits for the stopped process (none takes half the stop). A p99 of
+~150 calls is one stall of a loaded test machine, before the stop as during it (seen 30-140
+ms before and 8-800 ms during, in the suite), so it is printed, not compared. (The kill -9
+cases, and what the server's own objects say, are in test_stream_sender.py.)"""
 
 from __future__ import annotations
 
@@ -39,8 +42,11 @@ from tests.faults.sender_checks import (
     STICKS_ID,
     STOP_GAP_S,
     check_sequence,
+    gap_account,
+    gap_between,
     largest_gap,
     modes_since,
+    sender_log_lines,
 )
 from tests.faults.vehicle_apart import VehicleApart
 from tests.rest_flight import RestFlight
@@ -100,9 +106,9 @@ def served_flight(tmp_path: Path) -> Iterator[tuple[Pilot, VehicleApart]]:
             pilot.http.close()
 
 
-def _p99(samples: list[float]) -> float:
+def _quantile(samples: list[float], q: float) -> float:
     ordered = sorted(samples)
-    return ordered[max(1, math.ceil(0.99 * len(ordered))) - 1]
+    return ordered[max(1, math.ceil(q * len(ordered))) - 1]
 
 
 def _rest_latencies_s(pilot: Pilot, seconds: float) -> list[float]:
@@ -172,17 +178,22 @@ def test_a_3_s_sigstop_of_the_sender_with_setpoints_at_the_rate_limit(tmp_path: 
         state = pilot.state()
         ended_s = time.time()
         report = vehicle.report()
+        sender_log = sender_log_lines(pilot.served.stderr_path.read_text())
     setpoints = [h for h in report.since(fault_s - 0.5, SETPOINT_ID) if h.unix_s <= ended_s]
     gap_s, where = largest_gap(setpoints, fault_s)
-    p99_before, p99_during = _p99(before), _p99(during)
+    where += gap_account(report, fault_s, gap_between(setpoints), sender_log)
+    p99_before, p99_during = _quantile(before, 0.99), _quantile(during, 0.99)
+    median_before, median_during = _quantile(before, 0.5), _quantile(during, 0.5)
     print(f"served, SIGSTOP 3 s in OFFBOARD, setpoints at {SCRIPT_RATE_HZ:g}/s: largest setpoint "
           f"gap at the vehicle {gap_s * 1000:.1f} ms ({where}); REST p99 "
-          f"{p99_before * 1000:.1f} ms before, {p99_during * 1000:.1f} ms during "
+          f"{p99_before * 1000:.1f} ms before, {p99_during * 1000:.1f} ms during, median "
+          f"{median_before * 1000:.1f} and {median_during * 1000:.1f} ms "
           f"({len(before)}, {len(during)} requests)")
     assert refused == []
     assert report.mode_changes == changes, "the vehicle changed mode"
     assert gap_s <= STOP_GAP_S, where
-    assert p99_during <= 3 * p99_before
+    assert median_during <= 2 * median_before + 0.010, (median_before, median_during)
+    assert max(during) < STOP_S / 2, sorted(during)[-5:]
     check_sequence(report, fault_s - 0.5)
     assert modes_since(report, fault_s - 1.0) == {OFFBOARD_MODE}
     assert state["mode"] == "OFFBOARD"
@@ -231,11 +242,13 @@ def test_the_sender_stopped_while_flying_sticks_in_posctl(tmp_path: Path) -> Non
             state = pilot.state()
             ended_s = time.time()
             report = vehicle.report()
+            sender_log = sender_log_lines(pilot.served.stderr_path.read_text())
         finally:
             done.set()
             feeder.join(10.0)
     sticks = [h for h in report.since(fault_s - 0.5, STICKS_ID) if h.unix_s <= ended_s]
     gap_s, where = largest_gap(sticks, fault_s)
+    where += gap_account(report, fault_s, gap_between(sticks), sender_log)
     rate_hz = (len(sticks) - 1) / (sticks[-1].unix_s - sticks[0].unix_s)
     print(f"served, SIGSTOP of the sender in POSCTL: largest MANUAL_CONTROL gap at the vehicle "
           f"{gap_s * 1000:.1f} ms ({where}), {rate_hz:.1f} Hz over {len(sticks)} frames")
