@@ -123,6 +123,11 @@ def test_telemetry_iterates_states_and_events(served: Served) -> None:
     with SkyHelm(pilot_url(served)) as sky:
         sky.wait_until(ready, timeout_s=30)
         sky.acquire()
+        # armed on the ground until the test has looked: the sim at 8x disarms a vehicle that
+        # has not taken off after COM_DISARM_PRFLT (10 s, 1.25 s here), and on a loaded
+        # machine the second socket below opened later than that
+        prflt_s = sky.param("COM_DISARM_PRFLT")
+        sky.set_param("COM_DISARM_PRFLT", -1.0)
         messages = sky.telemetry(rate_hz=20)
         try:
             seen = {next(messages).type}  # the socket is open once a first message came
@@ -145,3 +150,4 @@ def test_telemetry_iterates_states_and_events(served: Served) -> None:
         finally:
             states.close()
         sky.disarm()
+        sky.set_param("COM_DISARM_PRFLT", prflt_s)
