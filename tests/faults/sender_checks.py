@@ -6,10 +6,13 @@ from __future__ import annotations
 
 import datetime
 import itertools
+import os
 import re
+from pathlib import Path
 
 from pymavlink.dialects.v20 import development as mavlink
 
+from server.link.stream.fallback_priority import FALLBACK_PRIORITY
 from tests.faults.sender_relay import Heard
 from tests.faults.vehicle_apart import Report
 
@@ -55,7 +58,7 @@ def sender_log_lines(log_text: str) -> list[tuple[float, str]]:
         match = _ASCTIME.match(line)
         if match:
             when = datetime.datetime.strptime(match.group(1), "%Y-%m-%d %H:%M:%S,%f")
-            found.append((when.timestamp(), match.group(2)[:160]))
+            found.append((when.timestamp(), match.group(2)[:320]))
     return found
 
 
@@ -71,3 +74,18 @@ def modes_since(report: Report, since_s: float) -> set[int]:
     modes = [mode for t, mode in report.modes if t >= since_s]
     assert len(modes) >= 2, "too few HEARTBEATs to tell"
     return set(modes)
+
+
+def raised_threads(pid: int) -> int:
+    """How many threads of process ``pid`` run at the sender fallback's real-time priority
+    (server.link.stream.fallback_priority)."""
+    count = 0
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        try:
+            tid = int(task.name)
+            policy = os.sched_getscheduler(tid) & ~os.SCHED_RESET_ON_FORK
+            priority = os.sched_getparam(tid).sched_priority
+            count += policy == os.SCHED_FIFO and priority == FALLBACK_PRIORITY
+        except (OSError, ValueError):
+            continue  # it ended
+    return count

@@ -142,7 +142,7 @@ def _sender_pid(supervisor: SenderSupervisor) -> int:
 
 
 def _sender_log(caplog: pytest.LogCaptureFixture) -> list[tuple[float, str]]:
-    return [(r.created, r.getMessage()[:160]) for r in caplog.records
+    return [(r.created, r.getMessage()[:320]) for r in caplog.records
             if "setpoint sender" in r.getMessage()]
 
 

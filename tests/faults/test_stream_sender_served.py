@@ -46,9 +46,11 @@ from tests.faults.sender_checks import (
     gap_between,
     largest_gap,
     modes_since,
+    raised_threads,
     sender_log_lines,
 )
 from tests.faults.vehicle_apart import VehicleApart
+from tests.link.realtime import may_run_real_time
 from tests.rest_flight import RestFlight
 from tests.serve_process import skyhelm_serve
 from tests.waiting import wait_for_blocking
@@ -233,12 +235,15 @@ def test_the_sender_stopped_while_flying_sticks_in_posctl(tmp_path: Path) -> Non
                 "the thread takes over",
                 lambda: (s := pilot.ok("GET", "sticks"))["stream"]["sender"] == "thread" and s,
                 2.0, 0.02)
+            server_pid = pilot.served.process.pid if pilot.served.process else 0
+            raised = raised_threads(server_pid)
             stopper.join()
             wait_for_blocking(
                 "a restarted process takes over",
                 lambda: pilot.ok("GET", "sticks")["stream"]["sender"] == "process", 10.0)
             time.sleep(1.0)
             after = pilot.ok("GET", "sticks")
+            raised_after = raised_threads(server_pid)
             state = pilot.state()
             ended_s = time.time()
             report = vehicle.report()
@@ -261,3 +266,6 @@ def test_the_sender_stopped_while_flying_sticks_in_posctl(tmp_path: Path) -> Non
     assert "stopped answering" in during["stream"]["sender_fault"]
     assert after["stream"]["sender"] == "process"
     assert after["stream"]["sender_restarts"] == 1, after["stream"]["sender_fault"]
+    # the server's threads ran real-time while its thread carried the sticks, and no longer
+    assert raised > 0 or not may_run_real_time()
+    assert raised_after == 0
