@@ -92,8 +92,15 @@ class Walk:
         self.boxes: dict[str, dict[str, dict[str, list[int] | None]]] = {}
 
     def probe(
-        self, state: str, *, record: bool = True, sizes: list[tuple[int, int]] = SIZES
+        self,
+        state: str,
+        *,
+        record: bool = True,
+        sizes: list[tuple[int, int]] = SIZES,
+        scope: str | None = None,
     ) -> None:
+        """The probe at each size and theme; ``scope`` (a selector) checks only what lies
+        inside it."""
         for width, height in sizes:
             self.page.set_viewport_size({"width": width, "height": height})
             for scheme in THEMES:
@@ -104,10 +111,13 @@ class Walk:
                 self.page.evaluate(SETTLED)
                 cockpit = (width, height) == COCKPIT
                 found = self.page.evaluate(
-                    LAYOUT_PROBLEMS, {"reach": self.reach if cockpit else [], "boxes": FIXED}
+                    LAYOUT_PROBLEMS,
+                    {"reach": self.reach if cockpit and not scope else [], "boxes": FIXED,
+                     "scope": scope},
                 )
                 where = f"{state}, {width}x{height} {scheme}"
-                assert found["controls"] > 30, f"{where}: the page's controls were not found"
+                least = 30 if scope is None else 0
+                assert found["controls"] > least, f"{where}: the page's controls were not found"
                 self.problems += [f"{where}: {p}" for p in found["problems"] + found["unreachable"]]
                 # below 1180 px the page takes two columns and scrolls as a whole
                 if found["pageScrolls"] and width > 1180:

@@ -1,8 +1,10 @@
 // Boxes of every visible control and panel, checked in the page: returns what is wrong
 // (test_layout.py evaluates this function). Options: `reach`, ids of controls that must be
-// in sight without scrolling anything; `boxes`, ids whose boxes (page coordinates) come back.
+// in sight without scrolling anything; `boxes`, ids whose boxes (page coordinates) come back;
+// `scope`, a selector: only what lies inside it is checked (and the top bar's row).
 (given) => {
   const options = given || {};
+  const inScope = options.scope ? (el) => el.closest(options.scope) !== null : () => true;
   const CONTROLS = "button, input, select, textarea, a[href], iframe, [role=button]";
   const BOXES = CONTROLS + ", .panel, .view, .leaflet-control, #topbar .slot, #alerts > *";
   const problems = [];
@@ -20,7 +22,7 @@
   const clips = (cs) => cs.overflowX !== "visible" || cs.overflowY !== "visible";
   const EPS = 1;
   for (const el of document.querySelectorAll(BOXES)) {
-    if (!shown(el)) continue;
+    if (!inScope(el) || !shown(el)) continue;
     const r = el.getBoundingClientRect();
     // inside every ancestor that clips it: a scrolling one by its content, others by their box
     let inScroller = false;
@@ -66,7 +68,8 @@
   };
   const ownText = (el) => [...el.childNodes].some((n) => n.nodeType === Node.TEXT_NODE && n.textContent.trim());
   for (const el of document.querySelectorAll("#topbar *, #layout *, #alerts *, .overlay *")) {
-    if (!shown(el) || el.closest("#log, .leaflet-pane, .leaflet-control-attribution, iframe")) continue;
+    if (!inScope(el) || !shown(el)
+        || el.closest("#log, .leaflet-pane, .leaflet-control-attribution, iframe")) continue;
     const cs = getComputedStyle(el);
     let cut = false;
     let text = el.textContent.trim();
@@ -86,13 +89,13 @@
   measure.remove();
   // a disabled control says why: its tooltip, or the line it is described by
   for (const el of document.querySelectorAll("button, input, select, textarea")) {
-    if (!el.disabled || !shown(el)) continue;
+    if (!el.disabled || !inScope(el) || !shown(el)) continue;
     const line = (el.getAttribute("aria-describedby") || "").split(/\s+/)
       .map((id) => document.getElementById(id)).filter((d) => d && shown(d))
       .map((d) => d.textContent.trim()).join(" ");
     if (!(el.title || "").trim() && !line) problems.push(`${name(el)} disabled without a reason`);
   }
-  const controls = [...document.querySelectorAll(CONTROLS)].filter(shown);
+  const controls = [...document.querySelectorAll(CONTROLS)].filter((el) => inScope(el) && shown(el));
   for (let i = 0; i < controls.length; i++) {
     for (let j = i + 1; j < controls.length; j++) {
       const a = controls[i], b = controls[j];
@@ -117,7 +120,7 @@
   // the alert area never covers the views (the map with its north arrow, the 3D scene)
   const views = document.querySelector(".views-panel").getBoundingClientRect();
   for (const alert of document.querySelectorAll("#alerts > *")) {
-    if (!shown(alert)) continue;
+    if (!inScope(alert) || !shown(alert)) continue;
     const r = alert.getBoundingClientRect();
     if (Math.min(r.right, views.right) - Math.max(r.left, views.left) > EPS
         && Math.min(r.bottom, views.bottom) - Math.max(r.top, views.top) > EPS) {

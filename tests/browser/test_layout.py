@@ -7,8 +7,9 @@ button's label is cut, the top bar keeps one row, the alert area never covers th
 primary flight controls are in sight at 1280x800 without scrolling, and the command buttons
 stay where they are whatever the state. The link's widest loss figures are read whole at
 every size, on the quad and the VTOL; the top bar holds the widest text of each of its slots
-(drawn by the page from its own state messages) at every width from 1024 to 1920 px, with
-the server there and lost. The standard flight is flown from the page at
+(drawn by the page from its own state messages) at every width from 1024 to 1920 px (the
+whole page at the three standard widths, the top bar alone between), with the server there
+and lost. The standard flight is flown from the page at
 1280x800 without anything scrolling. Also: the shortcut list opens with '?'; the theme
 follows the system and the pilot's choice is kept for the next visit."""
 
@@ -24,6 +25,7 @@ import pytest
 from .cockpit_walk import (
     LAYOUT_PROBLEMS,
     QUAD_SERVE_ARGS,
+    SIZES,
     VTOL_SERVE_ARGS,
     Walk,
     click_map,
@@ -130,8 +132,11 @@ WORST_DRAWN = """(cockpit) => {
     && document.querySelector("#vehicle-select option[value='255']") !== null
     && (cockpit !== "vtol" || text("vtol-state") === "→ FW");
 }"""
-# Every width from 1024 to 1920 px: every 32 px, and each side of the top bar's breakpoints.
+# Every width from 1024 to 1920 px: every 32 px, and each side of the top bar's breakpoints;
+# the whole page is probed at the three standard widths, the top bar alone between them (its
+# texts change nothing else: a top bar that wraps is off its row).
 BAR_WIDTHS = sorted({*range(1024, 1921, 32), 1180, 1181, 1440, 1441, 1920})
+PAGE_WIDTHS = {width for width, _ in SIZES}
 
 
 @pytest.fixture(scope="module")
@@ -248,7 +253,8 @@ def test_the_link_slot_shows_the_widest_loss_whole_at_every_size(
 def test_the_top_bar_holds_its_widest_texts_at_every_width(
     chromium: Any, request: pytest.FixtureRequest, cockpit: str
 ) -> None:
-    sizes = [(width, 800) for width in BAR_WIDTHS]
+    sizes = [(width, 800) for width in BAR_WIDTHS if width in PAGE_WIDTHS]
+    bar_sizes = [(width, 800) for width in BAR_WIDTHS if width not in PAGE_WIDTHS]
     with _cockpit(chromium, request, cockpit, WORST_TEXTS) as (page, walk):
         try:
             page.wait_for_function(WORST_DRAWN, arg=cockpit, timeout=30_000)
@@ -264,6 +270,7 @@ def test_the_top_bar_holds_its_widest_texts_at_every_width(
         picked = "document.getElementById('vehicle-select').selectedOptions[0].textContent"
         assert page.evaluate(picked) == "255 · plane"
         walk.probe("widest texts", record=False, sizes=sizes)
+        walk.probe("widest texts", record=False, sizes=bar_sizes, scope="#topbar")
         # the server lost: the SERVER box says the page is reconnecting
         page.evaluate("window.__offline = true; window.__telemetry.forEach((s) => s.close())")
         page.wait_for_function(
@@ -271,6 +278,8 @@ def test_the_top_bar_holds_its_widest_texts_at_every_width(
             timeout=10_000,
         )
         walk.probe("widest texts, the server lost", record=False, sizes=sizes)
+        walk.probe("widest texts, the server lost", record=False, sizes=bar_sizes,
+                   scope="#topbar")
         assert not walk.problems, "\n".join(walk.problems)
 
 
