@@ -27,12 +27,13 @@ class FakeProcess:
         self.beat_s = time.monotonic()
         self.killed: str | None = None
         self.killed_by_policy: int | None = None  # the killing thread's scheduling policy
+        self.ready = True  # it ran its first loop
 
     def heartbeat_age_s(self) -> float | None:
         return time.monotonic() - self.beat_s if self.alive else None
 
     def wait_ready(self, timeout_s: float) -> bool:
-        return self.alive
+        return self.alive and self.ready
 
     def kill(self, why: str) -> None:
         self.killed_by_policy = os.sched_getscheduler(0) & ~os.SCHED_RESET_ON_FORK
@@ -205,3 +206,26 @@ def test_a_restart_waits_until_the_new_process_runs(monkeypatch: pytest.MonkeyPa
     assert member.back == 0  # the thread keeps the streams until it runs its loop
     gate.set()
     wait_for_blocking("the streams moved back", lambda: member.back == 1, 2.0, 0.005)
+
+
+def test_a_process_still_starting_is_not_taken_for_a_stopped_one(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A first stream goes to the process as it starts; its heartbeat is then the server's
+    and ages while a busy machine starts the interpreter (0.5-0.8 s seen in the suite). It is
+    given the restart's start time, then killed for not starting."""
+    monkeypatch.setattr(sender_supervisor, "READY_TIMEOUT_S", 1.2)
+    monkeypatch.setattr(sender_supervisor, "run_state", lambda pid: "R")
+    sup, _ = _supervisor()
+    member = Member()
+    sup.watch(member)
+    process = sup.process()
+    assert isinstance(process, FakeProcess)
+    process.ready = False
+    process.beat_s = process.started_s = time.monotonic() - 0.2
+    member.streaming_in = process
+    # silent 0.7 s: past the 150 ms of a stopped process, and the 0.5 s of a runnable one
+    time.sleep(0.5)
+    assert process.killed is None
+    wait_for_blocking("the kill", lambda: process.killed is not None, 2.0, 0.005)
+    assert "did not start its loop in 1.2 s" in str(process.killed)

@@ -2,8 +2,8 @@
 
 The sender process (server.link.stream.stream_process) sends every frame of the UDP links
 handed to it and times their streams. When it dies (its control socket's end of file, its
-exit status) or stops answering (its shared heartbeat does not move while streams run), the
-supervisor at once:
+exit status) or stops answering (its shared heartbeat does not move while streams run; one
+still starting has ``READY_TIMEOUT_S``), the supervisor at once:
 
 - takes every link back (each link sends itself again, from the sequence number and signing
   timestamp the process last wrote: the frames go on contiguous and never replayed);
@@ -273,6 +273,14 @@ class SenderSupervisor:
                 continue
             if not any(member.streams_in(process) for member in list(self._members)):
                 continue  # idle: nothing waits on it (it reports once a stream starts)
+            if not process.wait_ready(0.0):
+                # still starting (a first stream is handed to it at once): its heartbeat is
+                # the one the server wrote, and a busy machine took 0.5-0.8 s to run a new
+                # interpreter's first loop; a restart waits for it as long
+                started_s = time.monotonic() - process.started_s
+                if started_s >= READY_TIMEOUT_S:
+                    process.kill(f"it did not start its loop in {started_s:.1f} s")
+                continue
             state = run_state(process.pid)
             used = cpu_used_s(answering[1] if answering[0] == process.pid else None,
                               cpu_times_s(process.pid))
