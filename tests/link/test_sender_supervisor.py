@@ -216,14 +216,9 @@ def test_a_process_still_starting_is_not_taken_for_a_stopped_one(
     given the restart's start time, then killed for not starting."""
     monkeypatch.setattr(sender_supervisor, "READY_TIMEOUT_S", 1.2)
     monkeypatch.setattr(sender_supervisor, "run_state", lambda pid: "R")
-    sup, _ = _supervisor()
-    member = Member()
-    sup.watch(member)
-    process = sup.process()
-    assert isinstance(process, FakeProcess)
+    process, _member = _carrying_a_stream()
     process.ready = False
     process.beat_s = process.started_s = time.monotonic() - 0.2
-    member.streaming_in = process
     # silent 0.7 s: past the 150 ms of a stopped process, and the 0.5 s of a runnable one
     time.sleep(0.5)
     assert process.killed is None
