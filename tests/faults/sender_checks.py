@@ -6,13 +6,12 @@ from __future__ import annotations
 
 import datetime
 import itertools
-import os
 import re
 from pathlib import Path
 
 from pymavlink.dialects.v20 import development as mavlink
 
-from server.link.stream.fallback_priority import FALLBACK_PRIORITY
+from server.link.stream.fallback_priority import raised, thread_ids
 from tests.faults.sender_relay import Heard
 from tests.faults.vehicle_apart import Report
 
@@ -25,27 +24,18 @@ STICKS_ID = mavlink.MAVLINK_MSG_ID_MANUAL_CONTROL
 GCS_SYSID = 255
 
 
-def largest_gap(heard: list[Heard], fault_s: float) -> tuple[float, str]:
-    """The largest gap between two frames (s), and where it lies from the fault."""
-    a, b = gap_between(heard)
-    return b - a, f"from {(a - fault_s) * 1000:+.0f} to {(b - fault_s) * 1000:+.0f} ms of the fault"
-
-
-def gap_between(heard: list[Heard]) -> tuple[float, float]:
-    """The times of the two frames with the largest gap between them."""
-    return max(itertools.pairwise(h.unix_s for h in heard), key=lambda pair: pair[1] - pair[0])
-
-
-def gap_account(report: Report, fault_s: float, gap: tuple[float, float],
-                sender_log: list[tuple[float, str]]) -> str:
-    """What else reached the vehicle from the server during a gap (every frame kind), and the
-    server's sender log lines, each with its time from the fault: a failure's account."""
-    a, b = gap
+def largest_gap(heard: list[Heard], fault_s: float, report: Report,
+                sender_log: list[tuple[float, str]]) -> tuple[float, str]:
+    """The largest gap between two frames (s), and a failure's account of it: where it lies
+    from the fault, what else of the server reached the vehicle meanwhile (every frame kind),
+    and the server's sender log lines, each with its time from the fault."""
+    a, b = max(itertools.pairwise(h.unix_s for h in heard), key=lambda pair: pair[1] - pair[0])
     inside = [h for h in report.heard if a < h.unix_s < b and h.sysid == GCS_SYSID]
     kinds = sorted({h.msg_id for h in inside})
     lines = [f"{(t - fault_s) * 1000:+.0f} ms {text}" for t, text in sender_log]
-    return (f"; {len(inside)} other frames of the server in the gap (ids {kinds}); "
-            f"the server's sender log: {lines}")
+    return b - a, (f"from {(a - fault_s) * 1000:+.0f} to {(b - fault_s) * 1000:+.0f} ms of the "
+                   f"fault; {len(inside)} other frames of the server in the gap (ids {kinds}); "
+                   f"the server's sender log: {lines}")
 
 
 _ASCTIME = re.compile(r"^(\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d{3}) .*?(setpoint sender.*)$")
@@ -79,13 +69,4 @@ def modes_since(report: Report, since_s: float) -> set[int]:
 def raised_threads(pid: int) -> int:
     """How many threads of process ``pid`` run at the sender fallback's real-time priority
     (server.link.stream.fallback_priority)."""
-    count = 0
-    for task in Path(f"/proc/{pid}/task").iterdir():
-        try:
-            tid = int(task.name)
-            policy = os.sched_getscheduler(tid) & ~os.SCHED_RESET_ON_FORK
-            priority = os.sched_getparam(tid).sched_priority
-            count += policy == os.SCHED_FIFO and priority == FALLBACK_PRIORITY
-        except (OSError, ValueError):
-            continue  # it ended
-    return count
+    return sum(map(raised, thread_ids(Path(f"/proc/{pid}/task"))))

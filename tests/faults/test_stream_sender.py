@@ -36,8 +36,6 @@ from tests.faults.sender_checks import (
     SETPOINT_ID,
     STICKS_ID,
     check_sequence,
-    gap_account,
-    gap_between,
     largest_gap,
     modes_since,
 )
@@ -180,8 +178,7 @@ async def test_kill_9_of_the_sender_while_hovering_in_offboard(
         assert await f.mode_changes() == changes, "the vehicle changed mode"
         events = await _stream_events(f.events)
     setpoints = [h for h in f.ended().since(watched_s - 0.5, SETPOINT_ID) if h.unix_s <= ended_s]
-    gap_s, where = largest_gap(setpoints, watched_s)
-    where += gap_account(f.ended(), watched_s, gap_between(setpoints), _sender_log(caplog))
+    gap_s, where = largest_gap(setpoints, watched_s, f.ended(), _sender_log(caplog))
     print(f"kill -9 in OFFBOARD ({'signed' if signed else 'unsigned'}): largest setpoint gap "
           f"at the vehicle {gap_s * 1000:.1f} ms over {len(setpoints)} setpoints")
     assert gap_s <= KILL_GAP_S, where
@@ -229,8 +226,7 @@ async def test_the_sender_killed_while_flying_sticks_in_posctl(
                 with contextlib.suppress(asyncio.CancelledError):
                     await task
     sticks = [h for h in f.ended().since(watched_s - 0.5, STICKS_ID) if h.unix_s <= ended_s]
-    gap_s, where = largest_gap(sticks, watched_s)
-    where += gap_account(f.ended(), watched_s, gap_between(sticks), _sender_log(caplog))
+    gap_s, where = largest_gap(sticks, watched_s, f.ended(), _sender_log(caplog))
     rate_hz = (len(sticks) - 1) / (sticks[-1].unix_s - sticks[0].unix_s)
     print(f"kill of the sender in POSCTL: largest MANUAL_CONTROL gap at the vehicle "
           f"{gap_s * 1000:.1f} ms, {rate_hz:.1f} Hz over {len(sticks)} frames")

@@ -42,8 +42,6 @@ from tests.faults.sender_checks import (
     STICKS_ID,
     STOP_GAP_S,
     check_sequence,
-    gap_account,
-    gap_between,
     largest_gap,
     modes_since,
     raised_threads,
@@ -182,8 +180,7 @@ def test_a_3_s_sigstop_of_the_sender_with_setpoints_at_the_rate_limit(tmp_path: 
         report = vehicle.report()
         sender_log = sender_log_lines(pilot.served.stderr_path.read_text())
     setpoints = [h for h in report.since(fault_s - 0.5, SETPOINT_ID) if h.unix_s <= ended_s]
-    gap_s, where = largest_gap(setpoints, fault_s)
-    where += gap_account(report, fault_s, gap_between(setpoints), sender_log)
+    gap_s, where = largest_gap(setpoints, fault_s, report, sender_log)
     p99_before, p99_during = _quantile(before, 0.99), _quantile(during, 0.99)
     median_before, median_during = _quantile(before, 0.5), _quantile(during, 0.5)
     print(f"served, SIGSTOP 3 s in OFFBOARD, setpoints at {SCRIPT_RATE_HZ:g}/s: largest setpoint "
@@ -252,8 +249,7 @@ def test_the_sender_stopped_while_flying_sticks_in_posctl(tmp_path: Path) -> Non
             done.set()
             feeder.join(10.0)
     sticks = [h for h in report.since(fault_s - 0.5, STICKS_ID) if h.unix_s <= ended_s]
-    gap_s, where = largest_gap(sticks, fault_s)
-    where += gap_account(report, fault_s, gap_between(sticks), sender_log)
+    gap_s, where = largest_gap(sticks, fault_s, report, sender_log)
     rate_hz = (len(sticks) - 1) / (sticks[-1].unix_s - sticks[0].unix_s)
     print(f"served, SIGSTOP of the sender in POSCTL: largest MANUAL_CONTROL gap at the vehicle "
           f"{gap_s * 1000:.1f} ms ({where}), {rate_hz:.1f} Hz over {len(sticks)} frames")

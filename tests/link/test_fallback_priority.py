@@ -79,13 +79,11 @@ def test_ordinary_threads_are_raised_and_put_back_real_time_ones_keep_theirs() -
 def test_the_spawner_passes_its_priority_on_and_all_of_it_is_put_back() -> None:
     priority = FallbackPriority()
     started: list[tuple[int, int]] = []
-    child_tid: list[int] = []
 
     def spawner() -> None:
         priority.raise_spawner()
         with _thread() as child:  # e.g. the new process's writer thread
             started.append(_policy(child))
-            child_tid.append(child)
             priority.restore()
             started.append(_policy(child))
 

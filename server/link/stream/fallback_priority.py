@@ -54,7 +54,7 @@ class FallbackPriority:
                 return 0
             self.active = True
             raised = 0
-            for tid in _thread_ids(self._tasks):
+            for tid in thread_ids(self._tasks):
                 try:
                     if os.sched_getscheduler(tid) & ~_RESET_ON_FORK != os.SCHED_OTHER:
                         continue  # real-time already (the sender thread, the watchers)
@@ -84,21 +84,29 @@ class FallbackPriority:
     def restore(self) -> None:
         """Every thread of this process at the raised priority back to ordinary."""
         with self._lock:
-            for tid in _thread_ids(self._tasks):
+            for tid in filter(raised, thread_ids(self._tasks)):
                 try:
-                    if (os.sched_getscheduler(tid) & ~_RESET_ON_FORK == os.SCHED_FIFO
-                            and os.sched_getparam(tid).sched_priority == FALLBACK_PRIORITY):
-                        os.sched_setscheduler(tid, os.SCHED_OTHER, os.sched_param(0))
+                    os.sched_setscheduler(tid, os.SCHED_OTHER, os.sched_param(0))
                 except OSError:
                     continue  # it ended
             self.active = False
+
+
+def raised(tid: int) -> bool:
+    """Whether thread ``tid`` runs at ``FALLBACK_PRIORITY`` (False once it has ended)."""
+    try:
+        return (os.sched_getscheduler(tid) & ~_RESET_ON_FORK == os.SCHED_FIFO
+                and os.sched_getparam(tid).sched_priority == FALLBACK_PRIORITY)
+    except OSError:
+        return False
 
 
 def _possible() -> bool:
     return SENDER_RT_PRIORITY > FALLBACK_PRIORITY and hasattr(os, "sched_setscheduler")
 
 
-def _thread_ids(tasks: Path) -> list[int]:
+def thread_ids(tasks: Path) -> list[int]:
+    """The thread ids in a /proc/PID/task directory (none once the process has ended)."""
     try:
         return [int(entry.name) for entry in tasks.iterdir() if entry.name.isdigit()]
     except OSError:

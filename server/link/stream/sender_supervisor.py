@@ -95,11 +95,10 @@ class SenderStatus:
 class SenderSupervisor:
     """Starts the sender process when first asked, watches it, replaces it after a fault."""
 
-    def __init__(self, start: Callable[[Callable[[Process, str], None]], Process],
-                 priority: FallbackPriority | None = None) -> None:
+    def __init__(self, start: Callable[[Callable[[Process, str], None]], Process]) -> None:
         self._start = start  # starts a process that calls its argument when it is gone
         # this server's threads, real-time while the sender thread carries the streams
-        self.priority = priority if priority is not None else FallbackPriority()
+        self.priority = FallbackPriority()
         self._lock = threading.RLock()
         self._process: Process | None = None
         # the process whose loss was handled last (held, so no later process can share its id)
@@ -172,7 +171,9 @@ class SenderSupervisor:
             give_up = self.gave_up or self.failed_in_row > MAX_FAILED_RESTARTS
             self.gave_up = give_up
         # the streams first, the words after: every step before the thread sends is a gap
-        if not give_up:
+        if give_up:
+            self.priority.restore()  # the thread sends from now on: not at the others' cost
+        else:
             self.priority.raise_threads()
         for handover in list(self._handovers):
             handover.sender_lost(process)
@@ -182,8 +183,6 @@ class SenderSupervisor:
                   "streams go on from the sender thread%s", process.pid, why,
                   "; it failed too often and is not started again" if give_up else
                   f"; restarting it in {self._backoff_s():g} s")
-        if give_up:
-            self.priority.restore()  # the thread sends from now on: not at the others' cost
         self._tell()
         if not give_up:
             with self._lock:
@@ -277,9 +276,9 @@ class SenderSupervisor:
                 # still starting (a first stream is handed to it at once): its heartbeat is
                 # the one the server wrote, and a busy machine took 0.5-0.8 s to run a new
                 # interpreter's first loop; a restart waits for it as long
-                started_s = time.monotonic() - process.started_s
-                if started_s >= READY_TIMEOUT_S:
-                    process.kill(f"it did not start its loop in {started_s:.1f} s")
+                starting_s = time.monotonic() - process.started_s
+                if starting_s >= READY_TIMEOUT_S:
+                    process.kill(f"it did not start its loop in {starting_s:.1f} s")
                 continue
             state = run_state(process.pid)
             used = cpu_used_s(answering[1] if answering[0] == process.pid else None,
