@@ -48,11 +48,13 @@ REACH = [
     "kbd-enable", "sticks-enable", "sticks-posctl", "stick-left", "stick-right",
 ]  # fmt: skip
 REACH_VTOL = [*REACH, "btn-to-fw", "btn-to-mc"]
-# Two frames after a change of size or theme, the page at its top.
-SETTLED = """() => new Promise((done) => {
+# Two frames after a change of size or theme, the page at its top, then the layout probe
+# with the given options: one call.
+SETTLED_PROBE = f"""(options) => new Promise((done) => {{
   window.scrollTo(0, 0);
-  requestAnimationFrame(() => requestAnimationFrame(done));
-})"""
+  requestAnimationFrame(() => requestAnimationFrame(() => done(({LAYOUT_PROBLEMS}
+  )(options))));
+}})"""
 
 
 def new_context(browser: Any, size: tuple[int, int] = COCKPIT, scheme: str = "dark") -> Any:
@@ -100,18 +102,18 @@ class Walk:
         scope: str | None = None,
     ) -> None:
         """The probe at each size and theme; ``scope`` (a selector) checks only what lies
-        inside it."""
-        for width, height in sizes:
-            self.page.set_viewport_size({"width": width, "height": height})
-            for scheme in THEMES:
-                self.page.emulate_media(color_scheme=scheme)
-                self.page.wait_for_function(
-                    f"document.documentElement.dataset.theme === '{scheme}'", timeout=5_000
-                )
-                self.page.evaluate(SETTLED)
+        inside it. One theme at a time, every size in it: a switch of theme restyles the
+        whole page, a size only lays it out again."""
+        for scheme in THEMES:
+            self.page.emulate_media(color_scheme=scheme)
+            self.page.wait_for_function(
+                f"document.documentElement.dataset.theme === '{scheme}'", timeout=5_000
+            )
+            for width, height in sizes:
+                self.page.set_viewport_size({"width": width, "height": height})
                 cockpit = (width, height) == COCKPIT
                 found = self.page.evaluate(
-                    LAYOUT_PROBLEMS,
+                    SETTLED_PROBE,
                     {"reach": self.reach if cockpit and not scope else [], "boxes": FIXED,
                      "scope": scope},
                 )

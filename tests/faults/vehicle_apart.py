@@ -32,6 +32,7 @@ class Report:
     modes: list[tuple[float, int]]  # (unix s, custom_mode) of each HEARTBEAT of the vehicle
     mode_changes: int  # the sim's count of its mode changes, every one
     signing_rejected: int | None  # frames the vehicle refused (None: it has no signing)
+    sim_late_s: float  # the most the sim's stepping loop woke up late (a starved process)
 
     def since(self, unix_s: float, msg_id: int) -> list[Heard]:
         return [h for h in self.heard if h.unix_s >= unix_s and h.msg_id == msg_id]
@@ -58,6 +59,7 @@ async def _serve(conn: Connection, signing_dir: str | None) -> None:
                     signing_rejected=(
                         instance.signing.rejected if instance.signing is not None else None
                     ),
+                    sim_late_s=sim.loop_stats.max_lag_s,
                 ))
         finally:
             relay.close()
