@@ -130,7 +130,8 @@ class RecordingLink:
 
     def __init__(self, name: str = "api") -> None:
         self.name = name
-        self.sent: list[Any] = []
+        self._sent: list[Any] = []
+        self._frames: list[bytes] = []  # encoded, not decoded until somebody looks
         # the vehicle's own encoder, as its UDP links use it
         self._codec = MavlinkCodec(1, 1)
         self._parser = mavlink.MAVLink(None)
@@ -141,10 +142,25 @@ class RecordingLink:
         return True
 
     def send(self, msg: Any) -> None:
-        decoded = self._parser.parse_buffer(self._codec.encode(msg))
-        assert decoded is not None
-        assert len(decoded) == 1
-        self.sent.extend(decoded)
+        self._frames.append(self._codec.encode(msg))
+
+    @property
+    def sent(self) -> list[Any]:
+        """Every message sent so far as a peer decodes it, each frame one message (decoded
+        when first asked for: most stepped flights never look)."""
+        if self._frames:
+            frames, self._frames = self._frames, []
+            for frame in frames:
+                decoded = self._parser.parse_buffer(frame)
+                assert decoded is not None
+                assert len(decoded) == 1
+                self._sent.extend(decoded)
+        return self._sent
+
+    @sent.setter
+    def sent(self, messages: list[Any]) -> None:
+        self._frames = []
+        self._sent = messages
 
     def of_type(self, type_name: str) -> list[Any]:
         return [m for m in self.sent if m.get_type() == type_name]
@@ -171,7 +187,8 @@ class RecordingLink:
         return texts
 
     def clear(self) -> None:
-        self.sent.clear()
+        self._frames.clear()
+        self._sent.clear()
 
 
 class Harness:
