@@ -40,6 +40,11 @@ class FoxgloveClient:
         self.socket = socket
         self.received = Received()
         self._subscriptions: dict[int, int] = {}  # subscription id -> channel id
+        # the subscribe request each subscription went in (1, 2, ...), and the latest request
+        # data has come for: the server takes requests in order, so those up to it are taken
+        self._request_of: dict[int, int] = {}
+        self._requests = 0
+        self._answered = 0
         self._decoders: dict[int, Callable[[bytes], Any]] = {}
         self.reader: asyncio.Task[None] | None = None
 
@@ -55,14 +60,25 @@ class FoxgloveClient:
         taken = set(self._subscriptions.values())
         new = [c for c in self.received.channels.values() if c["id"] not in taken and wanted(c)]
         subscriptions = []
+        request = self._requests + 1
         for channel in new:
             subscription_id = len(self._subscriptions) + 1
             self._subscriptions[subscription_id] = channel["id"]
+            self._request_of[subscription_id] = request
             self._decoders[channel["id"]] = decoder_for(channel)
             subscriptions.append({"id": subscription_id, "channelId": channel["id"]})
         if subscriptions:
+            self._requests = request
             await self.socket.send(json.dumps({"op": "subscribe", "subscriptions": subscriptions}))
         return len(subscriptions)
+
+    def taken(self, topic: str) -> bool:
+        """Whether the server has taken the subscription to ``topic``: data came for one made in
+        the same request or a later one (the protocol acknowledges no subscription)."""
+        channel = self.received.topics().get(topic)
+        made = [self._request_of[sid] for sid, cid in self._subscriptions.items()
+                if channel is not None and cid == channel["id"]]
+        return bool(made) and self._answered >= made[0]
 
     async def read(self) -> None:
         async for frame in self.socket:
@@ -71,6 +87,7 @@ class FoxgloveClient:
             elif frame[0] == OP_MESSAGE_DATA:
                 _, subscription_id, _ = _MESSAGE_HEAD.unpack_from(frame)
                 channel_id = self._subscriptions[subscription_id]
+                self._answered = max(self._answered, self._request_of[subscription_id])
                 topic = self.received.channels[channel_id]["topic"]
                 payload = frame[_MESSAGE_HEAD.size:]
                 self.received.messages[topic].append(self._decoders[channel_id](payload))
