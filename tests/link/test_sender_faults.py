@@ -28,7 +28,7 @@ from pymavlink.dialects.v20 import development as mavlink
 
 from server.link.codec.signing_keys import SigningKeyStore
 from server.link.link import Link
-from server.link.stream import stream_channel, stream_process
+from server.link.stream import stream_channel, stream_process, stream_thread
 from server.link.stream.sender_supervisor import ProcessGone, SenderSupervisor
 from server.link.stream.streamer import SetpointStreamer
 from tests.link.test_stream_process import Receiver
@@ -124,6 +124,32 @@ async def _stream_through(flight: Flight, fault: Any, after_s: float) -> None:
     await asyncio.sleep(0.5)
     await fault()
     await asyncio.sleep(after_s)
+
+
+async def test_the_thread_that_takes_over_runs_at_its_priority_before_the_process_is_lost(
+    tmp_path: Path, supervisor: SenderSupervisor, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Started at the loss, the thread would first wait for a core as an ordinary thread
+    (tens of milliseconds beside busy cores, seen as a gap at the vehicle) before it raised
+    its priority."""
+    monkeypatch.setattr(stream_thread, "_shared", None)  # a sender thread of this test's own
+    flight, receiver = await _flight(tmp_path, signed=False)
+    try:
+        assert stream_thread.shared_sender().native_id is None
+        flight.streamer.stream(_msg(1))
+        assert flight.streamer.in_process
+        sender = stream_thread.shared_sender()
+        tid = sender.native_id
+        assert tid is not None, "no sender thread while the process streams"
+        assert sender.pending() == 0  # idle: the process sends
+        if stream_thread.SENDER_RT_PRIORITY > 0:
+            await wait_for(lambda: os.sched_getscheduler(tid) & 0xFF == os.SCHED_FIFO, 1.0,
+                           "the idle thread at real-time priority")
+            assert os.sched_getparam(tid).sched_priority == stream_thread.SENDER_RT_PRIORITY
+        flight.streamer.stop()
+    finally:
+        await flight.link.close()
+        receiver.close()
 
 
 @pytest.mark.parametrize("signed", [False, True], ids=["unsigned", "signed"])

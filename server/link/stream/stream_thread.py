@@ -7,8 +7,10 @@ is due; a job sends its frame and answers its next deadline (or None: it is over
 math (:class:`Deadlines`, from the sender process's module) is shared with the loop-timed streamer.
 
 A thread still needs the GIL to send, and CPython hands it over only every switch interval
-(5 ms by default) while the loop thread runs Python code. Starting the thread lowers the
-process's switch interval to ``SWITCH_INTERVAL_S`` so a due send waits at most that long.
+(5 ms by default) while the loop thread runs Python code. Its first job lowers the process's
+switch interval to ``SWITCH_INTERVAL_S`` so a due send waits at most that long. A server whose
+streams go to the sender process starts the thread with the first of them, idle: it is there
+when a lost process hands it the streams.
 """
 
 from __future__ import annotations
@@ -61,12 +63,28 @@ class SenderThread:
 
     def at(self, deadline_s: float, job: Job) -> None:
         """Run ``job`` at ``deadline_s`` on the clock (at once when it is past)."""
+        # a job waits for the GIL at most a switch interval: lowered from the first job on
+        sys.setswitchinterval(min(sys.getswitchinterval(), SWITCH_INTERVAL_S))
         with self._cond:
             heapq.heappush(self._heap, (deadline_s, next(self._order), job))
             if self._heap[0][2] is job:
                 self._cond.notify()
             if self._thread is None and self._threaded:
                 self._start()
+
+    def start(self) -> None:
+        """Start the thread now, idle until a job comes: the first job (a stream taken over
+        from a lost process) then needs no new thread, which would first wait for a core as
+        an ordinary one before it raised its priority."""
+        with self._cond:
+            if self._thread is None and self._threaded:
+                self._start()
+
+    @property
+    def native_id(self) -> int | None:
+        """The OS's id of the running thread (None before it starts)."""
+        thread = self._thread
+        return thread.native_id if thread is not None and thread.is_alive() else None
 
     def pending(self) -> int:
         with self._cond:
@@ -94,7 +112,6 @@ class SenderThread:
             return self._heap[0][0] if self._heap else None
 
     def _start(self) -> None:
-        sys.setswitchinterval(min(sys.getswitchinterval(), SWITCH_INTERVAL_S))
         self._thread = threading.Thread(target=self._run, name="setpoint-sender", daemon=True)
         self._thread.start()
 

@@ -178,6 +178,10 @@ class SetpointStreamer:
             if self._channel is not None:
                 self._threaded = False
                 self._clock = time.monotonic  # the process's clock: CLOCK_MONOTONIC
+                if SENDER_THREAD:  # the thread that takes over a lost process runs already
+                    if self._sender is None:
+                        self._sender = shared_sender()
+                    self._sender.start()
                 return
             self._fell_back = True  # where the link has no process, sender_back finds none
         self._choose_thread()
