@@ -125,7 +125,12 @@ def test_the_supervisor_puts_back_when_it_gives_up() -> None:
     sup.process()
     with _thread() as loop:
         for n in range(sender_supervisor.MAX_FAILED_RESTARTS + 1):
-            wait_for_blocking(f"process {n + 1}", lambda n=n: len(started) == n + 1, 2.0, 0.005)
+            # started, and the streams handed back to it (the priority put back): killed
+            # before, the restart's hand-back could put the threads back after this loss
+            wait_for_blocking(
+                f"process {n + 1} carrying the streams",
+                lambda n=n: len(started) == n + 1 and not sup.priority.active, 2.0, 0.005,
+            )
             started[n].die("exit status 1")  # type: ignore[attr-defined]
             if n < sender_supervisor.MAX_FAILED_RESTARTS:
                 assert _policy(loop) == (os.SCHED_FIFO, FALLBACK_PRIORITY)
