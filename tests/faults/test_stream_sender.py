@@ -139,6 +139,14 @@ def _sender_pid(supervisor: SenderSupervisor) -> int:
     return process.pid
 
 
+def _mode_changes_told(f: Flight, changed: int, watched_s: float) -> str:
+    """A failure's account of mode changes: the vehicle's modes, and whether its own loop
+    was starved (then the gap was not the stream's)."""
+    return (f"the vehicle changed mode {changed} times; its modes "
+            f"{modes_since(f.ended(), watched_s - 1.0)}, its loop up to "
+            f"{f.ended().sim_late_s * 1000:.0f} ms late")
+
+
 def _sender_log(caplog: pytest.LogCaptureFixture) -> list[tuple[float, str]]:
     return [(r.created, r.getMessage()[:320]) for r in caplog.records
             if "setpoint sender" in r.getMessage()]
@@ -182,9 +190,7 @@ async def test_kill_9_of_the_sender_while_hovering_in_offboard(
     print(f"kill -9 in OFFBOARD ({'signed' if signed else 'unsigned'}): largest setpoint gap "
           f"at the vehicle {gap_s * 1000:.1f} ms over {len(setpoints)} setpoints")
     assert gap_s <= KILL_GAP_S, where
-    assert changed == 0, (f"the vehicle changed mode {changed} times; its modes "
-                          f"{modes_since(f.ended(), watched_s - 1.0)}, its loop up to "
-                          f"{f.ended().sim_late_s * 1000:.0f} ms late")
+    assert changed == 0, _mode_changes_told(f, changed, watched_s)
     assert f.ended().signing_rejected == rejected, "frames the vehicle refused"
     check_sequence(f.ended(), watched_s - 0.5)
     assert modes_since(f.ended(), watched_s - 1.0) == {OFFBOARD_MODE}
@@ -234,9 +240,7 @@ async def test_the_sender_killed_while_flying_sticks_in_posctl(
     print(f"kill of the sender in POSCTL: largest MANUAL_CONTROL gap at the vehicle "
           f"{gap_s * 1000:.1f} ms, {rate_hz:.1f} Hz over {len(sticks)} frames")
     assert gap_s <= KILL_GAP_S, where
-    assert changed == 0, (f"the vehicle changed mode {changed} times; its modes "
-                          f"{modes_since(f.ended(), watched_s - 1.0)}, its loop up to "
-                          f"{f.ended().sim_late_s * 1000:.0f} ms late")
+    assert changed == 0, _mode_changes_told(f, changed, watched_s)
     assert 23.0 <= rate_hz <= 27.0
     check_sequence(f.ended(), watched_s - 0.5)
     assert modes_since(f.ended(), watched_s - 1.0) == {POSCTL_MODE}

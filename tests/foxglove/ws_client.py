@@ -43,7 +43,6 @@ class FoxgloveClient:
         # the subscribe request each subscription went in (1, 2, ...), and the latest request
         # data has come for: the server takes requests in order, so those up to it are taken
         self._request_of: dict[int, int] = {}
-        self._requests = 0
         self._answered = 0
         self._decoders: dict[int, Callable[[bytes], Any]] = {}
         self.reader: asyncio.Task[None] | None = None
@@ -60,7 +59,7 @@ class FoxgloveClient:
         taken = set(self._subscriptions.values())
         new = [c for c in self.received.channels.values() if c["id"] not in taken and wanted(c)]
         subscriptions = []
-        request = self._requests + 1
+        request = max(self._request_of.values(), default=0) + 1
         for channel in new:
             subscription_id = len(self._subscriptions) + 1
             self._subscriptions[subscription_id] = channel["id"]
@@ -68,7 +67,6 @@ class FoxgloveClient:
             self._decoders[channel["id"]] = decoder_for(channel)
             subscriptions.append({"id": subscription_id, "channelId": channel["id"]})
         if subscriptions:
-            self._requests = request
             await self.socket.send(json.dumps({"op": "subscribe", "subscriptions": subscriptions}))
         return len(subscriptions)
 
@@ -78,7 +76,7 @@ class FoxgloveClient:
         channel = self.received.topics().get(topic)
         made = [self._request_of[sid] for sid, cid in self._subscriptions.items()
                 if channel is not None and cid == channel["id"]]
-        return bool(made) and self._answered >= made[0]
+        return made != [] and self._answered >= made[0]
 
     async def read(self) -> None:
         async for frame in self.socket:

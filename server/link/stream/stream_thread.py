@@ -63,22 +63,21 @@ class SenderThread:
 
     def at(self, deadline_s: float, job: Job) -> None:
         """Run ``job`` at ``deadline_s`` on the clock (at once when it is past)."""
-        # a job waits for the GIL at most a switch interval: lowered from the first job on
-        sys.setswitchinterval(min(sys.getswitchinterval(), SWITCH_INTERVAL_S))
         with self._cond:
+            if not self._heap:
+                # a job waits for the GIL at most a switch interval: lowered once work comes
+                sys.setswitchinterval(min(sys.getswitchinterval(), SWITCH_INTERVAL_S))
             heapq.heappush(self._heap, (deadline_s, next(self._order), job))
             if self._heap[0][2] is job:
                 self._cond.notify()
-            if self._thread is None and self._threaded:
-                self._start()
+            self._start()
 
     def start(self) -> None:
         """Start the thread now, idle until a job comes: the first job (a stream taken over
         from a lost process) then needs no new thread, which would first wait for a core as
         an ordinary one before it raised its priority."""
         with self._cond:
-            if self._thread is None and self._threaded:
-                self._start()
+            self._start()
 
     @property
     def native_id(self) -> int | None:
@@ -112,6 +111,9 @@ class SenderThread:
             return self._heap[0][0] if self._heap else None
 
     def _start(self) -> None:
+        """The thread, unless it runs already or the owner runs the jobs (under _cond)."""
+        if self._thread is not None or not self._threaded:
+            return
         self._thread = threading.Thread(target=self._run, name="setpoint-sender", daemon=True)
         self._thread.start()
 

@@ -179,9 +179,7 @@ class SetpointStreamer:
                 self._threaded = False
                 self._clock = time.monotonic  # the process's clock: CLOCK_MONOTONIC
                 if SENDER_THREAD:  # the thread that takes over a lost process runs already
-                    if self._sender is None:
-                        self._sender = shared_sender()
-                    self._sender.start()
+                    self._thread_sender().start()
                 return
             self._fell_back = True  # where the link has no process, sender_back finds none
         self._choose_thread()
@@ -190,11 +188,15 @@ class SetpointStreamer:
         assert self._loop is not None
         self._threaded = SENDER_THREAD and _real_time_loop(self._loop)
         if self._threaded:
-            if self._sender is None:
-                self._sender = shared_sender()
-            self._clock = self._sender.clock
+            self._clock = self._thread_sender().clock
         else:
             self._clock = self._loop.time
+
+    def _thread_sender(self) -> SenderThread:
+        """The sender thread this stream falls to: the one given, or the process's."""
+        if self._sender is None:
+            self._sender = shared_sender()
+        return self._sender
 
     def update(self, msg: mavlink.MAVLink_message) -> None:
         """Send ``msg`` from the next tick on without moving the schedule (a stream that
