@@ -12,11 +12,12 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from pathlib import Path
 
 import pytest
 
 from server.link.stream import sender_supervisor
-from server.link.stream.fallback_priority import FALLBACK_PRIORITY, FallbackPriority
+from server.link.stream.fallback_priority import FALLBACK_PRIORITY, FallbackPriority, thread_ids
 from tests.link.realtime import may_run_real_time
 from tests.link.test_sender_supervisor import Member, _supervisor
 from tests.waiting import wait_for_blocking
@@ -24,6 +25,7 @@ from tests.waiting import wait_for_blocking
 pytestmark = pytest.mark.skipif(not may_run_real_time(), reason="no real-time scheduling here")
 
 _RESET = os.SCHED_RESET_ON_FORK
+TASKS = Path("/proc/self/task")
 
 
 def _policy(tid: int) -> tuple[int, int]:
@@ -139,3 +141,23 @@ def test_the_supervisor_puts_back_when_it_gives_up() -> None:
         assert _policy(loop) == (os.SCHED_OTHER, 0)
         assert not sup.priority.active
     assert len(member.lost) == len(started)
+
+
+@pytest.mark.usefixtures("_short_backoff")
+def test_the_restart_runs_on_a_thread_that_waited_since_the_first_process_raised_with_the_others(
+) -> None:
+    sup, started = _supervisor()
+    sup.watch(member := Member())
+    sup.process()
+    restarter = sup._restarter.native_id
+    assert restarter is not None, "no restart thread while the first process runs"
+    before = set(thread_ids(TASKS))
+    assert restarter in before
+    started[0].die("killed by SIGKILL")  # type: ignore[attr-defined]
+    # nothing new in the process at the loss: a thread started now would start ordinary
+    assert set(thread_ids(TASKS)) <= before
+    assert _policy(restarter) == (os.SCHED_FIFO, FALLBACK_PRIORITY)
+    wait_for_blocking("the restart", lambda: member.back == 1, 2.0, 0.005)
+    wait_for_blocking("put back", lambda: not sup.priority.active, 2.0, 0.005)
+    assert _policy(restarter) == (os.SCHED_OTHER, 0)
+    assert len(started) == 2

@@ -106,7 +106,7 @@ class SenderSupervisor:
         self._members: weakref.WeakSet[Supervised] = weakref.WeakSet()
         self._handovers: weakref.WeakSet[Supervised] = weakref.WeakSet()
         self._listeners: list[Callable[[SenderStatus], None]] = []
-        self._restart_timer: threading.Timer | None = None
+        self._restarter = Restarter(self._restart)
         self._watchdog: threading.Thread | None = None
         self.restarts = 0
         self.faults = 0
@@ -185,10 +185,7 @@ class SenderSupervisor:
                   f"; restarting it in {self._backoff_s():g} s")
         self._tell()
         if not give_up:
-            with self._lock:
-                self._restart_timer = threading.Timer(self._backoff_s(), self._restart)
-                self._restart_timer.daemon = True
-                self._restart_timer.start()
+            self._restarter.after(self._backoff_s())
 
     def _fault(self, why: str) -> None:
         self.faults += 1
@@ -214,9 +211,7 @@ class SenderSupervisor:
                 self._fault(f"cannot restart: {exc}")
                 self.gave_up = self.failed_in_row > MAX_FAILED_RESTARTS
                 if not self.gave_up:
-                    self._restart_timer = threading.Timer(self._backoff_s(), self._restart)
-                    self._restart_timer.daemon = True
-                    self._restart_timer.start()
+                    self._restarter.after(self._backoff_s())
                 else:
                     self.priority.restore()
                 self._tell()
@@ -249,6 +244,7 @@ class SenderSupervisor:
 
     # -- the watchdog: a stuck process --
     def _start_watchdog(self) -> None:
+        self._restarter.start()
         if self._watchdog is None:
             self._watchdog = threading.Thread(target=self._watch, name="setpoint-watchdog",
                                               daemon=True)
@@ -293,6 +289,52 @@ class SenderSupervisor:
                 f"{used[1] * 1000:.0f} ms for a CPU")
             process.kill(f"stopped answering: no heartbeat for {age_s * 1000:.0f} ms "
                          f"(process state {state or '?'}{said})")
+
+
+class Restarter:
+    """The thread that starts a new sender process after the back-off. It exists from the
+    first process on and waits: at a loss the supervisor raises this server's threads
+    (fallback_priority) and it is one of them. A thread started at the loss would start at
+    ordinary priority, and its first steps hold the interpreter lock: taken off its core
+    there, it held the sender thread back (a 317 ms gap at the vehicle was seen so)."""
+
+    def __init__(self, run: Callable[[], None]) -> None:
+        self._run = run
+        self._wake = threading.Condition(threading.Lock())
+        self._due_s: float | None = None  # time.monotonic() of the next run
+        self._thread: threading.Thread | None = None
+
+    def start(self) -> None:
+        with self._wake:
+            if self._thread is None:
+                self._thread = threading.Thread(target=self._loop, name="setpoint-restarter",
+                                                 daemon=True)
+                self._thread.start()
+
+    def after(self, delay_s: float) -> None:
+        """Run once, delay_s from now (a later call moves it)."""
+        with self._wake:
+            self._due_s = time.monotonic() + delay_s
+            self._wake.notify()
+        self.start()  # started with the first process; only a stand-in skips that
+
+    @property
+    def native_id(self) -> int | None:
+        return None if self._thread is None else self._thread.native_id
+
+    def _loop(self) -> None:
+        while True:
+            with self._wake:
+                while True:
+                    due_s = self._due_s
+                    if due_s is not None and due_s <= time.monotonic():
+                        break
+                    self._wake.wait(None if due_s is None else due_s - time.monotonic())
+                self._due_s = None
+            try:
+                self._run()
+            except Exception:
+                log.exception("setpoint sender: the restart failed")
 
 
 def run_state(pid: int | None) -> str | None:
