@@ -205,6 +205,9 @@ class Chain:
         flight): afterwards position_ned reads that far north on the ground, since it is
         measured from the estimator's origin, not from where a flight starts."""
         vehicle = f"/vehicles/{self.vehicle}"
+        # a pilot takes off once the page reads ready to fly: a PX4 just started refuses
+        # to arm until its estimator has a position ("No valid position estimate")
+        wait_for_blocking("ready to fly", lambda: _armable(self.state()), 120.0, 0.5)
         with self.client() as api:
             start = self.state()["position_ned"]["north_m"]
             lease = api.post(f"{vehicle}/control", json={"client_name": "flight ending away"})
@@ -354,6 +357,11 @@ def full_chain(chain: Chain, context: Any) -> None:
 def _accepted(answer: httpx.Response) -> None:
     assert answer.status_code == 200, answer.text
     assert answer.json()["result"] == "ACCEPTED", answer.text
+
+
+def _armable(state: dict[str, Any]) -> bool:
+    checks = state.get("arming_checks") or {}
+    return checks.get("verdict") in ("ready", "arm_switches_mode")
 
 
 def _alt_rel_m(state: dict[str, Any]) -> float:
