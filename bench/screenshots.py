@@ -68,7 +68,10 @@ def fly_quad(page: Any, serve: Serve) -> None:
         page.click("#sp-from-here")
         click_and_wait_result(page, "#btn-offboard-start")
         drag_slider_to(page, "#sp-north_m-slider", 12.0)
-        drag_slider_to(page, "#sp-alt_m-slider", 10.0)
+        drag_slider_to(page, "#sp-alt_m-slider", 12.0)
+        # more than 3 m up at once: the page asks first, and the pilot says yes
+        page.wait_for_selector("#confirm-dialog[open]", timeout=5_000)
+        page.click("#confirm-ok")
         wait_for("the quad on its way", lambda: vehicle_state(api)["position_ned"]["north_m"] > 6,
                  30.0)
 

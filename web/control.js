@@ -106,6 +106,7 @@ async function askHeld() {
   const ok = await altitudeGuard.allows(page.state, panelAltitudeM());
   if (!held) return;
   held = false;
+  answerNote(ok);
   if (!ok) {
     panel.followAgain(["alt_m"]);
     followFlown(page.state);
@@ -114,11 +115,24 @@ async function askHeld() {
   scheduleSetpoint();
 }
 
+const NOTE_TAIL = " — asked when you leave the field or let go of the slider";
+
+/** The note that a question is to come gets its answer once it is given (unless the line
+ * shows something else by then). */
+function answerNote(ok) {
+  const shown = $("result").textContent;
+  if (!shown.endsWith(NOTE_TAIL)) return;
+  const asked = shown.slice(0, -NOTE_TAIL.length).replace(/\?$/, "");
+  showLine(`${asked}: ${ok ? "confirmed" : "cancelled"}`, ok ? "ok" : "bad");
+}
+
 function scheduleSetpoint() {
   if (!inControl()) return;
   const question = altitudeGuard.question(page.state, panelAltitudeM());
   if (question) {
-    if (!held) showLine(`${question.title} — asked when you leave the field or let go of the slider`, "pending");
+    // the note names the value the panel shows now, not the one that first needed asking
+    const note = `${question.title}${NOTE_TAIL}`;
+    if ($("result").textContent !== note) showLine(note, "pending");
     held = true;
     return;
   }

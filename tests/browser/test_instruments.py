@@ -100,6 +100,27 @@ def test_a_value_greys_out_with_its_age_while_the_vehicle_is_silent(
     page.wait_for_selector("#t-att:not(.stale)", timeout=PAGE_TIMEOUT_MS)
 
 
+# WCAG's contrast ratio of the dialog's title and text against its background
+CONTRAST_IN_DIALOG = """() => {
+    const rgb = (c) => c.match(/[\\d.]+/g).slice(0, 3).map(Number);
+    const lum = (c) => {
+        const [r, g, b] = rgb(c).map((v) => {
+            v /= 255;
+            return v <= 0.03928 ? v / 12.92 : ((v + 0.055) / 1.055) ** 2.4;
+        });
+        return 0.2126 * r + 0.7152 * g + 0.0722 * b;
+    };
+    const dialog = document.getElementById("confirm-dialog");
+    const back = lum(getComputedStyle(dialog).backgroundColor);
+    const ratio = (el) => {
+        const [a, b] = [lum(getComputedStyle(el).color), back].sort((x, y) => y - x);
+        return Math.round((a + 0.05) / (b + 0.05) * 10) / 10;
+    };
+    return { title: ratio(document.getElementById("confirm-title")),
+             text: ratio(dialog.querySelector("p")) };
+}"""
+
+
 def _open_confirmation(page: Any, button: str) -> str:
     """Clicks a button that asks first; returns the title of the dialog it opened."""
     page.click(button)
@@ -141,6 +162,11 @@ def test_kill_asks_first_then_disarms_at_once(api: httpx.Client, page: Any) -> N
     wait_for("armed", lambda: vehicle_state(api)["armed"], 10.0)
 
     assert _open_confirmation(page, "#btn-kill") == "Kill the motors?"
+    for scheme in ("dark", "light"):  # the question is read in either theme
+        page.emulate_media(color_scheme=scheme)
+        page.wait_for_function(f"document.documentElement.dataset.theme === '{scheme}'")
+        ratios = page.evaluate(CONTRAST_IN_DIALOG)
+        assert min(ratios.values()) >= 4.5, f"{scheme}: text contrast {ratios}"
     page.keyboard.press("Escape")
     page.wait_for_selector("#confirm-dialog", state="hidden", timeout=5_000)
     assert vehicle_state(api)["armed"]  # Escape is no

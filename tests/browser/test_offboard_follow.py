@@ -84,7 +84,14 @@ def test_the_form_follows_the_vehicle_so_a_leg_north_keeps_the_altitude(
 
     # Altitude 0 while airborne: nothing is sent before the pilot answers, with the numbers
     flown_down = vehicle_state(api)["setpoint"]["down_m"]
-    page.fill("#sp-alt_m", "0")
+    # while the field is edited, its note names the altitude it shows now
+    for typed in ("1", "0"):
+        page.fill("#sp-alt_m", typed)
+        page.wait_for_function(
+            "(m) => document.getElementById('result').textContent"
+            ".startsWith(`Descend to ${m} m above home? — asked when you leave`)",
+            arg=typed, timeout=5_000,
+        )
     page.press("#sp-alt_m", "Tab")
     page.wait_for_function("document.getElementById('confirm-dialog').open", timeout=5_000)
     question = page.text_content("#confirm-text") or ""
@@ -94,6 +101,7 @@ def test_the_form_follows_the_vehicle_so_a_leg_north_keeps_the_altitude(
     assert vehicle_state(api)["setpoint"]["down_m"] == flown_down
     page.click("#confirm-cancel")
     assert not _dialog_open(page)
+    assert page.text_content("#result") == "Descend to 0 m above home: cancelled"
     # cancelled: the altitude follows the vehicle again, and the vehicle never went down
     page.wait_for_function(
         "Math.abs(parseFloat(document.getElementById('sp-alt_m').value) - 5) < 0.5",
@@ -119,4 +127,13 @@ def test_the_form_follows_the_vehicle_so_a_leg_north_keeps_the_altitude(
     page.click("#sp-from-here")
     assert _tag(page, "north_m") == "following"
     assert (page.text_content("#sp-follow") or "") == "following the vehicle"
+
+    # 4 m up at once, asked and confirmed: sent, and the note says so
+    page.fill("#sp-alt_m", str(TAKEOFF_M + 4))
+    page.press("#sp-alt_m", "Tab")
+    page.wait_for_function("document.getElementById('confirm-dialog').open", timeout=5_000)
+    page.click("#confirm-ok")
+    wait_for("the climb sent", lambda: vehicle_state(api)["setpoint"]["down_m"] < -TAKEOFF_M - 3.5,
+             5.0)
+    assert page.text_content("#result") == f"Climb to {TAKEOFF_M + 4:g} m above home: confirmed"
     click_and_wait_result(page, "#btn-offboard-stop")
