@@ -140,8 +140,8 @@ def raise_priority() -> None:
     notice a lost sender process, whose streams wait on them."""
     if SENDER_RT_PRIORITY <= 0 or not hasattr(os, "sched_setscheduler"):
         return
-    # reset on fork: a thread or process this one starts (a new sender
-    # process and its threads) runs at ordinary priority, not at this one's
+    # reset on fork: a thread or process this one starts (a new sender process and its
+    # threads) runs at ordinary priority, not at this one's
     policy = os.SCHED_FIFO | getattr(os, "SCHED_RESET_ON_FORK", 0)
     try:
         os.sched_setscheduler(0, policy, os.sched_param(SENDER_RT_PRIORITY))
