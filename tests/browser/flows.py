@@ -32,6 +32,16 @@ def take_control(page: Any) -> None:
     )
 
 
+def wait_for_text(page: Any, element_id: str, text: str, *, starts: bool = False,
+                  timeout_ms: float = 5_000) -> None:
+    """Waits until the element's text contains ``text`` (begins with it: ``starts``)."""
+    page.wait_for_function(
+        "([id, text, starts]) => { const t = document.getElementById(id).textContent;"
+        " return starts ? t.startsWith(text) : t.includes(text); }",
+        arg=[element_id, text, starts], timeout=timeout_ms,
+    )
+
+
 def click_and_wait_result(
     page: Any, selector: str, expect: str = "ACCEPTED", confirm: bool = False
 ) -> str:

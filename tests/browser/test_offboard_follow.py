@@ -11,7 +11,13 @@ from typing import Any
 
 import httpx
 
-from .flows import arm_and_take_off, click_and_wait_result, settle_vehicle, take_control
+from .flows import (
+    arm_and_take_off,
+    click_and_wait_result,
+    settle_vehicle,
+    take_control,
+    wait_for_text,
+)
 from .harness import altitude_m, speed_m_s, vehicle_state, wait_for
 
 SERVE_ARGS = ["--sim-speed", "2"]
@@ -87,11 +93,8 @@ def test_the_form_follows_the_vehicle_so_a_leg_north_keeps_the_altitude(
     # while the field is edited, its note names the altitude it shows now
     for typed in ("1", "0"):
         page.fill("#sp-alt_m", typed)
-        page.wait_for_function(
-            "(m) => document.getElementById('result').textContent"
-            ".startsWith(`Descend to ${m} m above home? — asked when you leave`)",
-            arg=typed, timeout=5_000,
-        )
+        wait_for_text(page, "result", f"Descend to {typed} m above home? — asked when you leave",
+                      starts=True)
     page.press("#sp-alt_m", "Tab")
     page.wait_for_function("document.getElementById('confirm-dialog').open", timeout=5_000)
     question = page.text_content("#confirm-text") or ""

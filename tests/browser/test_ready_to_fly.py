@@ -8,7 +8,13 @@ from typing import Any
 
 import httpx
 
-from .flows import click_and_wait_result, settle_vehicle, start_offboard_here, take_control
+from .flows import (
+    click_and_wait_result,
+    settle_vehicle,
+    start_offboard_here,
+    take_control,
+    wait_for_text,
+)
 from .harness import vehicle_state, wait_for
 
 SERVE_ARGS = ["--sim-speed", "3"]
@@ -118,11 +124,7 @@ def test_picked_modes_px4_will_not_arm_in_say_so(page: Any, api: httpx.Client) -
     page.click(READY)
     for mode in ("LAND", "RTL"):
         page.select_option("#mode-select", mode)
-        page.wait_for_function(
-            "(mode) => document.getElementById('ready-popover').textContent"
-            ".includes(`In ${mode} (picked): cannot arm`)",
-            arg=mode, timeout=5_000,
-        )  # fmt: skip
+        wait_for_text(page, "ready-popover", f"In {mode} (picked): cannot arm")
         assert "Mode not suitable for arming" in (page.text_content("#ready-popover") or "")
     page.keyboard.press("Escape")
 
