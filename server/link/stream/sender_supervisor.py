@@ -155,7 +155,7 @@ class SenderSupervisor:
                 self._fault(f"cannot start: {exc}")
                 self.gave_up = True
                 raise
-            self._start_watchdog()
+            self._start_watchers()
             return self._process
 
     # -- faults --
@@ -243,7 +243,8 @@ class SenderSupervisor:
                 log.exception("setpoint sender: a status listener failed")
 
     # -- the watchdog: a stuck process --
-    def _start_watchdog(self) -> None:
+    def _start_watchers(self) -> None:
+        """The watchdog and the restart thread, from the first process on."""
         self._restarter.start()
         if self._watchdog is None:
             self._watchdog = threading.Thread(target=self._watch, name="setpoint-watchdog",
@@ -316,7 +317,6 @@ class Restarter:
         with self._wake:
             self._due_s = time.monotonic() + delay_s
             self._wake.notify()
-        self.start()  # started with the first process; only a stand-in skips that
 
     @property
     def native_id(self) -> int | None:
@@ -325,11 +325,9 @@ class Restarter:
     def _loop(self) -> None:
         while True:
             with self._wake:
-                while True:
-                    due_s = self._due_s
-                    if due_s is not None and due_s <= time.monotonic():
-                        break
-                    self._wake.wait(None if due_s is None else due_s - time.monotonic())
+                while self._due_s is None or self._due_s > time.monotonic():
+                    self._wake.wait(None if self._due_s is None else
+                                    self._due_s - time.monotonic())
                 self._due_s = None
             try:
                 self._run()
