@@ -24,6 +24,7 @@ from tests.api.conftest import PILOT
 from tests.api.test_ws import (
     Served,
     close_code,
+    close_reading,
     fly_offboard_at_2_m_s,
     receive_until,
     served,
@@ -161,7 +162,8 @@ async def test_a_silent_live_input_brakes_while_the_lease_stays(quad: Served) ->
         assert state["lease"]["holder"] is not None
         event = await receive_until(telemetry, {"type": "event", "kind": "deadman"})
         assert (event["data"]["action"], event["data"]["cause"]) == ("brake", "live_timeout")
-        await ws.close()
+        await close_reading(ws)
+        await close_reading(telemetry)
 
 
 async def test_the_velocity_intent_on_the_socket_is_live_by_default(quad: Served) -> None:

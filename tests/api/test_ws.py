@@ -78,6 +78,21 @@ async def receive_until(
             return message
 
 
+async def close_reading(ws: ClientConnection) -> None:
+    """Closes a socket as a client that keeps reading does. Messages left unread past the
+    client's queue stop websockets reading the connection, the server's answer to the close
+    among them, and the close then waits out its timeout (10 s)."""
+
+    async def drain() -> None:
+        with contextlib.suppress(ConnectionClosed):
+            async for _ in ws:
+                pass
+
+    reader = asyncio.create_task(drain())
+    await ws.close()
+    await reader
+
+
 async def close_code(ws: ClientConnection) -> int | None:
     with contextlib.suppress(ConnectionClosed, TimeoutError):
         while True:
