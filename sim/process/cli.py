@@ -6,11 +6,13 @@ import argparse
 import asyncio
 import json
 import math
+import signal
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
 from sim.models.airframes import AIRFRAME_NAMES
+from sim.process.run_loop import FAST_FORWARD_SPEED
 from sim.process.runner import SimCluster
 from sim.process.sim_processes import run_processes, stop_event
 
@@ -22,6 +24,8 @@ SITL_GCS_LOCAL_PORT = 18570
 # Vehicles one process steps by default: a quad costs ~2.7 % of a core, so 16 of them keep
 # a process's loop well inside its 20 ms wake period, and more processes use more cores.
 VEHICLES_PER_PROCESS = 16
+FAST_FORWARD = signal.SIGUSR1
+REAL_PACE = signal.SIGUSR2
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -47,6 +51,10 @@ def build_parser() -> argparse.ArgumentParser:
                         help="local GCS port of instance 0 (instance i: +i); 0 = ephemeral")
     parser.add_argument("--host", default="127.0.0.1", help="address to bind and send to")
     parser.add_argument("--speed", type=float, default=1.0, help="sim time / wall time")
+    parser.add_argument("--fast-forward-speed", type=float, default=FAST_FORWARD_SPEED,
+                        help="sim time / wall time from a SIGUSR1 until a SIGUSR2, which "
+                             "goes back to --speed (e.g. a take-off flown fast, then the "
+                             "rest in real time)")
     parser.add_argument("--ready-json", action="store_true",
                         help="print one JSON line with the bound ports once ready")
     parser.add_argument("--exit-on-stdin-eof", action="store_true",
@@ -84,6 +92,9 @@ async def serve(args: argparse.Namespace) -> int:
         speed=args.speed,
         signing_dir=args.signing_dir,
     )
+    loop = asyncio.get_running_loop()
+    loop.add_signal_handler(FAST_FORWARD, cluster.pace.set, args.fast_forward_speed)
+    loop.add_signal_handler(REAL_PACE, cluster.pace.set, args.speed)
     async with cluster:
         _report_ports(cluster, args)
         await stop.wait()
@@ -121,6 +132,7 @@ def _child_arguments(args: argparse.Namespace, first: int, count: int) -> list[s
     return [
         "--instance", str(first), "--count", str(count), "--processes", "1",
         "--airframe", args.airframe, "--host", args.host, "--speed", repr(args.speed),
+        "--fast-forward-speed", repr(args.fast_forward_speed),
         "--api-port", str(args.api_port), "--gcs-port", str(args.gcs_port),
         "--api-local-port", str(args.api_local_port),
         "--gcs-local-port", str(args.gcs_local_port),
@@ -134,16 +146,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.count < 1:
         print("--count must be at least 1", file=sys.stderr)
         return 2
-    if args.speed <= 0:
-        print("--speed must be positive", file=sys.stderr)
-        return 2
+    for name, speed in (("--speed", args.speed), ("--fast-forward-speed", args.fast_forward_speed)):
+        if not 0 < speed < math.inf:
+            print(f"{name} must be positive", file=sys.stderr)
+            return 2
     if args.processes < 0:
         print("--processes must be 0 (automatic) or more", file=sys.stderr)
         return 2
     processes = process_count(args.count, args.processes)
     try:
         if processes > 1:
-            return asyncio.run(run_processes(args, processes, _child_arguments))
+            return asyncio.run(run_processes(args, processes, _child_arguments,
+                                             forwarded=(FAST_FORWARD, REAL_PACE)))
         return asyncio.run(serve(args))
     except (OSError, RuntimeError) as exc:
         print(f"sim: {exc}", file=sys.stderr)

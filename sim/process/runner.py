@@ -8,6 +8,8 @@ all vehicles on absolute deadlines.
 from __future__ import annotations
 
 import asyncio
+import contextlib
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
@@ -15,7 +17,7 @@ from types import TracebackType
 from sim.mavlink.endpoint import UdpLink, open_link
 from sim.mavlink.signing import MAVLINK_SECRET_FILE, VehicleSigning
 from sim.process.clock import Clock
-from sim.process.run_loop import LoopStats, run_vehicles
+from sim.process.run_loop import FAST_FORWARD_SPEED, LoopStats, Pace, run_vehicles
 from sim.vehicle import AirframeFactory, DefaultsFactory, SimVehicle
 
 # Spacing of the instances' spawn points along east, so they do not start inside each other.
@@ -92,7 +94,8 @@ class SimCluster:
         self.gcs_port = gcs_port
         self.api_local_port = api_local_port
         self.gcs_local_port = gcs_local_port
-        self.speed = speed
+        # sim seconds per wall second, changeable while it runs (fast_forward)
+        self.pace = Pace(speed)
         self.instances: list[SimInstance] = []
         self.loop_stats = LoopStats()
         self._airframe_factory = airframe_factory
@@ -111,9 +114,24 @@ class SimCluster:
             raise
         vehicles = [inst.vehicle for inst in self.instances]
         self._task = asyncio.create_task(
-            run_vehicles(vehicles, self.speed, self.loop_stats, clock=self._clock),
+            run_vehicles(vehicles, self.pace, self.loop_stats, clock=self._clock),
             name="sim-vehicles",
         )
+
+    @property
+    def speed(self) -> float:
+        """Sim seconds per wall second, now."""
+        return self.pace.speed
+
+    @contextlib.contextmanager
+    def fast_forwarded(self, speed: float = FAST_FORWARD_SPEED) -> Iterator[None]:
+        """The block at `speed` (a set-up flight nobody looks at), then the speed before."""
+        before = self.pace.speed
+        self.pace.set(speed)
+        try:
+            yield
+        finally:
+            self.pace.set(before)
 
     async def _open_instance(self, index: int) -> SimInstance:
         offset = index - self.first_instance

@@ -57,10 +57,7 @@ async def _drain(proc: asyncio.subprocess.Process) -> None:
 
 
 async def _stop_all(children: list[asyncio.subprocess.Process]) -> None:
-    for proc in children:
-        if proc.returncode is None:
-            with contextlib.suppress(ProcessLookupError):
-                proc.send_signal(signal.SIGTERM)
+    _send(children, signal.SIGTERM)
     for proc in children:
         try:
             await asyncio.wait_for(proc.wait(), STOP_TIMEOUT_S)
@@ -70,6 +67,13 @@ async def _stop_all(children: list[asyncio.subprocess.Process]) -> None:
             await proc.wait()
         if proc.stdin is not None:
             proc.stdin.close()
+
+
+def _send(children: list[asyncio.subprocess.Process], sig: signal.Signals) -> None:
+    for proc in children:
+        if proc.returncode is None:
+            with contextlib.suppress(ProcessLookupError):
+                proc.send_signal(sig)
 
 
 def stop_event(*, exit_on_stdin_eof: bool) -> asyncio.Event:
@@ -95,10 +99,15 @@ def watch_stdin(loop: asyncio.AbstractEventLoop, stop: asyncio.Event) -> None:
 
 
 async def run_processes(
-    args: argparse.Namespace, processes: int, child_arguments: ChildArguments
+    args: argparse.Namespace, processes: int, child_arguments: ChildArguments,
+    forwarded: tuple[signal.Signals, ...] = (),
 ) -> int:
+    """Runs the children until asked to stop or one ends; the `forwarded` signals go on to
+    every child."""
     stop = stop_event(exit_on_stdin_eof=args.exit_on_stdin_eof)
     children: list[asyncio.subprocess.Process] = []
+    for sig in forwarded:
+        asyncio.get_running_loop().add_signal_handler(sig, _send, children, sig)
     drains: list[asyncio.Task[None]] = []
     try:
         for first, count in split_instances(args.instance, args.count, processes):

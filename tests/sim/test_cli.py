@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
+import select
 import signal
 import socket
 import subprocess
@@ -187,3 +189,76 @@ def test_a_process_that_dies_takes_the_others_down() -> None:
         assert not _alive(pids[0])
     finally:
         stop(proc)
+
+
+class _Listener:
+    """A ground station on one vehicle's port (the vehicle answers its first sender)."""
+
+    def __init__(self, port: int) -> None:
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.parser = mavlink.MAVLink(None)
+        mav = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+        self.sock.sendto(mavlink.MAVLink_heartbeat_message(6, 8, 0, 0, 0, 3).pack(mav),
+                         ("127.0.0.1", port))
+
+    def attitude_times_s(self, received_s: float) -> list[tuple[float, float]]:
+        """(received_s, the vehicle's time_boot_ms in s) of each ATTITUDE in one datagram."""
+        data = self.sock.recv(65536)
+        return [(received_s, msg.time_boot_ms / 1000.0)
+                for msg in self.parser.parse_buffer(data) or [] if msg.get_type() == "ATTITUDE"]
+
+
+def _clock_rates(vehicles: list[_Listener], window_s: float = 1.5) -> list[float]:
+    """How fast each vehicle's clock runs against this process's wall clock, all read at
+    once over `window_s` (after what waited in their sockets), from the first ATTITUDE."""
+    for vehicle in vehicles:
+        vehicle.sock.setblocking(False)
+        with contextlib.suppress(BlockingIOError):
+            while True:
+                vehicle.attitude_times_s(0.0)
+    seen: dict[_Listener, list[tuple[float, float]]] = {v: [] for v in vehicles}
+    end = time.monotonic() + window_s
+    while time.monotonic() < end or not all(len(times) >= 2 for times in seen.values()):
+        assert time.monotonic() < end + 10.0, "no ATTITUDE"
+        ready, _, _ = select.select([v.sock for v in vehicles], [], [], 0.2)
+        now = time.monotonic()
+        for vehicle in vehicles:
+            if vehicle.sock in ready:
+                seen[vehicle] += vehicle.attitude_times_s(now)
+    rates = []
+    for times in seen.values():
+        (wall0, sim0), (wall1, sim1) = times[0], times[-1]
+        rates.append((sim1 - sim0) / (wall1 - wall0))
+    return rates
+
+
+@pytest.mark.parametrize("processes", ["1", "2"])
+def test_sigusr1_fast_forwards_every_vehicle_and_sigusr2_goes_back(processes: str) -> None:
+    proc = start_sim("--count", "2", "--processes", processes, "--speed", "1",
+                     "--fast-forward-speed", "6")
+    try:
+        vehicles = [_Listener(i["gcs_local_port"]) for i in read_ready(proc)["instances"]]
+        try:
+            assert all(0.7 < rate < 1.3 for rate in _clock_rates(vehicles))
+            proc.send_signal(signal.SIGUSR1)
+            # 6x asked; a loaded machine may run it slower, never as slow as real time
+            assert all(3.0 < rate < 6.5 for rate in _clock_rates(vehicles))
+            proc.send_signal(signal.SIGUSR2)
+            assert all(0.7 < rate < 1.3 for rate in _clock_rates(vehicles))
+            assert proc.poll() is None
+        finally:
+            for vehicle in vehicles:
+                vehicle.sock.close()
+    finally:
+        stop(proc)
+
+
+@pytest.mark.parametrize("value", ["0", "-2", "inf", "nan"])
+def test_a_fast_forward_speed_that_is_not_positive_exits_2(value: str) -> None:
+    result = subprocess.run(
+        [sys.executable, "-m", "sim", "--fast-forward-speed", value, *EPHEMERAL],
+        capture_output=True, text=True, timeout=30,
+    )
+    assert result.returncode == 2
+    assert "--fast-forward-speed must be positive" in result.stderr

@@ -14,7 +14,13 @@ import pytest
 
 from sim.models.sim_run import PHYSICS_DT_S
 from sim.process.clock import ManualClock
-from sim.process.run_loop import MIN_WAKE_PERIOD_S, STEPS_PER_WAKE, LoopStats, run_vehicles
+from sim.process.run_loop import (
+    MIN_WAKE_PERIOD_S,
+    STEPS_PER_WAKE,
+    LoopStats,
+    Pace,
+    run_vehicles,
+)
 
 
 class CountingVehicle:
@@ -30,7 +36,7 @@ class CountingVehicle:
 class Loop:
     """run_vehicles on a ManualClock with one CountingVehicle."""
 
-    def __init__(self, speed: float, max_catch_up_steps: int) -> None:
+    def __init__(self, speed: float | Pace, max_catch_up_steps: int) -> None:
         self.clock = ManualClock()
         self.vehicle = CountingVehicle()
         self.stats = LoopStats()
@@ -46,7 +52,7 @@ LoopStarter = Callable[..., Awaitable[Loop]]
 async def start_loop() -> AsyncIterator[LoopStarter]:
     loops: list[Loop] = []
 
-    async def start(speed: float, max_catch_up_steps: int = 50) -> Loop:
+    async def start(speed: float | Pace, max_catch_up_steps: int = 50) -> Loop:
         loop = Loop(speed, max_catch_up_steps)
         loops.append(loop)
         await loop.clock.advance(0.0)  # the task takes its start time
@@ -79,6 +85,39 @@ async def test_much_faster_than_real_time_still_keeps_its_speed(start_loop: Loop
     assert loop.vehicle.now_s == pytest.approx(speed * 0.5, abs=speed * MIN_WAKE_PERIOD_S)
     # wake-ups are MIN_WAKE_PERIOD_S apart however many steps each one runs
     assert loop.stats.wakeups <= 0.5 / MIN_WAKE_PERIOD_S + 2
+
+
+async def test_a_new_speed_is_kept_from_the_next_wake_up_without_a_jump(
+    start_loop: LoopStarter,
+) -> None:
+    pace = Pace(1.0)
+    loop = await start_loop(pace)
+    await loop.clock.advance(1.0)
+    at_1x = loop.vehicle.now_s
+    assert at_1x == pytest.approx(1.0, abs=STEPS_PER_WAKE * PHYSICS_DT_S)
+
+    pace.set(8.0)  # fast-forward: 8 s of sim time in each wall second from here
+    await loop.clock.advance(1.0)
+    fast = loop.vehicle.now_s - at_1x
+    # less at most the wake-up still due at 1x when it was set, and the last one not yet due
+    wake_1x_s = STEPS_PER_WAKE * PHYSICS_DT_S
+    assert 8.0 - 7.0 * wake_1x_s - 8.0 * MIN_WAKE_PERIOD_S <= fast <= 8.0
+    # kept pace at 8x: no step dropped as if it had stalled, none run ahead
+    assert loop.stats.max_lag_s <= MIN_WAKE_PERIOD_S
+
+    pace.set(1.0)  # and back: the time it ran fast is not paid back by running slow
+    await loop.clock.advance(1.0)
+    assert loop.vehicle.now_s - at_1x - fast == pytest.approx(1.0, abs=2 * wake_1x_s)
+
+
+@pytest.mark.parametrize("speed", [0.0, -1.0, float("nan"), float("inf")])
+def test_a_pace_is_positive_and_finite(speed: float) -> None:
+    with pytest.raises(ValueError, match="speed"):
+        Pace(speed)
+    pace = Pace(2.0)
+    with pytest.raises(ValueError, match="speed"):
+        pace.set(speed)
+    assert pace.speed == 2.0
 
 
 async def test_after_a_stall_catches_up_a_bounded_number_of_steps_then_slows_down(
