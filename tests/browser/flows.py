@@ -8,6 +8,7 @@ from typing import Any
 import httpx
 
 from .harness import altitude_m, speed_m_s, vehicle_state, wait_for
+from .pausing import fast_forward
 
 RESULT_TIMEOUT_S = 30.0
 
@@ -66,12 +67,14 @@ def arm_and_take_off(page: Any, api: httpx.Client, altitude: float) -> None:
     page.fill("#takeoff-alt", str(altitude))
     click_and_wait_result(page, "#btn-takeoff")
     # up, and the take-off over (PX4 refuses some commands, a VTOL transition among them,
-    # while it is still in TAKEOFF)
-    wait_for(
-        f"altitude above {altitude - 0.8} m, out of TAKEOFF",
-        lambda: altitude_m(s := vehicle_state(api)) > altitude - 0.8 and s["mode"] != "TAKEOFF",
-        60.0,
-    )
+    # while it is still in TAKEOFF); the climb fast-forward, as the tests look at what follows
+    with fast_forward(api):
+        wait_for(
+            f"altitude above {altitude - 0.8} m, out of TAKEOFF",
+            lambda: altitude_m(s := vehicle_state(api)) > altitude - 0.8
+            and s["mode"] != "TAKEOFF",
+            60.0,
+        )
 
 
 def drag_slider_to(page: Any, selector: str, value: float) -> float:
@@ -167,25 +170,27 @@ def settle_vehicle(api: httpx.Client, *, flying: bool, altitude: float = 5.0) ->
         return
     pilot = _RestPilot(api)
     try:
-        if state["stream"]["active"] or state["mode"] == "OFFBOARD":
-            pilot.command("offboard/stop", {"then_mode": "HOLD"})
-        if flying and _hovering(vehicle_state(api), altitude):
-            pilot.command("mode", {"mode": "HOLD"})
-            return
-        if not _landed(vehicle_state(api)):
-            pilot.command("land")
-            pilot.wait("landed and disarmed", _landed, 60.0)
-        if flying:
-            # PX4 never arms in LAND or RTL, where a landing leaves it, nor in a manual mode
-            # (POSCTL) with no sticks coming: HOLD first, as a pilot does
-            if vehicle_state(api)["mode"] != "HOLD":
+        # a set-up flight: nothing looks at it, so the sim flies it fast-forward
+        with fast_forward(api):
+            if state["stream"]["active"] or state["mode"] == "OFFBOARD":
+                pilot.command("offboard/stop", {"then_mode": "HOLD"})
+            if flying and _hovering(vehicle_state(api), altitude):
                 pilot.command("mode", {"mode": "HOLD"})
-            pilot.command("arm")
-            pilot.command("takeoff", {"altitude_m": altitude})
-            pilot.wait(
-                f"hovering at {altitude} m",
-                lambda s: _hovering(s, altitude) and s["mode"] == "HOLD",
-                60.0,
-            )
+                return
+            if not _landed(vehicle_state(api)):
+                pilot.command("land")
+                pilot.wait("landed and disarmed", _landed, 60.0)
+            if flying:
+                # PX4 never arms in LAND or RTL, where a landing leaves it, nor in a manual mode
+                # (POSCTL) with no sticks coming: HOLD first, as a pilot does
+                if vehicle_state(api)["mode"] != "HOLD":
+                    pilot.command("mode", {"mode": "HOLD"})
+                pilot.command("arm")
+                pilot.command("takeoff", {"altitude_m": altitude})
+                pilot.wait(
+                    f"hovering at {altitude} m",
+                    lambda s: _hovering(s, altitude) and s["mode"] == "HOLD",
+                    60.0,
+                )
     finally:
         pilot.release()

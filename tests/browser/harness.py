@@ -138,9 +138,18 @@ class Serve:
             self.stop()
             self.discard_log()
 
-    def client(self) -> httpx.Client:
-        return httpx.Client(base_url=f"{self.base}/api/v1", timeout=10.0,
-                            headers={"Authorization": f"Bearer {self.token}"})
+    def client(self) -> ServeClient:
+        return ServeClient(self, base_url=f"{self.base}/api/v1", timeout=10.0,
+                           headers={"Authorization": f"Bearer {self.token}"})
+
+
+class ServeClient(httpx.Client):
+    """A client of one `skyhelm serve`'s API that knows its server (whose simulated vehicle
+    a set-up flight fast-forwards: tests/browser/pausing.py)."""
+
+    def __init__(self, serve: Serve, **options: Any) -> None:
+        super().__init__(**options)
+        self.serve = serve
 
 
 def vehicle_state(api: httpx.Client, vehicle_id: int = 1) -> dict[str, Any]:

@@ -1,5 +1,7 @@
-"""Pausing the simulated vehicle of a `skyhelm serve` (SIGSTOP its process, SIGCONT after):
-the vehicle falls silent as a vehicle whose link is cut, while the server stays up."""
+"""The pace of a `skyhelm serve`'s simulated vehicle: paused (SIGSTOP its process, SIGCONT
+after), the vehicle falls silent as a vehicle whose link is cut while the server stays up;
+fast-forwarded (SIGUSR1, SIGUSR2 after: `skyhelm sim --fast-forward-speed`), a set-up
+flight (a landing, a take-off) that a test does not look at takes a fraction of its time."""
 
 from __future__ import annotations
 
@@ -9,7 +11,11 @@ import signal
 from collections.abc import Iterator
 from pathlib import Path
 
-from .harness import Serve
+import httpx
+
+from sim.process.cli import FAST_FORWARD, REAL_PACE
+
+from .harness import Serve, ServeClient
 
 
 def sim_pid(serve: Serve) -> int:
@@ -32,3 +38,20 @@ def sim_paused(serve: Serve) -> Iterator[int]:
         yield pid
     finally:
         os.kill(pid, signal.SIGCONT)
+
+
+@contextlib.contextmanager
+def fast_forward(server: Serve | httpx.Client) -> Iterator[None]:
+    """The block's flight at the sim's fast-forward speed; a client that does not know its
+    server (tests/browser/harness.py ServeClient) flies it at the server's own speed."""
+    serve = server.serve if isinstance(server, ServeClient) else server
+    if not isinstance(serve, Serve):
+        yield
+        return
+    pid = sim_pid(serve)
+    os.kill(pid, FAST_FORWARD)
+    try:
+        yield
+    finally:
+        with contextlib.suppress(ProcessLookupError):  # a test may have stopped the server
+            os.kill(pid, REAL_PACE)

@@ -135,8 +135,9 @@ def test_a_3_s_sigstop_of_the_sender_with_setpoints_at_the_rate_limit(tmp_path: 
     with served_flight(tmp_path) as (pilot, vehicle):
         pilot.ok("POST", "arm")
         pilot.ok("POST", "takeoff", {"altitude_m": 3.0})
-        here = pilot.wait("climb to 2.5 m", lambda s: s["position_ned"]["down_m"] < -2.5,
-                          30.0)["position_ned"]
+        with vehicle.fast_forwarded():  # the climb; what is timed is the hover after it
+            here = pilot.wait("climb to 2.5 m", lambda s: s["position_ned"]["down_m"] < -2.5,
+                              30.0)["position_ned"]
         pilot.ok("POST", "offboard/start", {"setpoint": {
             "type": "position_ned", "north_m": here["north_m"], "east_m": here["east_m"],
             "down_m": -3.0}})
@@ -206,7 +207,8 @@ def test_the_sender_stopped_while_flying_sticks_in_posctl(tmp_path: Path) -> Non
     with served_flight(tmp_path) as (pilot, vehicle):
         pilot.ok("POST", "arm")
         pilot.ok("POST", "takeoff", {"altitude_m": 3.0})
-        pilot.wait("takeoff done", lambda s: s["mode"] == "HOLD", 30.0)
+        with vehicle.fast_forwarded():
+            pilot.wait("takeoff done", lambda s: s["mode"] == "HOLD", 30.0)
         done = threading.Event()
 
         def feed() -> None:  # the pilot's sticks at 10 Hz, a hover

@@ -12,15 +12,19 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import multiprocessing
+from collections.abc import Iterator
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from pathlib import Path
 from types import TracebackType
 
+from sim.process.run_loop import FAST_FORWARD_SPEED
 from sim.process.runner import SimCluster
 from tests.faults.sender_relay import Heard, SenderRelay
 
 READY_TIMEOUT_S = 60.0
+# what the test may ask of the sim's pace: a set-up flight fast-forward, then real time
+PACES = {"fast": FAST_FORWARD_SPEED, "real": 1.0}
 STOP_TIMEOUT_S = 10.0
 
 
@@ -46,12 +50,19 @@ async def _serve(conn: Connection, signing_dir: str | None) -> None:
     loop = asyncio.get_running_loop()
     keys = Path(signing_dir) if signing_dir is not None else None
     async with SimCluster(airframe="quad", count=1, speed=1.0, signing_dir=keys) as sim:
-        await sim.wait_ready(timeout_s=30.0)
+        with sim.fast_forwarded():  # its estimator's start, which no test looks at
+            await sim.wait_ready(timeout_s=30.0)
         instance = sim.instances[0]
         relay = SenderRelay(("127.0.0.1", instance.api_local_port))
         try:
             conn.send(relay.port)
-            while await loop.run_in_executor(None, conn.recv) == "report":
+            while True:
+                asked = await loop.run_in_executor(None, conn.recv)
+                if asked in PACES:
+                    sim.pace.set(PACES[asked])
+                    continue
+                if asked != "report":
+                    return
                 conn.send(Report(
                     heard=list(relay.heard),
                     modes=list(relay.modes),
@@ -82,6 +93,16 @@ class VehicleApart:
             self.close()
             raise RuntimeError(f"the simulated vehicle did not start in {READY_TIMEOUT_S} s")
         self.relay_port: int = self._conn.recv()
+
+    @contextlib.contextmanager
+    def fast_forwarded(self) -> Iterator[None]:
+        """The block's flight fast-forward (a climb before what the test times), then real
+        time again."""
+        self._conn.send("fast")
+        try:
+            yield
+        finally:
+            self._conn.send("real")
 
     def report(self) -> Report:
         self._conn.send("report")
