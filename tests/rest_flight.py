@@ -10,6 +10,7 @@ on real PX4 shows PX4's own answers.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import time
@@ -19,6 +20,7 @@ from typing import Any
 import httpx
 
 from tests.serve_process import Served
+from tests.sim_pace import fast_forwarded
 from tests.waiting import holds_for_blocking, wait_for_blocking
 
 Json = dict[str, Any]
@@ -46,6 +48,12 @@ class RestFlight:
         self.transcript: list[str] = []
         self.failed_stage: str | None = None
         self._started = time.monotonic()
+
+    def fast_forwarded(self) -> contextlib.AbstractContextManager[None]:
+        """A flight whose end the stage checks, not its pace, at the simulated vehicle's
+        fast-forward speed (tests/sim_pace.py); against PX4 at its own."""
+        process = self.served.process
+        return fast_forwarded(process.pid if process is not None else None)
 
     # -- talking to the server -------------------------------------------------------------
     def log(self, text: str) -> None:

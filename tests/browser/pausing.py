@@ -1,7 +1,7 @@
 """The pace of a `skyhelm serve`'s simulated vehicle: paused (SIGSTOP its process, SIGCONT
 after), the vehicle falls silent as a vehicle whose link is cut while the server stays up;
-fast-forwarded (SIGUSR1, SIGUSR2 after: `skyhelm sim --fast-forward-speed`), a set-up
-flight (a landing, a take-off) that a test does not look at takes a fraction of its time."""
+fast-forwarded (tests/sim_pace.py), a set-up flight (a landing, a take-off) that a test
+does not look at takes a fraction of its time."""
 
 from __future__ import annotations
 
@@ -9,11 +9,10 @@ import contextlib
 import os
 import signal
 from collections.abc import Iterator
-from pathlib import Path
 
 import httpx
 
-from sim.process.cli import FAST_FORWARD, REAL_PACE
+from tests.sim_pace import fast_forwarded, sim_child_pid
 
 from .harness import Serve, ServeClient
 
@@ -21,13 +20,9 @@ from .harness import Serve, ServeClient
 def sim_pid(serve: Serve) -> int:
     """The `python -m sim` child of the serve process."""
     assert serve._process is not None
-    parent = serve._process.pid
-    children = Path(f"/proc/{parent}/task/{parent}/children").read_text().split()
-    for child in children:
-        cmdline = Path(f"/proc/{child}/cmdline").read_bytes().split(b"\0")
-        if b"sim" in cmdline:
-            return int(child)
-    raise AssertionError(f"no simulated vehicle among the children {children} of {parent}")
+    pid = sim_child_pid(serve._process.pid)
+    assert pid is not None, f"no simulated vehicle among the children of {serve._process.pid}"
+    return pid
 
 
 @contextlib.contextmanager
@@ -40,18 +35,9 @@ def sim_paused(serve: Serve) -> Iterator[int]:
         os.kill(pid, signal.SIGCONT)
 
 
-@contextlib.contextmanager
-def fast_forward(server: Serve | httpx.Client) -> Iterator[None]:
-    """The block's flight at the sim's fast-forward speed; a client that does not know its
-    server (tests/browser/harness.py ServeClient) flies it at the server's own speed."""
+def fast_forward(server: Serve | httpx.Client) -> contextlib.AbstractContextManager[None]:
+    """The block's flight at the sim's fast-forward speed (tests/sim_pace.py); a client that
+    does not know its server (tests/browser/harness.py ServeClient) flies it as it is."""
     serve = server.serve if isinstance(server, ServeClient) else server
-    if not isinstance(serve, Serve):
-        yield
-        return
-    pid = sim_pid(serve)
-    os.kill(pid, FAST_FORWARD)
-    try:
-        yield
-    finally:
-        with contextlib.suppress(ProcessLookupError):  # a test may have stopped the server
-            os.kill(pid, REAL_PACE)
+    process = serve._process if isinstance(serve, Serve) else None
+    return fast_forwarded(process.pid if process is not None else None)
