@@ -17,15 +17,22 @@ $(PY):
 # The Python client is a distribution of its own (clients/python/), with the wire format
 # (wire/skyhelm_wire) inside it; installed from its path in the same pip call, never from
 # an index. A venv made when the wire was a distribution of its own drops that one first.
+# pip compiles what it installs one file at a time; compileall does it on every core after
+# (a fresh venv with the test tools: 34 s before, 22 + 8 s so). Files that do not compile
+# (some packages ship Python 2 examples) are left out, as pip leaves them.
+COMPILE := $(PY) -m compileall -q -q -j 0 $(VENV)/lib >/dev/null || true
+
 $(STAMP): pyproject.toml clients/python/pyproject.toml | $(PY)
 	$(PIP) uninstall -q -y skyhelm-wire 2>/dev/null || true
-	$(PIP) install -q -e ./clients/python -e .
+	$(PIP) install -q --no-compile -e ./clients/python -e .
+	$(COMPILE)
 	touch $@
 
 # One pip call for the product and its test tools: a second would resolve everything again.
 $(TSTAMP): pyproject.toml clients/python/pyproject.toml | $(PY)
 	$(PIP) uninstall -q -y skyhelm-wire 2>/dev/null || true
-	$(PIP) install -q -e ./clients/python -e '.[test]'
+	$(PIP) install -q --no-compile -e ./clients/python -e '.[test]'
+	$(COMPILE)
 	touch $(STAMP) $@
 
 $(BSTAMP): pyproject.toml $(TSTAMP)
