@@ -18,8 +18,8 @@ $(PY):
 # (wire/skyhelm_wire) inside it; installed from its path in the same pip call, never from
 # an index. A venv made when the wire was a distribution of its own drops that one first.
 # pip compiles what it installs one file at a time; compileall does it on every core after
-# (a fresh venv with the test tools, two runs each: 49-51 s before, 37-45 s so). Files that do not compile
-# (some packages ship Python 2 examples) are left out, as pip leaves them.
+# (a fresh venv with the test tools, two runs each: 49-51 s before, 37-45 s so). Files that
+# do not compile (some packages ship Python 2 examples) are left out, as pip leaves them.
 COMPILE := $(PY) -m compileall -q -q -j 0 $(VENV)/lib >/dev/null || true
 
 $(STAMP): pyproject.toml clients/python/pyproject.toml | $(PY)
