@@ -191,6 +191,9 @@ def test_a_process_that_dies_takes_the_others_down() -> None:
         stop(proc)
 
 
+Times = list[tuple[float, float]]  # (received_s, the vehicle's own s) of each ATTITUDE
+
+
 class _Listener:
     """A ground station on one vehicle's port (the vehicle answers its first sender)."""
 
@@ -202,33 +205,41 @@ class _Listener:
         self.sock.sendto(mavlink.MAVLink_heartbeat_message(6, 8, 0, 0, 0, 3).pack(mav),
                          ("127.0.0.1", port))
 
-    def attitude_times_s(self, received_s: float) -> list[tuple[float, float]]:
+    def attitude_times_s(self, received_s: float) -> Times:
         """(received_s, the vehicle's time_boot_ms in s) of each ATTITUDE in one datagram."""
         data = self.sock.recv(65536)
         return [(received_s, msg.time_boot_ms / 1000.0)
                 for msg in self.parser.parse_buffer(data) or [] if msg.get_type() == "ATTITUDE"]
 
 
+def _attitudes(vehicles: list[_Listener], seconds: float) -> dict[_Listener, Times]:
+    """(received_s, the vehicle's s) of each ATTITUDE every vehicle sends over `seconds`."""
+    seen: dict[_Listener, Times] = {v: [] for v in vehicles}
+    end = time.monotonic() + seconds
+    while (left := end - time.monotonic()) > 0:
+        ready, _, _ = select.select([v.sock for v in vehicles], [], [], left)
+        now = time.monotonic()
+        for vehicle in vehicles:
+            if vehicle.sock in ready:
+                seen[vehicle] += vehicle.attitude_times_s(now)
+    return seen
+
+
 def _clock_rates(vehicles: list[_Listener], window_s: float = 1.5) -> list[float]:
-    """How fast each vehicle's clock runs against this process's wall clock, all read at
-    once over `window_s` (after what waited in their sockets), from the first ATTITUDE."""
+    """How fast each vehicle's clock runs against this process's wall clock over `window_s`
+    (read from every vehicle at once, once each streams, after what waited in the sockets)."""
+    deadline = time.monotonic() + 15.0
+    while not all(_attitudes([v], 0.2)[v] for v in vehicles):  # booted: streaming
+        assert time.monotonic() < deadline, "no ATTITUDE"
     for vehicle in vehicles:
         vehicle.sock.setblocking(False)
         with contextlib.suppress(BlockingIOError):
             while True:
                 vehicle.attitude_times_s(0.0)
-    seen: dict[_Listener, list[tuple[float, float]]] = {v: [] for v in vehicles}
-    end = time.monotonic() + window_s
-    while time.monotonic() < end or not all(len(times) >= 2 for times in seen.values()):
-        assert time.monotonic() < end + 10.0, "no ATTITUDE"
-        ready, _, _ = select.select([v.sock for v in vehicles], [], [], 0.2)
-        now = time.monotonic()
-        for vehicle in vehicles:
-            if vehicle.sock in ready:
-                seen[vehicle] += vehicle.attitude_times_s(now)
     rates = []
-    for times in seen.values():
+    for times in _attitudes(vehicles, window_s).values():
         (wall0, sim0), (wall1, sim1) = times[0], times[-1]
+        assert wall1 - wall0 > window_s / 2, times
         rates.append((sim1 - sim0) / (wall1 - wall0))
     return rates
 
