@@ -95,7 +95,7 @@ MODULE_SECONDS: dict[str, float] = {
     "tests/fleet/test_edge.py": 12,
     "tests/faults/test_hostile_input.py": 10,
     "tests/faults/test_faultproxy.py": 10,
-    "tests/sim/test_cli.py": 16,
+    "tests/sim/test_cli.py": 9,
 }
 
 
