@@ -84,8 +84,6 @@ class SimCluster:
     ) -> None:
         if count < 1:
             raise ValueError("count must be at least 1")
-        if speed <= 0:
-            raise ValueError("speed must be positive")
         self.airframe = airframe
         self.count = count
         self.first_instance = instance
