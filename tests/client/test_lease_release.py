@@ -7,6 +7,8 @@ import os
 import signal
 import subprocess
 import sys
+import time
+from pathlib import Path
 
 import pytest
 
@@ -20,7 +22,8 @@ from tests.waiting import wait_for_blocking
 # write and read; seen over 10 s on a machine loaded to 5 (two busy loops beside the suite).
 SCRIPT_END_S = 30
 _SCRIPT = """
-import sys, time
+import faulthandler, signal, sys, time
+faulthandler.register(signal.SIGUSR1)  # where it is, should it not end (_ended)
 from skyhelm_client import SkyHelm
 sky = SkyHelm(sys.argv[1])
 print(sky.acquire(client_name="script").holder, flush=True)
@@ -40,11 +43,51 @@ def _last_end(sky: SkyHelm) -> dict[str, object]:
 def _script(served: Served, mode: str) -> subprocess.Popen[str]:
     process = subprocess.Popen(
         [sys.executable, "-c", _SCRIPT, pilot_url(served), mode],
-        stdout=subprocess.PIPE, text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"},
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
     )  # fmt: skip
     assert process.stdout is not None
     assert process.stdout.readline().strip() == "pilot · script"
     return process
+
+
+_STATUS_KEYS = ("State", "SigPnd", "ShdPnd", "SigBlk", "SigIgn", "SigCgt",
+                "voluntary_ctxt_switches", "nonvoluntary_ctxt_switches")  # fmt: skip
+
+
+def _proc(pid: int, name: str) -> str:
+    try:
+        return Path(f"/proc/{pid}/{name}").read_text(errors="replace")
+    except OSError as exc:
+        return f"({exc})"
+
+
+def _ended(process: subprocess.Popen[str]) -> int:
+    """The script's exit code; a script that does not end is failed with what it was doing:
+    its state as the kernel sees it, its Python stack, and the machine's real-time threads
+    (which a loaded machine could let take a core from it)."""
+    try:
+        return process.wait(timeout=SCRIPT_END_S)
+    except subprocess.TimeoutExpired:
+        pid = process.pid
+        status = {
+            key: value.strip()
+            for key, _, value in (line.partition(":") for line in _proc(pid, "status").splitlines())
+            if key in _STATUS_KEYS
+        }
+        stat, wchan = _proc(pid, "stat"), _proc(pid, "wchan")
+        threads = ["ps", "-eLo", "pid,tid,class,rtprio,pcpu,stat,comm"]
+        realtime = subprocess.run(threads, capture_output=True, text=True).stdout.splitlines()
+        realtime = [line for line in realtime if " FF " in line or " RR " in line]
+        process.send_signal(signal.SIGUSR1)
+        time.sleep(2)
+        process.kill()
+        _, stderr = process.communicate()
+        raise AssertionError(
+            f"the script did not end {SCRIPT_END_S} s after its signal: status {status}, "
+            f"stat {stat.strip()}, wchan {wchan!r}\nreal-time threads: {realtime}\n"
+            f"its stderr:\n{stderr}"
+        ) from None
 
 
 def _fail_while_holding(served: Served, watcher: SkyHelm) -> None:
@@ -62,11 +105,11 @@ def test_the_lease_is_given_back_however_the_script_ends(served: Served) -> None
 
         waiting = _script(served, "wait")
         waiting.send_signal(signal.SIGTERM)
-        assert waiting.wait(timeout=SCRIPT_END_S) == 128 + signal.SIGTERM
+        assert _ended(waiting) == 128 + signal.SIGTERM
         ended = _last_end(watcher)
         assert ended == {**ended, "holder": "pilot · script", "end": "released"}
 
         ending = _script(served, "end")  # no with block: atexit gives it back
-        assert ending.wait(timeout=SCRIPT_END_S) == 0
+        assert _ended(ending) == 0
         ended = _last_end(watcher)
         assert ended == {**ended, "holder": "pilot · script", "end": "released"}

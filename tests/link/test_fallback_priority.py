@@ -19,10 +19,13 @@ import pytest
 from server.link.stream import sender_supervisor
 from server.link.stream.fallback_priority import FALLBACK_PRIORITY, FallbackPriority, thread_ids
 from tests.link.realtime import may_run_real_time
-from tests.link.test_sender_supervisor import Member, _supervisor
+from tests.link.test_sender_supervisor import Member, _supervisor, closed_supervisors
 from tests.waiting import wait_for_blocking
 
-pytestmark = pytest.mark.skipif(not may_run_real_time(), reason="no real-time scheduling here")
+pytestmark = [
+    pytest.mark.skipif(not may_run_real_time(), reason="no real-time scheduling here"),
+    pytest.mark.usefixtures(closed_supervisors.__name__),
+]
 
 _RESET = os.SCHED_RESET_ON_FORK
 TASKS = Path("/proc/self/task")

@@ -54,10 +54,7 @@ def supervisor(monkeypatch: pytest.MonkeyPatch) -> Iterator[SenderSupervisor]:
     sup = SenderSupervisor(stream_channel.SenderProcess)
     monkeypatch.setattr(stream_channel, "_supervisor", sup)
     yield sup
-    sup.gave_up = True  # no restart after the test
-    process = sup.current()
-    if process is not None:
-        process.kill("the test ended")
+    sup.close()
 
 
 class Flight:

@@ -1,14 +1,15 @@
 """The sender supervisor's policy, on stand-in processes: a loss tells every link and stream
 once, a restart comes after the back-off and brings them back, quick failures in a row back
 off further and then give up (the streams stay on the thread, the status says so), and a
-stuck process is killed only while it carries a stream."""
+stuck process is killed only while it carries a stream; a closed supervisor's threads end
+and it starts nothing more."""
 
 from __future__ import annotations
 
 import os
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 
 import pytest
 
@@ -63,6 +64,10 @@ class Member:
         return self.streaming_in is process
 
 
+# every supervisor a test made, closed after it (closed_supervisors)
+MADE: list[SenderSupervisor] = []
+
+
 def _supervisor() -> tuple[SenderSupervisor, list[FakeProcess]]:
     started: list[FakeProcess] = []
 
@@ -71,7 +76,15 @@ def _supervisor() -> tuple[SenderSupervisor, list[FakeProcess]]:
         started.append(process)
         return process
 
-    return SenderSupervisor(start), started
+    MADE.append(sup := SenderSupervisor(start))
+    return sup, started
+
+
+@pytest.fixture(autouse=True)
+def closed_supervisors() -> Iterator[None]:
+    yield
+    while MADE:
+        MADE.pop().close()
 
 
 @pytest.fixture(autouse=True)
@@ -130,6 +143,27 @@ def test_a_stuck_process_is_killed_only_while_it_carries_a_stream() -> None:
     assert "stopped answering" in str(process.killed)
     # the kill is marked before its loss reaches the members (the watchdog's own thread)
     wait_for_blocking("the members told", lambda: member.lost == [process], 2.0, 0.005)
+
+
+def test_a_closed_supervisor_kills_its_process_ends_its_threads_and_starts_nothing() -> None:
+    sup, started = _supervisor()
+    member = Member()
+    sup.watch(member)
+    process = sup.process()
+    assert isinstance(process, FakeProcess)
+    names = ("setpoint-watchdog", "setpoint-restarter")
+    mine = [t for t in threading.enumerate() if t.name in names and t.ident is not None]
+    watchers = [sup._watchdog, sup._restarter.thread]
+    assert all(t is not None and t.is_alive() and t in mine for t in watchers)
+    sup.close()
+    assert process.killed == "its supervisor was closed"
+    assert member.lost == [process]
+    assert not any(t is not None and t.is_alive() for t in watchers)
+    time.sleep(0.1)  # past the back-off: nothing restarts
+    assert started == [process]
+    assert sup.status().gave_up
+    with pytest.raises(ProcessGone):
+        sup.process()
 
 
 def test_the_watchdog_runs_real_time_when_the_os_allows_it() -> None:

@@ -47,6 +47,8 @@ WATCH_PERIOD_S = 0.025
 RESTART_BACKOFF_S = (0.25, 1.0, 4.0)
 MAX_FAILED_RESTARTS = len(RESTART_BACKOFF_S)
 STABLE_AFTER_S = 10.0
+# how long close() waits for the watchdog and the restart thread to end
+CLOSE_WAIT_S = 1.0
 # a restarted process must run its loop this soon, or it failed (it is killed)
 READY_TIMEOUT_S = 2.0
 
@@ -108,6 +110,7 @@ class SenderSupervisor:
         self._listeners: list[Callable[[SenderStatus], None]] = []
         self._restarter = Restarter(self._restart)
         self._watchdog: threading.Thread | None = None
+        self._closed = threading.Event()
         self.restarts = 0
         self.faults = 0
         self.failed_in_row = 0
@@ -158,6 +161,22 @@ class SenderSupervisor:
             self._start_watchers()
             return self._process
 
+    def close(self) -> None:
+        """No restart from now on; the watchdog and the restart thread end, the running
+        process is killed (a supervisor of its own for an embedded server or a test: the
+        server's own lives as long as its process)."""
+        with self._lock:
+            self.gave_up = True
+            self._closed.set()
+            process = self._process
+        self._restarter.stop()
+        if process is not None and process.alive:
+            process.kill("its supervisor was closed")
+        self.priority.restore()
+        for thread in (self._watchdog, self._restarter.thread):
+            if thread is not None and thread is not threading.current_thread():
+                thread.join(CLOSE_WAIT_S)
+
     # -- faults --
     def lost(self, process: Process, why: str) -> None:
         """The process died or was killed (any thread; once per process)."""
@@ -181,6 +200,7 @@ class SenderSupervisor:
             member.sender_lost(process)
         log.error("setpoint sender process %s ended (%s): its links send themselves and its "
                   "streams go on from the sender thread%s", process.pid, why,
+                  "" if self._closed.is_set() else
                   "; it failed too often and is not started again" if give_up else
                   f"; restarting it in {self._backoff_s():g} s")
         self._tell()
@@ -257,8 +277,7 @@ class SenderSupervisor:
         # after the stop instead of 150
         raise_priority()
         answering: tuple[int | None, tuple[float, float] | None] = (None, None)
-        while True:
-            time.sleep(WATCH_PERIOD_S)
+        while not self._closed.wait(WATCH_PERIOD_S):
             process = self.current()
             if process is None:
                 continue
@@ -303,14 +322,21 @@ class Restarter:
         self._run = run
         self._wake = threading.Condition(threading.Lock())
         self._due_s: float | None = None  # time.monotonic() of the next run
-        self._thread: threading.Thread | None = None
+        self._stopped = False
+        self.thread: threading.Thread | None = None
 
     def start(self) -> None:
         with self._wake:
-            if self._thread is None:
-                self._thread = threading.Thread(target=self._loop, name="setpoint-restarter",
-                                                 daemon=True)
-                self._thread.start()
+            if self.thread is None and not self._stopped:
+                self.thread = threading.Thread(target=self._loop, name="setpoint-restarter",
+                                               daemon=True)
+                self.thread.start()
+
+    def stop(self) -> None:
+        """No run from now on; the thread ends."""
+        with self._wake:
+            self._stopped = True
+            self._wake.notify()
 
     def after(self, delay_s: float) -> None:
         """Run once, delay_s from now (a later call moves it)."""
@@ -320,14 +346,17 @@ class Restarter:
 
     @property
     def native_id(self) -> int | None:
-        return None if self._thread is None else self._thread.native_id
+        return None if self.thread is None else self.thread.native_id
 
     def _loop(self) -> None:
         while True:
             with self._wake:
-                while self._due_s is None or self._due_s > time.monotonic():
+                while not self._stopped and (self._due_s is None
+                                             or self._due_s > time.monotonic()):
                     self._wake.wait(None if self._due_s is None else
                                     self._due_s - time.monotonic())
+                if self._stopped:
+                    return
                 self._due_s = None
             try:
                 self._run()
