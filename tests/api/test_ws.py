@@ -131,11 +131,11 @@ async def test_telemetry_streams_states_at_the_asked_rate(quad: Served) -> None:
         if begun_s <= json.loads(text)["updated_s"] < begun_s + 2.0
     ]
     assert 5 <= len(in_window) <= 11, [json.loads(t)["updated_s"] - begun_s for t in texts[0]]
-    # the sockets of one vehicle and rate share each tick: the same text, encoded once
-    by_tick = [{json.loads(text)["updated_s"]: text for text in each} for each in texts]
-    common = set(by_tick[0]) & set(by_tick[1]) & set(by_tick[2])
+    # the sockets of one vehicle and rate share each tick: the same text, encoded once (a
+    # tick is not known by its updated_s, the time of the vehicle's last message: on a busy
+    # machine the server's side of the state can change twice between two of them)
+    common = set(texts[0]) & set(texts[1]) & set(texts[2])
     assert len(common) >= len(texts[0]) // 2  # a reader held back may miss one (latest wins)
-    assert all(by_tick[0][t] == by_tick[1][t] == by_tick[2][t] for t in common)
     publisher = quad.api.app.state.publishers.for_vehicle(quad.api.vehicle(1))
     assert 0 < publisher.encodes <= publisher.ticks
 
