@@ -277,7 +277,8 @@ class SenderSupervisor:
         # after the stop instead of 150
         raise_priority()
         answering: tuple[int | None, tuple[float, float] | None] = (None, None)
-        while not self._closed.wait(WATCH_PERIOD_S):
+        while not self._closed.is_set():
+            time.sleep(WATCH_PERIOD_S)  # (a plain sleep: one wake-up, nothing more to run)
             process = self.current()
             if process is None:
                 continue
