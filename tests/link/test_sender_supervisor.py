@@ -129,12 +129,18 @@ def test_quick_failures_in_a_row_give_up_and_say_so() -> None:
     assert len(member.lost) == len(started)
 
 
-def test_a_stuck_process_is_killed_only_while_it_carries_a_stream() -> None:
-    sup, _ = _supervisor()
+def _watched() -> tuple[SenderSupervisor, list[FakeProcess], Member, FakeProcess]:
+    """A supervisor with a member, and its first process started."""
+    sup, started = _supervisor()
     member = Member()
     sup.watch(member)
     process = sup.process()
     assert isinstance(process, FakeProcess)
+    return sup, started, member, process
+
+
+def test_a_stuck_process_is_killed_only_while_it_carries_a_stream() -> None:
+    _, _, member, process = _watched()
     process.beat_s = time.monotonic() - 10.0  # stuck, but idle: nothing waits on it
     time.sleep(5 * sender_supervisor.WATCH_PERIOD_S)
     assert process.killed is None
@@ -146,15 +152,10 @@ def test_a_stuck_process_is_killed_only_while_it_carries_a_stream() -> None:
 
 
 def test_a_closed_supervisor_kills_its_process_ends_its_threads_and_starts_nothing() -> None:
-    sup, started = _supervisor()
-    member = Member()
-    sup.watch(member)
-    process = sup.process()
-    assert isinstance(process, FakeProcess)
-    names = ("setpoint-watchdog", "setpoint-restarter")
-    mine = [t for t in threading.enumerate() if t.name in names and t.ident is not None]
+    sup, started, member, process = _watched()
     watchers = [sup._watchdog, sup._restarter.thread]
-    assert all(t is not None and t.is_alive() and t in mine for t in watchers)
+    assert [t.name for t in watchers if t is not None and t.is_alive()] == [
+        "setpoint-watchdog", "setpoint-restarter"]
     sup.close()
     assert process.killed == "its supervisor was closed"
     assert member.lost == [process]
