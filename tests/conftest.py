@@ -8,9 +8,8 @@
   server.
 - The longest modules start first (longest processing time first): a 90 s module started
   last would leave the other workers idle while it runs. ``MODULE_SECONDS`` holds what each
-  took in a run with ``--durations=0`` (beside two busy loops; the browser modules, which
-  only share out the two groups among themselves, from a quiet run times 1.35); a module not
-  listed counts as ``UNLISTED_S`` and keeps its place in the collection order among the rest.
+  took in a run with ``--durations=0`` (beside two busy loops); a module not listed counts
+  as ``UNLISTED_S`` and keeps its place in the collection order among the rest.
 """
 
 from __future__ import annotations
@@ -29,29 +28,24 @@ _BROWSER_TESTS = "tests/browser/"
 BROWSER_GROUPS = 2
 UNLISTED_S = 5.0
 MODULE_SECONDS: dict[str, float] = {
-    "tests/browser/test_layout.py": 129,
-    "tests/browser/test_dashboard_quad.py": 93,
-    "tests/browser/test_dashboard_handover.py": 91,
-    "tests/browser/test_fleet_view.py": 62,
-    "tests/browser/test_page_draws.py": 53,
-    "tests/browser/test_scene_panel.py": 46,
-    "tests/browser/test_instruments.py": 33,
-    "tests/browser/test_ready_to_fly.py": 27,
-    "tests/browser/test_control_after_restart.py": 26,
-    "tests/browser/test_csp.py": 20,
-    "tests/browser/test_map.py": 19,
+    "tests/browser/test_layout.py": 186,
+    "tests/browser/test_dashboard_quad.py": 74,
+    "tests/browser/test_dashboard_handover.py": 72,
+    "tests/browser/test_instruments.py": 54,
+    "tests/browser/test_fleet_view.py": 52,
+    "tests/browser/test_scene_panel.py": 51,
+    "tests/browser/test_ready_to_fly.py": 33,
+    "tests/browser/test_page_draws.py": 32,
+    "tests/browser/test_sliders.py": 31,
+    "tests/browser/test_control_after_restart.py": 23,
+    "tests/browser/test_map.py": 23,
+    "tests/browser/test_offboard_follow.py": 19,
     "tests/browser/test_dashboard_vtol.py": 18,
-    "tests/browser/test_params_editor.py": 17,
-    "tests/browser/test_offboard_follow.py": 16,
-    "tests/browser/test_alerts.py": 16,
-    "tests/browser/test_sliders.py": 16,
-    "tests/browser/test_dashboard_sticks.py": 11,
-    "tests/browser/test_map_fleet.py": 9,
-    "tests/browser/test_offline_map.py": 9,
-    "tests/browser/test_instruments_vtol.py": 8,
-    "tests/browser/test_page_without_scene.py": 8,
-    "tests/browser/test_page_late_vehicle.py": 7,
-    "tests/browser/test_plots.py": 6,
+    "tests/browser/test_csp.py": 16,
+    "tests/browser/test_alerts.py": 14,
+    "tests/browser/test_plots.py": 12,
+    "tests/browser/test_dashboard_sticks.py": 12,
+    "tests/browser/test_params_editor.py": 10,
     "tests/api/test_schemathesis_cli.py": 171,
     "tests/client/test_flow_chain.py": 144,
     "tests/api/test_openapi_fuzz.py": 131,
