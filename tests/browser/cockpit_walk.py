@@ -1,5 +1,5 @@
 """The cockpit's states, walked on a live page by the layout test and the screenshot script:
-the layout probe (layout_probe.js) at every size in each state, where the command
+the layout probe (layout_probe.js) at every size and theme in each state, where the command
 buttons were, and pictures of chosen states."""
 
 from __future__ import annotations
@@ -29,10 +29,6 @@ LAYOUT_PROBLEMS = (Path(__file__).with_name("layout_probe.js")).read_text()
 SIZES = [(1024, 768), (1280, 800), (1920, 1080)]
 COCKPIT = (1280, 800)
 THEMES = ["light", "dark"]
-# The theme the layout is probed in: the light one changes colours alone, not where anything
-# lies or how big it is (tests/browser/test_layout.py proves it), so a probe in both would
-# look at the same boxes twice. A picture asked in the light theme is still taken in it.
-LAYOUT_THEME = "dark"
 PAGE_TIMEOUT_MS = 30_000
 # A long ask: the probe looks at the question at every size and theme before it is answered.
 QUAD_SERVE_ARGS = ["--sim-count", "4", "--sim-speed", "1", "--takeover-ask-s", "60"]
@@ -79,8 +75,8 @@ class Shot:
 
 
 class Walk:
-    """Probes one page in each state at every size (in LAYOUT_THEME, switched in the page),
-    keeping what is wrong and where the FIXED controls were."""
+    """Probes one page in each state at every size and theme (switched in the page), keeping
+    what is wrong and where the FIXED controls were."""
 
     def __init__(
         self,
@@ -105,12 +101,10 @@ class Walk:
         sizes: list[tuple[int, int]] = SIZES,
         scope: str | None = None,
     ) -> None:
-        """The probe at each size, in LAYOUT_THEME and any theme a picture of this state
-        is wanted in; ``scope`` (a selector) checks only what lies inside it. One theme at a
-        time, every size in it: a switch of theme restyles the whole page, a size only lays
-        it out again."""
-        wanted = {shot.scheme for shot in self.shots.get(state, [])}
-        for scheme in [s for s in THEMES if s == LAYOUT_THEME or s in wanted]:
+        """The probe at each size and theme; ``scope`` (a selector) checks only what lies
+        inside it. One theme at a time, every size in it: a switch of theme restyles the
+        whole page, a size only lays it out again."""
+        for scheme in THEMES:
             self.page.emulate_media(color_scheme=scheme)
             self.page.wait_for_function(
                 f"document.documentElement.dataset.theme === '{scheme}'", timeout=5_000

@@ -1,24 +1,22 @@
-"""The page's layout in Chromium, in every state of a flight (observer, in control, a takeover
-request, flying offboard, the vehicle's link lost, sticks, a failsafe; four vehicles on the
-server; a VTOL in fixed-wing flight) at 1024x768, 1280x800 and 1920x1080 (in the dark theme:
-the light one changes colours alone, which is tested): every visible control and panel lies
-inside the window or inside the column that scrolls it, nothing is clipped by a box that
-hides its overflow, no two controls overlap, no button's label is cut, the top bar keeps one
-row, the alert area never covers the views, the primary flight controls are in sight at
-1280x800 without scrolling, and the command buttons stay where they are whatever the state.
-The link's widest loss figures are read whole at every size, on the quad and the VTOL; the
-top bar holds the widest text of each of its slots (drawn by the page from its own state
-messages) at every width from 1024 to 1920 px (the whole page at the three standard widths,
-the top bar alone between), with the server there and lost. The standard flight is flown
-from the page at 1280x800 without anything scrolling. Also: the shortcut list opens with
-'?'; the theme follows the system and the pilot's choice is kept for the next visit."""
+"""The page's layout in Chromium, in every state of a flight (observer, in control, a
+takeover request, flying offboard, the vehicle's link lost, sticks, a failsafe; four vehicles
+on the server; a VTOL in fixed-wing flight) at 1024x768, 1280x800 and 1920x1080, light and
+dark: every visible control and panel lies inside the window or inside the column that
+scrolls it, nothing is clipped by a box that hides its overflow, no two controls overlap, no
+button's label is cut, the top bar keeps one row, the alert area never covers the views, the
+primary flight controls are in sight at 1280x800 without scrolling, and the command buttons
+stay where they are whatever the state. The link's widest loss figures are read whole at
+every size, on the quad and the VTOL; the top bar holds the widest text of each of its slots
+(drawn by the page from its own state messages) at every width from 1024 to 1920 px (the
+whole page at the three standard widths, the top bar alone between), with the server there
+and lost. The standard flight is flown from the page at
+1280x800 without anything scrolling. Also: the shortcut list opens with '?'; the theme
+follows the system and the pilot's choice is kept for the next visit."""
 
 from __future__ import annotations
 
 import contextlib
-import re
 from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import httpx
@@ -26,7 +24,6 @@ import pytest
 
 from .cockpit_walk import (
     LAYOUT_PROBLEMS,
-    LAYOUT_THEME,
     QUAD_SERVE_ARGS,
     SIZES,
     VTOL_SERVE_ARGS,
@@ -374,72 +371,6 @@ def test_shortcut_keys_toggle_views_and_list_themselves(chromium: Any, serve: An
         assert page.is_visible("#map")
     finally:
         page.context.close()
-
-
-# Every element's box (page coordinates, to 0.01 px) by a number the element keeps from its
-# first look, once the page has drawn the theme asked: what the light theme could move.
-BOXES_IN_THEME = """(theme) => new Promise((done) => {
-  const root = document.documentElement;
-  const ids = (window.__boxIds ||= new WeakMap());
-  window.__boxNext ||= 0;
-  const settled = () => requestAnimationFrame(() => requestAnimationFrame(() => {
-    const boxes = {};
-    for (const el of document.querySelectorAll("body *")) {
-      if (!ids.has(el)) ids.set(el, ++window.__boxNext);
-      const r = el.getBoundingClientRect();
-      boxes[ids.get(el)] = [r.x, r.y, r.width, r.height]
-        .map((v) => Math.round(v * 100) / 100).join(" ");
-    }
-    done(boxes);
-  }));
-  const check = () => (root.dataset.theme === theme ? settled() : setTimeout(check, 20));
-  check();
-})"""
-# The light theme's rule (web/style.css) and what it may set: colours and the colour scheme.
-LIGHT_RULE = re.compile(r':root\[data-theme="light"\]\s*\{([^}]*)\}')
-COLOUR = re.compile(r"#[0-9a-fA-F]{3,8}|rgba?\([\d\s.,%]+\)")
-WEB = Path(__file__).parents[2] / "web"
-
-
-def test_the_light_theme_changes_colours_alone(chromium: Any, serve: Serve) -> None:
-    """What lets the layout probe look at one theme (cockpit_walk.LAYOUT_THEME): the light
-    theme sets colour variables and the colour scheme and nothing else, no other rule asks
-    for the theme, and every element of the page (folds open, the 3D view's box shown) has
-    the same box in both at every size."""
-    styles = {path.name: path.read_text() for path in sorted(WEB.glob("*.css"))}
-    rules = LIGHT_RULE.findall(styles["style.css"])
-    assert len(rules) == 1, "the light theme's rule was not found in web/style.css"
-    for declaration in filter(None, (d.strip() for d in rules[0].split(";"))):
-        name, _, value = (part.strip() for part in declaration.partition(":"))
-        assert (name, value) == ("color-scheme", "light") or (
-            name.startswith("--") and COLOUR.fullmatch(value)
-        ), f"the light theme sets more than a colour: {declaration}"
-    for name, text in styles.items():
-        asks = text.count("data-theme") + text.count("prefers-color-scheme")
-        # style.css: the rule, and its note at the top
-        assert asks == (3 if name == "style.css" else 0), f"{name} styles by theme"
-
-    for size in SIZES:
-        page = _open(chromium, serve.url, size, LAYOUT_THEME)
-        try:
-            page.evaluate(
-                "document.querySelectorAll('details').forEach((d) => { d.open = true; });"
-                "document.getElementById('views').classList.remove('no-scene')"
-            )
-            # dark, light, dark: an element whose box changed between the two darks moved
-            # with the telemetry, not the theme; the others are compared
-            first = page.evaluate(BOXES_IN_THEME, "dark")
-            page.emulate_media(color_scheme="light")
-            light = page.evaluate(BOXES_IN_THEME, "light")
-            page.emulate_media(color_scheme="dark")
-            second = page.evaluate(BOXES_IN_THEME, "dark")
-            assert len(first) > 500, "the page's elements were not found"
-            steady = [e for e, box in first.items() if second.get(e) == box and e in light]
-            assert len(steady) > 0.9 * len(first), f"{size}: the page did not hold still"
-            moved = [e for e in steady if light[e] != first[e]]
-            assert not moved, f"{size}: {len(moved)} boxes differ in the light theme"
-        finally:
-            page.context.close()
 
 
 def test_theme_follows_the_system_until_the_pilot_picks_one_kept_for_next_time(
