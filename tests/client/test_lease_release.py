@@ -17,10 +17,11 @@ from tests.client.conftest import pilot_url
 from tests.serve_process import Served
 from tests.waiting import wait_for_blocking
 
-# takes the lease, says so, then waits (for a signal) or ends (with the lease held)
 # A script's end: an interpreter's exit and a release that may wait 2 s for each of connect,
-# write and read; seen over 10 s on a machine loaded to 5 (two busy loops beside the suite).
+# write and read. Twice a script was still running 30 s after its SIGTERM beside two busy
+# loops (not understood: _ended reports what it was doing).
 SCRIPT_END_S = 30
+# takes the lease, says so, then waits (for a signal) or ends (with the lease held)
 _SCRIPT = """
 import faulthandler, signal, sys, time
 faulthandler.register(signal.SIGUSR1)  # where it is, should it not end (_ended)
