@@ -17,11 +17,14 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
 
+from server.link.stream import stream_channel
+from server.link.stream.sender_supervisor import SenderSupervisor
 from tests.browser.sharing import FAMILY_OF
 
 _BROWSER_TESTS = "tests/browser/"
@@ -116,6 +119,16 @@ def pytest_configure(config: pytest.Config) -> None:
     for name, folder in _KEPT.items():
         os.environ[name] = str(home / folder)
     config.add_cleanup(lambda: shutil.rmtree(home, ignore_errors=True))
+
+
+@pytest.fixture
+def supervisor(monkeypatch: pytest.MonkeyPatch) -> Iterator[SenderSupervisor]:
+    """A supervisor (and sender process) of this test's own, as the
+    server's (stream_channel), closed after it."""
+    sup = SenderSupervisor(stream_channel.SenderProcess)
+    monkeypatch.setattr(stream_channel, "_supervisor", sup)
+    yield sup
+    sup.close()
 
 
 def _module(nodeid: str) -> str:

@@ -18,7 +18,7 @@ import contextlib
 import os
 import signal
 import time
-from collections.abc import AsyncIterator, Iterator
+from collections.abc import AsyncIterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -26,7 +26,6 @@ from typing import Any
 import pytest
 
 from server.link import VehicleEvent
-from server.link.stream import stream_channel
 from server.link.stream.sender_supervisor import SenderSupervisor
 from tests.api.conftest import Api, api_at
 from tests.faults.sender_checks import (
@@ -41,15 +40,6 @@ from tests.faults.sender_checks import (
 )
 from tests.faults.vehicle_apart import Report, VehicleApart
 from tests.waiting import wait_for
-
-
-@pytest.fixture
-def supervisor(monkeypatch: pytest.MonkeyPatch) -> Iterator[SenderSupervisor]:
-    """A supervisor (and sender process) of this test's own."""
-    sup = SenderSupervisor(stream_channel.SenderProcess)
-    monkeypatch.setattr(stream_channel, "_supervisor", sup)
-    yield sup
-    sup.close()
 
 
 @dataclass

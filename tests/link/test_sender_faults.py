@@ -19,7 +19,7 @@ import socket
 import subprocess
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, cast
 
@@ -46,15 +46,6 @@ def _msg(x: float) -> mavlink.MAVLink_message:
     return MAV.set_position_target_local_ned_encode(
         0, 1, 1, 1, 2552, x, 0, -5, 0, 0, 0, 0, 0, 0, 0, 0
     )
-
-
-@pytest.fixture
-def supervisor(monkeypatch: pytest.MonkeyPatch) -> Iterator[SenderSupervisor]:
-    """A supervisor (and sender process) of this test's own."""
-    sup = SenderSupervisor(stream_channel.SenderProcess)
-    monkeypatch.setattr(stream_channel, "_supervisor", sup)
-    yield sup
-    sup.close()
 
 
 class Flight:
