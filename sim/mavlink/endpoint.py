@@ -19,8 +19,10 @@ parse as one.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import math
+import socket
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -37,6 +39,9 @@ from sim.mavlink.signing import MAVLINK_MSG_ID_SETUP_SIGNING, VehicleSigning
 Message: TypeAlias = Any
 Address = tuple[str, int]
 MessageHandler = Callable[["UdpLink", Message], None]
+
+# asked of the OS for each link socket (granted up to net.core.rmem_max)
+RECEIVE_BUFFER_BYTES = 4 * 1024 * 1024
 
 # A link without a configured remote follows a new sender once its partner is this quiet.
 PEER_HANDOVER_S = 2.0
@@ -197,6 +202,13 @@ class UdpLink(asyncio.DatagramProtocol):
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         self._transport = cast(asyncio.DatagramTransport, transport)
+        # A vehicle in Python shares its cores with whatever else runs: a receive buffer
+        # wider than the OS's default (~256 datagrams) keeps a stall of its loop from
+        # losing the ground's setpoints and commands (PX4 in C never stalls so).
+        sock = transport.get_extra_info("socket")
+        if sock is not None:
+            with contextlib.suppress(OSError):
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER_BYTES)
         self.local_port = transport.get_extra_info("sockname")[1]
 
     def connection_lost(self, exc: Exception | None) -> None:

@@ -45,6 +45,27 @@ UDP_PEER_HANDOVER_S = 2.0
 # Datagrams read per wakeup of a socket (the rest wait for the next turn of the loop).
 DRAIN_PER_WAKEUP = 64
 MAX_DATAGRAM_BYTES = 65535
+# The receive buffer asked of the OS for a link socket (it grants up to net.core.rmem_max).
+# Its default (212 KB) holds only ~256 datagrams however small: a vehicle sending PX4's
+# ~200 frames/s to a server held off its core for a second or two (a busy laptop, a slow
+# call in the loop) would lose frames, answers to commands among them. 4 MiB holds ~10,000
+# (under a minute of PX4's stream), delivered late rather than lost.
+LINK_RECEIVE_BUFFER_BYTES = 4 * 1024 * 1024
+
+
+def widen_receive_buffer(sock: Any, wanted_bytes: int) -> int:
+    """Ask for a receive buffer of ``wanted_bytes`` on ``sock``; the bytes the OS granted (Linux
+    reports twice what it holds for data, its own bookkeeping included)."""
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, wanted_bytes)
+        granted = int(sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF))
+    except OSError as exc:
+        log.debug("receive buffer of %d bytes refused: %s", wanted_bytes, exc)
+        return 0
+    if granted < wanted_bytes:
+        log.info("a link socket's receive buffer is %d bytes, not the %d asked "
+                 "(net.core.rmem_max caps it)", granted, wanted_bytes)
+    return granted
 
 
 class _DatagramReceiver(asyncio.DatagramProtocol):
@@ -67,6 +88,8 @@ class _UdpTransport(Transport):
         # a duplicate of the endpoint's socket for writes off the loop (asyncio's transport
         # is not thread-safe); it shares the non-blocking mode, so it never blocks either
         self._thread_socket: socket.socket | None = None
+        # what the OS granted for the socket's receive buffer (0 until open)
+        self.receive_buffer_bytes = 0
 
     @property
     def local_address(self) -> tuple[str, int] | None:
@@ -83,6 +106,7 @@ class _UdpTransport(Transport):
         )
         self._endpoint = endpoint
         sock = endpoint.get_extra_info("socket")
+        self.receive_buffer_bytes = widen_receive_buffer(sock, LINK_RECEIVE_BUFFER_BYTES)
         self._thread_socket = socket.socket(
             sock.family, sock.type, sock.proto, fileno=os.dup(sock.fileno()))
 
