@@ -209,6 +209,10 @@ class Link:
     def remove_frame_tap(self, tap: FrameTap) -> None:
         self._record.remove_tap(tap)
 
+    def input_pending(self) -> bool:
+        """Frames wait unread on the connection: the loop is behind the vehicle."""
+        return self._transport.input_pending()
+
     def stats(self) -> LinkStats:
         last = self._roster.last_heartbeat_s
         age = None if last is None else max(0.0, self.now() - last)
@@ -377,7 +381,7 @@ class Link:
             if late_s > LOOP_STALL_S:
                 self._roster.liveness.forgive(late_s)
             expected_s = self.now() + HEARTBEAT_CHECK_PERIOD_S
-            self._roster.judge(self.now(), self._transport.input_pending())
+            self._roster.judge(self.now(), self.input_pending())
 
 
 @dataclass(frozen=True)

@@ -30,13 +30,26 @@ class _FakeVehicle:
         self.sent: list[tuple[float, mavlink.MAVLink_message]] = []
         self.events: list[tuple[str, dict[str, object]]] = []
         self.on_send: Callable[[mavlink.MAVLink_message], None] = lambda _msg: None
+        # answers waiting unread in the link's socket (a loop behind), and a flood of frames
+        self.unread: list[mavlink.MAVLink_message] = []
+        self.flooded = False
         self.requests = Requester(
+            input_pending=self._input_pending,
             send=self._send,
             mav=mavlink.MAVLink(None, srcSystem=255, srcComponent=190),
             target=(1, 1),
             texts=RecentTexts(loop.time),
             publish=lambda kind, data: self.events.append((kind, data)),
         )
+
+    def _input_pending(self) -> bool:
+        """As the link's socket: what waits is read on the loop's next turn."""
+        if self.unread:
+            waiting, self.unread = self.unread, []
+            for msg in waiting:
+                asyncio.get_running_loop().call_soon(self.requests.handle_ack, msg, 1)
+            return True
+        return self.flooded
 
     def _send(self, msg: mavlink.MAVLink_message) -> None:
         self.sent.append((asyncio.get_running_loop().time(), msg))
@@ -74,6 +87,36 @@ async def test_unanswered_command_is_sent_four_times_then_times_out() -> None:
     assert [m.confirmation for _, m in fake.sent] == [0, 1, 2, 3]
     assert [t for t, _ in fake.sent] == pytest.approx([0.0, 0.5, 1.0, 1.5])
     assert result.elapsed_ms == pytest.approx(2000.0)
+
+
+async def test_an_answer_unread_when_the_last_try_ends_is_read_not_timed_out() -> None:
+    """The vehicle answered the last try, but the answer waits in the socket behind frames
+    the loop has not read yet: it is read and counts; TIMEOUT would be untrue."""
+    fake = _FakeVehicle()
+
+    def answer_the_last(msg: mavlink.MAVLink_message) -> None:
+        if msg.confirmation == 3:
+            fake.unread.append(mavlink.MAVLink_command_ack_message(ARM, ACCEPTED, 0, 0, 255, 190))
+
+    fake.on_send = answer_the_last
+
+    result = await fake.requests.command_long(ARM, 1)
+
+    assert result.ok
+    assert len(fake.sent) == 4
+    assert result.elapsed_ms == pytest.approx(2000.0, abs=10.0)
+
+
+async def test_a_flood_of_unread_frames_delays_a_timeout_by_the_grace_at_most() -> None:
+    fake = _FakeVehicle()
+    fake.flooded = True  # frames always wait: the loop never catches up, nothing answers
+
+    result = await fake.requests.command_long(ARM, 1)
+
+    assert result.outcome is CommandOutcome.TIMEOUT
+    assert len(fake.sent) == 4
+    grace_ms = fake.requests.unread_grace_s * 1000
+    assert 2000.0 + grace_ms <= result.elapsed_ms <= 2000.0 + grace_ms + 20.0
 
 
 async def test_answer_to_the_second_try_ends_the_retries() -> None:

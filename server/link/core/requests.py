@@ -11,6 +11,12 @@ Every request of every vehicle plugin goes through ``Requester``:
   answered by what the vehicle reports back: the same tries, until a predicate holds.
 - an accepted command may also have to show in the reported state (a mode, a VTOL state):
   a ``Confirmation`` says how. Accepted but never shown is NOT_CONFIRMED.
+
+No try ends while frames wait unread on the link (``input_pending``): a loop that fell
+behind (a busy machine, a backlog read 64 frames a turn) reads them first, as the link's
+liveness verdicts do, so TIMEOUT means the vehicle did not answer, not that its answer was
+still queued. The wait for them is bounded (``unread_grace_s``): a flood cannot hide a
+vehicle that never answers.
 """
 
 from __future__ import annotations
@@ -35,6 +41,8 @@ from server.link.codec.statustext import RecentTexts
 MAV_CMD_DO_SET_MODE = 176
 MAV_RESULT_IN_PROGRESS = 5
 NAN = math.nan
+# how often a try past its end looks again while the link reads the frames waiting
+UNREAD_POLL_S = 0.005
 # outcomes that a STATUSTEXT may explain (PX4 says why it refused)
 _EXPLAINED = frozenset(set(CommandOutcome) - {
     CommandOutcome.ACCEPTED, CommandOutcome.TIMEOUT, CommandOutcome.LINK_LOST,
@@ -88,6 +96,7 @@ class Requester:
     double_ack_window_s = 0.2
     double_ack_commands = frozenset({MAV_CMD_DO_SET_MODE})
     reason_wait_s = 0.1  # for the STATUSTEXT that says why a command was refused
+    unread_grace_s = 1.0  # past the tries' ends in all, while frames wait unread
 
     def __init__(
         self,
@@ -97,8 +106,10 @@ class Requester:
         target: tuple[int, int],
         texts: RecentTexts,
         publish: Publish,
+        input_pending: Callable[[], bool] = _never,
     ) -> None:
         self.send = send
+        self._input_pending = input_pending
         self.mav = mav
         self.target = target  # (system, component)
         self._texts = texts
@@ -262,6 +273,7 @@ class Requester:
         self._in_flight.add(pending)
         try:
             attempt = seen_progress = 0
+            grace_left_s = self.unread_grace_s
             send_try(attempt)
             deadline = loop.time() + per_try_s
             while not answered():
@@ -273,6 +285,10 @@ class Requester:
                     self._publish("command", {"command": pending.name, "outcome": "IN_PROGRESS",
                                               "progress": pending.progress})  # fmt: skip
                 if loop.time() >= deadline:
+                    if self._input_pending() and loop.time() < deadline + grace_left_s:
+                        await asyncio.sleep(UNREAD_POLL_S)  # the link reads what waits
+                        continue
+                    grace_left_s = max(0.0, grace_left_s - (loop.time() - deadline))
                     if seen_progress or attempt >= self.retries:
                         return CommandOutcome.TIMEOUT
                     attempt += 1

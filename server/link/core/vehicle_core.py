@@ -65,6 +65,7 @@ class VehicleCore:
         self.requests = Requester(
             send=sender.send, mav=sender.mav, target=(sysid, compid), texts=self.texts,
             publish=self.publish_event,
+            input_pending=getattr(sender, "input_pending", lambda: False),
         )  # fmt: skip
         self._handlers: dict[str, list[MessageHandler]] = {
             "HEARTBEAT": [self._on_heartbeat],
