@@ -9,6 +9,7 @@ import functools
 import os
 import re
 import secrets
+import shutil
 import signal
 import subprocess
 import sys
@@ -25,6 +26,8 @@ import httpx
 from tests.waiting import wait_for_blocking as wait_for
 
 CHROMIUM = Path("/usr/bin/chromium")
+# What the tests start: Chromium at the priority of everything else (the script says why).
+CHROMIUM_ORDINARY = Path(__file__).with_name("chromium_ordinary_priority.sh")
 CHROMIUM_ARGS = [
     "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
     "--disable-background-networking", "--disable-component-update", "--disable-sync",
@@ -32,6 +35,14 @@ CHROMIUM_ARGS = [
 ]
 READY = re.compile(r"SkyHelm ready: (http://\S+)")
 REPO = Path(__file__).resolve().parents[2]
+
+
+def chromium_executable() -> str:
+    """Chromium for a test: as root (which may raise priorities) through the script that
+    keeps it from doing so, where setpriv is there."""
+    if os.geteuid() == 0 and shutil.which("setpriv"):
+        return str(CHROMIUM_ORDINARY)
+    return str(CHROMIUM)
 
 
 def skyhelm_command() -> list[str]:
@@ -232,7 +243,7 @@ def chromium_context(
     ):
         context = playwright.chromium.launch_persistent_context(
             profile,
-            executable_path=str(CHROMIUM),
+            executable_path=chromium_executable(),
             args=[*CHROMIUM_ARGS, *extra_args],
             headless=True,
             viewport=viewport or {"width": 1600, "height": 1000},
@@ -267,7 +278,8 @@ class SharedChromium:
         browser = self._browsers.get(key)
         if browser is None or not browser.is_connected():
             browser = self._playwright.chromium.launch(
-                executable_path=str(CHROMIUM), args=[*CHROMIUM_ARGS, *extra_args], headless=True
+                executable_path=chromium_executable(), args=[*CHROMIUM_ARGS, *extra_args],
+                headless=True,
             )
             self._browsers[key] = browser
         return browser

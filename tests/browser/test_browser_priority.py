@@ -1,0 +1,61 @@
+"""The browser of the tests runs at the priority of the servers and vehicles beside it: run
+as root, Chromium would raise its display threads to nice -8 and, rendering WebGL in
+software, take the cores from the other workers' vehicles under test."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import pytest
+
+from tests.browser.harness import CHROMIUM, CHROMIUM_ARGS, chromium_executable
+from tests.waiting import wait_for_blocking as wait_for
+
+WEBGL_PAGE = ("<canvas id=c></canvas>"
+              "<script>c.getContext('webgl').clearColor(0, 0, 0, 1)</script>")
+
+
+def _niceness_of_threads(profile: str) -> dict[int, int]:
+    """Each thread's nice value, of every process started with this profile."""
+    flag = f"--user-data-dir={profile}".encode()
+    found: dict[int, int] = {}
+    for proc in Path("/proc").iterdir():
+        if not proc.name.isdigit():
+            continue
+        try:
+            if flag not in (proc / "cmdline").read_bytes():
+                continue
+            for task in (proc / "task").iterdir():
+                # the fields after the command's closing parenthesis: nice is the 17th
+                fields = (task / "stat").read_text().rsplit(")", 1)[1].split()
+                found[int(task.name)] = int(fields[16])
+        except (FileNotFoundError, ProcessLookupError):
+            continue
+    return found
+
+
+def test_the_tests_chromium_raises_no_thread_above_ordinary_priority() -> None:
+    if os.geteuid() != 0:
+        pytest.skip("only root may raise priorities: nothing to keep Chromium from")
+    if not CHROMIUM.exists():
+        pytest.skip("/usr/bin/chromium is not installed (make chromium, as root)")
+    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
+    with (
+        tempfile.TemporaryDirectory(prefix="skyhelm-priority-") as profile,
+        sync_api.sync_playwright() as playwright,
+    ):
+        context = playwright.chromium.launch_persistent_context(
+            profile, executable_path=chromium_executable(), args=CHROMIUM_ARGS, headless=True)
+        try:
+            context.new_page().set_content(WEBGL_PAGE)
+            # the browser, its GPU process and a renderer: Chromium sets priorities as each starts
+            threads = wait_for(
+                "Chromium's processes", lambda: (
+                    found if len(found := _niceness_of_threads(profile)) > 40 else None),
+                20.0)  # fmt: skip
+        finally:
+            context.close()
+    raised = {tid: nice for tid, nice in threads.items() if nice < 0}
+    assert not raised, f"{len(raised)} of {len(threads)} threads above ordinary priority"
