@@ -231,7 +231,8 @@ def chromium_context(
     """Debian's Chromium under Playwright, in a fresh profile (a skip when either is
     missing); it ignores the server's Content-Security-Policy (which forbids the eval that
     Playwright's string predicates use) unless told not to. `extra_args` add to Chromium's
-    arguments; `viewport` sets the window (1600×1000 by default)."""
+    arguments; `viewport` sets the window (1600×1000 by default). The context's
+    `profile_dir` names its profile (Chromium's processes carry it on their command line)."""
     import pytest
 
     if not CHROMIUM.exists():
@@ -249,6 +250,7 @@ def chromium_context(
             viewport=viewport or {"width": 1600, "height": 1000},
             bypass_csp=bypass_csp,
         )
+        context.profile_dir = profile
         try:
             yield context
         finally:

@@ -5,12 +5,11 @@ software, take the cores from the other workers' vehicles under test."""
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 
 import pytest
 
-from tests.browser.harness import CHROMIUM, CHROMIUM_ARGS, chromium_executable
+from tests.browser.harness import chromium_context
 from tests.waiting import wait_for_blocking as wait_for
 
 WEBGL_PAGE = ("<canvas id=c></canvas>"
@@ -39,23 +38,12 @@ def _niceness_of_threads(profile: str) -> dict[int, int]:
 def test_the_tests_chromium_raises_no_thread_above_ordinary_priority() -> None:
     if os.geteuid() != 0:
         pytest.skip("only root may raise priorities: nothing to keep Chromium from")
-    if not CHROMIUM.exists():
-        pytest.skip("/usr/bin/chromium is not installed (make chromium, as root)")
-    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")
-    with (
-        tempfile.TemporaryDirectory(prefix="skyhelm-priority-") as profile,
-        sync_api.sync_playwright() as playwright,
-    ):
-        context = playwright.chromium.launch_persistent_context(
-            profile, executable_path=chromium_executable(), args=CHROMIUM_ARGS, headless=True)
-        try:
-            context.new_page().set_content(WEBGL_PAGE)
-            # the browser, its GPU process and a renderer: Chromium sets priorities as each starts
-            threads = wait_for(
-                "Chromium's processes", lambda: (
-                    found if len(found := _niceness_of_threads(profile)) > 40 else None),
-                20.0)  # fmt: skip
-        finally:
-            context.close()
+    with chromium_context() as context:
+        context.new_page().set_content(WEBGL_PAGE)
+        # the browser, its GPU process and a renderer: Chromium sets priorities as each starts
+        threads = wait_for(
+            "Chromium's processes", lambda: (
+                found if len(found := _niceness_of_threads(context.profile_dir)) > 40 else None),
+            20.0)  # fmt: skip
     raised = {tid: nice for tid, nice in threads.items() if nice < 0}
     assert not raised, f"{len(raised)} of {len(threads)} threads above ordinary priority"
