@@ -67,12 +67,14 @@ lint: $(TSTAMP)
 audit: $(TSTAMP)
 	$(PY) -m tools.audit
 
-## Four workers on two cores: most tests wait on a real-time simulated vehicle, not on a core;
-## the browser tests run in two groups, the longest modules first (tests/conftest.py). Five
-## take a tenth off a quiet run, but beside two busy loops the in-process vehicles then miss
-## their answers (504s); a third browser group made the run slower.
+## Three workers on two cores: most tests wait on a real-time simulated vehicle, not on a core;
+## the browser tests run in two groups, the longest modules first (tests/conftest.py). On a
+## machine three times slower per core than usual, four took as long as three (1213 s against
+## 1228 s) with 22 failures against 3: the fourth added no work done, only vehicles and servers
+## starved of a core (504s). Five took a tenth off a quiet run on a fast machine, but beside two
+## busy loops the vehicles then missed their answers; a third browser group made the run slower.
 ## TEST_WORKERS=0 runs everything in one process.
-TEST_WORKERS ?= 4
+TEST_WORKERS ?= 3
 
 ## Set-up runs two at a time: the packages beside Debian's chromium. The linters and the audit
 ## (a few seconds of CPU, the rest waiting on the vulnerability service) then run beside the
