@@ -53,19 +53,18 @@ MAX_DATAGRAM_BYTES = 65535
 LINK_RECEIVE_BUFFER_BYTES = 4 * 1024 * 1024
 
 
-def widen_receive_buffer(sock: Any, wanted_bytes: int) -> int:
-    """Ask for a receive buffer of ``wanted_bytes`` on ``sock``; the bytes the OS granted (Linux
+def _widen_receive_buffer(sock: socket.socket) -> None:
+    """Ask for ``LINK_RECEIVE_BUFFER_BYTES`` on ``sock``; say so when the OS grants less (Linux
     reports twice what it holds for data, its own bookkeeping included)."""
     try:
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, wanted_bytes)
-        granted = int(sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF))
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, LINK_RECEIVE_BUFFER_BYTES)
+        granted = sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
     except OSError as exc:
-        log.debug("receive buffer of %d bytes refused: %s", wanted_bytes, exc)
-        return 0
-    if granted < wanted_bytes:
+        log.debug("receive buffer of %d bytes refused: %s", LINK_RECEIVE_BUFFER_BYTES, exc)
+        return
+    if granted < LINK_RECEIVE_BUFFER_BYTES:
         log.info("a link socket's receive buffer is %d bytes, not the %d asked "
-                 "(net.core.rmem_max caps it)", granted, wanted_bytes)
-    return granted
+                 "(net.core.rmem_max caps it)", granted, LINK_RECEIVE_BUFFER_BYTES)
 
 
 class _DatagramReceiver(asyncio.DatagramProtocol):
@@ -88,8 +87,6 @@ class _UdpTransport(Transport):
         # a duplicate of the endpoint's socket for writes off the loop (asyncio's transport
         # is not thread-safe); it shares the non-blocking mode, so it never blocks either
         self._thread_socket: socket.socket | None = None
-        # what the OS granted for the socket's receive buffer (0 until open)
-        self.receive_buffer_bytes = 0
 
     @property
     def local_address(self) -> tuple[str, int] | None:
@@ -106,7 +103,7 @@ class _UdpTransport(Transport):
         )
         self._endpoint = endpoint
         sock = endpoint.get_extra_info("socket")
-        self.receive_buffer_bytes = widen_receive_buffer(sock, LINK_RECEIVE_BUFFER_BYTES)
+        _widen_receive_buffer(sock)
         self._thread_socket = socket.socket(
             sock.family, sock.type, sock.proto, fileno=os.dup(sock.fileno()))
 
