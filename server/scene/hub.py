@@ -45,6 +45,11 @@ _CAMERA_OFFSET_ENU = np.array([-6.0, -6.0, 4.0])
 # The scene panel's title: viser's own says "Connected" (its socket to this server), which a
 # pilot reads as the vehicle. It says what the view shows instead, and which link is lost.
 SCENE_LABEL = "3D view"
+# Updates are not wrapped in viser's atomic(): viser sends nothing while any atomic block
+# is open and looks again only 1/60 s after one closes, so on a busy machine, where an
+# update takes ~25 ms and the next follows soon after, the scene's changes were held back
+# (one message for every four updates; in a loaded run none for 17 s, the vehicle armed
+# meanwhile). A frame that shows a vehicle's label a message behind its model is harmless.
 # Finer than this the model never moves, however close a camera is.
 _PIXEL_MIN_M = 0.002
 
@@ -244,29 +249,28 @@ class SceneHub:
 
     def _apply_fleet(self, server: viser.ViserServer, changes: dict[str, FleetPose | None]) -> None:
         listed = False
-        with server.atomic():
-            for key, pose in changes.items():
-                view = self._fleet_views.get(key)
-                if pose is None or (view is not None and view.mav_type != pose.mav_type):
-                    if view is not None:
-                        view.remove()
-                        del self._fleet_views[key]
-                        listed = True
-                    if pose is None:
-                        continue
-                if self._reference is None:
-                    # no local vehicle yet: the first fleet vehicle's home (or itself) is 0,0,0
-                    self._reference = pose.home or (pose.lat_deg, pose.lon_deg, pose.alt_amsl_m)
-                view = self._fleet_views.get(key)
-                if view is None:
-                    view = self._fleet_views[key] = FleetVehicleView(server.scene, key,
-                                                                     pose.mav_type)
+        for key, pose in changes.items():
+            view = self._fleet_views.get(key)
+            if pose is None or (view is not None and view.mav_type != pose.mav_type):
+                if view is not None:
+                    view.remove()
+                    del self._fleet_views[key]
                     listed = True
-                view.update(pose, self._reference)
-                self.updates_applied += 1
-            if listed:
-                self._refresh_follow_options()
-            self._follow_camera(server)
+                if pose is None:
+                    continue
+            if self._reference is None:
+                # no local vehicle yet: the first fleet vehicle's home (or itself) is 0,0,0
+                self._reference = pose.home or (pose.lat_deg, pose.lon_deg, pose.alt_amsl_m)
+            view = self._fleet_views.get(key)
+            if view is None:
+                view = self._fleet_views[key] = FleetVehicleView(server.scene, key,
+                                                                 pose.mav_type)
+                listed = True
+            view.update(pose, self._reference)
+            self.updates_applied += 1
+        if listed:
+            self._refresh_follow_options()
+        self._follow_camera(server)
 
     def _watched(self) -> bool:
         if self._proxy is not None and self._proxy.open_sockets > 0:
@@ -277,11 +281,10 @@ class SceneHub:
         server = self._server
         if server is None:
             return
-        with server.atomic():
-            for state in states:
-                self._apply(server, state, now_s)
-            self._follow_camera(server)
-            self._show_label(server)
+        for state in states:
+            self._apply(server, state, now_s)
+        self._follow_camera(server)
+        self._show_label(server)
 
     def _show_label(self, server: viser.ViserServer) -> None:
         """The panel's title: what the view shows, and any vehicle whose link is lost."""
@@ -393,7 +396,8 @@ class SceneHub:
                 offset = np.asarray(camera.position) - np.asarray(camera.look_at)
             else:
                 continue
-            # viser moves look_at along with position, so position goes first.
-            with client.atomic():
-                camera.position = target + offset
-                camera.look_at = target
+            # viser moves look_at along with position, so position goes first (not in an
+            # atomic block: see the note on atomic() above; between the two messages the
+            # view is off by one update's travel, for a frame at most).
+            camera.position = target + offset
+            camera.look_at = target
