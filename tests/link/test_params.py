@@ -173,7 +173,7 @@ async def test_set_whose_echo_differs_is_an_error(scripted: ScriptedSession) -> 
     server = _px4_params(scripted.peer)
     server.clamp["MPC_XY_CRUISE"] = 20.0
 
-    with pytest.raises(ParamError, match="kept 20"):
+    with pytest.raises(ParamError, match="the vehicle answered 20"):
         await scripted.vehicle.set_param("MPC_XY_CRUISE", 50.0)
 
 

@@ -254,7 +254,8 @@ class ParamClient:
                 last = self.cache.get(name)
                 if last is None:
                     raise TimeoutError(f"no echo for parameter {name}")
-                raise ParamError(f"{name}: asked for {value!r}, vehicle kept {last.value!r}")
+                raise ParamError(
+                    f"{name}: asked for {value!r}, the vehicle answered {last.value!r}")
             return self.cache[name].value
 
 
