@@ -42,6 +42,12 @@ MessageHandler = Callable[["UdpLink", Message], None]
 
 # asked of the OS for each link socket (granted up to net.core.rmem_max)
 RECEIVE_BUFFER_BYTES = 4 * 1024 * 1024
+# asyncio hands a datagram endpoint one datagram per turn of the loop; a vehicle whose loop
+# turns slowly (its steps on a starved core) then falls behind its input without bound, a
+# command answered seconds late behind setpoints that waited in the buffer. Every datagram
+# waiting is read at each turn, as PX4's receiver reads its socket dry, up to this many.
+DATAGRAMS_PER_TURN = 256
+_MAX_DATAGRAM_BYTES = 65535
 
 # A link without a configured remote follows a new sender once its partner is this quiet.
 PEER_HANDOVER_S = 2.0
@@ -174,8 +180,11 @@ class UdpLink(asyncio.DatagramProtocol):
         remote: Address | None = None,
         signing: VehicleSigning | None = None,
         link_id: int = 0,
+        sock: socket.socket | None = None,
     ) -> None:
         self.name = name
+        # the endpoint's own socket, read dry at each turn (none: one datagram a turn)
+        self._sock = sock
         self.remote = remote
         # a configured remote is replaced once, by the first checked frame's sender
         self._partner_set = False
@@ -213,12 +222,28 @@ class UdpLink(asyncio.DatagramProtocol):
 
     def connection_lost(self, exc: Exception | None) -> None:
         self._transport = None
+        self._sock = None
 
     def error_received(self, exc: Exception) -> None:
         # ICMP port unreachable while nobody listens on the remote: expected, keep going.
         self.counters.tx_errors += 1
 
     def datagram_received(self, data: bytes, addr: Address) -> None:
+        self._take(data, addr)
+        for _ in range(DATAGRAMS_PER_TURN - 1):
+            sock = self._sock
+            if sock is None or self._transport is None:
+                return
+            try:
+                data, addr = sock.recvfrom(_MAX_DATAGRAM_BYTES)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError as exc:  # an ICMP error queued on the socket, as asyncio reports it
+                self.error_received(exc)
+                continue
+            self._take(data, addr)
+
+    def _take(self, data: bytes, addr: Address) -> None:
         self.counters.rx_datagrams += 1
         messages, bad, unverified = self._codec.decode(data)
         self.counters.rx_dropped += bad
@@ -313,8 +338,17 @@ async def open_link(
     """Bind host:local_port (0 = ephemeral) and return the link once bound."""
     loop = asyncio.get_running_loop()
     remote = (host, remote_port) if remote_port else None
-    _, protocol = await loop.create_datagram_endpoint(
-        lambda: UdpLink(name, sysid, compid, on_message, remote, signing, link_id),
-        local_addr=(host, local_port),
-    )
+    family, kind, proto, _, address = socket.getaddrinfo(host, local_port,
+                                                         type=socket.SOCK_DGRAM)[0]
+    sock = socket.socket(family, kind, proto)
+    try:
+        sock.bind(address)
+        sock.setblocking(False)
+        _, protocol = await loop.create_datagram_endpoint(
+            lambda: UdpLink(name, sysid, compid, on_message, remote, signing, link_id, sock),
+            sock=sock,
+        )
+    except BaseException:
+        sock.close()
+        raise
     return protocol

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import time
 from collections.abc import AsyncIterator
 from typing import Any, cast
@@ -10,7 +11,7 @@ from typing import Any, cast
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
-from sim.mavlink.endpoint import MavlinkCodec, UdpLink
+from sim.mavlink.endpoint import MavlinkCodec, UdpLink, open_link
 from sim.process.clock import ManualClock
 from sim.process.run_loop import MIN_WAKE_PERIOD_S
 from sim.process.runner import SimCluster
@@ -202,3 +203,48 @@ def test_frame_that_cannot_be_packed_is_counted_and_skipped() -> None:
     (decoded,) = mavlink.MAVLink(None).parse_buffer(frame) or []
     assert decoded.get_type() == "HEARTBEAT"
     assert decoded.get_seq() == 0
+
+
+# A loop turn as long as a starved vehicle's step batch; datagrams that came meanwhile.
+SLOW_TURN_S = 0.02
+WAITING_DATAGRAMS = 300
+
+
+def _hold_the_loop(seconds: float) -> None:
+    time.sleep(seconds)  # the vehicle's steps: nothing else runs on the loop meanwhile
+
+
+async def test_a_slowly_turning_loop_reads_every_waiting_datagram_at_once(
+        peer: UdpPeer) -> None:
+    """asyncio alone hands a datagram endpoint one datagram per turn of the loop: with a
+    turn of 20-30 ms, 300 waiting setpoints took 9 s, a command behind them as late."""
+    taken: list[Any] = []
+    all_taken = asyncio.Event()
+
+    def take(_link: UdpLink, msg: Any) -> None:
+        taken.append(msg)
+        if len(taken) == WAITING_DATAGRAMS:
+            all_taken.set()
+
+    link = await open_link("api", 1, 1, take, "127.0.0.1", 0, None)
+    turning = True
+
+    async def slow_turns() -> None:
+        while turning:
+            _hold_the_loop(SLOW_TURN_S)
+            await asyncio.sleep(0)
+
+    try:
+        for _ in range(WAITING_DATAGRAMS):
+            peer.send(heartbeat(), link.local_port)
+        turns = asyncio.create_task(slow_turns())
+        started = time.monotonic()
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(all_taken.wait(), 10.0)
+        took_s = time.monotonic() - started
+        turning = False
+        await turns
+    finally:
+        link.close()
+    assert len(taken) == WAITING_DATAGRAMS
+    assert took_s < 10 * SLOW_TURN_S, f"{WAITING_DATAGRAMS} datagrams took {took_s:.2f} s"
