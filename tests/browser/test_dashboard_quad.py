@@ -4,6 +4,7 @@ it needs (on the ground or hovering, nobody in control), so they run in any orde
 
 from __future__ import annotations
 
+import contextlib
 import io
 import math
 from collections.abc import Iterator
@@ -13,7 +14,7 @@ import httpx
 import numpy as np
 import pytest
 
-from tests.waiting import holds_for_blocking
+from tests.waiting import holds_for_blocking, wait_for_blocking
 
 from .flows import (
     arm_and_take_off,
@@ -163,13 +164,31 @@ def test_scene_draws_the_vehicle_through_the_proxied_socket(
     )
 
 
-def test_click_in_the_scene_fills_the_reposition_target(scene_page: Any) -> None:
+# A click the scene did not take is clicked again, as a pilot would: on a loaded machine
+# (software WebGL, the suite's other workers) one click in a few runs never reached the
+# server although the canvas was under the pointer and the scene connected.
+SCENE_CLICKS = 3
+CLICK_TAKEN_S = 10.0
+
+
+def _scene_clicks_seen(serve: Serve) -> int:
+    click = httpx.get(f"{serve.base}/scene/api/click", params={"token": serve.token}).json()
+    return int(click["seq"])
+
+
+def test_click_in_the_scene_fills_the_reposition_target(scene_page: Any, serve: Serve) -> None:
     page = scene_page
     _scene_canvas(page)
     box = page.locator("#scene").bounding_box()
-    # Below the centre, where the camera looks down at the ground grid. Mouse events go
-    # straight to the canvas: software WebGL is too slow for Playwright's stability checks.
-    page.mouse.click(box["x"] + box["width"] * 0.5, box["y"] + box["height"] * 0.8)
+    seen = _scene_clicks_seen(serve)
+    for _ in range(SCENE_CLICKS):
+        # Below the centre, where the camera looks down at the ground grid. Mouse events go
+        # straight to the canvas: software WebGL is too slow for Playwright's stability checks.
+        page.mouse.click(box["x"] + box["width"] * 0.5, box["y"] + box["height"] * 0.8)
+        with contextlib.suppress(AssertionError):
+            wait_for_blocking("the scene to take the click",
+                              lambda: _scene_clicks_seen(serve) > seen, CLICK_TAKEN_S)
+            break
     page.wait_for_selector("#scene-click:not(.hidden)", timeout=20_000)
     assert "clicked" in (page.text_content("#scene-click") or "")
     lat = float(page.input_value("#repo-lat"))
