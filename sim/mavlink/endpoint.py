@@ -231,8 +231,8 @@ class UdpLink(asyncio.DatagramProtocol):
     def datagram_received(self, data: bytes, addr: Address) -> None:
         self._take(data, addr)
         for _ in range(DATAGRAMS_PER_TURN - 1):
-            sock = self._sock
-            if sock is None or self._transport is None:
+            sock = self._sock  # None once closed, also by a handler of the last datagram
+            if sock is None:
                 return
             try:
                 data, addr = sock.recvfrom(_MAX_DATAGRAM_BYTES)
@@ -322,6 +322,7 @@ class UdpLink(asyncio.DatagramProtocol):
         if self._transport is not None:
             self._transport.close()
             self._transport = None
+        self._sock = None
 
 
 async def open_link(
