@@ -27,6 +27,9 @@ from server.link.stream import stream_channel
 from server.link.stream.sender_supervisor import SenderSupervisor
 from tests.browser.sharing import FAMILY_OF
 
+# SKYHELM_TEST_CPU_LOG=path: each test's CPU seconds, its processes' included (tests/cpu_account.py)
+pytest_plugins = ["tests.cpu_account"]
+
 _BROWSER_TESTS = "tests/browser/"
 BROWSER_GROUPS = 2
 UNLISTED_S = 5.0
