@@ -8,10 +8,12 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Callable
+from typing import Any, cast
 
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
+from server.link.stream.sender_supervisor import STARVED_AFTER_S, STUCK_AFTER_S
 from server.link.stream.streamer import SetpointStreamer
 
 pytestmark = pytest.mark.looptime
@@ -170,6 +172,43 @@ async def test_a_stopped_stream_reports_no_rate(monkeypatch: pytest.MonkeyPatch)
     assert stats.rate_hz == 0.0
     assert stats.sent == 21
     assert stats.interval_p99_ms == pytest.approx(50, rel=1e-6)
+
+
+class _SilentFor:
+    """A sender process as the streamer sees it: silent for ``age_s`` (None: it ended)."""
+
+    def __init__(self, age_s: float | None) -> None:
+        self.process = self
+        self.age_s = age_s
+
+    def heartbeat_age_s(self) -> float | None:
+        return self.age_s
+
+
+@pytest.mark.parametrize(
+    ("silent_s", "active"),
+    [(0.1, True), (0.3, True), (STARVED_AFTER_S - 0.01, True), (STARVED_AFTER_S, False),
+     (2.0, False), (None, False)],
+)
+async def test_a_sender_kept_waiting_for_a_core_still_streams_a_silent_or_ended_one_not(
+    monkeypatch: pytest.MonkeyPatch, silent_s: float | None, active: bool
+) -> None:
+    """A busy machine keeps the sender process from its core for a few tenths of a second:
+    its stream is still active (the supervisor's watchdog, which kills a stopped process
+    once silent for STUCK_AFTER_S, leaves it too); a page reading `active` flip-flop with the
+    machine's load would show the stream stopped and back. Silent for STARVED_AFTER_S, or
+    ended, it is not."""
+    assert STUCK_AFTER_S < 0.3 < STARVED_AFTER_S
+    streamer = SetpointStreamer(_Recorder(monkeypatch), rate_hz=20)
+    streamer.stream(_msg(1))
+    await asyncio.sleep(0.2)
+    assert streamer.stats().active
+    streamer._channel = cast(Any, _SilentFor(silent_s))  # as while a process times it
+    try:
+        assert streamer.stats().active is active
+    finally:
+        streamer._channel = None
+        streamer.stop()
 
 
 @pytest.mark.parametrize("rate_hz", [1.0, 101.0])

@@ -37,7 +37,7 @@ from typing import Any
 from pymavlink.dialects.v20 import development as mavlink
 
 from server.link.codec.snapshot import StreamStats
-from server.link.stream.sender_supervisor import STUCK_AFTER_S, ProcessGone
+from server.link.stream.sender_supervisor import STARVED_AFTER_S, ProcessGone
 from server.link.stream.stream_channel import StreamChannel, supervisor
 from server.link.stream.stream_thread import Deadlines, SenderThread, shared_sender
 
@@ -302,14 +302,19 @@ class SetpointStreamer:
         return "thread" if self._threaded else "loop"
 
     def _frames_leaving(self) -> bool:
-        """Active, and its sender is running (a process that stopped answering is not)."""
+        """Active, and its sender is running: a process that ended is not, nor one silent
+        for STARVED_AFTER_S. One stopped (SIGSTOP) is killed by the supervisor's watchdog
+        once silent for STUCK_AFTER_S, and so ends; one a busy machine keeps waiting for a
+        core a few tenths of a second still streams (its frames leave once it runs, well
+        within the vehicle's offboard timeout), as the watchdog judges it: a flag that
+        flickered with the machine's load would tell a page the stream had stopped."""
         if not self._active:
             return False
         channel = self._channel
         if channel is None:
             return True
         age_s = channel.process.heartbeat_age_s()
-        return age_s is not None and age_s < STUCK_AFTER_S
+        return age_s is not None and age_s < STARVED_AFTER_S
 
     def _reset_stats(self) -> None:
         self._ring_next = 0
