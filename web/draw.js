@@ -5,10 +5,12 @@
 // when it shows again.
 // Parts drawn at a slower pace (the plots, running counters) keep one beat
 // (SLOW_BEAT_MS), so they change in the same frames.
-// The parts due together are drawn in one task, by a timer: no requestAnimationFrame at all
-// (each one asks the browser for a frame, which costs even when nothing changed, and a
-// window the browser gives few frames, headless Chromium's second page, would lag); what a
-// draw changes is painted in the browser's next frame.
+// The parts due together are drawn at the end of the task that asked for them (a microtask:
+// a state is drawn as its message is handled, not after whatever other tasks a busy page has
+// queued meanwhile): no requestAnimationFrame at all (each one asks the browser for a frame,
+// which costs even when nothing changed, and a window the browser gives few frames, headless
+// Chromium's second page, would lag); what a draw changes is painted in the browser's next
+// frame.
 //
 // window.skyhelm.draws counts the draws of each part and window.skyhelm.drawTimes keeps
 // when (performance.now(), the last DRAW_TIMES_KEPT) it drew, for the browser tests and the
@@ -20,12 +22,12 @@ export const drawTimes = {};
 const DRAW_TIMES_KEPT = 100;
 const painters = [];
 const due = new Set();
-let task = null;
+let task = false; // a drawDue() queued
 
 export const pageHidden = () => document.visibilityState === "hidden";
 
 function drawDue() {
-  task = null;
+  task = false;
   const now = performance.now();
   for (const painter of [...due]) {
     due.delete(painter);
@@ -71,7 +73,10 @@ export class Painter {
       return;
     }
     due.add(this);
-    if (task === null) task = setTimeout(drawDue, 0);
+    if (!task) {
+      task = true;
+      queueMicrotask(drawDue);
+    }
   }
 
   run(now, beatMs = now) {
