@@ -89,13 +89,17 @@ def pytest_runtest_teardown(item: pytest.Item, nextitem: pytest.Item | None) -> 
 def pytest_runtest_makereport(
     item: pytest.Item, call: pytest.CallInfo[None]
 ) -> Generator[None, Any, None]:
-    """A failed browser test reports what its pages logged (the page's own log panel)."""
+    """A failed browser test (or its set-up) reports what its pages logged (the page's own
+    log panel) and the last lines its server wrote."""
     outcome = yield
     report = outcome.get_result()
-    if call.when != "call" or not report.failed:
+    if call.when not in ("setup", "call") or not report.failed:
         return
     funcargs = getattr(item, "funcargs", {})
-    for name in ("page", "second_page"):
+    serve = funcargs.get("serve")
+    if isinstance(serve, Serve):
+        report.sections.append(("server log", serve.log_tail(60)))
+    for name in ("page", "second_page", "scene_page"):
         page = funcargs.get(name)
         if page is None or page.is_closed():
             continue
