@@ -270,9 +270,12 @@ async def fly_offboard_at_2_m_s(served: Served) -> ClientConnection:
         await ws.send(json.dumps({"type": "command", "id": request_id, "name": name, "args": args}))
         assert (await receive_until(ws, {"id": request_id}))["status"] == 200
 
+    seen: list[dict[str, Any]] = []
+
     async def heartbeat_then_state() -> dict[str, Any]:
         await ws.send(json.dumps({"type": "heartbeat"}))
-        return await served.api.state()
+        seen[:] = [await served.api.state()]
+        return seen[0]
 
     async def climbed() -> bool:
         return bool((await heartbeat_then_state())["position_ned"]["down_m"] <= -3.0)
@@ -280,7 +283,11 @@ async def fly_offboard_at_2_m_s(served: Served) -> ClientConnection:
     async def at_2_m_s() -> bool:
         return _speed(await heartbeat_then_state()) >= 1.8
 
-    await eventually(climbed, 20.0, "takeoff", poll_s=0.1)
+    try:
+        await eventually(climbed, 20.0, "takeoff", poll_s=0.1)
+    except AssertionError as exc:  # what the vehicle was doing instead
+        state = seen[0] if seen else {}
+        raise AssertionError(f"{exc}: {_summary(state)}") from None
     start = {
         "setpoint": {"type": "velocity_ned", "north_m_s": 2.0, "east_m_s": 0.0, "down_m_s": 0.0}
     }
@@ -298,6 +305,11 @@ async def _heartbeats(ws: ClientConnection) -> None:
         while True:
             await ws.send(json.dumps({"type": "heartbeat"}))
             await asyncio.sleep(0.25)
+
+
+def _summary(state: dict[str, Any]) -> dict[str, Any]:
+    return {key: state.get(key) for key in (
+        "mode", "armed", "landed_state", "position_ned", "lease", "stream", "last_heartbeat_age_s")}
 
 
 def _speed(state: dict[str, Any]) -> float:

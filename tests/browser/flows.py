@@ -13,6 +13,12 @@ from .pausing import fast_forward
 RESULT_TIMEOUT_S = 30.0
 
 
+# Software WebGL starts viser's client in ~8 CPU-s (5 s on a quiet machine, the page's main
+# thread among them: the scene's frame is of the page's origin); a loaded machine gives the
+# browser a fifth of a core or less, so a page with the scene takes a bound of its own.
+SCENE_START_MS = 90_000
+
+
 def open_dashboard(context: Any, url: str, scene: bool = True, init_script: str = "") -> Any:
     """Opens the page; without the scene, software WebGL leaves the CPU to the vehicle.
     ``init_script`` runs in the page before its own scripts."""
@@ -20,7 +26,8 @@ def open_dashboard(context: Any, url: str, scene: bool = True, init_script: str 
     if init_script:
         page.add_init_script(init_script)
     page.goto(url if scene else f"{url}&scene=off")
-    page.wait_for_function("document.getElementById('mode').textContent !== '–'", timeout=30_000)
+    page.wait_for_function("document.getElementById('mode').textContent !== '–'",
+                           timeout=SCENE_START_MS if scene else 30_000)
     return page
 
 

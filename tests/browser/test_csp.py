@@ -10,6 +10,7 @@ from typing import Any
 
 import httpx
 
+from .flows import SCENE_START_MS
 from .harness import Serve, wait_for
 
 SERVE_ARGS = ["--sim-speed", "2"]
@@ -40,14 +41,14 @@ def test_page_and_scene_work_under_the_csp_and_the_token_leaves_the_url(
         page.add_init_script(RECORD_VIOLATIONS)
         page.goto(serve.url)
         page.wait_for_function(
-            "() => document.getElementById('mode').textContent !== '–'", timeout=30_000
+            "() => document.getElementById('mode').textContent !== '–'", timeout=SCENE_START_MS
         )
         page.wait_for_function(
             "() => document.getElementById('conn-status').textContent === 'connected'",
             timeout=30_000,
         )
         canvas = page.frame_locator("#scene").locator("canvas").first
-        canvas.wait_for(timeout=60_000)
+        canvas.wait_for(timeout=SCENE_START_MS)
         scene = page.frame(url=lambda url: "/scene/" in url)
         assert scene is not None
         # the viser client, under its CSP, reached viser through the proxied socket

@@ -17,6 +17,7 @@ import pytest
 from tests.waiting import holds_for_blocking, wait_for_blocking
 
 from .flows import (
+    SCENE_START_MS,
     arm_and_take_off,
     click_and_wait_result,
     drag_slider_to,
@@ -57,7 +58,7 @@ def scene_page(browser: Any, serve: Serve) -> Iterator[Any]:
 
 def _scene_canvas(page: Any, frame_selector: str = "#scene") -> Any:
     canvas = page.frame_locator(frame_selector).locator("canvas").first
-    canvas.wait_for(timeout=30_000)
+    canvas.wait_for(timeout=SCENE_START_MS)
     return canvas
 
 

@@ -5,12 +5,11 @@ from __future__ import annotations
 
 from typing import Any
 
-from .flows import open_dashboard
+from .flows import SCENE_START_MS, open_dashboard
 from .harness import Serve, wait_for
 from .pausing import sim_paused
 
 SERVE_ARGS = ["--sim-speed", "2"]
-SCENE_START_MS = 60_000  # software WebGL starts viser's client slowly
 LINK_VERDICT_MS = 30_000
 
 
