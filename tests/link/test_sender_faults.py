@@ -278,6 +278,7 @@ def test_a_writer_thread_kept_waiting_does_not_fill_the_outbox(
         assert process.fault is None
     finally:
         process.kill("the test ends")
+        assert process.wait_ended(5.0)
 
 
 def test_frames_left_in_the_outbox_of_a_lost_process_are_counted_dropped() -> None:
@@ -441,3 +442,4 @@ def test_a_reader_kept_waiting_does_not_age_the_heartbeat(
         assert age_s < 0.15  # the process went round every report period meanwhile
     finally:
         process.kill("the test ends")
+        assert process.wait_ended(5.0)

@@ -92,6 +92,7 @@ class SenderProcess:
         self.fault: str | None = None  # why it was killed, when it was
         self._ready = threading.Event()  # its first report came
         self._gone_once = threading.Lock()
+        self._ended = threading.Event()  # its end handled: reported, or said in the log
         self._proc: subprocess.Popen[bytes] | None = None
         state_fd = os.memfd_create("skyhelm-sender-state", os.MFD_CLOEXEC)
         os.ftruncate(state_fd, stream_process.STATE_BYTES)
@@ -358,6 +359,12 @@ class SenderProcess:
             self._on_gone(self, why)
         else:
             log.error("setpoint sender process ended (%s)", why)
+        self._ended.set()
+
+    def wait_ended(self, timeout_s: float) -> bool:
+        """Whether its end was handled (reported, or said in the log) within ``timeout_s``:
+        a caller that killed it waits so before it goes (a test, whose log is closed after)."""
+        return self._ended.wait(timeout_s)
 
 
 def _slot_at(slot: int) -> int:
