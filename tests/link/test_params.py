@@ -199,6 +199,51 @@ async def test_an_older_value_arriving_before_the_echo_is_not_the_answer(
     assert scripted.vehicle.params.cache["MIS_TAKEOFF_ALT"].value == 3.5
 
 
+async def test_an_older_value_and_no_echo_is_no_answer_not_a_refusal(
+    scripted: ScriptedSession,
+) -> None:
+    """A vehicle too busy to answer the set (a starved process) while an older PARAM_VALUE
+    of the parameter still comes (the answer to a read): the set was never echoed, so it is
+    no answer (504), not "the vehicle answered" its old value (409)."""
+    server = _px4_params(scripted.peer)
+    echo = server.handle
+    first_set: list[bool] = []
+
+    def busy(msg: mavlink.MAVLink_message) -> None:
+        if msg.get_type() != "PARAM_SET":
+            echo(msg)
+        elif not first_set:
+            first_set.append(True)
+            server.send_value(msg.param_id)  # the old value, still on its way
+
+    await scripted.vehicle.get_param("MIS_TAKEOFF_ALT")
+    scripted.peer.on_message = busy
+    with pytest.raises(TimeoutError, match=r"no echo for parameter MIS_TAKEOFF_ALT set to 3\.5: "
+                       r"1 value\(s\) heard for 4 tries, the last 2\.5, perhaps sent before"):
+        await scripted.vehicle.set_param("MIS_TAKEOFF_ALT", 3.5)
+    assert len(scripted.peer.messages("PARAM_SET")) == 4
+
+
+async def test_a_clamp_with_one_answer_lost_is_still_a_refusal(
+    scripted: ScriptedSession,
+) -> None:
+    server = _px4_params(scripted.peer)
+    server.clamp["MPC_XY_CRUISE"] = 20.0
+    echo = server.handle
+    sets: list[bool] = []
+
+    def lossy(msg: mavlink.MAVLink_message) -> None:
+        if msg.get_type() == "PARAM_SET":
+            sets.append(True)
+            if len(sets) == 2:
+                return  # this try's answer is lost
+        echo(msg)
+
+    scripted.peer.on_message = lossy
+    with pytest.raises(ParamError, match="the vehicle answered 20"):
+        await scripted.vehicle.set_param("MPC_XY_CRUISE", 50.0)
+
+
 def test_a_value_the_vehicle_changes_unasked_is_told_once_with_its_previous() -> None:
     """PX4 sends a parameter changed by another ground station (or its shell) unasked: the
     first value heard is no change, a new value is told with the one before, a repeat is not."""

@@ -107,6 +107,7 @@ class ParamClient:
         self._by_index: dict[int, str] = {}
         self._count: int | None = None
         self._received = 0  # PARAM_VALUEs taken in, so a wait can tell a new one came
+        self._heard: dict[str, int] = {}  # PARAM_VALUEs taken in, by name
         self._set_lock = asyncio.Lock()
 
     def handle_param_value(self, msg: mavlink.MAVLink_param_value_message) -> None:
@@ -131,6 +132,7 @@ class ParamClient:
             self._by_index[msg.param_index] = name
         self._count = msg.param_count
         self._received += 1
+        self._heard[name] = self._heard.get(name, 0) + 1
 
     async def _wait_value(self, timeout_s: float) -> bool:
         """True when a PARAM_VALUE arrives within timeout_s."""
@@ -237,8 +239,12 @@ class ParamClient:
             self.cache.pop(name, None)
 
             requests = self._requests
+            heard_before = self._heard.get(name, 0)
+            tries = 0
 
             def request() -> None:
+                nonlocal tries
+                tries += 1
                 requests.send(
                     requests.mav.param_set_encode(*requests.target, wire_name, wire, param_type)
                 )
@@ -249,11 +255,20 @@ class ParamClient:
 
             # a PARAM_VALUE with another value may be an older one still on its way (a read,
             # the list, the vehicle's own report of a change), not the echo: the set is sent
-            # again until its value comes back; only the last value heard is the vehicle's
+            # again until its value comes back. A vehicle that answered the tries with another
+            # value (all, or all but one a lossy link lost) refused it (a clamp); one that
+            # answered fewer never echoed the set: the value heard may be older than it (a
+            # vehicle too busy to answer in time)
             if not await requests.until(request, echoed_as_asked, self.timeout_s):
                 last = self.cache.get(name)
+                heard = self._heard.get(name, 0) - heard_before
                 if last is None:
                     raise TimeoutError(f"no echo for parameter {name}")
+                if heard < max(2, tries - 1):
+                    raise TimeoutError(
+                        f"no echo for parameter {name} set to {value!r}: {heard} value(s) "
+                        f"heard for {tries} tries, the last {last.value!r}, perhaps sent "
+                        "before the set")
                 raise ParamError(
                     f"{name}: asked for {value!r}, the vehicle answered {last.value!r}")
             return self.cache[name].value
