@@ -120,17 +120,23 @@ async def test_telemetry_streams_states_at_the_asked_rate(quad: Served) -> None:
         ):
             start = time.monotonic()
             begun_s = asyncio.get_running_loop().time()
-            texts = await asyncio.gather(
-                *(_state_texts(w, start + 2.5, begun_s + 2.0) for w in (ws, second, third))
-            )
+            async with loop_stalls() as lags_s:
+                texts = await asyncio.gather(
+                    *(_state_texts(w, start + 2.5, begun_s + 2.0) for w in (ws, second, third))
+                )
     # 5 Hz for 2 s: about 10, never the sim's own telemetry rate. Counted by the server's
     # own time of each state (the test shares its loop clock), not by when this client read
-    # it: a loaded machine leaves states queued from before the window in the socket.
+    # it: a loaded machine leaves states queued from before the window in the socket. The
+    # server, its sim and this test share one loop: the time a busy machine kept it waiting
+    # (its wake-ups' lateness) is time no state could be made in, not held against the rate.
     in_window = [
         text for text in texts[0]
         if begun_s <= json.loads(text)["updated_s"] < begun_s + 2.0
     ]
-    assert 5 <= len(in_window) <= 11, [json.loads(t)["updated_s"] - begun_s for t in texts[0]]
+    lost_s = min(2.0, sum(lags_s))
+    fewest = max(1, math.floor(5 * (2.0 - lost_s)) - 4)  # 5 on a quiet machine
+    assert fewest <= len(in_window) <= 11, (
+        lost_s, [json.loads(t)["updated_s"] - begun_s for t in texts[0]])
     # the sockets of one vehicle and rate share each tick: the same text, encoded once (a
     # tick is not known by its updated_s, the time of the vehicle's last message: on a busy
     # machine the server's side of the state can change twice between two of them)

@@ -33,6 +33,9 @@ SERVE_ARGS = ["--sim-speed", "3"]
 # Pixels that differ by more than the threshold in _changed_pixels between two screenshots
 # of a drawing that has stopped changing (anti-aliasing noise).
 SETTLED_PIXELS = 20
+# A scene drawn in software WebGL, each screenshot a frame read back: seconds apiece on a
+# machine the suite loads.
+SCENE_DRAWN_S = 60.0
 
 
 @pytest.fixture
@@ -86,7 +89,7 @@ def _drawn_screenshot(canvas: Any) -> bytes:
         alike = _changed_pixels(shots[-2], shots[-1]) <= SETTLED_PIXELS
         return shots[-1] if drawn and alike else None
 
-    shot: bytes = wait_for("the scene drawn and still", settled, 30.0, every_s=0.25)
+    shot: bytes = wait_for("the scene drawn and still", settled, SCENE_DRAWN_S, every_s=0.25)
     return shot
 
 
@@ -160,7 +163,7 @@ def test_scene_draws_the_vehicle_through_the_proxied_socket(
     wait_for(
         "the vehicle drawn",
         lambda: _changed_pixels(canvas.screenshot(), empty) > 200,
-        30.0,
+        SCENE_DRAWN_S,
         every_s=0.25,
     )
 
