@@ -171,6 +171,12 @@ class SceneHub:
         self._show_label(server)
         server.scene.set_up_direction("+z")
         server.scene.world_axes.visible = False
+        # no environment map (viser's default HDRI, prefiltered on the client: software
+        # WebGL spent 60 % of a core on it for ~40 s after the view showed); a sky light
+        # lights the models instead
+        server.scene.configure_environment_map(hdri=None)
+        server.scene.add_light_hemisphere("/sky", sky_color=(255, 255, 255),
+                                          ground_color=(90, 90, 100), intensity=2.0)
         server.initial_camera.position = tuple(_CAMERA_OFFSET_ENU)
         server.initial_camera.look_at = (0.0, 0.0, 0.0)
         self._follow = server.gui.add_dropdown("Follow", options=(_FOLLOW_OFF,),
