@@ -5,7 +5,9 @@ in ``$SKYHELM_TEST_CPU_LOG.<worker>``. Read with ``python -m tests.cpu_account L
 A process's CPU is counted while it lives (/proc/<pid>/stat) and, once its parent reaped it,
 in the parent's children's time: a test is charged what its processes used between its
 setup and its teardown; a module fixture's processes are charged to the tests that ran
-while they lived.
+while they lived. A process whose parent ended before reaping it goes to init, and its time
+with it: Chromium's renderers when a browser closes, so the test that closed one can show
+less, even negative, CPU (read a browser module's figure as a lower bound).
 """
 
 from __future__ import annotations
