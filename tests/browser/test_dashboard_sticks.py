@@ -38,12 +38,12 @@ def _set_rc_loss(api: httpx.Client, seconds: float) -> None:
     taken.raise_for_status()
     headers = {"X-Lease-Id": taken.json()["lease_id"]}
     try:
-        for attempt in range(5):  # set-up, asked again if a busy sim let it go unechoed
+        for _ in range(5):  # set-up, asked again while a busy sim lets it go unechoed (504)
             answer = api.put("/vehicles/1/params/COM_RC_LOSS_T", json={"value": seconds},
                              headers=headers)
-            if answer.status_code != 504 or attempt == 4:
-                answer.raise_for_status()
+            if answer.status_code != 504:
                 break
+        answer.raise_for_status()
     finally:
         api.delete("/vehicles/1/control", headers=headers)
 
