@@ -7,11 +7,12 @@ button's label is cut, the top bar keeps one row, the alert area never covers th
 primary flight controls are in sight at 1280x800 without scrolling, and the command buttons
 stay where they are whatever the state. The link's widest loss figures are read whole at
 every size, on the quad and the VTOL; the top bar holds the widest text of each of its slots
-(drawn by the page from its own state messages) at every width from 1024 to 1920 px (the
-whole page at the three standard widths, the top bar alone between), with the server there
-and lost. The standard flight is flown from the page at
-1280x800 without anything scrolling. Also: the shortcut list opens with '?'; the theme
-follows the system and the pilot's choice is kept for the next visit."""
+(drawn by the page from its own state messages) at every width from 1024 to 1920 px, with the
+server there and lost: its slots are of fixed width within each of its three width regimes
+(only the spacer between them grows), which the test checks, so the whole page is probed at
+the three standard widths and the top bar alone at each regime's two ends. The standard flight
+is flown from the page at 1280x800 without anything scrolling. Also: the shortcut list opens
+with '?'; the theme follows the system and the pilot's choice is kept for the next visit."""
 
 from __future__ import annotations
 
@@ -132,11 +133,30 @@ WORST_DRAWN = """(cockpit) => {
     && document.querySelector("#vehicle-select option[value='255']") !== null
     && (cockpit !== "vtol" || text("vtol-state") === "→ FW");
 }"""
-# Every width from 1024 to 1920 px: every 32 px, and each side of the top bar's breakpoints;
-# the whole page is probed at the three standard widths, the top bar alone between them (its
-# texts change nothing else: a top bar that wraps is off its row).
-BAR_WIDTHS = sorted({*range(1024, 1921, 32), 1180, 1181, 1440, 1441, 1920})
+# The top bar's width regimes (web/style.css's media queries on it): within one, every slot
+# has a fixed width and only the spacer grows, so a text whole in its slot at a regime's
+# narrow end is whole at every width of the regime, and a bar on one row at the narrow end is
+# on one row up to the wide end. The test checks that premise (every box of the bar but the
+# spacer the same at both ends) and probes the whole page at the three standard widths, the
+# top bar alone at the regimes' other ends (its texts change nothing else: a top bar that
+# wraps is off its row).
+BAR_REGIMES = [(1024, 1180), (1181, 1440), (1441, 1920)]
 PAGE_WIDTHS = {width for width, _ in SIZES}
+BAR_WIDTHS = sorted({width for regime in BAR_REGIMES for width in regime} | PAGE_WIDTHS)
+# Each box inside the top bar but the spacer, by its place in the bar: [path, width, height].
+BAR_BOXES = """() => new Promise((done) => requestAnimationFrame(() => requestAnimationFrame(() => {
+  const bar = document.getElementById("topbar");
+  const path = (el) => {
+    const steps = [];
+    for (let e = el; e !== bar; e = e.parentElement) {
+      const index = [...e.parentElement.children].indexOf(e);
+      steps.unshift(`${e.tagName}${e.id ? "#" + e.id : ""}:${index}`);
+    }
+    return steps.join(" > ");
+  };
+  done([...bar.querySelectorAll("*")].filter((el) => !el.classList.contains("spacer"))
+    .map((el) => { const r = el.getBoundingClientRect(); return [path(el), r.width, r.height]; }));
+})))"""
 
 
 @pytest.fixture(scope="module")
@@ -271,6 +291,7 @@ def test_the_top_bar_holds_its_widest_texts_at_every_width(
         assert page.evaluate(picked) == "255 · plane"
         walk.probe("widest texts", record=False, sizes=sizes)
         walk.probe("widest texts", record=False, sizes=bar_sizes, scope="#topbar")
+        walk.problems += _bar_boxes_that_change_within_a_regime(page, "widest texts")
         # the server lost: the SERVER box says the page is reconnecting
         page.evaluate("window.__offline = true; window.__telemetry.forEach((s) => s.close())")
         page.wait_for_function(
@@ -280,7 +301,31 @@ def test_the_top_bar_holds_its_widest_texts_at_every_width(
         walk.probe("widest texts, the server lost", record=False, sizes=sizes)
         walk.probe("widest texts, the server lost", record=False, sizes=bar_sizes,
                    scope="#topbar")
+        walk.problems += _bar_boxes_that_change_within_a_regime(
+            page, "widest texts, the server lost"
+        )
         assert not walk.problems, "\n".join(walk.problems)
+
+
+def _bar_boxes_that_change_within_a_regime(page: Any, state: str) -> list[str]:
+    """Each box of the top bar (the spacer left out) whose size differs between the two
+    ends of a width regime: the premise of probing the bar at the ends only."""
+    changed = []
+    for narrow, wide in BAR_REGIMES:
+        ends = []
+        for width in (narrow, wide):
+            page.set_viewport_size({"width": width, "height": 800})
+            ends.append(page.evaluate(BAR_BOXES))
+        if [path for path, _, _ in ends[0]] != [path for path, _, _ in ends[1]]:
+            changed.append(f"{state}: the top bar holds other elements at {narrow} and {wide} px")
+            continue
+        changed += [
+            f"{state}: {path} is {w0:.1f}x{h0:.1f} at {narrow} px, {w1:.1f}x{h1:.1f} at {wide} px"
+            for (path, w0, h0), (_, w1, h1) in zip(ends[0], ends[1], strict=True)
+            if abs(w0 - w1) > 0.01 or abs(h0 - h1) > 0.01
+        ]
+    page.set_viewport_size({"width": 1280, "height": 800})
+    return changed
 
 
 @pytest.mark.parametrize("size", [(1024, 768), (1280, 800), (1920, 1080)], ids=str)
