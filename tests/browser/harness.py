@@ -23,6 +23,7 @@ from urllib.parse import urlsplit
 
 import httpx
 
+from tests.browser.ordinary_priority import ORDINARY_PRIORITY
 from tests.waiting import wait_for_blocking as wait_for
 
 CHROMIUM = Path("/usr/bin/chromium")
@@ -241,6 +242,7 @@ def chromium_context(
     with (
         tempfile.TemporaryDirectory(prefix="skyhelm-chromium-") as profile,
         sync_api.sync_playwright() as playwright,
+        ORDINARY_PRIORITY.held(),
     ):
         context = playwright.chromium.launch_persistent_context(
             profile,
@@ -266,6 +268,7 @@ class SharedChromium:
         self._playwright: Any = None
         self._manager: Any = None
         self._browsers: dict[tuple[str, ...], Any] = {}
+        self._priority = contextlib.ExitStack()
 
     def browser(self, extra_args: Sequence[str] = ()) -> Any:
         import pytest
@@ -276,6 +279,7 @@ class SharedChromium:
         if self._playwright is None:
             self._manager = sync_api.sync_playwright()
             self._playwright = self._manager.__enter__()
+            self._priority.enter_context(ORDINARY_PRIORITY.held())
         key = tuple(extra_args)
         browser = self._browsers.get(key)
         if browser is None or not browser.is_connected():
@@ -294,6 +298,7 @@ class SharedChromium:
         manager, self._manager, self._playwright = self._manager, None, None
         if manager is not None:
             manager.__exit__(None, None, None)
+        self._priority.close()
 
 
 @contextlib.contextmanager

@@ -1,0 +1,119 @@
+"""Chromium at nice 0, the priority of the servers, vehicles and other jobs beside it.
+
+chromium_ordinary_priority.sh takes from the tests' Chromium the right to raise its own
+priority (run as root it would put its display threads at nice -8). Without that right it
+cannot undo its own lowering either: it starts each renderer at nice 5, as for a page in the
+background, and could not bring it back to 0 when the page showed, so every page of the
+tests ran at nice 5. Beside a busy machine's ordinary jobs a process at nice 5 gets a third
+of their share of a core (weight 335 against 1024): the pages drew seconds late while the
+vehicles they showed flew on. While a test's Chromium runs, this brings each of its threads
+below nice 0 back to 0 (the test process may: it runs as root; nothing else is changed).
+Nothing is raised above 0: setpriv keeps Chromium from it, and this only raises what is
+below."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import threading
+from collections.abc import Iterator
+from pathlib import Path
+
+PROC = Path("/proc")
+# A renderer started in the background runs at nice 5 until this sees it.
+POLL_S = 0.25
+
+
+def _children_of() -> dict[int, list[int]]:
+    children: dict[int, list[int]] = {}
+    for entry in PROC.iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:  # gone meanwhile
+            continue
+        children.setdefault(int(fields[1]), []).append(int(entry.name))
+    return children
+
+
+def chromium_processes_of(root_pid: int) -> list[int]:
+    """Every Chromium process descending from ``root_pid`` (its executable's name)."""
+    children = _children_of()
+    found, todo = [], list(children.get(root_pid, []))
+    while todo:
+        pid = todo.pop()
+        todo += children.get(pid, [])
+        try:
+            if (PROC / str(pid) / "comm").read_text().strip().startswith("chrom"):
+                found.append(pid)
+        except OSError:
+            continue
+    return found
+
+
+def nice_of_threads(pid: int) -> dict[int, int]:
+    """Each thread's nice value (the 19th field of its stat, the 17th after the name)."""
+    found: dict[int, int] = {}
+    try:
+        tasks = list((PROC / str(pid) / "task").iterdir())
+    except OSError:
+        return found
+    for task in tasks:
+        try:
+            found[int(task.name)] = int((task / "stat").read_text().rsplit(")", 1)[1].split()[16])
+        except OSError:
+            continue
+    return found
+
+
+def raise_to_ordinary(root_pid: int) -> int:
+    """Brings every thread of ``root_pid``'s Chromium descendants that runs below nice 0 to
+    0; returns how many it changed."""
+    changed = 0
+    for pid in chromium_processes_of(root_pid):
+        for tid, nice in nice_of_threads(pid).items():
+            if nice > 0:
+                with contextlib.suppress(OSError):  # a thread that ended meanwhile
+                    os.setpriority(os.PRIO_PROCESS, tid, 0)
+                    changed += 1
+    return changed
+
+
+class OrdinaryPriority:
+    """While entered at least once: a thread that keeps this process's Chromium at nice 0."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._users = 0
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def _run(self, stop: threading.Event) -> None:
+        while not stop.wait(POLL_S):
+            raise_to_ordinary(os.getpid())
+
+    @contextlib.contextmanager
+    def held(self) -> Iterator[None]:
+        if os.geteuid() != 0:  # only root may raise a priority
+            yield
+            return
+        with self._lock:
+            self._users += 1
+            if self._thread is None:
+                self._stop = threading.Event()
+                self._thread = threading.Thread(
+                    target=self._run, args=(self._stop,), name="chromium-priority", daemon=True
+                )
+                self._thread.start()
+        try:
+            yield
+        finally:
+            with self._lock:
+                self._users -= 1
+                if self._users == 0 and self._thread is not None:
+                    self._stop.set()
+                    self._thread = None
+
+
+ORDINARY_PRIORITY = OrdinaryPriority()
