@@ -1,6 +1,9 @@
 """What each test costs the machine: CPU seconds of the test's process and every process it
 started (servers, simulated vehicles, Chromium), with its wall time; one JSON line per test
 in ``$SKYHELM_TEST_CPU_LOG.<worker>``. Read with ``python -m tests.cpu_account LOG...``.
+A failed or erring test is also written whole, as it happens, to
+``$SKYHELM_TEST_CPU_LOG.<worker>.failures`` (a run that is stopped before its summary, or one
+watched while it runs, still says what failed and why).
 
 A process's CPU is counted while it lives (/proc/<pid>/stat) and, once its parent reaped it,
 in the parent's children's time: a test is charged what its processes used between its
@@ -77,9 +80,21 @@ def pytest_runtest_protocol(item: pytest.Item) -> Iterator[None]:
         out.write(json.dumps(line) + "\n")
 
 
+def pytest_runtest_logreport(report: pytest.TestReport) -> None:
+    log = os.environ.get("SKYHELM_TEST_CPU_LOG")
+    if not log or not report.failed:
+        return
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "main")
+    when = time.strftime("%H:%M:%S")
+    with open(f"{log}.{worker}.failures", "a", encoding="utf-8") as out:
+        out.write(f"=== {when} {report.nodeid} ({report.when})\n{report.longreprtext}\n")
+
+
 def main(paths: list[str]) -> None:
     modules: dict[str, list[float]] = defaultdict(lambda: [0.0, 0.0, 0])
     for path in paths:
+        if path.endswith(".failures"):  # what failed, not what it cost
+            continue
         for raw in Path(path).read_text().splitlines():
             line = json.loads(raw)
             row = modules[line["test"].split("::", 1)[0]]
