@@ -199,29 +199,51 @@ async def test_an_older_value_arriving_before_the_echo_is_not_the_answer(
     assert scripted.vehicle.params.cache["MIS_TAKEOFF_ALT"].value == 3.5
 
 
-async def test_an_older_value_and_no_echo_is_no_answer_not_a_refusal(
+async def test_a_late_echo_behind_older_answers_is_the_answer_not_a_refusal(
     scripted: ScriptedSession,
 ) -> None:
-    """A vehicle too busy to answer the set (a starved process) while an older PARAM_VALUE
-    of the parameter still comes (the answer to a read): the set was never echoed, so it is
-    no answer (504), not "the vehicle answered" its old value (409)."""
+    """A vehicle busy for longer than the set's tries (a starved process) answers in order:
+    first the reads asked again and again before the set, all with the old value, then the
+    echo. No echo in time, and older values heard on every try: the set is not refused for
+    them, a read once they have come finds the value set."""
     server = _px4_params(scripted.peer)
     echo = server.handle
-    first_set: list[bool] = []
+    await scripted.vehicle.get_param("MIS_TAKEOFF_ALT")  # known, as after the list
+    loop = asyncio.get_running_loop()
+    scripted.peer.on_message = lambda msg: loop.call_later(1.0, echo, msg)  # in order, late
+    for _ in range(3):  # a read asked again before the set, by a server that waited for it
+        scripted.vehicle.params._request_read(b"MIS_TAKEOFF_ALT")
+    # their old values come during the set's tries (4 of 0.1 s here), its echoes after them
+    await asyncio.sleep(0.8)
 
-    def busy(msg: mavlink.MAVLink_message) -> None:
-        if msg.get_type() != "PARAM_SET":
-            echo(msg)
-        elif not first_set:
-            first_set.append(True)
-            server.send_value(msg.param_id)  # the old value, still on its way
+    assert await scripted.vehicle.set_param("MIS_TAKEOFF_ALT", 3.5) == 3.5
+    assert server.params["MIS_TAKEOFF_ALT"] == (3.5, MAV_PARAM_TYPE_REAL32)
+    assert len(scripted.peer.messages("PARAM_SET")) == 4  # every try went unanswered in time
 
+
+async def test_a_vehicle_that_answers_nothing_after_the_set_is_no_answer(
+    scripted: ScriptedSession,
+) -> None:
+    """An older value heard during the set (a read's answer), then silence: no echo and no
+    answer to a read after it is no answer (504), not "the vehicle answered" its old value."""
+    server = _px4_params(scripted.peer)
+    echo = server.handle
     await scripted.vehicle.get_param("MIS_TAKEOFF_ALT")
-    scripted.peer.on_message = busy
-    with pytest.raises(TimeoutError, match=r"no echo for parameter MIS_TAKEOFF_ALT set to 3\.5: "
-                       r"1 value\(s\) heard for 4 tries, the last 2\.5, perhaps sent before"):
+    silent: list[bool] = []
+
+    def gone_quiet(msg: mavlink.MAVLink_message) -> None:
+        if msg.get_type() == "PARAM_SET" and not silent:
+            silent.append(True)
+            server.send_value(msg.param_id)  # the old value, still on its way
+        elif not silent:
+            echo(msg)
+
+    scripted.peer.on_message = gone_quiet
+    with pytest.raises(TimeoutError, match=r"no echo for parameter MIS_TAKEOFF_ALT set to 3\.5, "
+                       r"nor an answer to a read after it"):
         await scripted.vehicle.set_param("MIS_TAKEOFF_ALT", 3.5)
     assert len(scripted.peer.messages("PARAM_SET")) == 4
+    assert len(scripted.peer.messages("PARAM_REQUEST_READ")) == 1 + 4  # the get, the read-back
 
 
 async def test_a_clamp_with_one_answer_lost_is_still_a_refusal(

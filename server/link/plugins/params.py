@@ -91,6 +91,9 @@ class ParamClient:
     timeout_s = 0.5  # per try; the number of retries is the requester's
     list_quiet_s = 0.5  # a list is complete, or has gaps, once it has been quiet this long
     list_rounds = 8  # of asking for the gaps by index in a row with no answer
+    read_backs = 2  # reads after a set never echoed as asked, all with another value: refused
+    drain_limit_s = 5.0  # the longest wait for the answers still on their way to stop
+    read_back_try_s = 1.5  # per try of a read after a set never echoed: the vehicle is slow
 
     def __init__(
         self,
@@ -239,12 +242,8 @@ class ParamClient:
             self.cache.pop(name, None)
 
             requests = self._requests
-            heard_before = self._heard.get(name, 0)
-            tries = 0
 
             def request() -> None:
-                nonlocal tries
-                tries += 1
                 requests.send(
                     requests.mav.param_set_encode(*requests.target, wire_name, wire, param_type)
                 )
@@ -253,25 +252,53 @@ class ParamClient:
                 entry = self.cache.get(name)
                 return entry is not None and same_value(entry.value, value, param_type)
 
-            # a PARAM_VALUE with another value may be an older one still on its way (a read,
-            # the list, the vehicle's own report of a change), not the echo: the set is sent
-            # again until its value comes back. A vehicle that answered the tries with another
-            # value (all, or all but one a lossy link lost) refused it (a clamp); one that
-            # answered fewer never echoed the set: the value heard may be older than it (a
-            # vehicle too busy to answer in time)
-            if not await requests.until(request, echoed_as_asked, self.timeout_s):
-                last = self.cache.get(name)
-                heard = self._heard.get(name, 0) - heard_before
-                if last is None:
-                    raise TimeoutError(f"no echo for parameter {name}")
-                if heard < max(2, tries - 1):
+            # a PARAM_VALUE with another value may be an older one still on its way (a read's
+            # answer, the list, the vehicle's own report of a change), not the echo: the set
+            # is sent again until its value comes back
+            if await requests.until(request, echoed_as_asked, self.timeout_s):
+                return self.cache[name].value
+            # No echo with the value asked. A busy vehicle may echo late, behind the answers
+            # to requests made before the set (a list asked again and again by a server that
+            # waited for it) that all carry the old value. The vehicle answers in order:
+            # once they have come, a read tells what it has now. Two such reads with another
+            # value are a refusal (it holds its own: a clamp, a type, another writer).
+            answers: list[float | int] = []
+            for _ in range(self.read_backs):
+                now = await self._read_back(name, wire_name)
+                if now is None:
                     raise TimeoutError(
-                        f"no echo for parameter {name} set to {value!r}: {heard} value(s) "
-                        f"heard for {tries} tries, the last {last.value!r}, perhaps sent "
-                        "before the set")
-                raise ParamError(
-                    f"{name}: asked for {value!r}, the vehicle answered {last.value!r}")
-            return self.cache[name].value
+                        f"no echo for parameter {name} set to {value!r}, nor an answer to a "
+                        "read after it")
+                if same_value(now.value, value, param_type):
+                    return now.value
+                answers.append(now.value)
+            raise ParamError(
+                f"{name}: asked for {value!r}, the vehicle answered {answers[-1]!r}")
+
+    async def _drained(self) -> None:
+        """Once no PARAM_VALUE has come for list_quiet_s (at most drain_limit_s): every answer
+        still on its way has come."""
+        loop = asyncio.get_running_loop()
+        end = loop.time() + self.drain_limit_s
+        while (left_s := end - loop.time()) > 0 and await self._wait_value(
+            min(self.list_quiet_s, left_s)
+        ):
+            pass
+
+    async def _read_back(self, name: str, wire_name: bytes) -> ParamEntry | None:
+        """The vehicle's value now, or None when it answers no read: a read by name once
+        every answer still on its way has come; the vehicle answers in order, so the last
+        value heard once its answers stop is the answer to it or a newer one."""
+        await self._drained()
+        heard = self._heard.get(name, 0)
+        if not await self._requests.until(
+            lambda: self._request_read(wire_name),
+            lambda: self._heard.get(name, 0) > heard,
+            self.read_back_try_s,
+        ):
+            return None
+        await self._drained()
+        return self.cache.get(name)
 
 
 def _param_name(param_id: str | bytes) -> str:
