@@ -8,7 +8,9 @@ vehicles, paced by a wall clock.
 from __future__ import annotations
 
 import asyncio
+import logging
 import math
+import os
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -40,6 +42,8 @@ __all__ = [
     "SimVehicle",
     "StatusText",
 ]
+
+log = logging.getLogger(__name__)
 
 # PX4 SITL: first HEARTBEAT (and home) about 1.5 s after start, ready to arm about 3 s.
 BOOT_TIME_S = 1.5
@@ -89,6 +93,9 @@ class SimVehicle:
         self.model = airframe_factory(airframe, self.params)
         self.model.reset(list(spawn_ned_m), 0.0)
         self.params.set("MAV_TYPE", self.model.mav_type)
+        # as PX4 SITL's start: PX4_PARAM_<name>=<value> in the environment sets a parameter
+        for problem in self.params.set_from_environment(os.environ):
+            log.warning("vehicle %d: %s", sysid, problem)
         self.origin = LocalOrigin()
         self.commander = Commander(self.params, self.announce, is_vtol=self.model.is_vtol)
         self.commander.on_arming_change(self._on_arming_change)

@@ -4,6 +4,7 @@ one URL it prints, stopped with Ctrl-C (SIGINT) afterwards."""
 from __future__ import annotations
 
 import contextlib
+import os
 import secrets
 import select
 import signal
@@ -34,14 +35,20 @@ class Served:
 
 
 @contextlib.contextmanager
-def skyhelm_serve(log_dir: Path, *args: str, ready_timeout_s: float = 60.0) -> Iterator[Served]:
-    """Run `skyhelm serve --port 0 ARGS` with an observer token; yield once it printed its URL."""
+def skyhelm_serve(
+    log_dir: Path, *args: str, ready_timeout_s: float = 60.0, env: dict[str, str] | None = None
+) -> Iterator[Served]:
+    """Run `skyhelm serve --port 0 ARGS` with an observer token (and ``env`` added to the
+    environment); yield once it printed its URL."""
     observer = secrets.token_urlsafe(16)
     command = [str(SKYHELM), "serve", "--port", "0", f"--observer-token={observer}"]
     command += ["--log-dir", str(log_dir), *args]
     stderr_path = log_dir / "serve.stderr.log"
     with stderr_path.open("w") as stderr:
-        server = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=stderr, text=True)
+        server = subprocess.Popen(
+            command, stdout=subprocess.PIPE, stderr=stderr, text=True,
+            env=None if env is None else {**os.environ, **env},
+        )
         try:
             line = _first_line(server, ready_timeout_s, stderr_path)
             base, _, token = line.removeprefix(READY_PREFIX).strip().partition("/?token=")

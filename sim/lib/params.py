@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import functools
 import json
+import math
 import struct
 from collections.abc import Callable, Iterator, Mapping
 from importlib import resources
@@ -158,6 +159,9 @@ def _absent_on(airframe: str, merged: Mapping[str, float | int]) -> list[str]:
     ]
 
 
+# PX4 SITL sets a parameter at start from the variable PX4_PARAM_<name> (rcS).
+ENV_PARAM_PREFIX = "PX4_PARAM_"
+
 class ParamReader(Protocol):
     """Read access to current parameter values; integers come back as float."""
 
@@ -259,6 +263,33 @@ class ParamStore:
     def set_from_wire(self, name: str, wire_value: float) -> float | int:
         """PARAM_SET: decode by the parameter's own type, as PX4 does."""
         return self.set(name, decode_param_value(wire_value, self.param_type(name)))
+
+    def set_from_environment(self, environ: Mapping[str, str]) -> list[str]:
+        """PX4 SITL's overrides at start (its rcS: ``export PX4_PARAM_{name}={value}``, then
+        ``param set`` for each): every such variable naming a parameter of this vehicle sets
+        it, as a number of the parameter's own type. Returns what could not be set (a name
+        the vehicle lacks, a value that is no number; PX4 says so and starts anyway)."""
+        problems = []
+        for variable, text in sorted(environ.items()):
+            if not variable.startswith(ENV_PARAM_PREFIX):
+                continue
+            name = variable.removeprefix(ENV_PARAM_PREFIX)
+            if name not in self._index:
+                problems.append(f"{variable}: this vehicle has no parameter {name}")
+                continue
+            if name == "MAV_SYS_ID":
+                problems.append(f"{variable}: the system id follows the instance (--instance)")
+                continue
+            try:
+                number = float(text) if self.param_type(name) != MAV_PARAM_TYPE_INT32 else int(text)
+            except ValueError:
+                problems.append(f"{variable}: {text!r} is not a number for {name}")
+                continue
+            if not math.isfinite(number):
+                problems.append(f"{variable}: {text!r} is not a finite number")
+                continue
+            self.set(name, number)
+        return problems
 
     def wire_value(self, name: str) -> float:
         return encode_param_value(self._values[name], self.param_type(name))

@@ -15,6 +15,7 @@ import time
 from typing import Any
 
 import httpx
+import pytest
 import schemathesis
 from hypothesis import HealthCheck, Phase, given, settings
 from schemathesis.checks import not_a_server_error
@@ -136,6 +137,8 @@ def generate_all() -> list[tuple[int, Any]]:
     return cases
 
 
+# 150-175 s on a quiet machine of 2 cores; beside two busy loops the suite's 240 s ended it
+@pytest.mark.timeout(600)
 async def test_openapi_fuzz_finds_no_5xx_and_no_schema_violation() -> None:
     started = time.monotonic()
     cases = generate_all()
@@ -181,7 +184,8 @@ async def test_openapi_fuzz_finds_no_5xx_and_no_schema_violation() -> None:
         async def sending() -> bool:
             return link.counters.tx_messages > sent_before
 
-        await eventually(sending, 5.0, "telemetry from the simulated vehicle")
+        # the sim shares this loop with the fuzz's calls: on a busy machine it waits its turn
+        await eventually(sending, 30.0, "telemetry from the simulated vehicle")
         assert sim.instances[0].tx_unpackable == 0
     elapsed_s = time.monotonic() - started
     operations = len({case.operation.label for _, case in cases})

@@ -123,11 +123,8 @@ def test_telemetry_iterates_states_and_events(served: Served) -> None:
     with SkyHelm(pilot_url(served)) as sky:
         sky.wait_until(ready, timeout_s=30)
         sky.acquire()
-        # armed on the ground until the test has looked: the sim at 8x disarms a vehicle that
-        # has not taken off after COM_DISARM_PRFLT (10 s, 1.25 s here), and on a loaded
-        # machine the second socket below opened later than that
-        prflt_s = sky.param("COM_DISARM_PRFLT")
-        sky.set_param("COM_DISARM_PRFLT", -1.0)
+        # armed on the ground until the test has looked: the fixture's vehicle waits 10 s of
+        # wall time before it disarms itself (COM_DISARM_PRFLT at 8x, set at its start)
         messages = sky.telemetry(rate_hz=20)
         try:
             seen = {next(messages).type}  # the socket is open once a first message came
@@ -150,4 +147,3 @@ def test_telemetry_iterates_states_and_events(served: Served) -> None:
         finally:
             states.close()
         sky.disarm()
-        sky.set_param("COM_DISARM_PRFLT", prflt_s)

@@ -9,6 +9,7 @@ import os
 import select
 import signal
 import socket
+import struct
 import subprocess
 import sys
 import time
@@ -36,10 +37,11 @@ EPHEMERAL = ["--api-port", "0", "--gcs-port", "0", "--api-local-port", "0",
              "--gcs-local-port", "0"]
 
 
-def start_sim(*extra: str) -> subprocess.Popen[str]:
+def start_sim(*extra: str, env: dict[str, str] | None = None) -> subprocess.Popen[str]:
     return subprocess.Popen(
         [sys.executable, "-m", "sim", "--ready-json", "--speed", "5", *EPHEMERAL, *extra],
         stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        env=None if env is None else {**os.environ, **env},
     )
 
 
@@ -97,6 +99,42 @@ def test_ready_json_lists_instances_and_the_sim_answers_on_them() -> None:
         assert proc.stdin is not None
         proc.stdin.close()  # parent gone: the sim follows
         assert proc.wait(10) == 0
+    finally:
+        stop(proc)
+
+
+def test_px4_param_variables_set_parameters_at_start_as_px4_sitl_does() -> None:
+    """PX4 SITL's rcS sets PX4_PARAM_<name>=<value> at start; so does the sim, and a name
+    it lacks is said, not fatal."""
+    proc = start_sim("--exit-on-stdin-eof", env={
+        "PX4_PARAM_COM_DISARM_PRFLT": "80", "PX4_PARAM_NAV_DLL_ACT": "2",
+        "PX4_PARAM_NO_SUCH_PARAM": "1"})  # fmt: skip
+    try:
+        port = read_ready(proc)["instances"][0]["gcs_local_port"]
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        sock.bind(("127.0.0.1", 0))
+        sock.settimeout(1.0)
+        mav = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+        parser = mavlink.MAVLink(None)
+        values: dict[str, float] = {}
+        deadline = time.monotonic() + 20.0
+        while len(values) < 2 and time.monotonic() < deadline:
+            for name in ("COM_DISARM_PRFLT", "NAV_DLL_ACT"):
+                read = mavlink.MAVLink_param_request_read_message(1, 1, name.encode(), -1)
+                sock.sendto(read.pack(mav), ("127.0.0.1", port))
+            with contextlib.suppress(TimeoutError):
+                for msg in parser.parse_buffer(sock.recv(65536)) or []:
+                    if msg.get_type() == "PARAM_VALUE":
+                        values[msg.param_id] = msg.param_value
+        sock.close()
+        assert values["COM_DISARM_PRFLT"] == 80.0
+        assert struct.unpack("<i", struct.pack("<f", values["NAV_DLL_ACT"])) == (2,)  # INT32
+        assert proc.stdin is not None
+        proc.stdin.close()
+        assert proc.wait(10) == 0
+        assert proc.stderr is not None
+        assert "PX4_PARAM_NO_SUCH_PARAM: this vehicle has no parameter NO_SUCH_PARAM" in (
+            proc.stderr.read())
     finally:
         stop(proc)
 

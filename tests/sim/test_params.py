@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import struct
 
+import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
 from sim.lib.params import (
@@ -106,3 +107,28 @@ def test_param_set_for_another_system_is_ignored(harness: Harness) -> None:
     harness.deliver(mavlink.MAVLink_param_set_message(7, 1, b"MIS_TAKEOFF_ALT", 9.0, 9))
     assert harness.vehicle.params.get("MIS_TAKEOFF_ALT") == 2.5
     assert not math.isnan(harness.vehicle.params.get("MIS_TAKEOFF_ALT"))
+
+
+def test_px4_param_variables_set_each_parameter_in_its_own_type() -> None:
+    params = ParamStore({"COM_DISARM_PRFLT": 10.0, "NAV_DLL_ACT": 0, "MAV_SYS_ID": 1})
+    problems = params.set_from_environment({
+        "PX4_PARAM_COM_DISARM_PRFLT": "80.5", "PX4_PARAM_NAV_DLL_ACT": "2", "HOME": "/root",
+        "PX4_PARAM_LOST": "1", "PX4_PARAM_MAV_SYS_ID": "7"})  # fmt: skip
+    assert params.value("COM_DISARM_PRFLT") == 80.5
+    assert params.value("NAV_DLL_ACT") == 2
+    assert isinstance(params.value("NAV_DLL_ACT"), int)
+    assert params.value("MAV_SYS_ID") == 1
+    assert problems == [
+        "PX4_PARAM_LOST: this vehicle has no parameter LOST",
+        "PX4_PARAM_MAV_SYS_ID: the system id follows the instance (--instance)",
+    ]
+
+
+@pytest.mark.parametrize("text", ["2.5", "two", "nan", ""])
+def test_a_px4_param_variable_that_is_no_number_of_the_type_is_said_and_left(text: str) -> None:
+    params = ParamStore({"NAV_DLL_ACT": 0, "MPC_XY_CRUISE": 5.0})
+    variable = "PX4_PARAM_NAV_DLL_ACT" if text == "2.5" else "PX4_PARAM_MPC_XY_CRUISE"
+    problems = params.set_from_environment({variable: text})
+    assert len(problems) == 1
+    assert problems[0].startswith(variable)
+    assert (params.value("NAV_DLL_ACT"), params.value("MPC_XY_CRUISE")) == (0, 5.0)
