@@ -92,7 +92,9 @@ class ParamClient:
     list_quiet_s = 0.5  # a list is complete, or has gaps, once it has been quiet this long
     list_rounds = 8  # of asking for the gaps by index in a row with no answer
     read_backs = 2  # reads after a set never echoed as asked, all with another value: refused
-    drain_limit_s = 5.0  # the longest wait for the answers still on their way to stop
+    # the longest wait for the answers still on their way to stop: a set that ends in 504 so
+    # takes at most 2 + 2 x (3 + 4 x 1.5 + 3) = 26 s, within a client's 30 s
+    drain_limit_s = 3.0
     read_back_try_s = 1.5  # per try of a read after a set never echoed: the vehicle is slow
 
     def __init__(
