@@ -15,12 +15,13 @@ from tests.serve_process import skyhelm_serve
 
 CLI_CONFIG = Path(__file__).with_name("schemathesis.toml")
 CLI_EXAMPLES = 10
-CLI_TIMEOUT_S = 400.0
+# 100-140 s on a quiet machine of 2 cores; beside two busy loops more than 400 s
+CLI_TIMEOUT_S = 900.0
 # the answer a call may take: a takeover ask waits for the holder (takeover_ask_s)
 RESPONSE_TIME_S = 30
 
 
-# 100-130 s on a quiet machine of 2 cores: the run's own bound, not the suite's 240 s
+# the run's own bound, not the suite's 240 s
 @pytest.mark.timeout(CLI_TIMEOUT_S + 60)
 def test_schemathesis_every_phase_and_check_against_skyhelm_serve(tmp_path: Path) -> None:
     unlimited = ["--lockout-free-failures", "10000", "--control-rate-per-s", "100000",
