@@ -9,6 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import httpx
 import pytest
 
 from tests.serve_process import skyhelm_serve
@@ -27,6 +28,9 @@ def test_schemathesis_every_phase_and_check_against_skyhelm_serve(tmp_path: Path
     unlimited = ["--lockout-free-failures", "10000", "--control-rate-per-s", "100000",
                  "--control-burst", "100000"]  # fmt: skip
     with skyhelm_serve(tmp_path, "--no-scene", *unlimited) as served:
+        # the server builds its OpenAPI document at the first request and keeps it; a server
+        # just started beside busy jobs took longer than schemathesis waits for it (10 s)
+        assert httpx.get(f"{served.base_url}/openapi.json", timeout=120.0).status_code == 200
         schemathesis = Path(sys.executable).with_name("schemathesis")
         command = [
             str(schemathesis), "--config-file", str(CLI_CONFIG), "--no-color", "run",
