@@ -28,7 +28,8 @@ import pytest
 _TICK_S = 1.0 / os.sysconf("SC_CLK_TCK")
 
 
-def _children_of() -> dict[int, list[int]]:
+def children_of() -> dict[int, list[int]]:
+    """Each live process's children, by parent pid (/proc)."""
     children: dict[int, list[int]] = defaultdict(list)
     for entry in os.scandir("/proc"):
         if not entry.name.isdigit():
@@ -56,7 +57,7 @@ def tree_cpu_s() -> float:
     """CPU seconds of this process, its reaped children and every live descendant."""
     own = os.times()
     total = own.user + own.system + own.children_user + own.children_system
-    children = _children_of()
+    children = children_of()
     stack = list(children.get(os.getpid(), []))
     while stack:
         pid = stack.pop()

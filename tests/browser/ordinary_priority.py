@@ -19,27 +19,16 @@ import threading
 from collections.abc import Iterator
 from pathlib import Path
 
+from tests.cpu_account import children_of
+
 PROC = Path("/proc")
 # A renderer started in the background runs at nice 5 until this sees it.
 POLL_S = 0.25
 
 
-def _children_of() -> dict[int, list[int]]:
-    children: dict[int, list[int]] = {}
-    for entry in PROC.iterdir():
-        if not entry.name.isdigit():
-            continue
-        try:
-            fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
-        except OSError:  # gone meanwhile
-            continue
-        children.setdefault(int(fields[1]), []).append(int(entry.name))
-    return children
-
-
 def chromium_processes_of(root_pid: int) -> list[int]:
     """Every Chromium process descending from ``root_pid`` (its executable's name)."""
-    children = _children_of()
+    children = children_of()
     found, todo = [], list(children.get(root_pid, []))
     while todo:
         pid = todo.pop()

@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 from tests.browser.harness import chromium_context
+from tests.browser.ordinary_priority import nice_of_threads
 from tests.waiting import wait_for_blocking as wait_for
 
 WEBGL_PAGE = ("<canvas id=c></canvas>"
@@ -28,12 +29,9 @@ def _niceness_of_threads(profile: str) -> dict[int, int]:
         try:
             if flag not in (proc / "cmdline").read_bytes():
                 continue
-            for task in (proc / "task").iterdir():
-                # the fields after the command's closing parenthesis: nice is the 17th
-                fields = (task / "stat").read_text().rsplit(")", 1)[1].split()
-                found[int(task.name)] = int(fields[16])
-        except (FileNotFoundError, ProcessLookupError):
+        except OSError:  # gone meanwhile
             continue
+        found.update(nice_of_threads(int(proc.name)))
     return found
 
 

@@ -264,7 +264,7 @@ class ParamClient:
             # waited for it) that all carry the old value. The vehicle answers in order:
             # once they have come, a read tells what it has now. Two such reads with another
             # value are a refusal (it holds its own: a clamp, a type, another writer).
-            answers: list[float | int] = []
+            answered: float | int | None = None
             for _ in range(self.read_backs):
                 now = await self._read_back(name, wire_name)
                 if now is None:
@@ -273,9 +273,8 @@ class ParamClient:
                         "read after it")
                 if same_value(now.value, value, param_type):
                     return now.value
-                answers.append(now.value)
-            raise ParamError(
-                f"{name}: asked for {value!r}, the vehicle answered {answers[-1]!r}")
+                answered = now.value
+            raise ParamError(f"{name}: asked for {value!r}, the vehicle answered {answered!r}")
 
     async def _drained(self) -> None:
         """Once no PARAM_VALUE has come for list_quiet_s (at most drain_limit_s): every answer
