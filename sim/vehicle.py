@@ -64,6 +64,10 @@ AirframeFactory = Callable[[str, ParamReader], AirframeModel]
 DefaultsFactory = Callable[[str], dict[str, float | int]]
 
 
+def _real_time() -> float:
+    return 1.0
+
+
 def _physics() -> tuple[AirframeFactory, DefaultsFactory]:
     from sim.models import airframes
 
@@ -114,6 +118,8 @@ class SimVehicle:
         self.last_trajectory_setpoint: TrajectorySetpoint | None = None
         self.ready_event: asyncio.Event | None = None
         self._links: list[tuple[Link, StreamSet]] = []
+        # sim seconds per wall second, as the loop that steps this vehicle runs it now
+        self.wall_speed: Callable[[], float] = _real_time
         self._geo_cache: tuple[float, GeoPoint] | None = None
         self._home_refreshed_s = -math.inf
 
@@ -282,8 +288,9 @@ class SimVehicle:
             # the rest of its checks (READY_TIME_S)
             self.set_home_here()
         if self.booted:
+            speed = self.wall_speed()
             for link, streams in self._links:
-                streams.tick(now, link)
+                streams.tick(now, link, speed)
 
     def _become_ready(self) -> None:
         self.commander.ready = True

@@ -5,6 +5,12 @@ runs them (mavlink_main.cpp's configure_streams for the ONBOARD and NORMAL modes
 rates SITL's start script raises on the GCS link), changed by SET_MESSAGE_INTERVAL.
 Messages (`sim.mavlink.mavlink_messages`) are built only when a stream is due and the link has
 someone to send to, and once per sim time for all links.
+
+Faster than real time (a fast-forward), every stream keeps its rate in sim time up to
+FAST_FORWARD_CAP_HZ of wall time (or its own rate, if faster): at 8x the 30 Hz
+LOCAL_POSITION_NED goes out 50 times per wall second, not 240. What a ground station reads
+per wall second stays what a real PX4 link sends (SITL's GCS link streams attitude and
+positions at 50 Hz), so a fast sim floods neither its peer nor a busy machine.
 """
 
 from __future__ import annotations
@@ -22,6 +28,9 @@ from sim.mavlink.mavlink_messages import MessageFactory
 from sim.mavlink.vehicle_interface import Message
 
 _M = mavlink
+# the most a stream is sent per wall second faster than real time (unless its own rate is
+# more): PX4 v1.16 SITL's GCS link rate for attitude, positions and targets
+FAST_FORWARD_CAP_HZ = 50.0
 # streamed only while the fixed-wing position controller runs (a plane; a VTOL in FW)
 FIXED_WING_ONLY = frozenset({_M.MAVLINK_MSG_ID_NAV_CONTROLLER_OUTPUT})
 # PX4 v1.16 SITL's onboard link (mavlink_main.cpp configure_streams, MAVLINK_MODE_ONBOARD),
@@ -138,7 +147,9 @@ class StreamSet:
         self._next_due_s = min(self._due_s.values(), default=math.inf)
         return True
 
-    def tick(self, now_s: float, sink: MessageSink) -> None:
+    def tick(self, now_s: float, sink: MessageSink, speed: float = 1.0) -> None:
+        """Send what is due at sim time ``now_s``; ``speed`` is sim seconds per wall
+        second (above 1, streams are capped at FAST_FORWARD_CAP_HZ of wall time)."""
         if now_s < self._next_due_s:
             return
         send = sink.has_remote
@@ -146,6 +157,8 @@ class StreamSet:
         for msg_id, due in self._due_s.items():
             if now_s >= due:
                 interval = self._interval_s[msg_id]
+                if speed > 1.0:
+                    interval = max(interval, speed * min(interval, 1.0 / FAST_FORWARD_CAP_HZ))
                 # Keep the phase of the deadline; skip missed slots instead of bursting.
                 due += interval
                 if due <= now_s:

@@ -140,6 +140,7 @@ class SimCluster:
             defaults_factory=self._defaults_factory,
         )
         vehicle.ready_event = asyncio.Event()
+        vehicle.wall_speed = lambda: self.pace.speed
 
         key_file = (self.signing_dir / str(index) / MAVLINK_SECRET_FILE
                     if self.signing_dir is not None else None)

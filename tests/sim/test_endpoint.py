@@ -158,6 +158,39 @@ async def test_speed_runs_sim_time_faster_than_wall_time() -> None:
         assert 5.0 - 5.0 * MIN_WAKE_PERIOD_S - PHYSICS_DT_S <= now_s <= 5.0 + 1e-9
 
 
+async def test_a_fast_forward_sends_each_stream_at_most_its_cap_per_wall_second(
+    peer: UdpPeer,
+) -> None:
+    """The cluster's pace reaches the vehicles' streams: at 8x, ATTITUDE (100 Hz in PX4)
+    goes out about 100 times per wall second, not 800; at real time, 100 again."""
+    clock = ManualClock()
+    async with cluster(speed=1.0, clock=clock, api_port=peer.port) as sim:
+        vehicle, link = sim.instances[0].vehicle, sim.instances[0].api_link
+        sent: list[str] = []
+        send = link.send
+
+        def recording_send(msg: Any) -> None:
+            sent.append(msg.get_type())
+            send(msg)
+
+        link.send = recording_send  # type: ignore[method-assign]
+        await clock.advance(2.0)  # booted and streaming
+
+        async def attitudes_in_one_wall_second() -> int:
+            before = sent.count("ATTITUDE")
+            for _ in range(10):
+                await clock.advance(0.1)
+            return sent.count("ATTITUDE") - before
+
+        with sim.fast_forwarded(8.0):
+            assert vehicle.wall_speed() == 8.0
+            fast = await attitudes_in_one_wall_second()
+        assert vehicle.wall_speed() == 1.0
+        real_time = await attitudes_in_one_wall_second()
+    assert 90 <= fast <= 110
+    assert 90 <= real_time <= 110
+
+
 async def test_wait_ready_returns_after_boot_at_the_speed_asked_for() -> None:
     async with cluster(speed=5.0) as sim:
         start_wall = time.monotonic()

@@ -13,7 +13,12 @@ from sim.lib.events import CURRENT_SEQUENCE_INTERVAL_S, MAVLINK_MSG_ID_EVENT
 from sim.lib.mavlink_custom import (
     MAVLINK_MSG_ID_CURRENT_EVENT_SEQUENCE as CURRENT_EVENT_SEQUENCE_ID,
 )
-from sim.mavlink.streams import FIXED_WING_ONLY, NORMAL_RATES_HZ, ONBOARD_RATES_HZ
+from sim.mavlink.streams import (
+    FAST_FORWARD_CAP_HZ,
+    FIXED_WING_ONLY,
+    NORMAL_RATES_HZ,
+    ONBOARD_RATES_HZ,
+)
 from tests.sim.conftest import Harness, HarnessFactory
 
 WINDOW_S = 10.0
@@ -77,6 +82,32 @@ def test_interval_zero_restores_the_default_rate(harness: Harness) -> None:
                          mavlink.MAVLINK_MSG_ID_ATTITUDE, -1)
     harness.command_long(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL,
                          mavlink.MAVLINK_MSG_ID_ATTITUDE, 0)
+    harness.api.clear()
+    harness.run(2.0)
+    assert rates_hz(harness.api.sent, 2.0)["ATTITUDE"] == pytest.approx(100.0, rel=0.05)
+
+
+@pytest.mark.parametrize("speed", [8.0, 2.0])
+def test_a_fast_forward_caps_each_stream_per_wall_second(harness: Harness, speed: float) -> None:
+    """Faster than real time a stream keeps its sim-time rate up to FAST_FORWARD_CAP_HZ of
+    wall time (its own rate when faster); back at real time every rate is PX4's again."""
+    harness.vehicle.wall_speed = lambda: speed
+    harness.api.clear()
+    harness.run(WINDOW_S)
+    measured_sim_hz = rates_hz(harness.api.sent, WINDOW_S)
+    capped = 0
+    for msg_id, hz in ONBOARD_RATES_HZ.items():
+        if msg_id in FIXED_WING_ONLY:
+            continue
+        wall_cap_hz = max(hz, FAST_FORWARD_CAP_HZ)
+        expected_sim_hz = min(hz, wall_cap_hz / speed)
+        capped += expected_sim_hz < hz
+        name = type_name(msg_id)
+        assert measured_sim_hz.get(name, 0.0) == pytest.approx(
+            expected_sim_hz, rel=0.1, abs=0.11), name
+    assert capped >= (12 if speed == 8.0 else 1)  # the premise: the cap acts at this speed
+    harness.vehicle.wall_speed = lambda: 1.0
+    harness.run(1.0)  # each stream's next deadline is at its own interval again
     harness.api.clear()
     harness.run(2.0)
     assert rates_hz(harness.api.sent, 2.0)["ATTITUDE"] == pytest.approx(100.0, rel=0.05)
