@@ -65,7 +65,7 @@ async def test_offboard_loss_failsafe_reaches_the_ws_and_the_log() -> None:
             while event["data"]["name"] != "commander_failsafe_enter_generic":
                 event = await receive_until(telemetry, {"type": "event", "kind": "px4_event"})
             # the mode shows with the next HEARTBEAT / CURRENT_MODE, after the event
-            await s.api.wait_state(lambda st: st["mode"] == "POSCTL", 3.0, "Position failsafe")
+            await s.api.wait_state(lambda st: st["mode"] == "POSCTL", 10.0, "Position failsafe")
             await pilot.close()
 
         assert event["data"]["text"] == FAILSAFE_TEXT

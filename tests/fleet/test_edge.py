@@ -162,11 +162,16 @@ async def test_the_edge_and_its_connected_vehicle_are_alive(rig: Rig) -> None:
 async def test_states_arrive_at_both_tiers_in_the_apis_schema(rig: Rig) -> None:
     await wait_for(lambda: len(rig.seen.on("state/slow")) >= 4, 15.0, "4 slow samples")
     fast, slow = rig.seen.on("state/fast"), rig.seen.on("state/slow")
-    fast_intervals = [b[0] - a[0] for a, b in itertools.pairwise(fast)]
-    slow_intervals = [b[0] - a[0] for a, b in itertools.pairwise(slow)]
-    # rates as received: median, so a stall of the loaded machine does not decide it
-    assert 0.08 <= statistics.median(fast_intervals) <= 0.15, fast_intervals
-    assert 0.8 <= statistics.median(slow_intervals) <= 1.3, slow_intervals
+    # each tier's rate by the server's own clock (when it sent), as a median: a tick the
+    # server skipped while the machine was busy is skipped by design (latest wins), and
+    # the bounds still tell 10 Hz from 20 Hz and from the slow tier's 1 Hz
+    def sent_intervals(samples: list[tuple[float, dict[str, Any]]]) -> list[float]:
+        sent = [payload["sent_unix_s"] for _, payload in samples]
+        return [b - a for a, b in itertools.pairwise(sent)]
+
+    fast_intervals, slow_intervals = sent_intervals(fast), sent_intervals(slow)
+    assert 0.08 <= statistics.median(fast_intervals) <= 0.25, fast_intervals
+    assert 0.8 <= statistics.median(slow_intervals) <= 1.5, slow_intervals
     rest = await rig.api.state()
     for _, payload in fast[-3:] + slow[-2:]:
         assert set(payload) == {"edge", "id", "seq", "sent_unix_s", "state"}
