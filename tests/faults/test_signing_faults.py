@@ -86,6 +86,16 @@ async def timed_504(rig: Rig, action: str) -> float:
     return elapsed
 
 
+async def heard_since(api: Api, healed: float) -> None:
+    """Until a HEARTBEAT came after the heal, as a pilot waits for the link to come back
+    before arming (a loaded machine may take a while to move what the outage held)."""
+    def heard(state: dict[str, Any]) -> bool:
+        age_s = state["last_heartbeat_age_s"]
+        return age_s is not None and age_s < time.monotonic() - healed
+
+    await api.wait_state(heard, 15.0, "a HEARTBEAT after the heal")
+
+
 async def arm_and_disarm(api: Api, vehicle: SimInstance) -> None:
     armed = await api.control("arm")
     assert armed.status_code == 200, armed.text
@@ -117,6 +127,7 @@ async def test_setup_signing_that_never_reaches_the_vehicle_is_a_504_and_no_key(
 
         r.proxy.heal()
         healed = time.monotonic()
+        await heard_since(r.api, healed)
         await arm_and_disarm(r.api, r.vehicle)
         print(f"\nSETUP_SIGNING never delivered: 504 after {elapsed:.2f} s "
               f"(expected {EXPECTED_S:.1f} s); {len(r.setups_sent)} SETUP_SIGNING sent "
@@ -161,6 +172,7 @@ async def test_a_rotation_whose_answers_are_lost_is_a_504_and_both_ends_keep_the
         await r.api.wait_state(lambda s: s["link"]["signing"]["vehicles_signed"], 10.0,
                                "the vehicle talking with the old key after the heal")
         signed_again = time.monotonic() - healed
+        await heard_since(r.api, healed)
         await arm_and_disarm(r.api, r.vehicle)
         await wait_for(lambda: r.vehicle.signing is not None
                        and r.vehicle.signing.secret_key == old_key, 1.0, "old key kept")
