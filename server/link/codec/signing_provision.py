@@ -13,6 +13,9 @@ from server.link.codec.signing_keys import SIGNING_KEY_BYTES
 # provision(): tries, and how long each waits for the vehicle to answer with the new key.
 PROVISION_TRIES = 3
 PROVISION_CONFIRM_S = 1.5
+# A try past its end while frames wait unread on the link: how long more it lets the link
+# read them (a loop that fell behind may hold the vehicle's answer), as commands do.
+UNREAD_GRACE_S = 1.0
 
 
 class SigningLink(Protocol):
@@ -22,6 +25,8 @@ class SigningLink(Protocol):
     mav: mavlink.MAVLink
 
     def send(self, msg: mavlink.MAVLink_message) -> None: ...
+
+    def input_pending(self) -> bool: ...
 
 
 class ProvisionError(RuntimeError):
@@ -89,12 +94,16 @@ def _roll_back(link: SigningLink, sysids: list[int], key: bytes | None,
 
 
 async def _switched(link: SigningLink, sysids: list[int], signed: bool, timeout_s: float) -> bool:
+    """Until every vehicle answered as asked, or ``timeout_s``; past it, a try goes on (at
+    most UNREAD_GRACE_S) while frames wait unread, since the answer may be among them."""
     signing = link.signing
     loop = asyncio.get_running_loop()
     deadline = loop.time() + timeout_s
     answered = signing.vehicle_signed if signed else signing.vehicle_unsigned
-    while loop.time() < deadline:
+    while True:
         if all(answered(sysid) for sysid in sysids):
             return True
+        now = loop.time()
+        if now >= deadline and not (link.input_pending() and now < deadline + UNREAD_GRACE_S):
+            return False
         await asyncio.sleep(0.02)
-    return False
