@@ -145,9 +145,10 @@ async def test_a_silent_live_input_brakes_while_the_lease_stays(quad: Served) ->
     async with connect(quad.url("telemetry", vehicle=1, rate_hz=2)) as telemetry:
         ws = await fly_offboard_at_2_m_s(quad)
         north = {"type": "velocity_ned", "north_m_s": 2.0, "east_m_s": 0.0, "down_m_s": 0.0}
+        # before the send: the server cannot have it sooner (its answer may come late)
+        fed_at = time.monotonic()
         await ws.send(json.dumps({"type": "setpoint", "id": 10, "setpoint": north, "live": True}))
         assert (await receive_until(ws, {"id": 10}))["status"] == 200
-        fed_at = time.monotonic()
 
         async def stopped_while_heartbeating() -> dict[str, Any] | None:
             # heartbeats keep the lease; they are not live input
