@@ -244,6 +244,13 @@ def ready_url(settings: Settings, port: int) -> str:
     return f"{scheme}://{host}:{port}/?token={settings.pilot_token()}"
 
 
+# How long an idle HTTP connection stays open (uvicorn's default: 5 s). A client that pools
+# connections (httpx keeps them 5 s, requests with no limit) and sends on one just as the
+# server closes it gets "connection reset" for a request the server never saw. Longer than
+# httpx's 5 s, the client closes first; nginx's default is the same 75 s.
+KEEP_ALIVE_S = 75
+
+
 def uvicorn_server(settings: Settings) -> uvicorn.Server:
     """The server `skyhelm serve` runs: https and wss when a TLS certificate is set."""
     from server.app import create_app
@@ -258,6 +265,7 @@ def uvicorn_server(settings: Settings) -> uvicorn.Server:
         ssl_certfile=settings.tls_cert,
         ssl_keyfile=settings.tls_key,
         lifespan="on",
+        timeout_keep_alive=KEEP_ALIVE_S,
         ws="websockets-sansio",
         # Telemetry is small and mostly local: compressing 1000 messages/s costs more CPU
         # than the bandwidth it saves.
