@@ -9,10 +9,10 @@ from collections.abc import AsyncIterator
 
 import pytest
 
-from server.cli import KEEP_ALIVE_S, uvicorn_server
+from server.cli import KEEP_ALIVE_S
 from server.settings import load_settings
 from tests.api.conftest import PILOT
-from tests.waiting import eventually
+from tests.api.uvicorn_run import uvicorn_serving
 
 # idle longer than httpx's keep-alive expiry and uvicorn's default timeout (both 5 s)
 IDLE_S = 6.0
@@ -22,21 +22,8 @@ IDLE_S = 6.0
 async def http_port() -> AsyncIterator[int]:
     settings = load_settings(port=0, token=PILOT, connect=["udpin:127.0.0.1:0"], scene=False,
                              log_dir=None, access_log=False)
-    server = uvicorn_server(settings)
-    task = asyncio.create_task(server.serve())
-
-    async def started() -> bool:
-        if task.done():
-            task.result()
-        return server.started
-
-    try:
-        await eventually(started, 20.0, "uvicorn to listen")
-        port: int = server.servers[0].sockets[0].getsockname()[1]
+    async with uvicorn_serving(settings) as port:
         yield port
-    finally:
-        server.should_exit = True
-        await asyncio.wait_for(task, 20.0)
 
 
 async def _get(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> bytes:

@@ -15,10 +15,10 @@ import pytest
 import trustme
 from websockets.asyncio.client import connect
 
-from server.cli import main, ready_url, uvicorn_server
+from server.cli import main, ready_url
 from server.settings import SettingsError, load_settings
 from tests.api.conftest import PILOT, auth
-from tests.waiting import eventually
+from tests.api.uvicorn_run import uvicorn_serving
 
 
 @pytest.fixture(scope="module")
@@ -42,22 +42,9 @@ async def https_server(cert_files: tuple[Path, Path]) -> AsyncIterator[int]:
         port=0, token=PILOT, connect=["udpin:127.0.0.1:0"], scene=False, log_dir=None,
         tls_cert=cert, tls_key=key, access_log=False,
     )
-    server = uvicorn_server(settings)
-    task = asyncio.create_task(server.serve())
-
-    async def started() -> bool:
-        if task.done():
-            task.result()
-        return server.started
-
-    try:
-        await eventually(started, 20.0, "uvicorn to listen with TLS")
-        port: int = server.servers[0].sockets[0].getsockname()[1]
+    async with uvicorn_serving(settings) as port:
         assert ready_url(settings, port) == f"https://127.0.0.1:{port}/?token={PILOT}"
         yield port
-    finally:
-        server.should_exit = True
-        await asyncio.wait_for(task, 20.0)
 
 
 async def test_https_and_wss_with_a_trusted_certificate(
