@@ -288,9 +288,8 @@ class SimVehicle:
             # the rest of its checks (READY_TIME_S)
             self.set_home_here()
         if self.booted:
-            speed = self.wall_speed()
             for link, streams in self._links:
-                streams.tick(now, link, speed)
+                streams.tick(now, link, self.wall_speed)
 
     def _become_ready(self) -> None:
         self.commander.ready = True

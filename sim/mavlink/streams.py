@@ -16,6 +16,7 @@ positions at 50 Hz), so a fast sim floods neither its peer nor a busy machine.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Protocol
 
 from pymavlink.dialects.v20 import development as mavlink
@@ -147,11 +148,13 @@ class StreamSet:
         self._next_due_s = min(self._due_s.values(), default=math.inf)
         return True
 
-    def tick(self, now_s: float, sink: MessageSink, speed: float = 1.0) -> None:
-        """Send what is due at sim time ``now_s``; ``speed`` is sim seconds per wall
-        second (above 1, streams are capped at FAST_FORWARD_CAP_HZ of wall time)."""
+    def tick(self, now_s: float, sink: MessageSink, wall_speed: Callable[[], float]) -> None:
+        """Send what is due at sim time ``now_s``; ``wall_speed()`` is sim seconds per wall
+        second (above 1, streams are capped at FAST_FORWARD_CAP_HZ of wall time), asked
+        only when something is due."""
         if now_s < self._next_due_s:
             return
+        speed = wall_speed()
         send = sink.has_remote
         next_due = math.inf
         for msg_id, due in self._due_s.items():

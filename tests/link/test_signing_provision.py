@@ -9,14 +9,15 @@ import time
 import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
+from server.link.codec.commands import UNREAD_GRACE_S
 from server.link.codec.signing import LinkSigning
-from server.link.codec.signing_provision import UNREAD_GRACE_S, ProvisionError, provision
+from server.link.codec.signing_provision import ProvisionError, provision
 
 CONFIRM_S = 0.1
 
 
 class BehindLink:
-    """A link whose vehicle's answers sit unread (``pending``) until ``read_at`` s."""
+    """A link whose vehicle's answer sits unread (``pending``) until it is read."""
 
     def __init__(self, pending: bool) -> None:
         self.signing = LinkSigning(None)

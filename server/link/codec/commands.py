@@ -10,6 +10,10 @@ from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import development as mavlink
 
+# How long past its end a request waits while frames wait unread on the link (a loop that
+# fell behind may hold the answer): the command tries in all, a SETUP_SIGNING try each.
+UNREAD_GRACE_S = 1.0
+
 
 class CommandOutcome(enum.Enum):
     ACCEPTED = "ACCEPTED"

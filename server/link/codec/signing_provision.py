@@ -7,15 +7,13 @@ from typing import Protocol
 
 from pymavlink.dialects.v20 import development as mavlink
 
+from server.link.codec.commands import UNREAD_GRACE_S
 from server.link.codec.signing import LinkSigning
 from server.link.codec.signing_keys import SIGNING_KEY_BYTES
 
 # provision(): tries, and how long each waits for the vehicle to answer with the new key.
 PROVISION_TRIES = 3
 PROVISION_CONFIRM_S = 1.5
-# A try past its end while frames wait unread on the link: how long more it lets the link
-# read them (a loop that fell behind may hold the vehicle's answer), as commands do.
-UNREAD_GRACE_S = 1.0
 
 
 class SigningLink(Protocol):

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 from pymavlink.dialects.v20 import development as mavlink
 
 from server.link.codec.commands import (
+    UNREAD_GRACE_S,
     CommandInt,
     CommandOutcome,
     CommandResult,
@@ -96,7 +97,7 @@ class Requester:
     double_ack_window_s = 0.2
     double_ack_commands = frozenset({MAV_CMD_DO_SET_MODE})
     reason_wait_s = 0.1  # for the STATUSTEXT that says why a command was refused
-    unread_grace_s = 1.0  # past the tries' ends in all, while frames wait unread
+    unread_grace_s = UNREAD_GRACE_S  # past the tries' ends in all, while frames wait unread
 
     def __init__(
         self,
