@@ -102,8 +102,11 @@ class VehicleCommands:
         return self.set_mode(*(as_int(p) for p in cmd.params[:3]))
 
     def _takeoff(self, cmd: Command, link: Link) -> int:
+        """Commander's NAV_TAKEOFF is a mode change: taken at once while disarmed, ready or
+        not (UserModeIntention::change), so a takeoff before the vehicle is ready is refused
+        by the arming that follows, with its reasons; armed, only when TAKEOFF can run."""
         v = self._v
-        if not v.ready or v.airframe_name == "rover":
+        if v.airframe_name == "rover":
             return MAV_RESULT_TEMPORARILY_REJECTED
         v.navigator.request_takeoff(cmd.params[6])
         return v.commander.request_mode(modes.AUTO_TAKEOFF)

@@ -241,10 +241,12 @@ class SimSession:
 
 @contextlib.asynccontextmanager
 async def open_sim(
-    airframe: str = "quad", speed: float = 5.0, ready_timeout_s: float = 10.0
+    airframe: str = "quad", speed: float = 5.0, ready_timeout_s: float = 10.0,
+    position: bool = True,
 ) -> AsyncIterator[SimSession]:
     """The simulated vehicle on ephemeral ports, a Link to its API port, the Vehicle on it,
-    once it has a position and a home (PX4 is ready to take off then)."""
+    once it has a position and a home (PX4 is ready to take off then; ``position=False``:
+    once it has a home, as PX4 has from its first HEARTBEAT on)."""
     from sim.process.runner import SimCluster
 
     async with SimCluster(airframe=airframe, count=1, speed=speed) as sim:
@@ -254,12 +256,13 @@ async def open_sim(
             await wait_for(lambda: 1 in link.vehicles, ready_timeout_s, "discovery")
             vehicle = link.vehicles[1]
             assert isinstance(vehicle, Vehicle)
-            await wait_for(lambda: _ready(vehicle), ready_timeout_s, "home and position")
+            await wait_for(lambda: _ready(vehicle, position), ready_timeout_s,
+                           "home and position" if position else "home")
             yield SimSession(sim, link, vehicle)
         finally:
             await link.close()
 
 
-def _ready(vehicle: Vehicle) -> bool:
+def _ready(vehicle: Vehicle, position: bool = True) -> bool:
     state = vehicle.snapshot()
-    return state.home is not None and state.position_ned is not None
+    return state.home is not None and (state.position_ned is not None or not position)

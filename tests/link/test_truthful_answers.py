@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 
+import pytest
 from pymavlink.dialects.v20 import development as mavlink
 
 from server.link.codec.commands import CommandOutcome, CommandResult
@@ -145,6 +146,32 @@ async def test_takeoff_after_px4_disarmed_itself_arms_again_and_climbs() -> None
         assert result.ok, result
         assert result.command == "MAV_CMD_NAV_TAKEOFF"
         assert vehicle.snapshot().armed
+
+
+async def test_takeoff_before_px4_is_ready_answers_the_refused_arming_and_leaves_no_takeoff(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """PX4 takes NAV_TAKEOFF while disarmed, ready or not, and refuses the arming after it:
+    the answer is that refusal with PX4's reason, and the vehicle is back in the mode it was
+    in (left in TAKEOFF, the pilot's next Arm would start a climb)."""
+    monkeypatch.setattr("sim.vehicle.READY_TIME_S", math.inf)  # a position that never comes
+    async with open_sim(speed=5.0, position=False) as session:
+        vehicle = session.vehicle
+        simulated = session.sim.instances[0].vehicle
+        await wait_for(lambda: vehicle.snapshot().mode == "HOLD", 5.0, "the first mode")
+        changes_before = simulated.commander.mode_changes
+
+        result = await vehicle.takeoff(3.0)
+
+        assert result.outcome is CommandOutcome.TEMPORARILY_REJECTED, result
+        assert result.command == "MAV_CMD_COMPONENT_ARM_DISARM"
+        assert result.reason is not None
+        assert result.reason.startswith("Arming denied: Resolve system health failures first")
+        assert not vehicle.snapshot().armed
+        # PX4 took the takeoff (one mode change) and HOLD again (the other)
+        assert simulated.commander.mode_changes == changes_before + 2
+        assert simulated.mode_name == "AUTO_LOITER"
+        await wait_for(lambda: vehicle.snapshot().mode == "HOLD", 3.0, "HOLD reported")
 
 
 async def test_takeoff_right_after_arming_is_confirmed_by_the_climb() -> None:

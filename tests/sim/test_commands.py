@@ -82,6 +82,21 @@ def test_arming_before_ready_is_refused_with_reason(make_harness: HarnessFactory
     assert "Arming denied: Resolve system health failures first" in h.api.texts()
 
 
+def test_takeoff_before_ready_is_taken_and_the_arming_after_it_refused(
+    make_harness: HarnessFactory,
+) -> None:
+    # Commander: NAV_TAKEOFF is a mode change, always allowed while disarmed; canArm refuses
+    h = make_harness(ready=False)
+    h.run(2.0)
+    h.command_long(mavlink.MAV_CMD_NAV_TAKEOFF, *([math.nan] * 7))
+    assert h.last_ack(mavlink.MAV_CMD_NAV_TAKEOFF) == ACCEPTED
+    assert h.vehicle.mode_name == "AUTO_TAKEOFF"
+    h.arm()
+    assert h.last_ack(ARM) == TEMPORARILY_REJECTED
+    assert "Arming denied: Resolve system health failures first" in h.api.texts()
+    assert not h.vehicle.armed
+
+
 def test_arming_in_offboard_without_signal_is_refused(harness: Harness) -> None:
     harness.set_mode(modes.OFFBOARD)
     assert harness.last_ack(SET_MODE) == ACCEPTED  # disarmed: any known mode is accepted

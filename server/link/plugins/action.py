@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
+import logging
 import math
 import time
 from collections.abc import Callable
@@ -23,6 +24,8 @@ from server.link.core.vehicle_core import VehicleCore
 from server.link.plugins.arming_modes import mode_to_arm_in
 from server.link.plugins.mavlink_values import enum_name
 from server.link.plugins.telemetry import Telemetry
+
+log = logging.getLogger(__name__)
 
 MAV_CMD_NAV_RETURN_TO_LAUNCH = 20
 MAV_CMD_NAV_LAND = 21
@@ -169,8 +172,11 @@ class Action:
     async def _arm_and_take_off(self, alt_amsl: float) -> CommandResult:
         """QGroundControl's takeoff (PX4FirmwarePlugin::guidedModeTakeoff): NAV_TAKEOFF
         switches the disarmed vehicle to TAKEOFF from whatever mode it was left in, PX4 arms
-        there, and arming starts the climb. A refused arm is answered as PX4 gave it."""
+        there, and arming starts the climb. A refused arm is answered as PX4 gave it, and the
+        vehicle is put back in the mode it was in: left in TAKEOFF, the next arm (a pilot's
+        Arm, once PX4 is ready) would start a climb nobody asked for then."""
         t = self._telemetry
+        mode_before = t.mode
         in_takeoff = Confirmation(
             reached=lambda: t.mode in _TAKING_OFF_MODES,
             timeout_s=self.mode_confirm_timeout_s,
@@ -183,6 +189,7 @@ class Action:
             return switched
         armed = await self._arm_disarm(True, False)
         if not armed.ok:
+            await self._put_back_mode(mode_before)
             return armed
         started_s = self._core.now()
         climbing = await self._core.requests.wait_until(
@@ -195,6 +202,20 @@ class Action:
             switched, outcome=CommandOutcome.NOT_CONFIRMED, elapsed_ms=elapsed_ms,
             reason=self._why_not_taking_off(),
         )  # fmt: skip
+
+    async def _put_back_mode(self, mode: str) -> None:
+        """Back to ``mode`` after a takeoff whose arming was refused (best effort: a mode
+        PX4 does not take back, or an unknown one, is logged and left)."""
+        if mode in _TAKING_OFF_MODES or self._telemetry.armed:
+            return
+        try:
+            back = await self._set_mode_once(mode)
+        except modes.UnknownModeError:
+            log.warning("takeoff refused: left in %s (%s is not a mode to ask for)",
+                        self._telemetry.mode, mode)  # fmt: skip
+            return
+        if not back.ok:
+            log.warning("takeoff refused: %s not taken back (%s)", mode, back.outcome.name)
 
     def _taking_off(self) -> bool:
         t = self._telemetry
