@@ -54,7 +54,6 @@ from server.link.codec.urls import parse_link_url
 from server.scene import FleetScene, SceneHub
 from server.settings import Settings
 from server.simproc import SimProcess
-from skyhelm_wire.calls import API_PREFIX
 from skyhelm_wire.messages import SceneClickMessage
 
 log = logging.getLogger(__name__)
@@ -180,29 +179,35 @@ def create_app(settings: Settings, *, freeze_gc_at_start: bool = False) -> FastA
             allow_methods=["*"],
             allow_headers=["Authorization", "Content-Type", "X-Lease-Id"],
         )
-    api = APIRouter(prefix=API_PREFIX)
+    # Every route under API_PREFIX is made once, when its module is imported (its router
+    # carries the prefix), and every app holds those same route objects: FastAPI's
+    # include_router builds each route of the included router again for each app it is
+    # included in (its parameters' and answers' models: ~1 CPU-s per app, of an app the
+    # tests make by the hundred and `skyhelm serve` makes at each start).
+    routers: list[APIRouter] = []
     if fleet is not None:
         # first: routes are tried in order (each costs ~5 us), and a call proxied to an edge
         # is the one whose latency counts twice
-        api.include_router(fleet_routes.router)
-        api.include_router(fleet_ws.router)
-    for module in (
-        health,
-        session,
-        page_config,
-        tiles,
-        vehicles,
-        control,
-        commands,
-        intents,
-        setpoint,
-        sticks,
-        params,
-    ):
-        api.include_router(module.router)
-    api.include_router(signing_routes.router)
-    api.include_router(ws.router)
-    app.include_router(api)
+        routers += [fleet_routes.router, fleet_ws.router]
+    routers += [
+        module.router
+        for module in (
+            health,
+            session,
+            page_config,
+            tiles,
+            vehicles,
+            control,
+            commands,
+            intents,
+            setpoint,
+            sticks,
+            params,
+            signing_routes,
+        )
+    ]
+    routers += ws.ROUTERS
+    app.router.routes.extend(route for router in routers for route in router.routes)
     hold_to_contract(app, settings)
     if hub is not None:
         hub.mount(app, check_token=tokens.is_valid)

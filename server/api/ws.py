@@ -6,8 +6,6 @@ timeouts as ws_common.py says."""
 
 from __future__ import annotations
 
-from fastapi import APIRouter
-
 from server.api import ws_control, ws_telemetry
 from server.api.ws_telemetry import MIN_RATE_HZ
 from server.control.views import event_message
@@ -21,9 +19,8 @@ from server.http.ws_common import (
     SEND_TIMEOUT_S,
 )
 
-router = APIRouter()
-router.include_router(ws_telemetry.router)
-router.include_router(ws_control.router)
+# the telemetry socket, then the control session (create_app mounts them in this order)
+ROUTERS = (ws_telemetry.router, ws_control.router)
 
 __all__ = [
     "CLOSE_FORBIDDEN",
@@ -33,7 +30,7 @@ __all__ = [
     "CLOSE_UNAUTHORIZED",
     "EVENT_BACKLOG",
     "MIN_RATE_HZ",
+    "ROUTERS",
     "SEND_TIMEOUT_S",
     "event_message",
-    "router",
 ]

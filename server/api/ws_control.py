@@ -45,13 +45,13 @@ from server.http.ws_common import (
     close_socket,
 )
 from server.link import Vehicle
-from skyhelm_wire.calls import CALL, COMMAND_CALLS, CallSpec
+from skyhelm_wire.calls import API_PREFIX, CALL, COMMAND_CALLS, CallSpec
 from skyhelm_wire.intents import IntentOut
 from skyhelm_wire.sockets import SOCKET
 
 log = logging.getLogger(__name__)
 
-router = APIRouter()
+router = APIRouter(prefix=API_PREFIX)
 # what the socket takes, as the wire's calls: the commands and intents made under the lease
 # (which the socket holds) by name, the setpoint's and the sticks' bodies
 SOCKET_CALLS: dict[str, CallSpec] = {

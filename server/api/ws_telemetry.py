@@ -29,6 +29,7 @@ from server.http.ws_common import (
 )
 from server.link import Link, Vehicle
 from server.link.codec.aio import loop_time_s
+from skyhelm_wire.calls import API_PREFIX
 from skyhelm_wire.sockets import SOCKET
 
 MIN_RATE_HZ = 0.1
@@ -38,7 +39,7 @@ ON_CHANGE_KEEPALIVE_S = 0.5
 # MAVLink system ids a vehicle can have; another id can never appear.
 SYSID_RANGE = range(1, 256)
 
-router = APIRouter()
+router = APIRouter(prefix=API_PREFIX)
 
 
 def publishers_of(websocket: WebSocket) -> StatePublishers:

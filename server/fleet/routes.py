@@ -31,7 +31,7 @@ from server.http.schemas import ErrorOut
 from skyhelm_wire.calls import API_PREFIX, CALL, FLEET_VEHICLE_PATH, VEHICLE_CALLS, VEHICLE_PATH
 from skyhelm_wire.fleet import FLEET_NAME_PATTERN
 
-router = APIRouter(tags=["fleet"])
+router = APIRouter(prefix=API_PREFIX, tags=["fleet"])
 
 EdgeName = Annotated[
     str, Path(pattern=FLEET_NAME_PATTERN, description="the edge's name in the fleet")

@@ -12,11 +12,12 @@ from fastapi import APIRouter, WebSocket
 from server.fleet.view import FleetView, Watcher
 from server.fleet.view_service import FleetService
 from server.http.ws_common import Sender, admit, run_until_disconnect
+from skyhelm_wire.calls import API_PREFIX
 from skyhelm_wire.sockets import SOCKET
 
 MIN_RATE_HZ = 0.1
 
-router = APIRouter()
+router = APIRouter(prefix=API_PREFIX)
 
 
 @router.websocket(SOCKET["fleet"].route)

@@ -67,6 +67,16 @@ async def test_unknown_vehicle_is_404(empty_api: Api) -> None:
         assert response.json()["detail"]["reason"] == "no vehicle 7"
 
 
+async def test_a_documented_path_asked_with_another_method_is_405_with_its_methods(
+    empty_api: Api,
+) -> None:
+    response = await empty_api.client.put("/api/v1/vehicles/7/arm", json={})
+    assert response.status_code == 405
+    assert response.headers["allow"] == "POST"
+    response = await empty_api.client.get("/api/v1/no-such-call")
+    assert response.status_code == 404
+
+
 async def test_cors_is_closed_by_default(empty_api: Api) -> None:
     response = await empty_api.client.options(
         "/api/v1/vehicles",

@@ -20,9 +20,9 @@ from server.http.error_handlers import command_response
 from server.http.errors import COMMAND_RESPONSES
 from server.http.routing import body_parameter, route_options
 from server.link import Vehicle
-from skyhelm_wire.calls import CALL
+from skyhelm_wire.calls import API_PREFIX, CALL
 
-router = APIRouter(tags=["commands"], responses=COMMAND_RESPONSES)
+router = APIRouter(prefix=API_PREFIX, tags=["commands"], responses=COMMAND_RESPONSES)
 
 async def run_operation(name: str, vehicle: Vehicle, body: BaseModel | None) -> JSONResponse:
     return command_response(await run_command(name, vehicle, body))

@@ -16,7 +16,7 @@ from server.http.errors import CONTROL_RESPONSES, READ_RESPONSES
 from server.http.routing import route
 from server.http.schemas import ErrorOut
 from server.link import Vehicle
-from skyhelm_wire.calls import AUDIT_LIMIT_MAX, CALL
+from skyhelm_wire.calls import API_PREFIX, AUDIT_LIMIT_MAX, CALL
 from skyhelm_wire.control import (
     ControlBody,
     ControlStatusOut,
@@ -26,7 +26,7 @@ from skyhelm_wire.control import (
     TakeoverAnswerOut,
 )
 
-router = APIRouter(tags=["control"])
+router = APIRouter(prefix=API_PREFIX, tags=["control"])
 DISCONNECT_POLL_S = 0.1
 _REFUSED: dict[int | str, dict[str, Any]] = {
     409: {"model": ErrorOut, "description": "held by another, or the takeover refused"}

@@ -12,9 +12,9 @@ from server.http.deps import Context
 from server.http.routing import route
 from server.http.schemas import ChildProcessOut, HealthOut
 from server.link.stream.stream_channel import sender_status
-from skyhelm_wire.calls import CALL
+from skyhelm_wire.calls import API_PREFIX, CALL
 
-router = APIRouter(tags=["health"])
+router = APIRouter(prefix=API_PREFIX, tags=["health"])
 
 
 @functools.cache

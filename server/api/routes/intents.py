@@ -25,9 +25,9 @@ from server.http.deps import Context, ControlledVehicle
 from server.http.errors import COMMAND_RESPONSES, command_status
 from server.http.routing import body_parameter, route_options
 from server.link import Vehicle
-from skyhelm_wire.calls import CALL
+from skyhelm_wire.calls import API_PREFIX, CALL
 
-router = APIRouter(tags=["intents"], responses=COMMAND_RESPONSES)
+router = APIRouter(prefix=API_PREFIX, tags=["intents"], responses=COMMAND_RESPONSES)
 
 
 async def answer_intent(

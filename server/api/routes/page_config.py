@@ -12,7 +12,7 @@ from server.http.routing import route
 from skyhelm_wire.calls import API_PREFIX, CALL
 from skyhelm_wire.page import PageConfigOut
 
-router = APIRouter(tags=["health"])
+router = APIRouter(prefix=API_PREFIX, tags=["health"])
 
 
 def archive_tile_url(tile_format: str) -> str:

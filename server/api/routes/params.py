@@ -11,9 +11,15 @@ from server.http.deps import ConnectedVehicle, ControlledVehicle
 from server.http.errors import CONTROL_RESPONSES, READ_RESPONSES, Responses
 from server.http.routing import route
 from server.http.schemas import ErrorOut, ParamMetadataOut, ParamOut, ParamsOut, ParamValueBody
-from skyhelm_wire.calls import CALL, PARAM_NAME_LENGTH, PARAM_NAME_PATTERN, PARAM_NAMES_PATTERN
+from skyhelm_wire.calls import (
+    API_PREFIX,
+    CALL,
+    PARAM_NAME_LENGTH,
+    PARAM_NAME_PATTERN,
+    PARAM_NAMES_PATTERN,
+)
 
-router = APIRouter(tags=["params"])
+router = APIRouter(prefix=API_PREFIX, tags=["params"])
 
 ParamName = Annotated[
     str,

@@ -10,10 +10,10 @@ from server.control.auth import TOKEN_COOKIE, token_from
 from server.http.deps import Reader
 from server.http.errors import AUTH_RESPONSES
 from server.http.routing import route
-from skyhelm_wire.calls import CALL
+from skyhelm_wire.calls import API_PREFIX, CALL
 from skyhelm_wire.page import SessionOut
 
-router = APIRouter(tags=["session"])
+router = APIRouter(prefix=API_PREFIX, tags=["session"])
 
 
 @route(router, CALL["open_session"], responses=AUTH_RESPONSES)

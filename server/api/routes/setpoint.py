@@ -12,9 +12,9 @@ from server.http.deps import Context, ControlledVehicle
 from server.http.errors import CONTROL_RESPONSES
 from server.http.routing import route
 from server.http.schemas import SentSetpointOut, SetpointBody
-from skyhelm_wire.calls import CALL
+from skyhelm_wire.calls import API_PREFIX, CALL
 
-router = APIRouter(tags=["setpoint"])
+router = APIRouter(prefix=API_PREFIX, tags=["setpoint"])
 
 
 @route(router, CALL["set_setpoint"], responses=CONTROL_RESPONSES)

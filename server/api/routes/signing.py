@@ -19,7 +19,7 @@ from server.http.routing import route
 from server.link import Link
 from server.link.codec.signing_keys import SigningKeyStore, new_key
 from server.link.codec.signing_provision import ProvisionError, provision
-from skyhelm_wire.calls import CALL
+from skyhelm_wire.calls import API_PREFIX, CALL
 from skyhelm_wire.common import ErrorOut
 from skyhelm_wire.signing import (
     LinkSigningOut,
@@ -28,7 +28,7 @@ from skyhelm_wire.signing import (
     SigningStatusOut,
 )
 
-router = APIRouter(tags=["signing"])
+router = APIRouter(prefix=API_PREFIX, tags=["signing"])
 
 _RESPONSES: dict[int | str, dict[str, object]] = {
     **AUTH_RESPONSES,

@@ -13,10 +13,10 @@ from server.control.vehicle_ops import fly_sticks, sticks_out, stop_sticks
 from server.http.deps import Context, ControlledVehicle, KnownVehicle
 from server.http.errors import CONTROL_RESPONSES, READ_RESPONSES
 from server.http.routing import route
-from skyhelm_wire.calls import CALL
+from skyhelm_wire.calls import API_PREFIX, CALL
 from skyhelm_wire.sticks import SticksBody, SticksOut
 
-router = APIRouter(tags=["sticks"])
+router = APIRouter(prefix=API_PREFIX, tags=["sticks"])
 
 
 @route(router, CALL["sticks"], responses=READ_RESPONSES)

@@ -17,9 +17,9 @@ from server.http.deps import Context, Reader
 from server.http.errors import AUTH_RESPONSES, ApiError
 from server.http.routing import route
 from server.http.tile_archive import MAX_ZOOM, MEDIA_TYPES
-from skyhelm_wire.calls import CALL
+from skyhelm_wire.calls import API_PREFIX, CALL
 
-router = APIRouter(tags=["map"])
+router = APIRouter(prefix=API_PREFIX, tags=["map"])
 
 CACHE_CONTROL = "private, max-age=86400"
 _TILE_RESPONSES = {

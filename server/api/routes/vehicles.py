@@ -13,9 +13,9 @@ from server.http.deps import Context, KnownVehicle, Reader
 from server.http.errors import AUTH_RESPONSES, READ_RESPONSES
 from server.http.routing import route
 from server.http.schemas import StreamOut
-from skyhelm_wire.calls import CALL
+from skyhelm_wire.calls import API_PREFIX, CALL
 
-router = APIRouter(tags=["vehicles"])
+router = APIRouter(prefix=API_PREFIX, tags=["vehicles"])
 
 
 @route(router, CALL["vehicles"], responses=AUTH_RESPONSES)
