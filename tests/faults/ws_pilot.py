@@ -3,13 +3,16 @@ tab is gone, no close frame) or freeze it (SIGSTOP: the laptop sleeps, the socke
 
 ``python -m tests.faults.ws_pilot URL NORTH_M_S RATE_HZ``: connects to the control socket,
 sends a live velocity setpoint (hold-to-fly, as the page's keys do) RATE_HZ times a second,
-prints ``flying`` once the first one is accepted, and one line per accepted setpoint's id."""
+prints ``flying`` once the first one is accepted, and ``sent T`` after each send, T the
+monotonic time just before it (the machine's clock, the test's too): a test that freezes the
+tab knows when its last input went out, however long a busy machine kept it from running."""
 
 from __future__ import annotations
 
 import asyncio
 import json
 import sys
+import time
 
 from websockets.asyncio.client import connect
 
@@ -38,7 +41,9 @@ async def fly(url: str, north_m_s: float, rate_hz: float) -> None:
         while not reader.done():
             request_id += 1
             message = {"type": "setpoint", "id": request_id, "setpoint": setpoint, "live": True}
+            sending_s = time.monotonic()
             await ws.send(json.dumps(message))
+            print(f"sent {sending_s:.6f}", flush=True)
             await asyncio.sleep(1.0 / rate_hz)
         reader.result()
 
