@@ -12,10 +12,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import os
-import re
-import signal
 import statistics
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -26,43 +23,24 @@ from fastapi import APIRouter, FastAPI
 from fastapi.routing import APIRoute, APIWebSocketRoute
 
 from bench._results import machine_info, write_results
+from bench._serve import cpu_seconds, served
 from server.app import create_app
 from server.settings import load_settings
 
-ROOT = Path(__file__).resolve().parents[1]
 TOKEN = "startup-cost-token"
-READY = re.compile(r"SkyHelm ready: (http://\S+)")
 # paths of early, middle and late routers, as a script's first calls reach them
 FIRST_CALLS = ("/api/v1/health", "/api/v1/vehicles", "/api/v1/vehicles/7",
                "/api/v1/vehicles/7/params")
-_TICK_S = 1.0 / os.sysconf("SC_CLK_TCK")
 
 
-def _cpu_s(pid: int) -> float:
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) * _TICK_S
-
-
-def serve_to_ready() -> dict[str, float]:
+async def serve_to_ready() -> dict[str, float]:
     """One `skyhelm serve --port 0`: seconds and the server's CPU seconds to its ready line."""
-    script = Path(sys.executable).with_name("skyhelm")
+    command = [str(Path(sys.executable).with_name("skyhelm")), "serve", "--port", "0",
+               f"--token={TOKEN}", "--no-tlog", "--no-scene"]  # fmt: skip
     started = time.perf_counter()
-    process = subprocess.Popen(
-        [str(script), "serve", "--port", "0", f"--token={TOKEN}", "--no-tlog", "--no-scene"],
-        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, stdin=subprocess.DEVNULL,
-        text=True, start_new_session=True,
-    )
-    try:
-        assert process.stdout is not None
-        for line in process.stdout:
-            if READY.search(line):
-                break
-        else:
-            raise RuntimeError("skyhelm serve ended before its ready line")
-        return {"ready_s": time.perf_counter() - started, "server_cpu_s": _cpu_s(process.pid)}
-    finally:
-        os.killpg(process.pid, signal.SIGTERM)
-        process.wait(30)
+    async with served(command) as (process, _):
+        return {"ready_s": time.perf_counter() - started,
+                "server_cpu_s": cpu_seconds(process.pid)}  # fmt: skip
 
 
 def _settings() -> Any:
@@ -109,7 +87,7 @@ def main() -> int:
     app_and_first_calls(shared_routes_app)  # imports and module-level routes, once
     shared = [app_and_first_calls(shared_routes_app) for _ in range(apps)]
     included = [app_and_first_calls(included_routes_app) for _ in range(apps)]
-    serves = [serve_to_ready() for _ in range(starts)]
+    serves = [asyncio.run(serve_to_ready()) for _ in range(starts)]
     cost = {
         "shared_routes": round(statistics.median(shared), 4),
         "include_router": round(statistics.median(included), 4),
