@@ -1,6 +1,6 @@
 """Chromium at nice 0, the priority of the servers, vehicles and other jobs beside it.
 
-chromium_ordinary_priority.sh takes from the tests' Chromium the right to raise its own
+chromium_for_tests.sh takes from the tests' Chromium the right to raise its own
 priority (run as root it would put its display threads at nice -8). Without that right it
 cannot undo its own lowering either: it starts each renderer at nice 5, as for a page in the
 background, and could not bring it back to 0 when the page showed, so every page of the
