@@ -18,8 +18,7 @@ from tests.serve_process import Served
 from tests.waiting import wait_for_blocking
 
 # A script's end: an interpreter's exit and a release that may wait 2 s for each of connect,
-# write and read. Twice a script was still running 30 s after its SIGTERM beside two busy
-# loops (not understood: _ended reports what it was doing).
+# write and read.
 SCRIPT_END_S = 30
 # takes the lease, says so, then waits (for a signal) or ends (with the lease held)
 _SCRIPT = """
@@ -29,7 +28,14 @@ from skyhelm_client import SkyHelm
 sky = SkyHelm(sys.argv[1])
 print(sky.acquire(client_name="script").holder, flush=True)
 if sys.argv[2] == "wait":
-    time.sleep(60)
+    # short sleeps: Python runs a signal's handler between bytecodes, and time.sleep looks for
+    # one only when the kernel interrupts it. A SIGTERM that came after the line above was
+    # read and before one long sleep began left the script asleep, its handler waiting, for
+    # the whole sleep. Seen three times in the suite: still running 30 s after its SIGTERM,
+    # asleep at this line; the SIGUSR1 of _ended broke the sleep, and the waiting handler
+    # then ended it with 143 before the kill.
+    while True:
+        time.sleep(0.1)
 """
 
 
