@@ -125,6 +125,13 @@ def browser(request: pytest.FixtureRequest) -> Iterator[Any]:
 
 
 @pytest.fixture(scope="module")
+def chromium() -> Any:
+    """The worker's shared Chromium itself, with no context: each test opens its own (its
+    size and colour scheme)."""
+    return SHARED_CHROMIUM.browser()
+
+
+@pytest.fixture(scope="module")
 def serve(
     request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
 ) -> Iterator[Serve]:

@@ -10,8 +10,6 @@ import os
 from pathlib import Path
 from typing import Any
 
-import pytest
-
 from .harness import CHROMIUM_TEST_ARGS
 from .ordinary_priority import chromium_processes_of
 
@@ -20,13 +18,6 @@ DISABLED = "--disable-features="
 # AI mode so that a headless browser does not ask Google for them)
 PLAYWRIGHTS = {"LensOverlay", "AimEnabled"}
 OURS = {"WebUIOmniboxPopup", "WebUIOmniboxAimPopup"}
-
-
-@pytest.fixture(scope="module")
-def chromium() -> Any:
-    from .conftest import SHARED_CHROMIUM
-
-    return SHARED_CHROMIUM.browser()
 
 
 def _browser_command_lines() -> list[list[str]]:

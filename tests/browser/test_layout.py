@@ -160,14 +160,6 @@ BAR_BOXES = """() => new Promise((done) => requestAnimationFrame(() => requestAn
 
 
 @pytest.fixture(scope="module")
-def chromium() -> Any:
-    """A plain browser: each test opens its own context with its size and colour scheme."""
-    from .conftest import SHARED_CHROMIUM
-
-    return SHARED_CHROMIUM.browser()
-
-
-@pytest.fixture(scope="module")
 def vtol_serve() -> Iterator[Serve]:
     with Serve(extra_args=VTOL_SERVE_ARGS).running() as server:
         yield server
