@@ -100,14 +100,20 @@ class Api:
     ) -> dict[str, Any]:
         """Poll the state; a pilot holding the lease keeps renewing it while waiting."""
 
+        seen: list[dict[str, Any]] = []
+
         async def probe() -> dict[str, Any] | None:
             if renew and self.lease_headers:
                 await self.client.put(f"/api/v1/vehicles/{self.default_vehicle}/control",
                                       headers=self.lease_headers)
             state = await self.state()
+            seen[:] = [state]
             return state if predicate(state) else None
 
-        result: dict[str, Any] = await eventually(probe, timeout_s, what)
+        try:
+            result: dict[str, Any] = await eventually(probe, timeout_s, what)
+        except AssertionError as timed_out:
+            raise AssertionError(f"{timed_out}; the last state: {_summary(seen)}") from None
         return result
 
     async def wait_ready(self) -> None:
@@ -115,6 +121,15 @@ class Api:
         await self.wait_state(
             lambda s: s["global"] is not None and s["home"] is not None, 10.0, "position and home"
         )
+
+
+def _summary(seen: list[dict[str, Any]]) -> str:
+    """What a failed wait shows of the last state: the fields a wait is usually about."""
+    if not seen:
+        return "none read"
+    keys = ("connected", "armed", "mode", "landed_state", "stream", "link_quality",
+            "position_ned")
+    return repr({key: seen[0][key] for key in keys if key in seen[0]})
 
 
 @contextlib.asynccontextmanager

@@ -48,6 +48,27 @@ def test_a_vehicle_sending_only_heartbeats_is_judged_by_the_heartbeat_timeout() 
     assert liveness.silent_for(1, 3.0 + 5.1) == "nothing heard for 5.0 s"
 
 
+def test_frames_before_the_first_heartbeat_tell_that_it_streams() -> None:
+    # PX4 starts its streams on a link at once and sends its HEARTBEAT within the second:
+    # a link cut just after that HEARTBEAT is still judged by the silence bound
+    liveness = Liveness(heartbeat_timeout_s=5.0, silence_timeout_s=1.0)
+    for i in range(40):
+        liveness.frame(1, i / 50.0)
+    assert not liveness.known(1)
+    liveness.heartbeat(1, 0.8)
+    liveness.frame(1, 0.8)
+    assert liveness.quality(1, 0.8).lost_after_s == 1.0
+    assert liveness.silent_for(1, 0.8 + 1.1) == "nothing heard for 1.0 s"
+    # and frames long before it give its rate at once
+    late = Liveness(heartbeat_timeout_s=5.0, silence_timeout_s=1.0)
+    for i in range(20):
+        late.frame(2, i * 0.2)  # 5 Hz for 4 s: not streaming
+    late.heartbeat(2, 4.0)
+    late.frame(2, 4.0)
+    assert late.quality(2, 4.0).rate_hz == 20 / 4.0
+    assert late.silent_for(2, 4.0 + 4.9) is None
+
+
 def test_missing_heartbeats_of_a_streaming_vehicle_are_a_warning_never_a_verdict() -> None:
     liveness = Liveness(heartbeat_timeout_s=5.0, silence_timeout_s=1.0)
     _streamed(liveness, 1, 0.0, 2.0, rate_hz=50.0)

@@ -104,13 +104,19 @@ class Liveness:
         self.heartbeat_timeout_s = heartbeat_timeout_s
         self.silence_timeout_s = silence_timeout_s
         self._heard: dict[int, _Heard] = {}
+        # sysid -> (first frame s, frames) heard before its first HEARTBEAT: PX4 starts its
+        # streams on a link at once, its HEARTBEAT comes within the second, and the frames
+        # before it already tell that it streams
+        self._before: dict[int, tuple[float, int]] = {}
 
     def frame(self, sysid: int, now_s: float, missing: int = 0) -> None:
         """Any valid frame from the vehicle's autopilot; ``missing``: frames its sequence
         says went missing before it (-1: it arrived late, after one counted missing)."""
         heard = self._heard.get(sysid)
-        if heard is None:
-            return  # not a vehicle (yet): its heartbeat starts the record
+        if heard is None:  # not a vehicle (yet): its heartbeat starts the record
+            first_s, count = self._before.get(sysid, (now_s, 0))
+            self._before[sysid] = (first_s, count + 1)
+            return
         heard.last_frame_s = now_s
         heard.loss_in.add(now_s, 1, missing)
         elapsed_s = now_s - heard.window_start_s
@@ -123,7 +129,12 @@ class Liveness:
     def heartbeat(self, sysid: int, now_s: float) -> None:
         heard = self._heard.get(sysid)
         if heard is None:
-            self._heard[sysid] = _Heard(now_s, now_s, now_s)
+            heard = self._heard[sysid] = _Heard(now_s, now_s, now_s)
+            first_s, count = self._before.pop(sysid, (now_s, 0))
+            if now_s - first_s >= RATE_WINDOW_S:
+                heard.rate_hz = count / (now_s - first_s)
+            else:  # the first window began with the first frame
+                heard.window_start_s, heard.window_frames = first_s, count
             return
         heard.last_heartbeat_s = now_s
 
