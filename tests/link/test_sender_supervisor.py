@@ -6,6 +6,7 @@ and it starts nothing more."""
 
 from __future__ import annotations
 
+import logging
 import os
 import threading
 import time
@@ -44,6 +45,9 @@ class FakeProcess:
     def die(self, why: str) -> None:
         self.alive = False
         self.on_gone(self, why)
+
+    def wait_ended(self, timeout_s: float) -> bool:
+        return not self.alive  # its loss is handled within die()
 
 
 class Member:
@@ -151,7 +155,10 @@ def test_a_stuck_process_is_killed_only_while_it_carries_a_stream() -> None:
     wait_for_blocking("the members told", lambda: member.lost == [process], 2.0, 0.005)
 
 
-def test_a_closed_supervisor_kills_its_process_ends_its_threads_and_starts_nothing() -> None:
+def test_a_closed_supervisor_kills_its_process_ends_its_threads_and_starts_nothing(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    caplog.set_level(logging.INFO, logger=sender_supervisor.__name__)
     sup, started, member, process = _watched()
     watchers = [sup._watchdog, sup._restarter.thread]
     assert [t.name for t in watchers if t is not None and t.is_alive()] == [
@@ -159,6 +166,11 @@ def test_a_closed_supervisor_kills_its_process_ends_its_threads_and_starts_nothi
     sup.close()
     assert process.killed == "its supervisor was closed"
     assert member.lost == [process]
+    # its owner stopped it: no fault, and the log says so without an error
+    assert sup.status().faults == 0
+    assert sup.status().last_fault is None
+    assert [r.levelname for r in caplog.records if "sender process" in r.getMessage()] == [
+        "INFO"]
     assert not any(t is not None and t.is_alive() for t in watchers)
     time.sleep(0.1)  # past the back-off: nothing restarts
     assert started == [process]

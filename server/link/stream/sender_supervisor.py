@@ -49,6 +49,8 @@ MAX_FAILED_RESTARTS = len(RESTART_BACKOFF_S)
 STABLE_AFTER_S = 10.0
 # how long close() waits for the watchdog and the restart thread to end
 CLOSE_WAIT_S = 1.0
+# why the process of a closed supervisor ended: no fault
+CLOSED = "its supervisor was closed"
 # a restarted process must run its loop this soon, or it failed (it is killed)
 READY_TIMEOUT_S = 2.0
 
@@ -69,6 +71,8 @@ class Process(Protocol):
     def wait_ready(self, timeout_s: float) -> bool: ...
 
     def kill(self, why: str) -> None: ...
+
+    def wait_ended(self, timeout_s: float) -> bool: ...
 
 
 class Supervised(Protocol):
@@ -171,7 +175,9 @@ class SenderSupervisor:
             process = self._process
         self._restarter.stop()
         if process is not None and process.alive:
-            process.kill("its supervisor was closed")
+            process.kill(CLOSED)
+            # its end is handled (the streams told) before the owner goes on to close them
+            process.wait_ended(CLOSE_WAIT_S)
         self.priority.restore()
         for thread in (self._watchdog, self._restarter.thread):
             if thread is not None and thread is not threading.current_thread():
@@ -184,11 +190,15 @@ class SenderSupervisor:
             if process is self._handled or process is not self._process:
                 return
             self._handled = process
-            stable = time.monotonic() - process.started_s >= STABLE_AFTER_S
-            self.failed_in_row = 1 if stable else self.failed_in_row + 1
-            self._fault(why)
-            give_up = self.gave_up or self.failed_in_row > MAX_FAILED_RESTARTS
-            self.gave_up = give_up
+            closing = self._closed.is_set()
+            if closing:
+                give_up = True
+            else:
+                stable = time.monotonic() - process.started_s >= STABLE_AFTER_S
+                self.failed_in_row = 1 if stable else self.failed_in_row + 1
+                self._fault(why)
+                give_up = self.gave_up or self.failed_in_row > MAX_FAILED_RESTARTS
+                self.gave_up = give_up
         # the streams first, the words after: every step before the thread sends is a gap
         if give_up:
             self.priority.restore()  # the thread sends from now on: not at the others' cost
@@ -198,11 +208,13 @@ class SenderSupervisor:
             handover.sender_lost(process)
         for member in list(self._members):
             member.sender_lost(process)
-        log.error("setpoint sender process %s ended (%s): its links send themselves and its "
-                  "streams go on from the sender thread%s", process.pid, why,
-                  "" if self._closed.is_set() else
-                  "; it failed too often and is not started again" if give_up else
-                  f"; restarting it in {self._backoff_s():g} s")
+        if closing:  # the owner stops it (a server's end, an embedded one's close)
+            log.info("setpoint sender process %s stopped: %s", process.pid, CLOSED)
+        else:
+            log.error("setpoint sender process %s ended (%s): its links send themselves and "
+                      "its streams go on from the sender thread%s", process.pid, why,
+                      "; it failed too often and is not started again" if give_up else
+                      f"; restarting it in {self._backoff_s():g} s")
         self._tell()
         if not give_up:
             self._restarter.after(self._backoff_s())
