@@ -5,9 +5,11 @@ message type went missing: every frame of its autopilot that passed the checksum
 signature, with signing on) keeps it alive, the HEARTBEAT no more than any other. PX4 sends
 dozens of frames a second on every link, so a vehicle that has been sending at least
 STREAMING_RATE_HZ is lost after ``silence_timeout_s`` of silence (a cut radio shows within
-about a second); a vehicle that sends little besides its heartbeat is lost after
-``heartbeat_timeout_s`` of silence (the MAVLink heartbeat protocol's 5 s at least, see
-server.settings). A telemetry radio losing a few heartbeats in a row is then no verdict.
+about a second; the frames before its first HEARTBEAT count toward that rate, so a link
+cut just after the vehicle was discovered shows as soon); a vehicle that sends little
+besides its heartbeat is lost after ``heartbeat_timeout_s`` of silence (the MAVLink
+heartbeat protocol's 5 s at least, see server.settings). A telemetry radio losing a few
+heartbeats in a row is then no verdict.
 
 Before the verdict comes a warning: the link is *degraded* while the vehicle has been silent
 for half its bound, while it loses many of its frames on the way (MAVLink sequence gaps, and
