@@ -14,6 +14,7 @@
 
 from __future__ import annotations
 
+import logging
 import os
 import shutil
 import tempfile
@@ -122,6 +123,19 @@ def pytest_configure(config: pytest.Config) -> None:
     for name, folder in _KEPT.items():
         os.environ[name] = str(home / folder)
     config.add_cleanup(lambda: shutil.rmtree(home, ignore_errors=True))
+
+
+@pytest.fixture(autouse=True)
+def _root_logging_kept() -> Iterator[None]:
+    """The root logger as it was before the test: a test that runs a command in this process
+    (``skyhelm serve`` refusing its settings, ``skyhelm convert``) has it log to that test's
+    captured stderr, which is closed after it; every later log line of the worker then
+    printed a "Logging error" with its stack."""
+    root = logging.getLogger()
+    handlers, level = root.handlers[:], root.level
+    yield
+    root.handlers[:] = handlers
+    root.setLevel(level)
 
 
 @pytest.fixture

@@ -289,8 +289,9 @@ async def test_silent_vehicle_is_503_for_control_and_shown_disconnected() -> Non
     async with sim_cluster("quad") as sim, api_for(sim, silence_timeout_s=0.5) as api:
         headers = await api.take_control()
         # the server knows the vehicle streams: its silence, not its heartbeat, is the bound
-        await api.wait_state(lambda s: s["link_quality"]["lost_after_s"] == 0.5, 5.0,
-                             "the vehicle judged by its silence")
+        await api.wait_state(
+            lambda s: (s["link_quality"] or {}).get("lost_after_s") == 0.5, 5.0,
+            "the vehicle judged by its silence")
         await sim.stop()
         await api.wait_state(lambda s: s["connected"] is False, 5.0, "the vehicle to go silent")
         response = await api.client.post("/api/v1/vehicles/1/arm", json={}, headers=headers)
