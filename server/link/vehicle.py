@@ -139,6 +139,8 @@ class Vehicle(VehicleOperations):
         except (TimeoutError, ConnectionError) as exc:
             self.core.publish_event("params", {"reread": False, "error": str(exc)})
             return
+        if not values:
+            return  # none had been read: nothing to read again, and nothing to tell
         self.core.publish_event("params", {
             "reread": True, "count": len(values),
             "text": f"{len(values)} parameters read again after the reboot",
