@@ -26,7 +26,7 @@ from server.control.lease import (
 from server.control.lease_ops import AskerGone, lease_out, unless_gone
 from server.control.operations import OPERATIONS, run_command, run_intent, sent_out
 from server.control.vehicle_ops import fly_sticks, stop_sticks
-from server.http.context import ApiContext
+from server.http.context import ApiContext, require_connected
 from server.http.errors import (
     ApiError,
     command_answer,
@@ -380,8 +380,7 @@ class _ControlSession:
     def _held(self) -> Iterator[None]:
         """The lease held (and renewed) for one call, on a connected vehicle."""
         with self._context.leases.hold(self._vehicle.sysid, self._lease.lease_id):
-            if not self._vehicle.connected:
-                raise ApiError(503, f"vehicle {self._vehicle.sysid} is not connected")
+            require_connected(self._vehicle)
             yield
 
     async def _reply(

@@ -91,5 +91,7 @@ def known_vehicle(context: ApiContext, vehicle_id: int) -> Vehicle:
 
 def require_connected(vehicle: Vehicle) -> Vehicle:
     if not vehicle.connected:
-        raise ApiError(503, f"vehicle {vehicle.sysid} is not connected (no HEARTBEAT)")
+        why = vehicle.lost_reason
+        raise ApiError(503, f"vehicle {vehicle.sysid} is not connected"
+                            + (f": {why}" if why else ""))
     return vehicle

@@ -74,6 +74,8 @@ class VehicleOperations:
     # what the core reports, read here
     connected = PluginSetting[bool]("core.connected", writable=False)
     """Whether the link hears the vehicle (``VehicleCore``; changed by set_connected)."""
+    lost_reason = PluginSetting[str | None]("core.lost_reason", writable=False)
+    """How the link noticed the vehicle's loss ("nothing heard for 1.0 s"), while it is lost."""
     mav_type = PluginSetting[int]("core.mav_type", writable=False)
     """MAV_TYPE from its last HEARTBEAT (``VehicleCore``)."""
     autopilot = PluginSetting[int]("core.autopilot", writable=False)

@@ -296,5 +296,8 @@ async def test_silent_vehicle_is_503_for_control_and_shown_disconnected() -> Non
         await api.wait_state(lambda s: s["connected"] is False, 5.0, "the vehicle to go silent")
         response = await api.client.post("/api/v1/vehicles/1/arm", json={}, headers=headers)
         assert response.status_code == 503
+        # how the loss was noticed (it said "no HEARTBEAT" whatever the cause)
+        assert response.json()["detail"]["reason"] == (
+            "vehicle 1 is not connected: nothing heard for 0.5 s")
         listed = (await api.client.get("/api/v1/vehicles")).json()
         assert listed[0]["connected"] is False

@@ -57,6 +57,7 @@ class VehicleCore:
         self.autopilot = heartbeat.autopilot if heartbeat is not None else 0
         self.connected = True
         self.lost_s: float | None = None  # when the link last lost the vehicle
+        self.lost_reason: str | None = None  # how it noticed, while the vehicle is lost
         self.link_quality: LinkQuality | None = None  # the link's figures, 10 times a second
         self.created_s = self.last_heartbeat_s = self.updated_s = self.now()
         self.events = EventHub()
@@ -121,6 +122,7 @@ class VehicleCore:
         if connected == self.connected:
             return
         self.connected = connected
+        self.lost_reason = None if connected else reason
         if connected:
             lost_for_s = self.now() - self.lost_s if self.lost_s is not None else None
             text = "link to the vehicle back" + (
