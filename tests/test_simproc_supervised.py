@@ -1,6 +1,7 @@
 """The embedded simulated vehicle's process killed (-9) under a running server: its end is
 seen at once, logged once with the cause, raised as a ``process`` event and shown by
-``/api/v1/health``."""
+``/api/v1/health``; its vehicle is lost at once with that cause (not a second later, for its
+silence), and a control call is refused saying so."""
 
 from __future__ import annotations
 
@@ -37,14 +38,28 @@ async def test_a_killed_simulated_vehicle_is_seen_at_once_and_said_once(
             killed = time.monotonic()
             os.kill(sim.pid, signal.SIGKILL)
 
+            told: list[VehicleEvent] = []
+
             async def fault_event() -> VehicleEvent:
                 while True:
-                    event = await events.get()
+                    told.append(event := await events.get())
                     if event.kind == "process":
                         return event
 
             event = await asyncio.wait_for(fault_event(), 5.0)
             noticed_s = time.monotonic() - killed
+            # lost with it, before the link's silence bound (1 s) could tell
+            assert vehicle.connected is False
+            lost = [e for e in told + _drain(events) if e.kind == "connection"]
+            assert [e.data["reason"] for e in lost] == [
+                "simulated vehicle's process ended (killed by SIGKILL)"]
+            lease = (await client.post("/api/v1/vehicles/1/control", json={})).json()
+            refused = await client.post("/api/v1/vehicles/1/arm", json={},
+                                        headers={"X-Lease-Id": lease["lease_id"]})
+            assert refused.status_code == 503
+            assert refused.json()["detail"]["reason"] == (
+                "vehicle 1 is not connected: simulated vehicle's process ended "
+                "(killed by SIGKILL)")
 
             async def health_says() -> dict[str, object] | None:
                 body = (await client.get("/api/v1/health")).json()
@@ -63,3 +78,10 @@ async def test_a_killed_simulated_vehicle_is_seen_at_once_and_said_once(
     said = [r for r in caplog.records if "simulated vehicle's process" in r.getMessage()]
     assert len(said) == 1
     assert "killed by SIGKILL" in said[0].getMessage()
+
+
+def _drain(queue: asyncio.Queue[VehicleEvent]) -> list[VehicleEvent]:
+    items = []
+    while not queue.empty():
+        items.append(queue.get_nowait())
+    return items

@@ -209,6 +209,11 @@ class Link:
     def remove_frame_tap(self, tap: FrameTap) -> None:
         self._record.remove_tap(tap)
 
+    def peer_gone(self, reason: str) -> None:
+        """What is at the other end is known to be gone (the server's own simulated
+        vehicle's process ended): its vehicles are lost now, for ``reason``."""
+        self._roster.lose_all(reason)
+
     def input_pending(self) -> bool:
         """Frames wait unread on the connection: the loop is behind the vehicle."""
         return self._transport.input_pending()

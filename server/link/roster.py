@@ -132,6 +132,15 @@ class VehicleRoster:
                 self._vehicles[sysid].set_connected(
                     False, why, silent_since_s=self.liveness.last_frame_s(sysid))
 
+    def lose_all(self, reason: str) -> None:
+        """Every vehicle heard is lost now, for ``reason`` (its peer is known gone): no
+        waiting for the silence that would tell it a second later."""
+        for sysid in list(self._connected):
+            self._connected.discard(sysid)
+            log.warning("link %s: vehicle %d lost (%s)", self._link_name, sysid, reason)
+            self._vehicles[sysid].set_connected(
+                False, reason, silent_since_s=self.liveness.last_frame_s(sysid))
+
     async def close(self) -> None:
         for vehicle in list(self._vehicles.values()):
             await _close_vehicle(vehicle)
