@@ -11,7 +11,7 @@ import time
 from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from fastapi import APIRouter, FastAPI
 from fastapi.middleware.cors import CORSMiddleware
@@ -51,10 +51,12 @@ from server.http.tile_archive import open_tile_archive
 from server.link import Envelope, Link
 from server.link.codec.signing_keys import SigningKeyError, SigningKeyStore
 from server.link.codec.urls import parse_link_url
-from server.scene import FleetScene, SceneHub
 from server.settings import Settings
 from server.simproc import SimProcess
 from skyhelm_wire.messages import SceneClickMessage
+
+if TYPE_CHECKING:
+    from server.scene import FleetScene, SceneHub
 
 log = logging.getLogger(__name__)
 
@@ -82,7 +84,7 @@ def create_app(settings: Settings, *, freeze_gc_at_start: bool = False) -> FastA
         settings, tokens, registry, leases, deadman, read_only=is_replay(settings.connect),
         tiles=open_tile_archive(settings.map_tiles) if settings.map_tiles else None,
     )
-    hub = SceneHub() if settings.scene else None
+    hub = _scene_hub() if settings.scene else None
     publishers = StatePublishers(
         registry.all, leases.status, max_rate_hz=settings.telemetry_max_rate_hz
     )
@@ -230,6 +232,14 @@ def _on_loop(
         loop.call_soon_threadsafe(publish, click.model_dump(exclude={"type"}))
 
     return on_click
+
+
+def _scene_hub() -> SceneHub:
+    """The 3D scene: viser (half a second of imports) is loaded only for a server that
+    shows it, not for ``--no-scene`` nor the other commands."""
+    from server.scene.hub import SceneHub
+
+    return SceneHub()
 
 
 def _show_in_scene(scene: FleetScene) -> Callable[[FleetVehicle], None]:
