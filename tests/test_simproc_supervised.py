@@ -16,6 +16,7 @@ import pytest
 
 from server.link import VehicleEvent
 from tests.api.conftest import app_running, auth, make_settings
+from tests.link.conftest import drain
 from tests.waiting import eventually
 
 
@@ -50,7 +51,7 @@ async def test_a_killed_simulated_vehicle_is_seen_at_once_and_said_once(
             noticed_s = time.monotonic() - killed
             # lost with it, before the link's silence bound (1 s) could tell
             assert vehicle.connected is False
-            lost = [e for e in told + _drain(events) if e.kind == "connection"]
+            lost = [e for e in told + drain(events) if e.kind == "connection"]
             assert [e.data["reason"] for e in lost] == [
                 "simulated vehicle's process ended (killed by SIGKILL)"]
             lease = (await client.post("/api/v1/vehicles/1/control", json={})).json()
@@ -78,10 +79,3 @@ async def test_a_killed_simulated_vehicle_is_seen_at_once_and_said_once(
     said = [r for r in caplog.records if "simulated vehicle's process" in r.getMessage()]
     assert len(said) == 1
     assert "killed by SIGKILL" in said[0].getMessage()
-
-
-def _drain(queue: asyncio.Queue[VehicleEvent]) -> list[VehicleEvent]:
-    items = []
-    while not queue.empty():
-        items.append(queue.get_nowait())
-    return items
