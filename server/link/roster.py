@@ -127,19 +127,19 @@ class VehicleRoster:
         for sysid in list(self._connected):
             why = self.liveness.silent_for(sysid, now_s)
             if why is not None:
-                self._connected.discard(sysid)
-                log.warning("link %s: vehicle %d lost (%s)", self._link_name, sysid, why)
-                self._vehicles[sysid].set_connected(
-                    False, why, silent_since_s=self.liveness.last_frame_s(sysid))
+                self._lose(sysid, why)
 
     def lose_all(self, reason: str) -> None:
         """Every vehicle heard is lost now, for ``reason`` (its peer is known gone): no
         waiting for the silence that would tell it a second later."""
         for sysid in list(self._connected):
-            self._connected.discard(sysid)
-            log.warning("link %s: vehicle %d lost (%s)", self._link_name, sysid, reason)
-            self._vehicles[sysid].set_connected(
-                False, reason, silent_since_s=self.liveness.last_frame_s(sysid))
+            self._lose(sysid, reason)
+
+    def _lose(self, sysid: int, why: str) -> None:
+        self._connected.discard(sysid)
+        log.warning("link %s: vehicle %d lost (%s)", self._link_name, sysid, why)
+        self._vehicles[sysid].set_connected(
+            False, why, silent_since_s=self.liveness.last_frame_s(sysid))
 
     async def close(self) -> None:
         for vehicle in list(self._vehicles.values()):
