@@ -22,7 +22,7 @@ from bench._markdown import ratio, table
 from bench._report import Section
 from bench._results import machine_info, write_results
 from server.link import VehicleState
-from server.scene import SceneHub
+from server.scene.hub import SceneHub
 from tests.api.state_fakes import pushing, scene_fed_by
 from tests.scene.conftest import FakeVehicle
 from tests.serving import uvicorn_serving

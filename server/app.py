@@ -56,7 +56,8 @@ from server.simproc import SimProcess
 from skyhelm_wire.messages import SceneClickMessage
 
 if TYPE_CHECKING:
-    from server.scene import FleetScene, SceneHub
+    from server.scene.fleet_view import FleetScene
+    from server.scene.hub import SceneHub
 
 log = logging.getLogger(__name__)
 

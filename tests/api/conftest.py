@@ -100,20 +100,20 @@ class Api:
     ) -> dict[str, Any]:
         """Poll the state; a pilot holding the lease keeps renewing it while waiting."""
 
-        seen: list[dict[str, Any]] = []
+        last: dict[str, Any] | None = None
 
         async def probe() -> dict[str, Any] | None:
+            nonlocal last
             if renew and self.lease_headers:
                 await self.client.put(f"/api/v1/vehicles/{self.default_vehicle}/control",
                                       headers=self.lease_headers)
-            state = await self.state()
-            seen[:] = [state]
-            return state if predicate(state) else None
+            last = await self.state()
+            return last if predicate(last) else None
 
         try:
             result: dict[str, Any] = await eventually(probe, timeout_s, what)
         except AssertionError as timed_out:
-            raise AssertionError(f"{timed_out}; the last state: {_summary(seen)}") from None
+            raise AssertionError(f"{timed_out}; the last state: {_summary(last)}") from None
         return result
 
     async def wait_ready(self) -> None:
@@ -123,13 +123,13 @@ class Api:
         )
 
 
-def _summary(seen: list[dict[str, Any]]) -> str:
+def _summary(state: dict[str, Any] | None) -> str:
     """What a failed wait shows of the last state: the fields a wait is usually about."""
-    if not seen:
+    if state is None:
         return "none read"
     keys = ("connected", "armed", "mode", "landed_state", "stream", "link_quality",
             "position_ned")
-    return repr({key: seen[0][key] for key in keys if key in seen[0]})
+    return repr({key: state[key] for key in keys if key in state})
 
 
 @contextlib.asynccontextmanager

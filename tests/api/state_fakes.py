@@ -13,7 +13,7 @@ from server.control.publishers import StatePublishers
 from server.link import Vehicle
 from server.link.codec.aio import cancel_and_wait
 from server.link.core.state import StateSubscription, SubscriptionHub, VehicleState
-from server.scene import SceneHub
+from server.scene.hub import SceneHub
 from tests.scene.conftest import FakeVehicle
 
 

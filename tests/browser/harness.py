@@ -195,7 +195,7 @@ def empty_scene() -> Iterator[tuple[str, str]]:
     """A scene hub with no vehicle behind its own tiny app: the reference 'empty' picture."""
     from fastapi import FastAPI
 
-    from server.scene import SceneHub
+    from server.scene.hub import SceneHub
     from tests.serving import uvicorn_serving
 
     token = secrets.token_urlsafe(12)

@@ -10,7 +10,6 @@ import pytest
 import viser
 
 from server.link.core.state import HomeState
-from server.scene import SceneHub
 from server.scene.compass import (
     CARDINALS,
     RING_RADIUS_M,
@@ -19,6 +18,7 @@ from server.scene.compass import (
     north_arrow_segments,
     rose_segments,
 )
+from server.scene.hub import SceneHub
 from tests.api.state_fakes import pushing, scene_fed_by
 from tests.waiting import wait_for
 

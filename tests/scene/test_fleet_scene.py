@@ -11,8 +11,8 @@ from typing import Any
 import pymap3d
 import pytest
 
-from server.scene import SceneHub
 from server.scene.fleet_view import LOST_COLOUR, fleet_pose
+from server.scene.hub import SceneHub
 from server.scene.styling import STATE_COLOURS
 from tests.api.state_fakes import pushing, scene_fed_by
 from tests.waiting import wait_for

@@ -18,7 +18,7 @@ from fastapi import FastAPI
 from websockets.asyncio.client import connect
 from websockets.typing import Subprotocol
 
-from server.scene import SceneHub
+from server.scene.hub import SceneHub
 from server.scene.proxy import pace_script
 from skyhelm_wire.messages import SceneClickMessage
 from tests.api.state_fakes import PushingVehicle, pushing, scene_fed_by

@@ -17,8 +17,8 @@ from fastapi import FastAPI
 from websockets.asyncio.client import connect
 from websockets.typing import Subprotocol
 
-from server.scene import SceneHub
 from server.scene import vehicle_view as vehicle_view_module
+from server.scene.hub import SceneHub
 from tests.api.state_fakes import pushing, scene_fed_by
 from tests.serving import uvicorn_serving
 
