@@ -61,6 +61,9 @@ async def test_a_killed_simulated_vehicle_is_seen_at_once_and_said_once(
             assert refused.json()["detail"]["reason"] == (
                 "vehicle 1 is not connected: simulated vehicle's process ended "
                 "(killed by SIGKILL)")
+            state = (await client.get("/api/v1/vehicles/1")).json()
+            assert state["connected"] is False
+            assert state["lost_reason"] == "simulated vehicle's process ended (killed by SIGKILL)"
 
             async def health_says() -> dict[str, object] | None:
                 body = (await client.get("/api/v1/health")).json()

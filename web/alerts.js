@@ -121,7 +121,9 @@ export class Alerts {
     const name = `vehicle ${state.vehicle ?? state.id ?? ""}`.trim();
     if (state.connected === false) {
       this.vehicleLost = true;
-      this.raise("link", `Link lost with ${name}`, "critical");
+      // and how the server noticed: its silence, or the simulated vehicle's process ended
+      const how = state.lost_reason ? ` — ${state.lost_reason}` : "";
+      this.raise("link", `Link lost with ${name}${how}`, "critical");
     } else if (state.connected) {
       if (this.vehicleLost) this.raise("link-back", `Link with ${name} regained`, "info", { forMs: 5000 });
       this.vehicleLost = false;

@@ -515,6 +515,7 @@
  * @property {Array<string>|null} [sensors_unhealthy] SYS_STATUS sensors present and enabled but not healthy
  * @property {Object<string, number>} [message_ages_s] seconds since each source message (by MAVLink name) was last received
  * @property {LinkQualityOut|null} [link_quality]
+ * @property {string|null} [lost_reason] how the server noticed the vehicle's loss, while `connected` is false ("nothing heard for 1.0 s", "simulated vehicle's process ended (killed by SIGKILL)"); null while it is connected
  * @property {ArmingChecksOut|null} [arming_checks] ready to fly: PX4's arming checks for the mode flown, and why not
  * @property {number} vehicle
  * @property {string} vehicle_type
@@ -621,6 +622,7 @@
  * @property {Array<string>|null} [sensors_unhealthy] SYS_STATUS sensors present and enabled but not healthy
  * @property {Object<string, number>} [message_ages_s] seconds since each source message (by MAVLink name) was last received
  * @property {LinkQualityOut|null} [link_quality]
+ * @property {string|null} [lost_reason] how the server noticed the vehicle's loss, while `connected` is false ("nothing heard for 1.0 s", "simulated vehicle's process ended (killed by SIGKILL)"); null while it is connected
  * @property {ArmingChecksOut|null} [arming_checks] ready to fly: PX4's arming checks for the mode flown, and why not
  */
 

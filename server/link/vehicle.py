@@ -179,6 +179,7 @@ class Vehicle(VehicleOperations):
             stream=self.offboard.streamer.stats(),
             link=self.link.stats(),
             link_quality=core.link_quality,
+            lost_reason=core.lost_reason,
             updated_s=core.updated_s,
             telemetry_refused=tuple(sorted(self.telemetry_requests.refused)),
             message_ages_s=t.ages_at(core.now()),

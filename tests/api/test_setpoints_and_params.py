@@ -301,3 +301,6 @@ async def test_silent_vehicle_is_503_for_control_and_shown_disconnected() -> Non
             "vehicle 1 is not connected: nothing heard for 0.5 s")
         listed = (await api.client.get("/api/v1/vehicles")).json()
         assert listed[0]["connected"] is False
+        # and the state says it to whoever reads it later, not only the event and the 503
+        state = (await api.client.get("/api/v1/vehicles/1")).json()
+        assert state["lost_reason"] == "nothing heard for 0.5 s"

@@ -68,10 +68,13 @@ async def _partition_scenario(rig: Rig, api: Api, log: WsLog) -> None:
     assert detect_s < 2.5  # a 1 s silence bound, checked every 0.1 s
     assert lost["stream"]["active"] is False
     assert set(lost["stale"]) >= LIVE_FIELDS
+    assert lost["lost_reason"] == "nothing heard for 1.0 s"  # how it was noticed
     # ... and on the WebSocket: the event and a state saying so
     await wait_for(lambda: any(not e["connected"] for e in log.events("connection")), 5.0,
                    "WS connection event")
     await wait_for(lambda: any(not m["connected"] for _, m in log.states()), 5.0, "WS state")
+    assert {m["lost_reason"] for _, m in log.states() if not m["connected"]} == {
+        "nothing heard for 1.0 s"}
     stopped = [e for e in log.events("stream") if e.get("reason") == "link lost"]
     assert stopped, log.events("stream")
     sent_at_loss = server_vehicle.stream_stats().sent
@@ -91,6 +94,7 @@ async def _partition_scenario(rig: Rig, api: Api, log: WsLog) -> None:
     back_at = time.monotonic()
     recover_s = back_at - cut - PARTITION_S
     assert first_back["mode"] != "OFFBOARD", first_back["mode"]
+    assert first_back["lost_reason"] is None
 
     async def fresh() -> dict[str, Any] | None:
         state = await rest_state(api.client)

@@ -286,6 +286,12 @@ class VehicleStateOut(_Out):
         description="seconds since each source message (by MAVLink name) was last received",
     )
     link_quality: LinkQualityOut | None = None
+    lost_reason: str | None = Field(
+        None,
+        description="how the server noticed the vehicle's loss, while `connected` is false "
+        "(\"nothing heard for 1.0 s\", \"simulated vehicle's process ended (killed by "
+        "SIGKILL)\"); null while it is connected",
+    )
     arming_checks: ArmingChecksOut | None = Field(
         None, description="ready to fly: PX4's arming checks for the mode flown, and why not"
     )

@@ -278,6 +278,9 @@ class VehicleState:
     # seconds since each source message (by MAVLink name) was last received
     message_ages_s: dict[str, float] = field(default_factory=dict)
     link_quality: LinkQuality | None = None
+    # how the server noticed the vehicle's loss, while `connected` is false ("nothing heard for
+    # 1.0 s", "simulated vehicle's process ended (killed by SIGKILL)"); null while it is connected
+    lost_reason: str | None = None
     # ready to fly: PX4's arming checks for the mode flown, and why not
     arming_checks: ArmingChecksState | None = None
     # telemetry streams the vehicle refused to send
