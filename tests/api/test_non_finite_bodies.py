@@ -7,6 +7,7 @@ moment it is served; hypothesis fills the other fields with valid values."""
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 from collections.abc import AsyncIterator, Iterator
@@ -125,7 +126,10 @@ def _drawn(strategy: st.SearchStrategy[Any]) -> Any:
     return drawn[0]
 
 
-def _cases() -> list[Case]:
+@functools.cache
+def cases() -> list[Case]:
+    """Every (body, field, non-finite value), drawn when a test first asks: at collection,
+    every worker of the suite would draw them all (a third of its collection's time)."""
     spec = _spec()
     cases = []
     for path, operations in spec["paths"].items():
@@ -141,16 +145,14 @@ def _cases() -> list[Case]:
     return cases
 
 
-CASES = _cases()
-
 
 def test_every_body_of_the_api_is_covered() -> None:
-    covered = {(c.method, c.path) for c in CASES}
+    covered = {(c.method, c.path) for c in cases()}
     assert ("put", "/api/v1/vehicles/{vehicle_id}/setpoint") in covered
     assert ("post", "/api/v1/vehicles/{vehicle_id}/control") in covered
     assert ("post", "/api/v1/vehicles/{vehicle_id}/origin") in covered
     assert ("put", "/api/v1/vehicles/{vehicle_id}/params/{name}") in covered
-    setpoint_fields = {c.field for c in CASES if c.path.endswith("/setpoint")}
+    setpoint_fields = {c.field for c in cases() if c.path.endswith("/setpoint")}
     assert ("north_m",) in setpoint_fields
     assert ("yaw_rate_deg_s",) in setpoint_fields or len(setpoint_fields) > 10
 
@@ -192,7 +194,7 @@ async def test_non_finite_numbers_in_every_field_are_422_naming_the_field(
 ) -> None:
     api = live_api
     failures = []
-    for case in CASES:
+    for case in cases():
         url = case.path
         for name, value in PATH_VALUES.items():
             url = url.replace("{" + name + "}", value)
