@@ -64,6 +64,19 @@ def test_the_fleet_lists_every_edge_and_vehicle(rig: FleetRig) -> None:
     assert rig.http.get(f"{rig.fleet.api}/config", headers=rig.auth()).json()["fleet"] is True
 
 
+def position_ned(rig: FleetRig, edge: str) -> Json:
+    """The edge's vehicle's position_ned through the fleet; a state without one fails with
+    what the state said of itself (seen once after a take-off, in a whole suite's busiest
+    first minute, when the test waited for a global position and home only)."""
+    state = fleet_state(rig, edge)
+    position: Json | None = state.get("position_ned")
+    told = {name: state.get(name) for name in (
+        "connected", "lost_reason", "stale", "mode", "armed", "message_ages_s", "age_s",
+        "state_age_s", "updated_s")}  # fmt: skip
+    assert position is not None, f"{edge}/1 state without position_ned: {told}"
+    return position
+
+
 def fleet_row(rig: FleetRig, key: str) -> Json:
     row: Json = next(r for r in rig.fleet_get("/fleet/vehicles") if r["key"] == key)
     return row
@@ -82,7 +95,7 @@ def fly(rig: FleetRig, edge: str) -> str:
     wait_for_blocking(
         f"{edge}/1 ready to arm",
         lambda: (s := fleet_state(rig, edge)).get("global") is not None
-        and s.get("home") is not None,
+        and s.get("home") is not None and s.get("position_ned") is not None,
         60.0,
     )
     lease = call("POST", "control", {"client_name": f"fleet test {edge}"})["lease_id"]
@@ -90,10 +103,10 @@ def fly(rig: FleetRig, edge: str) -> str:
     call("POST", "takeoff", {"altitude_m": TAKEOFF_ALT_M}, lease)
     wait_for_blocking(
         f"{edge}/1 airborne",
-        lambda: -fleet_state(rig, edge)["position_ned"]["down_m"] > TAKEOFF_ALT_M - 1.0,
+        lambda: -position_ned(rig, edge)["down_m"] > TAKEOFF_ALT_M - 1.0,
         60.0,
     )
-    start_north_m = fleet_state(rig, edge)["position_ned"]["north_m"]
+    start_north_m = position_ned(rig, edge)["north_m"]
     call("POST", "offboard/start", {}, lease)
     answer = call(
         "POST", "intents/offset", {"north_m": OFFSET_NORTH_M, "east_m": 0.0, "up_m": 0.0}, lease
@@ -101,7 +114,7 @@ def fly(rig: FleetRig, edge: str) -> str:
     assert answer["via"] == "setpoint"  # in OFFBOARD: streamed by the edge
     wait_for_blocking(
         f"{edge}/1 flown north",
-        lambda: fleet_state(rig, edge)["position_ned"]["north_m"]
+        lambda: position_ned(rig, edge)["north_m"]
         > start_north_m + OFFSET_NORTH_M - 1.0,
         60.0,
     )
