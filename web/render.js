@@ -63,7 +63,7 @@ function renderLink() {
   setAttr($("link-slot"), "title", `the server's link to vehicle ${state.vehicle ?? ""}: its freshest message ${ageText} old`
     + ` (heartbeat ${heartbeat}), frames lost from it ${pct(quality?.loss_in_pct)}`
     + ` and to it ${pct(quality?.loss_out_pct)}${warnings}`
-    + (state.connected === false && state.lost_reason ? `; lost: ${state.lost_reason}` : "")
+    + (state.lost_reason ? `; lost: ${state.lost_reason}` : "")
     + (page.connected ? "" : "; this page has lost the server, so the link's state is not known"));
 }
 

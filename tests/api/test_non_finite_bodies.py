@@ -131,7 +131,7 @@ def cases() -> list[Case]:
     """Every (body, field, non-finite value), drawn when a test first asks: at collection,
     every worker of the suite would draw them all (a third of its collection's time)."""
     spec = _spec()
-    cases = []
+    found = []
     for path, operations in spec["paths"].items():
         for method, operation in operations.items():
             body = operation.get("requestBody")
@@ -141,9 +141,8 @@ def cases() -> list[Case]:
                 for field in dict.fromkeys(_fields(spec, variant)):
                     for value in NON_FINITE:
                         example = _drawn(_with(spec, variant, field, value))
-                        cases.append(Case(method, path, field, value, example))
-    return cases
-
+                        found.append(Case(method, path, field, value, example))
+    return found
 
 
 def test_every_body_of_the_api_is_covered() -> None:

@@ -66,8 +66,8 @@ def test_the_fleet_lists_every_edge_and_vehicle(rig: FleetRig) -> None:
 
 def position_ned(rig: FleetRig, edge: str) -> Json:
     """The edge's vehicle's position_ned through the fleet; a state without one fails with
-    what the state said of itself (seen once after a take-off, in a whole suite's busiest
-    first minute, when the test waited for a global position and home only)."""
+    what the state said of itself (seen once after a take-off, six minutes into a whole
+    suite's run, when the test waited for a global position and home only)."""
     state = fleet_state(rig, edge)
     position: Json | None = state.get("position_ned")
     told = {name: state.get(name) for name in (
