@@ -31,6 +31,7 @@ from typing import Any
 import httpx
 from packaging.requirements import Requirement
 
+from skyhelm_client.tls import default_tls
 from tests.waiting import wait_for_blocking
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -131,6 +132,7 @@ class Chain:
             base_url=f"{self.base_url}/api/v1",
             headers={"Authorization": f"Bearer {self.token}"},
             timeout=30.0,
+            verify=default_tls(),
         )
 
     def state(self) -> dict[str, Any]:

@@ -19,6 +19,7 @@ from typing import Any
 
 import httpx
 
+from skyhelm_client.tls import default_tls
 from tests.serve_process import Served
 from tests.sim_pace import fast_forwarded
 from tests.waiting import holds_for_blocking, wait_for_blocking
@@ -42,7 +43,7 @@ class RestFlight:
 
     def __init__(self, served: Served, vehicle_id: int | None = None) -> None:
         self.served = served
-        self.http = httpx.Client(base_url=served.api, timeout=30.0)
+        self.http = httpx.Client(base_url=served.api, timeout=30.0, verify=default_tls())
         self.vehicle_id = vehicle_id
         self.lease_id: str | None = None
         self.transcript: list[str] = []

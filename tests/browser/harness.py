@@ -22,6 +22,7 @@ from urllib.parse import urlsplit
 
 import httpx
 
+from skyhelm_client.tls import default_tls
 from tests.browser.ordinary_priority import ORDINARY_PRIORITY
 from tests.waiting import wait_for_blocking as wait_for
 
@@ -158,7 +159,8 @@ class Serve:
 
     def client(self) -> ServeClient:
         return ServeClient(self, base_url=f"{self.base}/api/v1", timeout=10.0,
-                           headers={"Authorization": f"Bearer {self.token}"})
+                           headers={"Authorization": f"Bearer {self.token}"},
+                           verify=default_tls())
 
 
 class ServeClient(httpx.Client):

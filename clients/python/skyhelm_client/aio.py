@@ -24,6 +24,7 @@ from skyhelm_client.models import (
     param_value,
     param_values,
 )
+from skyhelm_client.tls import default_tls
 from skyhelm_client.urls import ws_url
 from skyhelm_wire.control import AuditEntryOut
 from skyhelm_wire.intents import IntentOut
@@ -46,7 +47,7 @@ class AsyncSkyHelm(AsyncCalls):
     _http: httpx.AsyncClient
 
     def _open(self, timeout_s: float) -> None:
-        self._http = httpx.AsyncClient(timeout=timeout_s)
+        self._http = httpx.AsyncClient(timeout=timeout_s, verify=default_tls())
 
     async def __aenter__(self) -> AsyncSkyHelm:
         return self

@@ -24,6 +24,7 @@ from skyhelm_client.models import (
     param_value,
     param_values,
 )
+from skyhelm_client.tls import default_tls
 from skyhelm_client.urls import ws_url
 from skyhelm_wire.control import AuditEntryOut
 from skyhelm_wire.intents import IntentOut
@@ -48,7 +49,7 @@ class SkyHelm(SyncCalls):
     _http: httpx.Client
 
     def _open(self, timeout_s: float) -> None:
-        self._http = httpx.Client(timeout=timeout_s)
+        self._http = httpx.Client(timeout=timeout_s, verify=default_tls())
 
     def __enter__(self) -> SkyHelm:
         return self
