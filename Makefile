@@ -20,7 +20,10 @@ $(PY):
 # pip compiles what it installs one file at a time; compileall does it on every core after
 # (a fresh venv with the test tools, two runs each: 49-51 s before, 37-45 s so). Files that
 # do not compile (some packages ship Python 2 examples) are left out, as pip leaves them.
-COMPILE := $(PY) -m compileall -q -q -j 0 $(VENV)/lib >/dev/null || true
+# So are pymavlink's dialects that nothing here imports (9 of its 2 MB modules in each of
+# MAVLink 1 and 2, 5 of the 24 CPU-s of compiling the venv); one imported compiles then.
+UNUSED_DIALECTS := pymavlink/dialects/v[12]0/(ASLUAV|AVSSUAS|cubepilot|matrixpilot|paparazzi|python_array_test|storm32|uAvionix|ualberta)\.py
+COMPILE := $(PY) -m compileall -q -q -j 0 -x '$(UNUSED_DIALECTS)' $(VENV)/lib >/dev/null || true
 
 $(STAMP): pyproject.toml clients/python/pyproject.toml | $(PY)
 	$(PIP) uninstall -q -y skyhelm-wire 2>/dev/null || true
@@ -67,14 +70,16 @@ lint: $(TSTAMP)
 audit: $(TSTAMP)
 	$(PY) -m tools.audit
 
-## Three workers on two cores: most tests wait on a real-time simulated vehicle, not on a core;
-## the browser tests run in two groups, the longest modules first (tests/conftest.py). On a
-## machine three times slower per core than usual, four took as long as three (1213 s against
-## 1228 s) with 22 failures against 3: the fourth added no work done, only vehicles and servers
-## starved of a core (504s). Five took a tenth off a quiet run on a fast machine, but beside two
-## busy loops the vehicles then missed their answers; a third browser group made the run slower.
-## TEST_WORKERS=0 runs everything in one process.
-TEST_WORKERS ?= 3
+## Four workers on two cores: most tests wait on a real-time simulated vehicle, not on a core;
+## the browser tests run in two groups, the longest modules first (tests/conftest.py). A fresh
+## clone's whole `make test` on a quiet 2-core machine: 712-785 s with three, 630-642 s with
+## four (the machine's cores 75 % busy with three, 83 % with four). Earlier, on a machine three
+## times slower per core than usual, four took as long as three with more failures (vehicles
+## and servers starved of a core); since then the suite waits on what it tests, not on time, and
+## holds beside two busy loops. Five took a tenth off a quiet run on a fast machine, but beside
+## two busy loops the vehicles then missed their answers; a third browser group made the run
+## slower. TEST_WORKERS=0 runs everything in one process.
+TEST_WORKERS ?= 4
 
 ## Set-up runs two at a time: the packages beside Debian's chromium. The linters and the audit
 ## (a few seconds of CPU, the rest waiting on the vulnerability service) then run beside the
