@@ -28,29 +28,31 @@ import pytest
 _TICK_S = 1.0 / os.sysconf("SC_CLK_TCK")
 
 
+def proc_stat(pid: int) -> tuple[str, list[str]] | None:
+    """A process's name and the fields of /proc/<pid>/stat after it (the state first), or
+    None once it has ended."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    return stat[stat.index("(") + 1:stat.rindex(")")], stat[stat.rindex(")") + 2:].split()
+
+
 def children_of() -> dict[int, list[int]]:
     """Each live process's children, by parent pid (/proc)."""
     children: dict[int, list[int]] = defaultdict(list)
     for entry in os.scandir("/proc"):
-        if not entry.name.isdigit():
-            continue
-        try:
-            stat = Path(entry.path, "stat").read_text()
-        except OSError:
-            continue
-        fields = stat[stat.rindex(")") + 2:].split()
-        children[int(fields[1])].append(int(entry.name))
+        if entry.name.isdigit() and (found := proc_stat(int(entry.name))) is not None:
+            children[int(found[1][1])].append(int(entry.name))
     return children
 
 
 def _process_s(pid: int) -> float:
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
+    found = proc_stat(pid)
+    if found is None:
         return 0.0
-    fields = stat[stat.rindex(")") + 2:].split()
     # utime, stime, cutime, cstime: fields 14-17 of proc(5), counted from the state (3)
-    return sum(int(fields[i]) for i in range(11, 15)) * _TICK_S
+    return sum(int(found[1][i]) for i in range(11, 15)) * _TICK_S
 
 
 def tree_cpu_s() -> float:

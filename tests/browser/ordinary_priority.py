@@ -19,6 +19,8 @@ import threading
 from collections.abc import Iterator
 from pathlib import Path
 
+from tests.cpu_account import proc_stat
+
 PROC = Path("/proc")
 # A renderer started in the background runs at nice 5 until this sees it.
 POLL_S = 0.25
@@ -42,14 +44,11 @@ class ProcessTable:
             self._read(pid)
 
     def _read(self, pid: int) -> None:
-        try:
-            stat = (PROC / str(pid) / "stat").read_text()
-        except OSError:  # ended meanwhile
+        found = proc_stat(pid)
+        if found is None:  # ended meanwhile
             self._known.pop(pid, None)
-            return
-        name = stat[stat.index("(") + 1:stat.rindex(")")]
-        parent = int(stat[stat.rindex(")") + 2:].split()[1])
-        self._known[pid] = (parent, name.startswith("chrom"))
+        else:
+            self._known[pid] = (int(found[1][1]), found[0].startswith("chrom"))
 
     def chromium_descendants(self, root_pid: int) -> list[int]:
         """A descendant not Chromium when first seen is read again: it may have become it
@@ -63,7 +62,7 @@ class ProcessTable:
             todo += children.get(pid, [])
             if not self._known[pid][1]:
                 self._read(pid)
-            if self._known.get(pid, (0, False))[1]:
+            if pid in self._known and self._known[pid][1]:
                 found.append(pid)
         return found
 
@@ -88,11 +87,9 @@ def nice_of_threads(pid: int) -> dict[int, int]:
     return found
 
 
-def raise_to_ordinary(root_pid: int, table: ProcessTable | None = None) -> int:
+def raise_to_ordinary(root_pid: int, table: ProcessTable) -> int:
     """Brings every thread of ``root_pid``'s Chromium descendants that runs below nice 0 to
     0; returns how many it changed. ``table``: the processes as last seen, refreshed here."""
-    if table is None:
-        table = ProcessTable()
     table.refresh()
     changed = 0
     for pid in table.chromium_descendants(root_pid):
