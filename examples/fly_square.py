@@ -25,6 +25,9 @@ ARRIVED_M = 0.5
 def fly_square(sky: SkyHelm) -> None:
     lease = sky.acquire(client_name="fly_square")
     print(f"control of vehicle {sky.vehicle_id} as {lease.holder}, lease ttl {lease.ttl_s} s")
+    # a vehicle just started (PX4 or the simulated one) refuses to arm until its estimator
+    # has a position: wait until its arming checks pass
+    sky.wait_until(lambda s: s.ready_to_fly, timeout_s=120, what="ready to fly")
     print("arm:", sky.arm().result)
     print("takeoff:", sky.takeoff(altitude_m=ALTITUDE_M).result)
     here = sky.wait_until(

@@ -32,6 +32,8 @@ async def watch(sky: AsyncSkyHelm) -> None:
 
 async def fly_square(sky: AsyncSkyHelm) -> None:
     await sky.acquire(client_name="fly_square_async")
+    # a vehicle just started refuses to arm until its estimator has a position
+    await sky.wait_until(lambda s: s.ready_to_fly, timeout_s=120, what="ready to fly")
     await sky.arm()
     await sky.takeoff(altitude_m=ALTITUDE_M)
     state = await sky.wait_until(

@@ -7,7 +7,6 @@ from pathlib import Path
 
 import pytest
 
-from skyhelm_client import State
 from tests.serve_process import Served, skyhelm_serve
 
 # Sim seconds per wall second: PX4's timeouts inside the sim scale with it.
@@ -29,8 +28,3 @@ def served(tmp_path: Path) -> Iterator[Served]:
 def pilot_url(served: Served) -> str:
     """What `skyhelm serve` printed: the URL a script is given."""
     return f"{served.base_url}/?token={served.pilot_token}"
-
-
-def ready(state: State) -> bool:
-    """Position and home known: the vehicle may arm."""
-    return state["global"] is not None and state["home"] is not None

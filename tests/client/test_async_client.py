@@ -17,7 +17,7 @@ from skyhelm_client import (
     Refused,
     VelocityNed,
 )
-from tests.client.conftest import pilot_url, ready
+from tests.client.conftest import pilot_url
 from tests.serve_process import Served
 from tests.waiting import eventually
 
@@ -42,7 +42,7 @@ async def test_flies_watches_telemetry_and_is_taken_over(served: Served) -> None
         watcher = asyncio.create_task(_collect(other, messages, opened))
         try:
             await asyncio.wait_for(opened.wait(), 10)
-            await sky.wait_until(ready, timeout_s=30)
+            await sky.wait_until(lambda s: s.ready_to_fly, timeout_s=30)
             with pytest.raises(NoLease):
                 await sky.takeoff(altitude_m=ALTITUDE_M)
             first = await sky.acquire(client_name="async test")

@@ -9,7 +9,7 @@ import contextlib
 import pytest
 
 from skyhelm_client import AsyncSkyHelm, InvalidInput, Message, PositionNed
-from tests.client.conftest import pilot_url, ready
+from tests.client.conftest import pilot_url
 from tests.serve_process import Served
 
 ALTITUDE_M = 5.0
@@ -26,7 +26,7 @@ async def _deadman_event(sky: AsyncSkyHelm, opened: asyncio.Event) -> Message:
 
 async def test_velocity_offset_and_brake_intents(served: Served) -> None:
     async with AsyncSkyHelm(pilot_url(served)) as sky:
-        await sky.wait_until(ready, timeout_s=30)
+        await sky.wait_until(lambda s: s.ready_to_fly, timeout_s=30)
         await sky.acquire(client_name="intents")
         await sky.arm()
         await sky.takeoff(altitude_m=ALTITUDE_M)

@@ -13,11 +13,12 @@ from skyhelm_client import (
     PositionNed,
     Refused,
     SkyHelm,
+    State,
     Unauthorized,
     VelocityNed,
     WaitTimedOut,
 )
-from tests.client.conftest import pilot_url, ready
+from tests.client.conftest import pilot_url
 from tests.serve_process import Served
 
 ALTITUDE_M = 5.0
@@ -25,7 +26,7 @@ ALTITUDE_M = 5.0
 
 def test_flies_with_the_lease_and_every_refusal_is_typed(served: Served) -> None:
     with SkyHelm(pilot_url(served)) as sky, SkyHelm(pilot_url(served)) as other:
-        sky.wait_until(ready, timeout_s=30, what="position and home")
+        sky.wait_until(lambda s: s.ready_to_fly, timeout_s=30, what="ready to fly")
         with pytest.raises(NoLease) as no_lease:
             sky.arm()
         assert no_lease.value.status == 423
@@ -121,7 +122,7 @@ def test_parameters_reads_and_the_other_refusals(served: Served) -> None:
 
 def test_telemetry_iterates_states_and_events(served: Served) -> None:
     with SkyHelm(pilot_url(served)) as sky:
-        sky.wait_until(ready, timeout_s=30)
+        sky.wait_until(lambda s: s.ready_to_fly, timeout_s=30)
         sky.acquire()
         # armed on the ground until the test has looked: the fixture's vehicle waits 10 s of
         # wall time before it disarms itself (COM_DISARM_PRFLT at 8x, set at its start)
@@ -147,3 +148,20 @@ def test_telemetry_iterates_states_and_events(served: Served) -> None:
         finally:
             states.close()
         sky.disarm()
+
+
+def test_ready_to_fly_is_the_arming_checks_verdict(served: Served) -> None:
+    """A just-started quad is waited for with ``ready_to_fly``; it arms then. Its state with
+    other verdicts: ready only where the server's arm would be taken."""
+    with SkyHelm(pilot_url(served)) as sky:
+        state = sky.wait_until(lambda s: s.ready_to_fly, timeout_s=30, what="ready to fly")
+        sky.acquire(client_name="ready test")
+        assert sky.arm().result == "ACCEPTED"
+        sky.disarm()
+    data = state.as_dict()
+    for verdict, ready_to_fly in (("ready", True), ("arm_switches_mode", True),
+                                  ("not_ready", False), (None, False)):
+        data["arming_checks"] = {**data["arming_checks"], "verdict": verdict}
+        assert State(data).ready_to_fly is ready_to_fly, verdict
+    data["arming_checks"] = None
+    assert State(data).ready_to_fly is False

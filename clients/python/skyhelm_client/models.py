@@ -138,6 +138,14 @@ class State(Mapping[str, Any]):
         return -self.position_ned.down_m
 
     @property
+    def ready_to_fly(self) -> bool:
+        """PX4's arming checks pass for the mode flown, or would once the server's arm has
+        switched mode first (``model.arming_checks``: its verdict, and why not). A vehicle
+        just started is not, until its estimator has a position."""
+        checks = self.model.arming_checks
+        return checks is not None and checks.verdict in ("ready", "arm_switches_mode")
+
+    @property
     def setpoint(self) -> dict[str, Any] | None:
         """The streamed setpoint as JSON (``model.setpoint`` typed)."""
         setpoint: dict[str, Any] | None = self._data.get("setpoint")
